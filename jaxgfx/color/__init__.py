@@ -1,0 +1,1 @@
+"""jaxgfx.color (see docs/)."""

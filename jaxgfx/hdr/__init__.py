@@ -1,0 +1,1 @@
+"""jaxgfx.hdr (see docs/)."""

@@ -1,0 +1,1 @@
+"""jaxgfx.image (see docs/)."""

@@ -1,0 +1,1 @@
+"""jaxgfx.io (see docs/)."""

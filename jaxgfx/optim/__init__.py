@@ -1,0 +1,1 @@
+"""jaxgfx.optim (see docs/)."""

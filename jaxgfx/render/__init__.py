@@ -1,0 +1,1 @@
+"""jaxgfx.render (see docs/)."""

@@ -1,0 +1,1 @@
+"""jaxgfx.testing (see docs/)."""

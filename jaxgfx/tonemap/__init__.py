@@ -1,0 +1,1 @@
+"""jaxgfx.tonemap (see docs/)."""

@@ -1,0 +1,76 @@
+"""Safe math: values match NumPy away from singularities; values and gradients finite at them."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from jax.test_util import check_grads
+
+from jaxgfx import _math
+from jaxgfx._checks import check_choice, check_image, check_odd_int, check_positive
+
+
+@pytest.mark.parametrize(
+    "fn, ref, xs",
+    [
+        (_math.safe_sqrt, np.sqrt, [0.25, 2.0, 9.0]),
+        (_math.safe_log, np.log, [0.5, 1.0, 7.0]),
+        (lambda x: _math.safe_pow(x, 2.2), lambda x: x**2.2, [0.1, 0.5, 3.0]),
+        (_math.safe_arccos, np.arccos, [-0.9, 0.0, 0.7]),
+    ],
+)
+def test_matches_numpy_and_grads(x64, fn, ref, xs):
+    x = jnp.asarray(xs, jnp.float64)
+    np.testing.assert_allclose(fn(x), ref(np.asarray(xs)), rtol=1e-12)
+    np.testing.assert_allclose(jax.jit(fn)(x), ref(np.asarray(xs)), rtol=1e-12)
+    check_grads(fn, (x,), order=2, modes=["fwd", "rev"])
+
+
+@pytest.mark.parametrize(
+    "fn, x",
+    [
+        (_math.safe_sqrt, 0.0),
+        (_math.safe_sqrt, -1.0),
+        (_math.safe_log, 0.0),
+        (lambda x: _math.safe_pow(x, 0.5), 0.0),
+        (_math.safe_arccos, 1.0),
+        (_math.safe_arccos, -1.0),
+        (lambda x: _math.safe_div(1.0, x), 0.0),
+        (lambda x: _math.safe_atan2(x, x), 0.0),
+        (lambda x: _math.safe_norm(jnp.stack([x, x, x])), 0.0),
+        (lambda x: _math.safe_normalize(jnp.stack([x, x, x])).sum(), 0.0),
+    ],
+)
+def test_singular_points_finite(fn, x):
+    x = jnp.float32(x)
+    assert np.isfinite(fn(x))
+    assert np.isfinite(jax.grad(fn)(x))
+
+
+def test_safe_normalize_and_atan2_values():
+    v = jnp.array([3.0, 4.0, 0.0])
+    np.testing.assert_allclose(_math.safe_normalize(v), [0.6, 0.8, 0.0], rtol=1e-6)
+    np.testing.assert_allclose(_math.safe_atan2(1.0, -1.0), 3 * np.pi / 4, rtol=1e-6)
+    assert _math.safe_div(1.0, 0.0, fill=-1.0) == -1.0
+
+
+def test_checks_raise_with_names():
+    with pytest.raises(ValueError, match="img"):
+        check_image(np.zeros(5), "img")
+    with pytest.raises(ValueError, match="img.*NaN"):
+        check_image(np.full((2, 2), np.nan), "img")
+    with pytest.raises(ValueError, match="C in"):
+        check_image(np.zeros((4, 4, 2)), "img", channels=3)
+    with pytest.raises(TypeError, match="img"):
+        check_image("foo", "img")
+    with pytest.raises(ValueError, match="padding"):
+        check_choice("mirror", "padding", ("zero", "reflect"))
+    with pytest.raises(ValueError, match="sigma"):
+        check_positive(-1.0, "sigma")
+    with pytest.raises(ValueError, match="size"):
+        check_odd_int(4, "size")
+    with pytest.raises(TypeError, match="size"):
+        check_odd_int(3.0, "size")
+    # tracers are let through
+    jax.jit(lambda s: check_positive(s, "sigma") * 2)(1.0)
+    assert check_image(np.ones((3, 3), np.uint8)).dtype == jnp.float32
