@@ -1,0 +1,1 @@
+"""Research scripts: ``python -m experiments.NAME --config configs/NAME.yaml``."""
