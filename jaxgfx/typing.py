@@ -5,7 +5,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int, Shaped, UInt
 Image = Float[Array, "*batch H W C"]
 ImageLike = Float[ArrayLike, "*batch H W C"]
 Gray = Float[Array, "*batch H W"]
-AnyImage = Float[Array, "*batch H W *C"]
+AnyImage = Float[Array, "..."]  # (..., H, W) or (..., H, W, C)
 Vec3 = Float[Array, "*batch 3"]
 RGB = Float[Array, "*batch 3"]
 Mat33 = Float[Array, "3 3"]

@@ -74,3 +74,9 @@ def test_checks_raise_with_names():
     # tracers are let through
     jax.jit(lambda s: check_positive(s, "sigma") * 2)(1.0)
     assert check_image(np.ones((3, 3), np.uint8)).dtype == jnp.float32
+
+
+def test_typing_aliases_import():
+    import jaxgfx.typing as t
+
+    assert t.Image is not None and t.AnyImage is not None
