@@ -237,31 +237,60 @@ def read_hdr(path, *, offset: float = 0.5) -> np.ndarray:
 _MINRUN = 4
 
 
-def _rle_component(b: np.ndarray, out: bytearray) -> None:
-    """Append the new-style RLE encoding of one component of one scanline to ``out``."""
-    n = b.size
-    change = np.flatnonzero(b[1:] != b[:-1]) + 1
-    starts = np.concatenate(([0], change))
-    lengths = np.diff(np.concatenate((starts, [n])))
-    long = lengths >= _MINRUN
-    lit = 0
-    for s, L in zip(starts[long].tolist(), lengths[long].tolist(), strict=True):
-        while lit < s:  # literal bytes before this run, chunks of <= 128
-            k = min(128, s - lit)
-            out.append(k)
-            out += b[lit : lit + k].tobytes()
-            lit += k
-        val = int(b[s])
-        lit = s + L
-        while L > 0:
-            k = min(127, L)
-            out += bytes((128 + k, val))
-            L -= k
-    while lit < n:
-        k = min(128, n - lit)
-        out.append(k)
-        out += b[lit : lit + k].tobytes()
-        lit += k
+def _chunks(starts: np.ndarray, lengths: np.ndarray, m: int):
+    """Split spans ``(start, length)`` into consecutive chunks of at most ``m`` elements."""
+    k = -(-lengths // m)
+    span = np.repeat(np.arange(starts.size), k)
+    j = np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)
+    return starts[span] + m * j, np.minimum(m, lengths[span] - m * j)
+
+
+def _rle_encode(planar: np.ndarray) -> bytes:
+    """New-style RLE of scanlines ``planar`` ``(H, 4, W)`` uint8, vectorised over the image.
+
+    Each component of each scanline is coded as runs of >= 4 equal bytes (``128 + n, value``,
+    n <= 127) and literal chunks (``n, bytes...``, n <= 128), after a ``2 2 W_hi W_lo`` marker.
+    """
+    h, _, w = planar.shape
+    flat = planar.reshape(-1)
+    n = flat.size
+    start = np.ones(n, bool)
+    start[1:] = flat[1:] != flat[:-1]
+    start[::w] = True  # runs never cross a component/scanline boundary
+    rs = np.flatnonzero(start)
+    rl = np.diff(np.append(rs, n))
+    long = rl >= _MINRUN
+    # literal spans: maximal groups of consecutive short runs within one component line
+    lit = np.repeat(~long, rl)
+    lit_start = lit.copy()
+    lit_start[1:] &= ~lit[:-1] | start[1:] & (np.arange(1, n) % w == 0)
+    ls = np.flatnonzero(lit_start)
+    lit_end = lit.copy()
+    lit_end[:-1] &= ~lit[1:] | (np.arange(1, n) % w == 0)
+    ll = np.flatnonzero(lit_end) + 1 - ls
+    run_s, run_l = _chunks(rs[long], rl[long], 127)
+    lit_s, lit_l = _chunks(ls, ll, 128)
+    cs = np.concatenate([run_s, lit_s])
+    cl = np.concatenate([run_l, lit_l])
+    is_run = np.concatenate([np.ones(run_s.size, bool), np.zeros(lit_s.size, bool)])
+    order = np.argsort(cs, kind="stable")
+    cs, cl, is_run = cs[order], cl[order], is_run[order]
+    size = np.where(is_run, 2, 1 + cl)
+    row = cs // (4 * w)
+    pos = np.cumsum(size) - size + 4 * (row + 1)
+    out = np.empty(int(size.sum()) + 4 * h, np.uint8)
+    out[pos] = np.where(is_run, 128 + cl, cl)
+    out[pos[is_run] + 1] = flat[cs[is_run]]
+    li = np.flatnonzero(~is_run)
+    ln = cl[li]
+    which = np.repeat(li, ln)
+    within = np.arange(ln.sum()) - np.repeat(np.cumsum(ln) - ln, ln)
+    out[pos[which] + 1 + within] = flat[cs[which] + within]
+    first = np.searchsorted(row, np.arange(h))
+    marker = pos[first] - 4
+    for i, v in enumerate((2, 2, w >> 8, w & 0xFF)):
+        out[marker + i] = v
+    return out.tobytes()
 
 
 def write_hdr(path, image, *, rle: bool = True) -> None:
@@ -282,12 +311,7 @@ def write_hdr(path, image, *, rle: bool = True) -> None:
     out = bytearray(b"#?RADIANCE\n# written by jaxgfx\nFORMAT=32-bit_rle_rgbe\n\n")
     out += f"-Y {h} +X {w}\n".encode()
     if rle and 8 <= w <= 0x7FFF:
-        marker = bytes((2, 2, w >> 8, w & 0xFF))
-        planar = np.ascontiguousarray(rgbe.transpose(0, 2, 1))  # (H, 4, W)
-        for y in range(h):
-            out += marker
-            for c in range(4):
-                _rle_component(planar[y, c], out)
+        out += _rle_encode(np.ascontiguousarray(rgbe.transpose(0, 2, 1)))  # (H, 4, W)
     else:
         out += np.ascontiguousarray(rgbe).tobytes()
     p.write_bytes(bytes(out))

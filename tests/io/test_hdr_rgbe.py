@@ -129,3 +129,16 @@ def test_bad_files(tmp_path, hdr_image):
         read_hdr(tmp_path / "b.hdr")
     with pytest.raises(ValueError, match="image"):
         write_hdr(tmp_path / "x.hdr", np.zeros((4, 4, 2)))
+
+
+@pytest.mark.parametrize("w", [8, 9, 131, 300])
+def test_rle_edge_runs_read_by_opencv(tmp_path, rng, w):
+    """Runs of length 1..6 and > 127, literals > 128, at both ends of each scanline."""
+    lengths = rng.integers(1, 7, 400)
+    lengths[::17] = 140
+    vals = np.repeat(rng.integers(1, 4, lengths.size), lengths)[: 6 * w].reshape(6, w)
+    img = np.stack([vals, vals[::-1], np.roll(vals, 3, axis=1)], -1).astype(np.float32) / 4
+    p = tmp_path / "e.hdr"
+    write_hdr(p, img)
+    np.testing.assert_array_equal(read_hdr(p, offset=0.0), _cv_read(p))
+    np.testing.assert_array_equal(read_hdr(p), float_from_rgbe(rgbe_from_float(img)))
