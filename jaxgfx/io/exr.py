@@ -4,9 +4,11 @@ Channel order convention (used by :func:`read_exr` when ``channels`` is not give
 A`` first (those present, in that order), then every other channel sorted alphabetically
 (``Y``, ``Z``, ``diffuse.R``...). A file holding only ``Y`` therefore reads as ``(H, W, 1)``.
 
-Only the first part of a multi-part file is read; deep and sub-sampled (chroma ``xSampling`` /
-``ySampling`` > 1) images are rejected with ``ValueError``. ``UINT`` channels are returned as
-float32 like the others (exact up to 2**24).
+The pixels of the data window are returned (not padded to the display window; both windows
+are in :func:`read_exr_header`). Scanline and tiled files are read (tiled: the full-resolution
+level). Only the first part of a multi-part file is read; deep and sub-sampled (chroma
+``xSampling`` / ``ySampling`` > 1) images are rejected with ``ValueError``. ``UINT`` channels
+are returned as float32 like the others (exact up to 2**24).
 """
 
 from __future__ import annotations

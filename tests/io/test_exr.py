@@ -109,3 +109,20 @@ def test_errors(tmp_path, rng):
         write_exr(tmp_path / "x.exr", np.zeros(4))
     with pytest.raises(TypeError, match="image"):
         write_exr(tmp_path / "x.exr", "abc")
+
+
+def test_tiled_and_offset_data_window(tmp_path, rng):
+    """Files written by OpenEXR itself: tiled storage; data window not at the origin."""
+    a = rng.random((40, 50)).astype(np.float32)
+    td = OpenEXR.TileDescription()
+    td.xSize, td.ySize, td.mode = 16, 16, OpenEXR.ONE_LEVEL
+    hdr = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.tiledimage, "tiles": td}
+    OpenEXR.File(hdr, {"R": a, "G": 2 * a, "B": 3 * a}).write(str(tmp_path / "t.exr"))
+    assert read_exr_header(tmp_path / "t.exr")["storage"] == "tiled"
+    np.testing.assert_array_equal(read_exr(tmp_path / "t.exr"), np.stack([a, 2 * a, 3 * a], -1))
+    dw = (np.array([10, 20], np.int32), np.array([59, 59], np.int32))
+    hdr = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage, "dataWindow": dw}
+    OpenEXR.File(hdr, {"Y": a}).write(str(tmp_path / "d.exr"))
+    h = read_exr_header(tmp_path / "d.exr")
+    assert h["data_window"] == ((10, 20), (59, 59)) and (h["width"], h["height"]) == (50, 40)
+    np.testing.assert_array_equal(read_exr(tmp_path / "d.exr")[..., 0], a)  # data window only
