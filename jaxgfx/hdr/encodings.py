@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import as_float_array
+from ..typing import Array, ArrayLike, Float, Shaped, UInt
 
 __all__ = [
     "rgbe_encode",
@@ -49,6 +50,16 @@ __all__ = [
     "logluv24_uv_table",
     "ENCODINGS",
 ]
+
+# Shape-annotated aliases (module level so linters do not parse the shape strings).
+_Triple = Shaped[ArrayLike, "*batch 3"]
+_TripleOut = Float[Array, "*batch 3"]
+_RGBEIn = UInt[ArrayLike, "*batch 4"]
+_RGBEOut = UInt[Array, "*batch 4"]
+_WordIn = UInt[ArrayLike, "*batch"]
+_WordOut = UInt[Array, "*batch"]
+_AnyIn = Shaped[ArrayLike, "..."]
+_AnyOut = Float[Array, "..."]
 
 U_NEUTRAL = 4.0 / 19.0  # u'v' of equal-energy white (X = Y = Z), used for black pixels
 V_NEUTRAL = 9.0 / 19.0
@@ -72,7 +83,7 @@ def _check_uint(x, name: str):
 # ----------------------------------------------------------------------------- RGBE
 
 
-def rgbe_encode(rgb):
+def rgbe_encode(rgb: _Triple) -> _RGBEOut:
     """Encode linear RGB ``(..., 3)`` to Radiance RGBE bytes ``(..., 4)`` uint8 (Ward 1991).
 
     Pixels with ``max < 2**-127`` (or NaN / negative channels, stored as 0) encode to zeros;
@@ -100,7 +111,7 @@ def rgbe_encode(rgb):
     return jnp.where(sat[..., None], jnp.uint8(255), out)
 
 
-def rgbe_decode(rgbe, *, offset: float = 0.5, dtype=jnp.float32):
+def rgbe_decode(rgbe: _RGBEIn, *, offset: float = 0.5, dtype=jnp.float32) -> _TripleOut:
     """Decode RGBE bytes ``(..., 4)`` to RGB ``(..., 3)``: ``(M + offset) 2**(E - 136)``, 0 if E=0.
 
     ``offset=0.5`` (default) is Radiance's bin centre (max relative error ``2**-8`` on the
@@ -141,7 +152,7 @@ def _uv_Y_to_xyz(u, v, Y):
 # ----------------------------------------------------------------------------- LogLuv32
 
 
-def logluv32_encode(XYZ):
+def logluv32_encode(XYZ: _Triple) -> _WordOut:
     """Encode CIE XYZ ``(..., 3)`` to 32-bit LogLuv words ``(...,)`` uint32 (Larson 1998).
 
     Word layout: bit 31 sign of Y, bits 16..30 ``Le = floor(256 (log2|Y| + 64))`` (0 encodes
@@ -167,7 +178,7 @@ def logluv32_encode(XYZ):
     return (Le << 16) | (ue << 8) | ve
 
 
-def logluv32_decode(word, *, dtype=jnp.float32):
+def logluv32_decode(word: _WordIn, *, dtype=jnp.float32) -> _TripleOut:
     """Decode 32-bit LogLuv words ``(...,)`` to CIE XYZ ``(..., 3)`` (Larson 1998).
 
     ``Y = ±2**((Le + 0.5) / 256 - 64)`` (0 when ``Le = 0``), ``u' = (ue + 0.5) / 410``,
@@ -249,7 +260,7 @@ def _index_to_uv(c, dtype):
     return u, v
 
 
-def logluv24_encode(XYZ):
+def logluv24_encode(XYZ: _Triple) -> _WordOut:
     """Encode CIE XYZ ``(..., 3)`` to 24-bit LogLuv words ``(...,)`` uint32 (Larson 1998).
 
     ``L10 = floor(64 (log2 Y + 12))`` in bits 14..23 (``Y <= 2.4283e-4`` → 0, ``Y >= 15.742``
@@ -271,7 +282,7 @@ def logluv24_encode(XYZ):
     return (L << 14) | _uv_to_index(u, v)
 
 
-def logluv24_decode(word, *, dtype=jnp.float32):
+def logluv24_decode(word: _WordIn, *, dtype=jnp.float32) -> _TripleOut:
     """Decode 24-bit LogLuv words ``(...,)`` to CIE XYZ ``(..., 3)``.
 
     ``Y = 2**((L10 + 0.5) / 64 - 12)`` (0 when ``L10 = 0``); u'v' = centre of the indexed cell.
@@ -297,7 +308,7 @@ def _half_rt_jvp(primals, tangents):
     return _half_rt(x), t
 
 
-def half_roundtrip(x):
+def half_roundtrip(x: _AnyIn) -> _AnyOut:
     """Round ``x`` to IEEE binary16 (OpenEXR ``HALF``) and back, keeping ``x``'s dtype.
 
     Round-to-nearest-even; relative step ``2**-10`` (max relative error ``2**-11``) for
