@@ -35,9 +35,9 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float, Shaped, UInt
 
 from .._checks import as_float_array
-from ..typing import Array, ArrayLike, Float, Shaped, UInt
 
 __all__ = [
     "rgbe_encode",
