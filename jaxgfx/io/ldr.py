@@ -232,18 +232,20 @@ def _read_sidecar(sidecar, names: list[str]) -> list[float]:
     return [_parse_time(v, f"'{s}' [{i}]") for i, v in enumerate(data)]
 
 
-def read_ldr_stack(paths, *, exposure_times=None, sidecar=None):
+def read_ldr_stack(paths, *, exposure_times=None, sidecar=None, return_order: bool = False):
     """Read an exposure bracket of LDR images, sorted by exposure time (shortest first).
 
     ``paths``: image files of equal size. Exposure times come from, in order of precedence,
-    ``exposure_times`` (N positive seconds, in ``paths`` order), ``sidecar`` (a ``.txt`` with
+    ``exposure_times`` (N positive seconds, in ``paths`` order; ``None`` or empty = not
+    given), ``sidecar`` (a ``.txt`` with
     N numbers or fractions like ``1/250``, or a ``.yaml`` / ``.json`` holding a list, a
     ``{"exposure_times": [...]}`` mapping, or ``{file name: time}``), else each file's EXIF
     ExposureTime (:func:`exif_exposure_time`).
 
-    Returns ``(images, times, order)``: ``images`` ``(N, H, W, 3)`` uint8 or uint16 (grey is
-    replicated to 3 channels, alpha dropped), ``times`` ``(N,)`` float64 seconds ascending,
-    ``order`` ``(N,)`` int indices into ``paths`` (``images[k]`` is ``paths[order[k]]``).
+    Returns ``(images, times)``, or ``(images, times, order)`` with ``return_order=True``:
+    ``images`` ``(N, H, W, 3)`` uint8 or uint16 (grey is replicated to 3 channels, alpha
+    dropped), ``times`` ``(N,)`` float64 seconds ascending, ``order`` ``(N,)`` int indices into
+    ``paths`` (``images[k]`` is ``paths[order[k]]``).
     Raises ``ValueError`` naming the file with no exposure time, listing the sizes when they
     differ, or when bit depths differ.
     """
@@ -251,7 +253,7 @@ def read_ldr_stack(paths, *, exposure_times=None, sidecar=None):
         raise ValueError(f"paths: expected a non-empty list of image files, got {paths!r}")
     files = [existing_file(q, "paths") for q in paths]
     n = len(files)
-    if exposure_times is not None:
+    if exposure_times is not None and np.size(exposure_times) > 0:
         t = np.asarray(exposure_times, np.float64).ravel()
         if t.shape != (n,) or not np.all(np.isfinite(t)) or not np.all(t > 0):
             raise ValueError(
@@ -285,4 +287,5 @@ def read_ldr_stack(paths, *, exposure_times=None, sidecar=None):
     if len(dtypes) > 1:
         raise ValueError(f"images have different bit depths: {sorted(str(d) for d in dtypes)}")
     order = np.argsort(times, kind="stable")
-    return np.stack([images[i] for i in order]), times[order], order
+    stack = np.stack([images[i] for i in order])
+    return (stack, times[order], order) if return_order else (stack, times[order])

@@ -38,11 +38,14 @@ class RawImage:
         cfa_pattern: colours of the repeating CFA tile in row-major order, e.g. ``"RGGB"``
             (2x2 Bayer) or a 36-letter string for 6x6 X-Trans.
         color_desc: LibRaw's colour names for indices 0..3, e.g. ``"RGBG"``.
-        black_level: ``(4,)`` float64 black level per colour index (as ``raw_colors``; rawpy's
-            ``black_level_per_channel``).
+        black_level: ``(4,)`` float64 black level per CFA site of the 2x2 tile, in
+            ``cfa_pattern`` order (``"RGGB"`` → R, G1, G2, B; the order of
+            ``jaxgfx.hdr.cfa_channels``). For non-2x2 CFAs: per colour index.
+        black_level_per_color: ``(4,)`` the same levels per colour index 0..3 (rawpy's
+            ``black_level_per_channel``, indexed by ``raw_colors``).
         white_level: saturation level (raw units).
-        camera_whitebalance: ``(4,)`` as-shot multipliers per colour index (LibRaw
-            ``cam_mul``; 0 when absent).
+        camera_whitebalance: ``(4,)`` as-shot multipliers per colour index, i.e. in
+            ``color_desc`` order (LibRaw ``cam_mul``; 0 when absent).
         color_matrix: ``(3, 4)`` camera → sRGB matrix from LibRaw (``rgb_cam``).
         rgb_xyz_matrix: ``(4, 3)`` XYZ → camera matrix (LibRaw ``cam_xyz``; for DNGs where
             LibRaw leaves it zero, the file's ColorMatrix1 in the first three rows).
@@ -57,6 +60,7 @@ class RawImage:
     cfa_pattern: str
     color_desc: str
     black_level: np.ndarray
+    black_level_per_color: np.ndarray
     white_level: int
     camera_whitebalance: np.ndarray
     color_matrix: np.ndarray
@@ -72,7 +76,7 @@ class RawImage:
     def normalized(self) -> np.ndarray:
         """Float32 mosaic ``(x - black[c]) / (white - black[c])`` per CFA site (not clipped:
         noise below black stays negative, saturated pixels reach ~1)."""
-        black = self.black_level[self.raw_colors]
+        black = self.black_level_per_color[self.raw_colors]
         return ((self.mosaic - black) / (self.white_level - black)).astype(np.float32)
 
 
@@ -176,13 +180,19 @@ def read_raw(path) -> RawImage:
         cm = meta["color_matrix1"].ravel()
         n = cm.size // 3
         rgb_xyz[:n] = cm[: 3 * n].reshape(n, 3)
+    if pattern.shape == (2, 2) and colors.shape[0] >= 2 and colors.shape[1] >= 2:
+        pattern = colors[:2, :2]  # the tile at the visible origin (margins may shift it)
+        black_sites = black[pattern.ravel()]
+    else:
+        black_sites = black.copy()
     found = tuple(k for k in ("exposure_time", "iso", "f_number") if meta.get(k) is not None)
     return RawImage(
         mosaic=mosaic,
         raw_colors=colors,
         cfa_pattern=_cfa_string(pattern, desc),
         color_desc=desc,
-        black_level=black,
+        black_level=black_sites,
+        black_level_per_color=black,
         white_level=white,
         camera_whitebalance=cam_wb,
         color_matrix=color_matrix,

@@ -85,7 +85,10 @@ def test_stack_from_exif_sorted(tmp_path, rng):
         paths.append(tmp_path / f"img{i}.jpg")
         _jpeg_with_exif(paths[-1], base + 20 * i, e)
     assert exif_exposure_time(paths[1]) == pytest.approx(1 / 250)
-    imgs, times, order = read_ldr_stack(paths)
+    imgs, times, order = read_ldr_stack(paths, return_order=True)
+    imgs2, times2 = read_ldr_stack(paths, exposure_times=[])  # empty = not given
+    np.testing.assert_array_equal(imgs2, imgs)
+    np.testing.assert_array_equal(times2, times)
     np.testing.assert_allclose(times, [1 / 250, 1 / 30, 1 / 2])
     np.testing.assert_array_equal(order, [1, 0, 2])
     assert imgs.shape == (3, 16, 24, 3) and imgs.dtype == np.uint8
@@ -128,7 +131,7 @@ def test_stack_sidecar(tmp_path, rng, kind):
     else:
         side = tmp_path / "times.json"
         side.write_text(json.dumps({"p0.png": 0.25, "p1.png": "1/1000", "p2.png": 0.0625}))
-    imgs, t, order = read_ldr_stack(paths, sidecar=side)
+    imgs, t, order = read_ldr_stack(paths, sidecar=side, return_order=True)
     np.testing.assert_allclose(t, [0.001, 0.0625, 0.25])
     np.testing.assert_array_equal(order, [1, 2, 0])
     assert imgs.dtype == np.uint16

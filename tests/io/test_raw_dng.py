@@ -43,10 +43,10 @@ def test_dng_bit_exact_and_metadata(tmp_path, rng, pattern):
     assert img.cfa_pattern == pattern and img.white_level == 4095
     letters = _site_letters(pattern, 24, 36)
     assert np.all(np.array(list(img.color_desc))[img.raw_colors] == letters)
-    # black per colour index: site k of the pattern has black[k]
-    for k in range(4):
+    np.testing.assert_array_equal(img.black_level, black)  # per site, pattern order
+    for k in range(4):  # per colour index: site k has colour raw_colors[k // 2, k % 2]
         yy, xx = divmod(k, 2)
-        assert img.black_level[img.raw_colors[yy, xx]] == black[k]
+        assert img.black_level_per_color[img.raw_colors[yy, xx]] == black[k]
     np.testing.assert_allclose(img.camera_whitebalance[:3], [2.0, 1.0, 1.5], rtol=1e-6)
     np.testing.assert_allclose(img.rgb_xyz_matrix[:3], CM, atol=1e-6)
     assert img.exposure_time == pytest.approx(1 / 250) and img.iso == 200
