@@ -80,6 +80,11 @@ def read_image(path, *, as_float: bool = False) -> np.ndarray:
             raise ValueError(f"'{p}': expected a single 2-D image, got array shape {img.shape}")
     else:
         info = _png_depth_and_type(p)
+        if info is not None:
+            with open(p, "rb") as fh:
+                fh.seek(max(0, p.stat().st_size - 12))
+                if fh.read(12)[4:8] != b"IEND":
+                    raise ValueError(f"'{p}': truncated PNG (no IEND chunk at the end)")
         if info is not None and info[0] == 16 and info[1] in (2, 6):
             img = _read_png16_color(p)
         else:
