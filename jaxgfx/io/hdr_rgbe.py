@@ -44,18 +44,23 @@ _RES_RE = re.compile(rb"^([+-])([XY]) (\d+) ([+-])([XY]) (\d+)$")
 
 def rgbe_from_float(rgb) -> np.ndarray:
     """Encode float RGB ``(..., 3)`` to RGBE bytes ``(..., 4)`` uint8 (Ward 1991, see module)."""
-    rgb = np.asarray(rgb, dtype=np.float64)
-    rgb = np.where(np.isnan(rgb) | (rgb < 0), 0.0, rgb)
+    rgb = np.array(rgb, dtype=np.float64)  # a copy: modified in place below
+    if rgb.shape[-1:] != (3,):
+        raise ValueError(f"rgb: expected shape (..., 3), got {rgb.shape}")
+    bad = ~(rgb >= 0)  # negative or NaN
+    if bad.any():
+        rgb[bad] = 0.0
     v = rgb.max(axis=-1)
     _, e = np.frexp(v)
     zero = v < 2.0**-127
     sat = v >= 2.0**128
     e = np.where(zero | sat, 0, e)
-    mant = np.floor(np.ldexp(rgb, (8 - e)[..., None]))
-    mant = np.clip(mant, 0, 255)
+    rgb *= np.ldexp(256.0, -e)[..., None]  # exact power-of-two scaling: 2**(8 - e)
+    np.floor(rgb, out=rgb)
+    np.clip(rgb, 0, 255, out=rgb)
     out = np.empty(rgb.shape[:-1] + (4,), np.uint8)
-    out[..., :3] = mant.astype(np.uint8)
-    out[..., 3] = (e + 128).astype(np.uint8)
+    out[..., :3] = rgb
+    out[..., 3] = e + 128
     out[zero] = 0
     out[sat] = 255
     return out
