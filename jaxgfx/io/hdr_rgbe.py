@@ -267,11 +267,13 @@ def _rle_encode(planar: np.ndarray) -> bytes:
     long = rl >= _MINRUN
     # literal spans: maximal groups of consecutive short runs within one component line
     lit = np.repeat(~long, rl)
+    line_start = np.zeros(n, bool)
+    line_start[::w] = True
     lit_start = lit.copy()
-    lit_start[1:] &= ~lit[:-1] | start[1:] & (np.arange(1, n) % w == 0)
+    lit_start[1:] &= ~lit[:-1] | line_start[1:]
     ls = np.flatnonzero(lit_start)
     lit_end = lit.copy()
-    lit_end[:-1] &= ~lit[1:] | (np.arange(1, n) % w == 0)
+    lit_end[:-1] &= ~lit[1:] | line_start[1:]
     ll = np.flatnonzero(lit_end) + 1 - ls
     run_s, run_l = _chunks(rs[long], rl[long], 127)
     lit_s, lit_l = _chunks(ls, ll, 128)
@@ -286,11 +288,10 @@ def _rle_encode(planar: np.ndarray) -> bytes:
     out = np.empty(int(size.sum()) + 4 * h, np.uint8)
     out[pos] = np.where(is_run, 128 + cl, cl)
     out[pos[is_run] + 1] = flat[cs[is_run]]
-    li = np.flatnonzero(~is_run)
-    ln = cl[li]
-    which = np.repeat(li, ln)
-    within = np.arange(ln.sum()) - np.repeat(np.cumsum(ln) - ln, ln)
-    out[pos[which] + 1 + within] = flat[cs[which] + within]
+    # literal bytes keep their order: output index = source index + a per-chunk shift
+    li = ~is_run
+    src = np.flatnonzero(lit)
+    out[src + np.repeat(pos[li] + 1 - cs[li], cl[li])] = flat[src]
     first = np.searchsorted(row, np.arange(h))
     marker = pos[first] - 4
     for i, v in enumerate((2, 2, w >> 8, w & 0xFF)):
