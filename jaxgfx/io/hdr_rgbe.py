@@ -71,10 +71,11 @@ def float_from_rgbe(rgbe, *, offset: float = 0.5) -> np.ndarray:
     rgbe = np.asarray(rgbe)
     if rgbe.shape[-1:] != (4,):
         raise ValueError(f"rgbe: expected shape (..., 4), got {rgbe.shape}")
-    e = rgbe[..., 3].astype(np.int32)
-    m = rgbe[..., :3].astype(np.float64) + offset
-    val = np.ldexp(m, (e - 136)[..., None])
-    return np.where((e > 0)[..., None], val, 0.0).astype(np.float32)
+    # float32 is exact here: (M + offset) has <= 9 significant bits and 2**(E - 136) >= 2**-136.
+    scale = np.ldexp(np.float32(1.0), np.arange(256) - 136).astype(np.float32)
+    scale[0] = 0.0
+    m = rgbe[..., :3].astype(np.float32) + np.float32(offset)
+    return m * scale[rgbe[..., 3].astype(np.intp)][..., None]
 
 
 # ----------------------------------------------------------------------------- reading
@@ -117,6 +118,35 @@ def _parse_header(data: bytes, p) -> tuple[dict, int]:
     return info, res_end + 1
 
 
+def _decode_rle_line(buf: bytes, pos: int, width: int, y: int, p) -> tuple[bytes, int]:
+    """Decode the 4 run-length coded components of one new-style scanline (planar bytes)."""
+    size = len(buf)
+    line = bytearray()
+    end = 0
+    for _ in range(4):
+        end += width
+        while len(line) < end:
+            if pos >= size:
+                raise ValueError(f"'{p}': file truncated in scanline {y}")
+            count = buf[pos]
+            if count > 128:
+                count -= 128
+                if pos + 1 >= size:
+                    raise ValueError(f"'{p}': file truncated in scanline {y}")
+                if len(line) + count > end:
+                    raise ValueError(f"'{p}': bad run length in scanline {y}")
+                line += bytes((buf[pos + 1],)) * count
+                pos += 2
+            else:
+                if pos + 1 + count > size:
+                    raise ValueError(f"'{p}': file truncated in scanline {y}")
+                if count == 0 or len(line) + count > end:
+                    raise ValueError(f"'{p}': bad run length in scanline {y}")
+                line += buf[pos + 1 : pos + 1 + count]
+                pos += 1 + count
+    return bytes(line), pos
+
+
 def _decode_scanlines(buf: bytes, pos: int, n_lines: int, width: int, p) -> np.ndarray:
     """Decode ``n_lines`` scanlines of ``width`` RGBE pixels starting at ``buf[pos]``."""
     out = np.empty((n_lines, width, 4), np.uint8)
@@ -132,33 +162,18 @@ def _decode_scanlines(buf: bytes, pos: int, n_lines: int, width: int, p) -> np.n
                 raise ValueError(
                     f"'{p}': scanline {y} length {b2 << 8 | b3} does not match width {width}"
                 )
-            pos += 4
-            for c in range(4):
-                row = out[y, :, c]
-                x = 0
-                while x < width:
-                    if pos >= size:
-                        raise ValueError(f"'{p}': file truncated in scanline {y}")
-                    count = buf[pos]
-                    if count > 128:
-                        count -= 128
-                        if pos + 1 >= size:
-                            raise ValueError(f"'{p}': file truncated in scanline {y}")
-                        if x + count > width:
-                            raise ValueError(f"'{p}': bad run length in scanline {y}")
-                        row[x : x + count] = buf[pos + 1]
-                        pos += 2
-                    else:
-                        if pos + 1 + count > size:
-                            raise ValueError(f"'{p}': file truncated in scanline {y}")
-                        if count == 0 or x + count > width:
-                            raise ValueError(f"'{p}': bad run length in scanline {y}")
-                        row[x : x + count] = arr[pos + 1 : pos + 1 + count]
-                        pos += 1 + count
-                    x += count
-            prev = out[y, -1]
+            line, pos = _decode_rle_line(buf, pos + 4, width, y, p)
+            out[y] = np.frombuffer(line, np.uint8).reshape(4, width).T
+            prev = out[y, -1].copy()
             continue
-        # Flat or old-style run-length encoded pixels.
+        # Flat scanline: one vectorised copy unless it holds old-style run markers (1, 1, 1, n).
+        if pos + 4 * width <= size:
+            px = arr[pos : pos + 4 * width].reshape(width, 4)
+            if not np.any((px[:, 0] == 1) & (px[:, 1] == 1) & (px[:, 2] == 1)):
+                out[y] = px
+                pos += 4 * width
+                prev = out[y, -1].copy()
+                continue
         x = 0
         shift = 0
         while x < width:
