@@ -80,10 +80,12 @@ class RawImage:
         return ((self.mosaic - black) / (self.white_level - black)).astype(np.float32)
 
 
-def _as_float(v) -> float | None:
+def _as_float(v, *, rational: bool = True) -> float | None:
+    """A tag value as float: ``(num, den)`` pairs are rationals when ``rational``; for other
+    sequences (e.g. ISOSpeedRatings with several values) the first element."""
     if v is None:
         return None
-    if isinstance(v, tuple) and len(v) == 2:
+    if rational and isinstance(v, tuple) and len(v) == 2:
         num, den = v
         return float(num) / float(den) if den else None
     if isinstance(v, (tuple, list, np.ndarray)):
@@ -114,13 +116,13 @@ def _tiff_metadata(p: Path) -> dict:
                     out["color_matrix1"] = vals
                 for key, (code, _names) in _EXIF_TAGS.items():
                     if key not in out and code in tags:
-                        out[key] = _as_float(tags[code].value)
+                        out[key] = _as_float(tags[code].value, rational=key != "iso")
                 exif = tags[34665].value if 34665 in tags else None
                 if isinstance(exif, dict):
                     for key, (_, names) in _EXIF_TAGS.items():
                         for n in names:
                             if key not in out and n in exif:
-                                out[key] = _as_float(exif[n])
+                                out[key] = _as_float(exif[n], rational=key != "iso")
                 ends = [o + c for o, c in zip(page.dataoffsets, page.databytecounts, strict=False)]
                 if ends and max(ends) > size:
                     out["truncated"] = True
