@@ -126,3 +126,11 @@ def test_tiled_and_offset_data_window(tmp_path, rng):
     h = read_exr_header(tmp_path / "d.exr")
     assert h["data_window"] == ((10, 20), (59, 59)) and (h["width"], h["height"]) == (50, 40)
     np.testing.assert_array_equal(read_exr(tmp_path / "d.exr")[..., 0], a)  # data window only
+
+
+def test_jax_array_input(tmp_path):
+    import jax.numpy as jnp
+
+    img = jnp.linspace(0.0, 2.0, 4 * 6 * 3).reshape(4, 6, 3)
+    write_exr(tmp_path / "j.exr", img.T.transpose(2, 1, 0))  # a JAX array, shape (4, 6, 3)
+    np.testing.assert_array_equal(read_exr(tmp_path / "j.exr"), np.asarray(img))

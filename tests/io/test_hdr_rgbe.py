@@ -142,3 +142,12 @@ def test_rle_edge_runs_read_by_opencv(tmp_path, rng, w):
     write_hdr(p, img)
     np.testing.assert_array_equal(read_hdr(p, offset=0.0), _cv_read(p))
     np.testing.assert_array_equal(read_hdr(p), float_from_rgbe(rgbe_from_float(img)))
+
+
+def test_xyze_format_and_missing_format_line(tmp_path):
+    px = bytes((128, 64, 32, 129)) * 2
+    (tmp_path / "x.hdr").write_bytes(b"#?RADIANCE\nFORMAT=32-bit_rle_xyze\n\n-Y 1 +X 2\n" + px)
+    assert read_hdr_header(tmp_path / "x.hdr")["format"] == "32-bit_rle_xyze"
+    np.testing.assert_array_equal(read_hdr(tmp_path / "x.hdr", offset=0.0), [[[1, 0.5, 0.25]] * 2])
+    (tmp_path / "n.hdr").write_bytes(b"#?RADIANCE\n\n-Y 1 +X 2\n" + px)  # FORMAT is optional
+    np.testing.assert_array_equal(read_hdr(tmp_path / "n.hdr", offset=0.0), [[[1, 0.5, 0.25]] * 2])
