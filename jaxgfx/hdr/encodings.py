@@ -18,10 +18,10 @@ pipeline can be evaluated on exactly the values a file would hold.
   libtiff's geometry (``UV_SQSIZ = 0.0035``, ``UV_VSTART = 0.01694``, 163 rows) but is computed
   here from the spectral locus of the CIE 1931 2° observer (tabulated data from colour-science,
   imported lazily on first use) closed by the purple line. It has 16193 cells (libtiff's
-  ``uvcode.h``, generated in 1997 from a coarser locus, has 16289) and row extents within two
-  cells of libtiff's, so the 14-bit indices are NOT interchangeable with libtiff files; decoded
-  chromaticities agree to within a cell. Out-of-gamut u'v' are
-  clamped into the table (row first, then column), not mapped along hue angles as libtiff.
+  ``uvcode.h``, generated in 1997 from a coarser locus, has 16289) with row starts within 0.006
+  (1.7 cells) and widths within 4 cells of libtiff's, so the 14-bit indices are NOT
+  interchangeable with libtiff files. Out-of-gamut u'v' are clamped into the table (row first,
+  then column), not mapped along hue angles as libtiff.
 * **Half** (IEEE 754 binary16, OpenEXR): :func:`half_roundtrip`.
 
 LogLuv functions take and return CIE XYZ ``(..., 3)`` (convert RGB with ``jaxgfx.color``).
