@@ -1,1 +1,42 @@
-"""jaxgfx.io (see docs/)."""
+"""jaxgfx.io: host-only NumPy readers and writers (OpenEXR, Radiance .hdr, RAW/DNG, LDR).
+
+Nothing here is traced by JAX: every function takes paths and NumPy arrays and returns NumPy
+arrays. Missing files raise ``FileNotFoundError``; corrupt, truncated or unsupported files raise
+``ValueError`` naming the file.
+"""
+
+from ._dispatch import read_any as read_any
+from ._dispatch import write_any as write_any
+from .dng import write_dng as write_dng
+from .exr import read_exr as read_exr
+from .exr import read_exr_header as read_exr_header
+from .exr import write_exr as write_exr
+from .hdr_rgbe import read_hdr as read_hdr
+from .hdr_rgbe import read_hdr_header as read_hdr_header
+from .hdr_rgbe import write_hdr as write_hdr
+from .ldr import exif_exposure_time as exif_exposure_time
+from .ldr import read_image as read_image
+from .ldr import read_ldr_stack as read_ldr_stack
+from .ldr import write_png as write_png
+from .raw import RawImage as RawImage
+from .raw import read_raw as read_raw
+from .raw import read_raw_linear_rgb as read_raw_linear_rgb
+
+__all__ = [
+    "read_exr",
+    "read_exr_header",
+    "write_exr",
+    "read_hdr",
+    "read_hdr_header",
+    "write_hdr",
+    "RawImage",
+    "read_raw",
+    "read_raw_linear_rgb",
+    "write_dng",
+    "read_image",
+    "write_png",
+    "read_ldr_stack",
+    "exif_exposure_time",
+    "read_any",
+    "write_any",
+]

@@ -1,0 +1,107 @@
+"""Read / write any supported file by its extension (used by the command-line interface)."""
+
+from __future__ import annotations
+
+import numpy as np
+import tifffile
+from PIL import Image
+
+from ._common import as_image_array, existing_file, output_path
+from .exr import read_exr, write_exr
+from .hdr_rgbe import read_hdr, write_hdr
+from .ldr import read_image, write_png
+from .raw import read_raw_linear_rgb
+
+__all__ = ["read_any", "write_any", "RAW_EXTENSIONS", "LDR_EXTENSIONS"]
+
+RAW_EXTENSIONS = frozenset(
+    {
+        ".dng",
+        ".nef",
+        ".nrw",
+        ".cr2",
+        ".cr3",
+        ".crw",
+        ".arw",
+        ".srf",
+        ".sr2",
+        ".raf",
+        ".orf",
+        ".rw2",
+        ".pef",
+        ".srw",
+        ".x3f",
+        ".3fr",
+        ".iiq",
+        ".erf",
+        ".kdc",
+        ".mrw",
+        ".mos",
+        ".raw",
+    }
+)
+LDR_EXTENSIONS = frozenset({".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"})
+_HDR_EXTENSIONS = frozenset({".hdr", ".pic", ".rgbe"})
+
+
+def read_any(path) -> np.ndarray:
+    """Read any supported image as float32 ``(H, W, C)`` (``(H, W)`` for grey LDR files).
+
+    ``.exr`` → :func:`read_exr`; ``.hdr`` / ``.pic`` / ``.rgbe`` → :func:`read_hdr`; LDR
+    (``.png .jpg .jpeg .tif .tiff .bmp``) → :func:`read_image` with ``as_float=True`` (values in
+    [0, 1], still display-encoded); camera raws (``.dng .nef .cr2 .arw ...``) →
+    :func:`read_raw_linear_rgb` (linear camera RGB). Unknown extensions raise ``ValueError``.
+    """
+    p = existing_file(path)
+    ext = p.suffix.lower()
+    if ext == ".exr":
+        return read_exr(p)
+    if ext in _HDR_EXTENSIONS:
+        return read_hdr(p)
+    if ext in LDR_EXTENSIONS:
+        return read_image(p, as_float=True)
+    if ext in RAW_EXTENSIONS:
+        return read_raw_linear_rgb(p)
+    raise ValueError(f"'{p}': unsupported extension {ext!r}; known: {_known()}")
+
+
+def _known() -> list[str]:
+    return sorted({".exr"} | _HDR_EXTENSIONS | LDR_EXTENSIONS | RAW_EXTENSIONS)
+
+
+def write_any(path, image) -> None:
+    """Write ``image`` by extension: ``.exr`` (float32, zip), ``.hdr`` (RGBE, RLE), ``.png``
+    (16-bit for uint16 input, else 8-bit; floats in [0, 1]), ``.jpg`` / ``.jpeg`` (8-bit,
+    quality 95), ``.tif`` / ``.tiff`` (dtype kept: float32 linear or uint8/uint16). Raw
+    formats cannot be written here (use :func:`write_dng` with a mosaic)."""
+    p = output_path(path)
+    ext = p.suffix.lower()
+    arr = as_image_array(image)
+    if ext == ".exr":
+        write_exr(p, arr)
+    elif ext in _HDR_EXTENSIONS:
+        write_hdr(p, arr)
+    elif ext == ".png":
+        write_png(p, arr, bits=16 if arr.dtype == np.uint16 else 8)
+    elif ext in (".jpg", ".jpeg"):
+        if arr.ndim == 3 and arr.shape[-1] not in (1, 3):
+            raise ValueError(f"image: JPEG needs 1 or 3 channels, got shape {arr.shape}")
+        if np.issubdtype(arr.dtype, np.floating):
+            arr = np.round(np.clip(np.nan_to_num(arr), 0.0, 1.0) * 255)
+        elif arr.min() < 0 or arr.max() > 255:
+            raise ValueError("image: integer JPEG input must be in [0, 255]")
+        Image.fromarray(np.ascontiguousarray(arr.astype(np.uint8).squeeze())).save(
+            p, format="JPEG", quality=95
+        )
+    elif ext in (".tif", ".tiff"):
+        if np.issubdtype(arr.dtype, np.floating):
+            arr = arr.astype(np.float32)
+        tifffile.imwrite(p, np.ascontiguousarray(arr), photometric=_photometric(arr))
+    elif ext in RAW_EXTENSIONS:
+        raise ValueError(f"'{p}': cannot write raw images; use write_dng(path, mosaic)")
+    else:
+        raise ValueError(f"'{p}': unsupported extension {ext!r}; known: {_known()}")
+
+
+def _photometric(arr: np.ndarray) -> str:
+    return "rgb" if arr.ndim == 3 and arr.shape[-1] in (3, 4) else "minisblack"
