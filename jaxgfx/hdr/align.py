@@ -102,7 +102,9 @@ def _phase_core(a, b, *, upsample):
     dx = jnp.where(
         inx, _parabola(up[uy, jnp.maximum(ux - 1, 0)], c0, up[uy, jnp.minimum(ux + 1, n - 1)]), 0
     )
-    return jnp.stack([sy + off[uy] + dy / upsample, sx + off[ux] + dx / upsample])
+    est = jnp.stack([sy + off[uy] + dy / upsample, sx + off[ux] + dx / upsample])
+    # featureless input (flat correlation surface): no information, report no shift
+    return jnp.where(jnp.max(up) > jnp.min(up), est, 0.0)
 
 
 def phase_correlation(ref, img, *, upsample: int = 1):
@@ -184,7 +186,8 @@ def _mtb_core(a, b, exclusion, *, levels):
             # normalise by the overlap so that large shifts are not favoured
             return safe_div(jnp.sum(diff).astype(jnp.float32), jnp.sum(inside).astype(jnp.float32))
 
-        e = jax.vmap(err)(cand)
+        # ties (e.g. featureless images) resolve to the smallest move
+        e = jax.vmap(err)(cand) + 1e-7 * jnp.sum(jnp.abs(cand), axis=1)
         shift = shift + cand[jnp.argmin(e)]
     return shift
 

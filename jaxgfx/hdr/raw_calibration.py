@@ -479,7 +479,9 @@ def _pair_ratio(ya, yb, va, vb, valid, robust, iters):
     e = yb - r * ya
     den = jnp.sum(w * ya)
     se = safe_sqrt(safe_div(jnp.sum((w * e) ** 2), den * den))
-    return r, se, jnp.sum(valid)
+    n = jnp.sum(valid)
+    # no usable pixel: the ratio is unknown (NaN), not 0
+    return jnp.where(n > 0, r, jnp.nan), jnp.where(n > 0, se, jnp.nan), n
 
 
 def pairwise_exposure_ratio(
@@ -512,7 +514,7 @@ def pairwise_exposure_ratio(
       black, white: levels, scalar or ``(C,)``.
 
     Returns:
-      ``(ratio, se, n_pixels)`` scalars.
+      ``(ratio, se, n_pixels)`` scalars; ratio and se are NaN when no pixel is usable.
     """
     a = as_float_array(a, "a")
     b = as_float_array(b, "b")
@@ -555,6 +557,8 @@ def estimate_exposure_ratios(
     ``pairwise_exposure_ratio`` (pixels valid in both frames, all channels pooled). Ratios to
     the reference frame are chained products, ``log R = sum log r``, with variances
     ``sum (se_k / r_k)^2`` (adjacent pairs share a frame; that small correlation is ignored).
+    A pair without usable pixels (e.g. both frames saturated) gives NaN for the frames that
+    are chained through it.
 
     Args:
       stack: ``(N, H, W[, C])`` frames or ``(N, H, W)`` mosaics with ``cfa_pattern``; N >= 2.
@@ -586,7 +590,8 @@ def _ratios_core(x, t, bl, wl, noise, saturation, min_signal, *, robust, referen
         return _pair_core(a, b, bl, wl, noise, saturation, min_signal, robust=robust)
 
     r, se, npx = jax.vmap(pair)(xs[:-1], xs[1:])
-    logr = safe_log(r)
+    good = r > 0  # False for NaN (pair without usable pixels): NaN propagates down the chain
+    logr = jnp.where(good, safe_log(jnp.where(good, r, 1.0)), jnp.nan)
     vlog = safe_div(se, r) ** 2
     cum_l = jnp.concatenate([jnp.zeros(1, x.dtype), jnp.cumsum(logr)])  # sorted positions
     cum_v = jnp.concatenate([jnp.zeros(1, x.dtype), jnp.cumsum(vlog)])

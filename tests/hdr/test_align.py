@@ -153,3 +153,15 @@ def test_bad_inputs():
         shift_image(a, (0.0, 1.0, 2.0))
     with pytest.raises(ValueError, match="ref"):
         phase_correlation(np.full((16, 16), np.nan), a)
+
+
+def test_degenerate_inputs_are_finite():
+    flat = np.ones((16, 16), np.float32)
+    np.testing.assert_array_equal(phase_correlation(flat, flat), [0.0, 0.0])
+    np.testing.assert_array_equal(phase_correlation(flat, 0 * flat, upsample=4), [0.0, 0.0])
+    np.testing.assert_array_equal(mtb_align(flat, flat, levels=2), [0, 0])
+    # a shift far outside the image: edge value (bilinear), finite gradient
+    eye = jnp.eye(4)
+    np.testing.assert_array_equal(shift_image(eye, (100.0, -100.0))[0], [0.0, 0, 0, 0])
+    g = jax.grad(lambda s: jnp.sum(shift_image(eye, s)))(jnp.array([100.0, -100.0]))
+    assert np.all(np.isfinite(g))

@@ -242,3 +242,18 @@ def test_bad_inputs(bracket):
         calibrate_raw_stack(bracket, np.zeros(4))
     with pytest.raises(ValueError, match="noise_pairs"):
         calibrate_raw_stack(bracket, NOMINAL, noise_pairs=bracket[:3, None])
+
+
+def test_no_usable_pixels_reported_not_hidden():
+    sat = np.full((16, 16), WHITE, np.float32)
+    r, se, n = pairwise_exposure_ratio(sat, sat, black=BLACK, white=WHITE)
+    assert int(n) == 0 and np.isnan(float(r)) and np.isnan(float(se))
+    g = jax.grad(lambda a: pairwise_exposure_ratio(a, sat, black=BLACK, white=WHITE)[0])(sat)
+    assert np.all(np.isfinite(g))
+    er = estimate_exposure_ratios(
+        np.stack([sat * 0.25, sat * 0.5, sat]), [1.0, 2.0, 4.0], black=0.0, white=WHITE
+    )
+    assert float(er.ratios[1]) == pytest.approx(2.0)  # first pair is fine
+    assert np.isnan(float(er.ratios[2]))  # chained through the saturated pair
+    lin = linearity_check(np.stack([sat] * 3), [1.0, 2.0, 4.0], black=BLACK, white=WHITE)
+    assert int(lin.n_pixels[0]) == 0 and not bool(lin.is_linear[0])
