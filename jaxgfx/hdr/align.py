@@ -144,8 +144,27 @@ def phase_correlation(ref, img, *, upsample: int = 1):
 def _bitmaps(g, exclusion):
     """Threshold bitmap (above median) and exclusion bitmap (outside the median's
     ``[0.5 - exclusion, 0.5 + exclusion]`` quantile band)."""
-    q = jnp.quantile(g, jnp.array([0.5 - exclusion, 0.5, 0.5 + exclusion]))
+    q = _quantiles(g, jnp.array([0.5 - exclusion, 0.5, 0.5 + exclusion], g.dtype))
     return g > q[1], (g < q[0]) | (g > q[2])
+
+
+def _quantiles(g, qs, iters=32):
+    """Lower quantiles by bisection on the value (``count(g <= t) >= q n``): O(n) per step,
+    ~30x faster than XLA's CPU sort for 256^2 images."""
+    v = g.ravel()
+    lo = jnp.full(qs.shape, jnp.min(v))
+    hi = jnp.full(qs.shape, jnp.max(v))
+    need = jnp.ceil(qs * v.size)
+
+    def step(_, lohi):
+        lo, hi = lohi
+        mid = 0.5 * (lo + hi)
+        cnt = jnp.sum(v[None, :] <= mid[:, None], axis=1)
+        ok = cnt >= need
+        return jnp.where(ok, lo, mid), jnp.where(ok, mid, hi)
+
+    lo, hi = jax.lax.fori_loop(0, iters, step, (lo, hi))
+    return hi
 
 
 def _shift_int(bits, dy, dx):
@@ -170,25 +189,29 @@ def _mtb_core(a, b, exclusion, *, levels):
     for _ in range(levels - 1):
         pa.append(_down2(pa[-1]))
         pb.append(_down2(pb[-1]))
-    cand = jnp.array([(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)], jnp.int32)
+    cand = [(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)]
     shift = jnp.zeros(2, jnp.int32)
     for lev in range(levels - 1, -1, -1):
         ta, ea = _bitmaps(pa[lev], exclusion)
         tb, eb = _bitmaps(pb[lev], exclusion)
         shift = 2 * shift
-
-        def err(c, ta=ta, ea=ea, tb=tb, eb=eb, shift=shift):
-            # img content = ref content moved by s: compare ref with img moved back by -s
-            s = shift + c
-            tbs, inside = _shift_int(tb, -s[0], -s[1])
-            ebs, _ = _shift_int(eb, -s[0], -s[1])
+        # img content = ref content moved by s: compare ref with img moved back by -s.
+        # One dynamic move by the coarse estimate, then the 9 static one-pixel moves.
+        tb0, in0 = _shift_int(tb, -shift[0], -shift[1])
+        eb0, _ = _shift_int(eb, -shift[0], -shift[1])
+        errs = []
+        for cy, cx in cand:
+            tbs, inside = _shift_int(tb0, -cy, -cx)
+            ebs, _ = _shift_int(eb0, -cy, -cx)
+            inside = inside & _shift_int(in0, -cy, -cx)[0]
             diff = (ta ^ tbs) & ea & ebs & inside
-            # normalise by the overlap so that large shifts are not favoured
-            return safe_div(jnp.sum(diff).astype(jnp.float32), jnp.sum(inside).astype(jnp.float32))
-
-        # ties (e.g. featureless images) resolve to the smallest move
-        e = jax.vmap(err)(cand) + 1e-7 * jnp.sum(jnp.abs(cand), axis=1)
-        shift = shift + cand[jnp.argmin(e)]
+            # normalise by the overlap so that large shifts are not favoured; ties
+            # (e.g. featureless images) resolve to the smallest move
+            errs.append(
+                safe_div(jnp.sum(diff).astype(jnp.float32), jnp.sum(inside).astype(jnp.float32))
+                + 1e-7 * (abs(cy) + abs(cx))
+            )
+        shift = shift + jnp.array(cand, jnp.int32)[jnp.argmin(jnp.stack(errs))]
     return shift
 
 
