@@ -19,7 +19,9 @@ balanced highlights may exceed 1.
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._checks import check_choice, check_image, check_positive
 from .._math import safe_div
@@ -63,23 +65,36 @@ def _valid_mask(image, saturation):
 
 def _masked_quantile(image, w, q):
     """Per-channel ``q``-quantile over (H, W) of the pixels with ``w == 1`` (NumPy 'linear'
-    interpolation). Returns (quantile (..., 3), count (..., 1))."""
+    interpolation). Returns (quantile (..., 3), count (..., 1)).
+
+    XLA's CPU sort is ~20x slower than NumPy's, so instead of sorting we take the
+    ``k = floor(min(q, 1 - q) (N - 1)) + 2`` extreme values with ``lax.top_k`` (``k`` is static
+    and bounds the needed rank for any count ``n <= N`` of unmasked pixels)."""
     *batch, H, W, C = image.shape
-    x = image.reshape(*batch, H * W, C)
-    m = w.reshape(*batch, H * W, 1) > 0
-    big = jnp.asarray(jnp.finfo(image.dtype).max, image.dtype)
-    xs = jnp.sort(jnp.where(m, x, big), axis=-2)
-    n = jnp.sum(m, axis=-2).astype(image.dtype)  # (..., 1)
+    N = H * W
+    x = jnp.swapaxes(image.reshape(*batch, N, C), -1, -2)  # (..., C, N)
+    m = jnp.swapaxes(w.reshape(*batch, N, 1), -1, -2) > 0  # (..., 1, N)
+    n_i = jnp.sum(m, axis=-1, dtype=jnp.int32)  # (..., 1)
+    n = n_i.astype(image.dtype)
     pos = q * jnp.maximum(n - 1.0, 0.0)
     lo = jnp.floor(pos)
     frac = pos - lo
     lo_i = lo.astype(jnp.int32)
-    hi_i = jnp.minimum(lo_i + 1, jnp.maximum(n.astype(jnp.int32) - 1, 0))
-    idx_lo = jnp.broadcast_to(lo_i[..., None, :], (*batch, 1, C))
-    idx_hi = jnp.broadcast_to(hi_i[..., None, :], (*batch, 1, C))
-    v_lo = jnp.take_along_axis(xs, idx_lo, axis=-2)[..., 0, :]
-    v_hi = jnp.take_along_axis(xs, idx_hi, axis=-2)[..., 0, :]
-    v_hi = jnp.where(frac > 0, v_hi, v_lo)  # avoid 0 * big when pos is integral
+    hi_i = jnp.minimum(lo_i + 1, jnp.maximum(n_i - 1, 0))
+    low = jnp.asarray(jnp.finfo(image.dtype).min, image.dtype)
+    top = q >= 0.5
+    k = min(N, int(np.floor((1.0 - q if top else q) * (N - 1))) + 2)
+    if top:  # descending largest values; bottom rank j is top rank n - 1 - j
+        vals = jax.lax.top_k(jnp.where(m, x, low), k)[0]
+        r_lo, r_hi = n_i - 1 - lo_i, n_i - 1 - hi_i
+    else:  # ascending smallest values
+        vals = -jax.lax.top_k(jnp.where(m, -x, low), k)[0]
+        r_lo, r_hi = lo_i, hi_i
+    r_lo = jnp.clip(r_lo, 0, k - 1)[..., None, :]
+    r_hi = jnp.clip(r_hi, 0, k - 1)[..., None, :]
+    v_lo = jnp.take_along_axis(vals, jnp.broadcast_to(r_lo, (*batch, C, 1)), axis=-1)[..., 0]
+    v_hi = jnp.take_along_axis(vals, jnp.broadcast_to(r_hi, (*batch, C, 1)), axis=-1)[..., 0]
+    v_hi = jnp.where(frac > 0, v_hi, v_lo)
     return v_lo + frac * (v_hi - v_lo), n
 
 
