@@ -81,36 +81,50 @@ def test_vs_colour_science_float32_jit(ours, ref, rng):
 
 @pytest.mark.parametrize(("enc", "dec"), ROUND_TRIPS, ids=list(TRANSFER_FUNCTIONS))
 def test_round_trip_and_odd_extension(enc, dec, rng, x64):
-    x = np.concatenate([rng.uniform(-3, 3, 300), [0.0, -0.01, 0.01]])
-    np.testing.assert_allclose(np.asarray(dec(enc(x))), x, rtol=1e-12, atol=1e-15)
-    np.testing.assert_allclose(np.asarray(enc(-x)), -np.asarray(enc(x)), rtol=0, atol=0)
-    y = enc(jnp.asarray(x))
+    x = np.sort(np.concatenate([rng.uniform(-3, 3, 300), [0.0, -0.01, 0.01]]))
+    y, back, yneg = jax.jit(lambda x: (enc(x), dec(enc(x)), enc(-x)))(x)
     assert y.dtype == jnp.float64
-    # monotonic (strictly increasing)
-    xs = np.sort(x)
-    assert np.all(np.diff(np.asarray(enc(xs))) > 0)
+    np.testing.assert_allclose(np.asarray(back), x, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(np.asarray(yneg), -np.asarray(y), rtol=0, atol=0)
+    assert np.all(np.diff(np.asarray(y)) > 0)  # strictly increasing
+
+
+@jax.jit
+def _grads_at(k):
+    """Gradients at 0 and at the sRGB knee, in one compiled program."""
+    g = jax.grad
+    return jnp.stack(
+        [
+            g(linear_to_srgb)(0.0 * k),
+            g(srgb_to_linear)(0.0 * k),
+            g(linear_to_rec709)(0.0 * k),
+            g(linear_to_prophoto)(0.0 * k),
+            g(prophoto_to_linear)(0.0 * k),
+            g(linear_to_srgb)(k),
+            g(linear_to_srgb)(k + 1e-12),
+            g(linear_to_adobe_rgb)(0.0 * k),
+            g(adobe_rgb_to_linear)(0.0 * k),
+            g(gamma_encode, argnums=1)(0.0 * k, 2.2),
+            g(gamma_decode, argnums=1)(0.5 + 0.0 * k, 2.0),
+        ]
+    )
 
 
 def test_gradient_at_zero_and_knees(x64):
-    g = jax.grad
-    assert float(g(linear_to_srgb)(0.0)) == pytest.approx(12.92)
-    assert float(g(srgb_to_linear)(0.0)) == pytest.approx(1 / 12.92)
-    assert float(g(linear_to_rec709)(0.0)) == pytest.approx(4.5)
-    assert float(g(linear_to_prophoto)(0.0)) == pytest.approx(16.0)
-    assert float(g(prophoto_to_linear)(0.0)) == pytest.approx(1 / 16)
-    # sRGB knee: one-sided slopes (closed form) are both finite and close (C1 up to ~1e-3)
     k = 0.0031308
-    below = float(g(linear_to_srgb)(k))
-    above = float(g(linear_to_srgb)(k + 1e-12))
+    gr = np.asarray(_grads_at(k))
+    np.testing.assert_allclose(gr[:5], [12.92, 1 / 12.92, 4.5, 16.0, 1 / 16], rtol=1e-14)
+    # sRGB knee: one-sided slopes (closed form) are both finite and close
+    below, above = gr[5], gr[6]
     assert below == pytest.approx(12.92)
     assert above == pytest.approx(1.055 / 2.4 * (k + 1e-12) ** (1 / 2.4 - 1), rel=1e-9)
     assert abs(above - below) / below < 0.02  # the standard's constants are not exactly C1
+    # power laws at 0: finite (0) instead of inf/NaN
+    np.testing.assert_array_equal(gr[7:10], 0.0)
+    # d/dgamma x^gamma = x^gamma log x
+    assert gr[10] == pytest.approx(0.25 * np.log(0.5), rel=1e-12)
     # IEC 61966-2-1: V <= 0.04045 is on the linear segment
     assert float(srgb_to_linear(0.04045)) == pytest.approx(0.04045 / 12.92, rel=1e-15)
-    # power laws at 0: finite (0) instead of inf/NaN
-    for f in (linear_to_adobe_rgb, adobe_rgb_to_linear):
-        assert float(g(f)(0.0)) == 0.0
-    assert float(g(gamma_encode, argnums=1)(0.0, 2.2)) == 0.0
 
 
 @pytest.mark.parametrize(("enc", "dec"), ROUND_TRIPS[1:], ids=list(TRANSFER_FUNCTIONS)[1:])
@@ -125,17 +139,14 @@ def test_check_grads(enc, dec, x64):
 
 def test_gamma_grads_both_args(x64):
     x = jnp.array([0.1, 0.5, 0.8, -0.3])
-    check_grads(jax.jit(gamma_encode), (x, 2.2), order=2, modes=["rev"])
+    check_grads(jax.jit(gamma_encode), (x, 2.2), order=1, modes=["rev"])
     check_grads(jax.jit(gamma_decode), (x, 1.8), order=1, modes=["rev"])
-    # d/dgamma x^gamma = x^gamma log x
-    d = jax.grad(lambda gm: gamma_decode(0.5, gm))(2.0)
-    assert float(d) == pytest.approx(0.25 * np.log(0.5), rel=1e-12)
 
 
 def test_vmap_and_nd_shapes(rng):
     x = rng.uniform(0, 1, (2, 5, 7, 3)).astype(np.float32)
     ref = eotf_sRGB(x.astype(np.float64))
-    out = jax.vmap(srgb_to_linear)(x)
+    out = jax.jit(jax.vmap(srgb_to_linear))(x)
     assert out.shape == x.shape
     np.testing.assert_allclose(np.asarray(out), ref, rtol=2e-6, atol=1e-7)
 

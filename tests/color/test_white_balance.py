@@ -55,35 +55,52 @@ def test_grey_world_formula(rng):
 def test_white_patch_quantiles(rng):
     img = _cast_image(rng)
     flat = img.reshape(-1, 3).astype(np.float64)
-    for q in (1.0, 0.9, 0.5, 0.0):
+    qs = (1.0, 0.9, 0.5, 0.0)
+    gains = jax.jit(lambda x: [white_balance_white_patch_gains(x, quantile=q) for q in qs])(img)
+    for q, g in zip(qs, gains, strict=True):
         e = np.quantile(flat, q, axis=0)
-        np.testing.assert_allclose(np.asarray(_wp(img, quantile=q)), e.mean() / e, rtol=1e-5)
+        np.testing.assert_allclose(np.asarray(g), e.mean() / e, rtol=1e-5)
     mask = np.all(img < 0.99, axis=-1)
     e = np.quantile(img[mask].astype(np.float64), 0.95, axis=0)
-    g = _wp(img, quantile=0.95, saturation=0.99)
+    f = jax.jit(
+        lambda x: (
+            white_balance_white_patch_gains(x, quantile=0.95, saturation=0.99),
+            white_balance_white_patch(x, quantile=1.0, saturation=0.99),
+        )
+    )
+    g, out = f(img)
     np.testing.assert_allclose(np.asarray(g), e.mean() / e, rtol=1e-5)
     # a grey highlight becomes neutral: quantile=1 maps each channel max to the mean max
-    out = np.asarray(white_balance_white_patch(img, quantile=1.0, saturation=0.99))
+    out = np.asarray(out)
     top = out[mask].max(0)
     np.testing.assert_allclose(top, top.mean(), rtol=1e-5)
+
+
+@jax.jit
+def _stretch_all(x):
+    kw = dict(low=0.02, high=0.97)
+    return (
+        white_balance_stretch(x, **kw),
+        white_balance_stretch(x, clip=False, **kw),
+        white_balance_stretch_limits(x, **kw),
+    )
 
 
 def test_stretch(rng):
     img = _cast_image(rng)
     flat = img.reshape(-1, 3).astype(np.float64)
     lo, hi = np.quantile(flat, 0.02, axis=0), np.quantile(flat, 0.97, axis=0)
-    f = jax.jit(white_balance_stretch, static_argnames=("low", "high", "saturation", "clip"))
-    out = np.asarray(f(img, low=0.02, high=0.97))
-    np.testing.assert_allclose(out, np.clip((img - lo) / (hi - lo), 0, 1), atol=2e-6)
-    L, H = white_balance_stretch_limits(img, low=0.02, high=0.97)
+    out, raw, (L, H) = _stretch_all(img)
+    np.testing.assert_allclose(np.asarray(out), np.clip((img - lo) / (hi - lo), 0, 1), atol=2e-6)
     np.testing.assert_allclose(np.asarray(L), lo, rtol=1e-6)
     np.testing.assert_allclose(np.asarray(H), hi, rtol=1e-6)
-    raw = np.asarray(f(img, low=0.02, high=0.97, clip=False))
+    raw = np.asarray(raw)
     assert raw.min() < 0 and raw.max() > 1
+    np.testing.assert_allclose(raw, (img - lo) / (hi - lo), atol=2e-6)
     # a constant channel is left unchanged
     img2 = img.copy()
     img2[..., 1] = 0.3
-    out2 = np.asarray(f(img2, low=0.02, high=0.97))
+    out2 = np.asarray(_stretch_all(img2)[0])
     np.testing.assert_allclose(out2[..., 1], 0.3, rtol=1e-6)
 
 
@@ -117,44 +134,61 @@ def test_batch_and_vmap(rng):
     assert g.shape == (2, 3)
     for i in range(2):
         np.testing.assert_allclose(g[i], _np_grey_world(imgs[i].astype(np.float64)), rtol=1e-5)
-    gv = np.asarray(jax.vmap(white_balance_grey_world_gains)(imgs))
+    gv = np.asarray(jax.jit(jax.vmap(white_balance_grey_world_gains))(imgs))
     np.testing.assert_allclose(gv, g, rtol=1e-6)
     wp = np.asarray(_wp(imgs, quantile=0.9))
-    np.testing.assert_allclose(wp[1], np.asarray(_wp(imgs[1], quantile=0.9)), rtol=1e-6)
-    out = np.asarray(apply_white_balance(imgs, g))
+    e = np.quantile(imgs[1].reshape(-1, 3).astype(np.float64), 0.9, axis=0)
+    np.testing.assert_allclose(wp[1], e.mean() / e, rtol=1e-5)
+    out = np.asarray(jax.jit(apply_white_balance)(imgs, g))
     np.testing.assert_allclose(out, imgs * g[:, None, None, :], rtol=1e-6)
     # batched von Kries whites, one per image
     src = np.array([[1.2, 1.0, 0.7], [0.7, 1.0, 1.2]], np.float32)
-    vk = np.asarray(white_balance_von_kries(imgs, src))
-    np.testing.assert_allclose(vk[1], np.asarray(white_balance_von_kries(imgs[1], src[1])), 1e-5)
-    np.testing.assert_allclose(
-        np.asarray(white_balance(imgs, method="white_patch", quantile=0.9)),
-        imgs * wp[:, None, None, :],
-        rtol=1e-6,
-    )
+    vk = jax.jit(white_balance_von_kries)(imgs, src)
+    vk_single = jax.jit(jax.vmap(white_balance_von_kries))(imgs, src)  # vmap == batch
+    np.testing.assert_allclose(np.asarray(vk), np.asarray(vk_single), rtol=1e-5)
+    wb = jax.jit(lambda x: white_balance(x, method="white_patch", quantile=0.9))(imgs)
+    np.testing.assert_allclose(np.asarray(wb), imgs * wp[:, None, None, :], rtol=1e-6)
 
 
 def test_gradients(rng, x64):
     img = jnp.asarray(rng.uniform(0.1, 0.9, (4, 4, 3)))
-    check_grads(jax.jit(white_balance_grey_world), (img,), order=1, modes=["rev"])
-    f = jax.jit(lambda x: white_balance_white_patch(x, quantile=0.8))
-    check_grads(f, (img,), order=1, modes=["rev"])
-    f = jax.jit(lambda x: white_balance_stretch(x, low=0.1, high=0.9, clip=False))
-    check_grads(f, (img,), order=1, modes=["rev"])
-    check_grads(jax.jit(apply_white_balance), (img, jnp.array([1.1, 1.0, 0.9])), 1, modes=["rev"])
+
+    # all estimators in one program (one compile); the random cotangent probes every output
+    @jax.jit
+    def f(x, gains):
+        return jnp.concatenate(
+            [
+                white_balance_grey_world(x).ravel(),
+                white_balance_white_patch(x, quantile=0.8).ravel(),
+                white_balance_stretch(x, low=0.1, high=0.9, clip=False).ravel(),
+                apply_white_balance(x, gains).ravel(),
+            ]
+        )
+
+    check_grads(f, (img, jnp.array([1.1, 1.0, 0.9])), order=1, modes=["rev"])
+
+
+@jax.jit
+def _all_gains(x):
+    return jnp.stack(
+        [
+            white_balance_grey_world_gains(x),
+            white_balance_white_patch_gains(x, quantile=1.0),
+            white_balance_grey_world_gains(x, saturation=0.99),
+            white_balance_white_patch_gains(x, quantile=0.5, saturation=0.99),
+        ]
+    )
 
 
 def test_degenerate_images():
     black = jnp.zeros((4, 4, 3))
-    np.testing.assert_array_equal(np.asarray(_gw(black)), 1.0)
-    np.testing.assert_array_equal(np.asarray(_wp(black, quantile=1.0)), 1.0)
+    np.testing.assert_array_equal(np.asarray(_all_gains(black)), 1.0)
     sat = jnp.ones((4, 4, 3))
-    np.testing.assert_array_equal(np.asarray(_gw(sat, saturation=0.99)), 1.0)  # all masked
-    np.testing.assert_array_equal(np.asarray(_wp(sat, quantile=0.5, saturation=0.99)), 1.0)
+    np.testing.assert_array_equal(np.asarray(_all_gains(sat))[2:], 1.0)  # all pixels masked
     g = jax.jit(jax.grad(lambda x: jnp.sum(white_balance_grey_world(x))))(black)
     assert np.all(np.isfinite(np.asarray(g)))
-    one_zero = jnp.ones((4, 4, 3)).at[..., 2].set(0.0)  # empty channel: gains fall back to 1
-    np.testing.assert_array_equal(np.asarray(_gw(one_zero)), 1.0)
+    one_zero = jnp.full((4, 4, 3), 0.5).at[..., 2].set(0.0)  # empty channel: gains fall back to 1
+    np.testing.assert_array_equal(np.asarray(_all_gains(one_zero)), 1.0)
 
 
 def test_bad_arguments():
