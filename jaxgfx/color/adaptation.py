@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_choice
-from ._common import as_colour, cast_const
+from ._common import as_colour, cast_const, matvec3
 from .spaces import _RGB_TO_XYZ, _XYZ_TO_RGB, RGB_SPACES, whitepoint_xyz
 
 __all__ = [
@@ -91,7 +91,7 @@ def chromatic_adaptation(xyz, src_white, dst_white, *, method="bradford"):
     src = whitepoint_xyz(src_white, "src_white", like=xyz)
     dst = whitepoint_xyz(dst_white, "dst_white", like=xyz)
     M = _cat_matrix(src, dst, method, xyz)
-    return jnp.einsum("ij,...j->...i", M, xyz)
+    return matvec3(M, xyz)
 
 
 def rgb_to_rgb(rgb, *, src="srgb", dst="prophoto", adaptation="bradford"):
@@ -114,4 +114,4 @@ def rgb_to_rgb(rgb, *, src="srgb", dst="prophoto", adaptation="bradford"):
         dst_w = whitepoint_xyz(wd, like=rgb)
         M = _cat_matrix(src_w, dst_w, adaptation, rgb) @ M
     M = cast_const(_XYZ_TO_RGB[dst], rgb) @ M
-    return jnp.einsum("ij,...j->...i", M, rgb)
+    return matvec3(M, rgb)

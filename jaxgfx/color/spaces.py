@@ -18,7 +18,7 @@ import numpy as np
 
 from .._checks import check_choice, is_concrete
 from .._math import safe_div
-from ._common import as_colour, cast_const
+from ._common import as_colour, cast_const, matvec3
 
 __all__ = [
     "WHITEPOINTS",
@@ -180,7 +180,7 @@ def whitepoint_xyz(white, name="white", *, like=None):
 
 
 def _apply(m, x):
-    return jnp.einsum("ij,...j->...i", cast_const(m, x), x)
+    return matvec3(cast_const(m, x), x)
 
 
 def rgb_to_xyz(rgb, *, space="srgb"):
@@ -210,7 +210,8 @@ def xyz_to_rgb(xyz, *, space="srgb"):
 def _lab_f(t):
     big = t > _EPS
     t_safe = jnp.where(big, t, 1.0)
-    return jnp.where(big, jnp.cbrt(t_safe), (_KAPPA * t + 16.0) / 116.0)
+    # t ** (1/3) rather than jnp.cbrt: same result here (t > 0), ~2x faster on XLA:CPU
+    return jnp.where(big, t_safe ** (1.0 / 3.0), (_KAPPA * t + 16.0) / 116.0)
 
 
 def xyz_to_lab(xyz, *, white="D65"):
@@ -375,4 +376,5 @@ def luminance(rgb, *, weights="rec709"):
     """
     check_choice(weights, "weights", LUMINANCE_WEIGHTS)
     rgb = as_colour(rgb, "rgb")
-    return rgb @ cast_const(np.asarray(LUMINANCE_WEIGHTS[weights]), rgb)
+    w = LUMINANCE_WEIGHTS[weights]
+    return rgb[..., 0] * w[0] + rgb[..., 1] * w[1] + rgb[..., 2] * w[2]

@@ -25,7 +25,7 @@ import numpy as np
 
 from .._checks import check_choice, check_image, check_positive
 from .._math import safe_div
-from ._common import as_colour, cast_const
+from ._common import as_colour, cast_const, matvec3
 from .adaptation import _CAT_INV, CAT_MATRICES
 from .spaces import _RGB_TO_XYZ, _XYZ_TO_RGB, RGB_SPACES
 
@@ -248,7 +248,7 @@ def white_balance_von_kries(
     image = check_image(image, channels=3, min_ndim=3)
     M = white_balance_von_kries_matrix(src_white_rgb, dst_white_rgb, method=method, space=space)
     M = M.astype(image.dtype)
-    return jnp.einsum("...ij,...hwj->...hwi", M, image)
+    return matvec3(M, image)
 
 
 #: name -> estimator returning the balanced image; keyword options pass through.
