@@ -50,7 +50,11 @@ def _everything(rgb, img):
     return outs
 
 
-@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize(
+    "dtype",
+    # float32 under x64 is the leak check; float64 outputs are also asserted across the suite
+    [np.float32, pytest.param(np.float64, marks=pytest.mark.slow)],
+)
 def test_dtype_follows_input(dtype, rng, x64):
     rgb = rng.uniform(0.01, 1, (5, 3)).astype(dtype)
     img = rng.uniform(0.01, 1, (4, 4, 3)).astype(dtype)
