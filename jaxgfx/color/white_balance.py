@@ -50,7 +50,8 @@ def _check_saturation(saturation):
 
 
 def _check_unit(q, name):
-    if not isinstance(q, (int, float)) or isinstance(q, bool) or not 0.0 <= q <= 1.0:
+    ok_type = isinstance(q, (int, float, np.integer, np.floating)) and not isinstance(q, bool)
+    if not ok_type or not 0.0 <= float(q) <= 1.0:
         raise ValueError(f"{name}: expected a number in [0, 1], got {q!r}")
     return float(q)
 
