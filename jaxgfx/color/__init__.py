@@ -50,6 +50,10 @@ from .transfer import transfer_encode as transfer_encode
 from .white_balance import WHITE_BALANCE_METHODS as WHITE_BALANCE_METHODS
 from .white_balance import apply_white_balance as apply_white_balance
 from .white_balance import white_balance as white_balance
+from .white_balance import white_balance_brightest_pixel as white_balance_brightest_pixel
+from .white_balance import (
+    white_balance_brightest_pixel_gains as white_balance_brightest_pixel_gains,
+)
 from .white_balance import white_balance_grey_world as white_balance_grey_world
 from .white_balance import white_balance_grey_world_gains as white_balance_grey_world_gains
 from .white_balance import white_balance_stretch as white_balance_stretch
@@ -107,6 +111,8 @@ __all__ = [
     "white_balance_grey_world_gains",
     "white_balance_white_patch",
     "white_balance_white_patch_gains",
+    "white_balance_brightest_pixel",
+    "white_balance_brightest_pixel_gains",
     "white_balance_stretch",
     "white_balance_stretch_limits",
     "white_balance_von_kries",

@@ -35,6 +35,8 @@ __all__ = [
     "white_balance_grey_world_gains",
     "white_balance_white_patch",
     "white_balance_white_patch_gains",
+    "white_balance_brightest_pixel",
+    "white_balance_brightest_pixel_gains",
     "white_balance_stretch",
     "white_balance_stretch_limits",
     "white_balance_von_kries",
@@ -172,6 +174,40 @@ def white_balance_white_patch(image, *, quantile=0.99, saturation=None):
     return apply_white_balance(image, g)
 
 
+def white_balance_brightest_pixel_gains(image, *, quantile=0.99, saturation=None):
+    """Gains from the colour of the brightest pixels (the lecture's highlight model: a specular
+    highlight has the illuminant's colour, so take the brightest pixel and use channel weights
+    inversely proportional to its colour).
+
+    Brightness is the Rec.709 luminance; the estimate is the mean colour of the (unmasked)
+    pixels whose luminance is ``>=`` its ``quantile`` (``quantile=1`` -> the brightest pixel,
+    ties averaged), and ``g_c = mean(e) / e_c``. Returns ``(..., 3)``.
+
+    Example:
+      >>> img = jnp.array([[[0.1, 0.2, 0.1], [0.8, 0.4, 0.2], [0.2, 0.9, 0.1]]])
+      >>> [round(float(g), 4) for g in white_balance_brightest_pixel_gains(img, quantile=1.0)]
+      [2.0, 0.4444, 4.0]
+    """
+    image = check_image(image, channels=3, min_ndim=3)
+    q = _check_unit(quantile, "quantile")
+    _check_saturation(saturation)
+    w = _valid_mask(image, saturation)
+    lum = (image[..., 0] * 0.2126 + image[..., 1] * 0.7152 + image[..., 2] * 0.0722)[..., None]
+    thr, n = _masked_quantile(lum, w, q)  # (..., 1)
+    sel = w * (lum >= thr[..., None, None, :]).astype(image.dtype)
+    cnt = jnp.sum(sel, axis=(-3, -2))
+    est = safe_div(jnp.sum(image * sel, axis=(-3, -2)), cnt)
+    return _gains_from_estimate(est, (n > 0) & (cnt > 0))
+
+
+def white_balance_brightest_pixel(image, *, quantile=0.99, saturation=None):
+    """Highlight white balance from the brightest pixels' colour (see
+    :func:`white_balance_brightest_pixel_gains`)."""
+    image = check_image(image, channels=3, min_ndim=3)
+    g = white_balance_brightest_pixel_gains(image, quantile=quantile, saturation=saturation)
+    return apply_white_balance(image, g)
+
+
 def white_balance_stretch_limits(image, *, low=0.01, high=0.99, saturation=None):
     """Per-channel ``low`` and ``high`` quantiles ``(lo, hi)``, each ``(..., 3)``, used by
     :func:`white_balance_stretch`."""
@@ -256,6 +292,7 @@ def white_balance_von_kries(
 WHITE_BALANCE_METHODS = {
     "grey_world": white_balance_grey_world,
     "white_patch": white_balance_white_patch,
+    "brightest_pixel": white_balance_brightest_pixel,
     "stretch": white_balance_stretch,
 }
 

@@ -11,6 +11,8 @@ from jaxgfx.color import (
     apply_white_balance,
     rgb_to_xyz_matrix,
     white_balance,
+    white_balance_brightest_pixel,
+    white_balance_brightest_pixel_gains,
     white_balance_grey_world,
     white_balance_grey_world_gains,
     white_balance_stretch,
@@ -74,6 +76,33 @@ def test_white_patch_quantiles(rng):
     out = np.asarray(out)
     top = out[mask].max(0)
     np.testing.assert_allclose(top, top.mean(), rtol=1e-5)
+
+
+def _np_brightest(img, q, mask=None):
+    px = img.reshape(-1, 3) if mask is None else img[mask]
+    lum = px @ np.array([0.2126, 0.7152, 0.0722])
+    e = px[lum >= np.quantile(lum, q)].mean(0)
+    return e.mean() / e
+
+
+def test_brightest_pixel(rng):
+    img = _cast_image(rng)
+    f = jax.jit(
+        lambda x: (
+            white_balance_brightest_pixel_gains(x, quantile=1.0),
+            white_balance_brightest_pixel_gains(x, quantile=0.9),
+            white_balance_brightest_pixel_gains(x, quantile=0.95, saturation=0.99),
+            white_balance_brightest_pixel(x, quantile=0.95, saturation=0.99),
+        )
+    )
+    g1, g9, gm, out = f(img)
+    img64 = img.astype(np.float64)
+    mask = np.all(img < 0.99, axis=-1)
+    # quantile=1: the clipped white block is the brightest -> gains 1 (it is already neutral)
+    np.testing.assert_allclose(np.asarray(g1), 1.0, rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(g9), _np_brightest(img64, 0.9), rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(gm), _np_brightest(img64, 0.95, mask), rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(out), img * np.asarray(gm), rtol=1e-6)
 
 
 @jax.jit
@@ -160,6 +189,7 @@ def test_gradients(rng, x64):
             [
                 white_balance_grey_world(x).ravel(),
                 white_balance_white_patch(x, quantile=0.8).ravel(),
+                white_balance_brightest_pixel(x, quantile=0.7).ravel(),
                 white_balance_stretch(x, low=0.1, high=0.9, clip=False).ravel(),
                 apply_white_balance(x, gains).ravel(),
             ]
@@ -176,6 +206,7 @@ def _all_gains(x):
             white_balance_white_patch_gains(x, quantile=1.0),
             white_balance_grey_world_gains(x, saturation=0.99),
             white_balance_white_patch_gains(x, quantile=0.5, saturation=0.99),
+            white_balance_brightest_pixel_gains(x, quantile=1.0, saturation=0.99),
         ]
     )
 
