@@ -1,4 +1,5 @@
-"""White balance: grey world, white patch (robust max-RGB), per-channel stretch, von Kries.
+"""White balance: grey world, white patch (robust max-RGB), brightest pixel, per-channel
+stretch, von Kries.
 
 All functions take an image ``(..., H, W, 3)`` (leading batch axes allowed; statistics are
 per image over ``H, W``) and return the balanced image with the input's dtype. The ``*_gains``
@@ -6,8 +7,9 @@ helpers return the per-channel gains ``(..., 3)``.
 
 **Gain normalisation.** The estimators return gains ``g_c = mean(e) / e_c`` where ``e`` is the
 per-channel illuminant estimate (channel mean for grey world, channel quantile for white
-patch): the estimate becomes neutral and its mean level is kept (the lecture's grey-world
-formula ``R' = R * Avg / mean(R)``).
+patch, mean colour of the brightest pixels for the highlight model): the estimate becomes
+neutral and its mean level is kept (the lecture's grey-world formula
+``R' = R * Avg / mean(R)``).
 
 **Saturation mask.** ``saturation=s`` excludes from the statistics every pixel with *any*
 channel ``>= s`` (clipped highlights carry no colour information); ``None`` (default) uses all
