@@ -1,1 +1,122 @@
-"""jaxgfx.color (see docs/)."""
+"""jaxgfx.color: transfer functions, colour spaces, colour differences, chromatic adaptation
+and white balance (see docs/color.md).
+
+All functions are pure, jittable, vmappable and differentiable; colours are channels-last
+``(..., 3)`` and the dtype follows the input.
+"""
+
+from .adaptation import CAT_MATRICES as CAT_MATRICES
+from .adaptation import chromatic_adaptation as chromatic_adaptation
+from .adaptation import chromatic_adaptation_matrix as chromatic_adaptation_matrix
+from .adaptation import rgb_to_rgb as rgb_to_rgb
+from .difference import delta_e_1976 as delta_e_1976
+from .difference import delta_e_2000 as delta_e_2000
+from .spaces import LUMINANCE_WEIGHTS as LUMINANCE_WEIGHTS
+from .spaces import RGB_SPACES as RGB_SPACES
+from .spaces import WHITEPOINTS as WHITEPOINTS
+from .spaces import YIQ_MATRIX as YIQ_MATRIX
+from .spaces import RGBSpace as RGBSpace
+from .spaces import cmyk_to_rgb as cmyk_to_rgb
+from .spaces import hsv_to_rgb as hsv_to_rgb
+from .spaces import lab_to_xyz as lab_to_xyz
+from .spaces import luminance as luminance
+from .spaces import normalised_primary_matrix as normalised_primary_matrix
+from .spaces import rgb_to_cmyk as rgb_to_cmyk
+from .spaces import rgb_to_hsv as rgb_to_hsv
+from .spaces import rgb_to_xyz as rgb_to_xyz
+from .spaces import rgb_to_xyz_matrix as rgb_to_xyz_matrix
+from .spaces import rgb_to_yiq as rgb_to_yiq
+from .spaces import whitepoint_xyz as whitepoint_xyz
+from .spaces import xy_to_xyz as xy_to_xyz
+from .spaces import xyY_to_xyz as xyY_to_xyz
+from .spaces import xyz_to_lab as xyz_to_lab
+from .spaces import xyz_to_rgb as xyz_to_rgb
+from .spaces import xyz_to_xyY as xyz_to_xyY
+from .spaces import yiq_to_rgb as yiq_to_rgb
+from .transfer import ADOBE_RGB_GAMMA as ADOBE_RGB_GAMMA
+from .transfer import TRANSFER_FUNCTIONS as TRANSFER_FUNCTIONS
+from .transfer import adobe_rgb_to_linear as adobe_rgb_to_linear
+from .transfer import gamma_decode as gamma_decode
+from .transfer import gamma_encode as gamma_encode
+from .transfer import linear_to_adobe_rgb as linear_to_adobe_rgb
+from .transfer import linear_to_prophoto as linear_to_prophoto
+from .transfer import linear_to_rec709 as linear_to_rec709
+from .transfer import linear_to_srgb as linear_to_srgb
+from .transfer import prophoto_to_linear as prophoto_to_linear
+from .transfer import rec709_to_linear as rec709_to_linear
+from .transfer import srgb_to_linear as srgb_to_linear
+from .transfer import transfer_decode as transfer_decode
+from .transfer import transfer_encode as transfer_encode
+from .white_balance import WHITE_BALANCE_METHODS as WHITE_BALANCE_METHODS
+from .white_balance import apply_white_balance as apply_white_balance
+from .white_balance import white_balance as white_balance
+from .white_balance import white_balance_brightest_pixel as white_balance_brightest_pixel
+from .white_balance import (
+    white_balance_brightest_pixel_gains as white_balance_brightest_pixel_gains,
+)
+from .white_balance import white_balance_grey_world as white_balance_grey_world
+from .white_balance import white_balance_grey_world_gains as white_balance_grey_world_gains
+from .white_balance import white_balance_stretch as white_balance_stretch
+from .white_balance import white_balance_stretch_limits as white_balance_stretch_limits
+from .white_balance import white_balance_von_kries as white_balance_von_kries
+from .white_balance import white_balance_von_kries_matrix as white_balance_von_kries_matrix
+from .white_balance import white_balance_white_patch as white_balance_white_patch
+from .white_balance import white_balance_white_patch_gains as white_balance_white_patch_gains
+
+__all__ = [
+    "srgb_to_linear",
+    "linear_to_srgb",
+    "linear_to_rec709",
+    "rec709_to_linear",
+    "linear_to_adobe_rgb",
+    "adobe_rgb_to_linear",
+    "linear_to_prophoto",
+    "prophoto_to_linear",
+    "gamma_encode",
+    "gamma_decode",
+    "transfer_encode",
+    "transfer_decode",
+    "TRANSFER_FUNCTIONS",
+    "ADOBE_RGB_GAMMA",
+    "WHITEPOINTS",
+    "RGB_SPACES",
+    "RGBSpace",
+    "LUMINANCE_WEIGHTS",
+    "YIQ_MATRIX",
+    "normalised_primary_matrix",
+    "rgb_to_xyz_matrix",
+    "whitepoint_xyz",
+    "xy_to_xyz",
+    "rgb_to_xyz",
+    "xyz_to_rgb",
+    "xyz_to_lab",
+    "lab_to_xyz",
+    "xyz_to_xyY",
+    "xyY_to_xyz",
+    "rgb_to_hsv",
+    "hsv_to_rgb",
+    "rgb_to_yiq",
+    "yiq_to_rgb",
+    "rgb_to_cmyk",
+    "cmyk_to_rgb",
+    "luminance",
+    "delta_e_1976",
+    "delta_e_2000",
+    "CAT_MATRICES",
+    "chromatic_adaptation_matrix",
+    "chromatic_adaptation",
+    "rgb_to_rgb",
+    "apply_white_balance",
+    "white_balance_grey_world",
+    "white_balance_grey_world_gains",
+    "white_balance_white_patch",
+    "white_balance_white_patch_gains",
+    "white_balance_brightest_pixel",
+    "white_balance_brightest_pixel_gains",
+    "white_balance_stretch",
+    "white_balance_stretch_limits",
+    "white_balance_von_kries",
+    "white_balance_von_kries_matrix",
+    "white_balance",
+    "WHITE_BALANCE_METHODS",
+]
