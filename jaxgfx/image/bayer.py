@@ -138,26 +138,27 @@ def _apply(padded, kernel, h, w):
     return acc
 
 
-@functools.partial(jax.jit, static_argnums=(1, 2))
-def _demosaic(raw, pattern, method):
+def _site_maps(h, w, pattern):
+    """Per-pixel colour of the site and colour held by its row (the horizontal neighbour's
+    colour by tile phase), as int8 arrays: passed as arguments so that the compiled program
+    is shared by all patterns."""
+    tile = _pattern_channels(pattern)
+    ii, jj = np.mgrid[:h, :w]
+    return tile[ii % 2, jj % 2].astype(np.int8), tile[ii % 2, (jj + 1) % 2].astype(np.int8)
+
+
+@functools.partial(jax.jit, static_argnums=(3,))
+def _demosaic(raw, cmap, row_colour, method):
     h, w = raw.shape[-2:]
-    ks = _KERNELS[method]
     pad = [(0, 0)] * (raw.ndim - 2) + [(_PAD, _PAD), (_PAD, _PAD)]
     p = jnp.pad(raw, pad, mode="reflect")
-    est = {name: _apply(p, k, h, w) for name, k in ks.items()}
-    cmap = _channel_map(h, w, pattern)
-    # colour of the horizontal neighbour: for a G site, the colour its row holds
-    row_colour = np.roll(cmap, -1, axis=1) if w > 1 else cmap
-    if w % 2 == 1 and w > 1:  # last column: neighbour by the tile phase, not the wrap
-        row_colour[:, -1] = cmap[:, -2]
-    is_ = {c: jnp.asarray(cmap == c) for c in range(3)}
+    est = {name: _apply(p, k, h, w) for name, k in _KERNELS[method].items()}
     out = []
     for c, other in ((0, 2), (2, 0)):
-        at_g_row = jnp.asarray((cmap == 1) & (row_colour == c))
-        v = jnp.where(at_g_row, est["row"], est["col"])
-        v = jnp.where(is_[other], est["diag"], v)
-        out.append(jnp.where(is_[c], raw, v))
-    g = jnp.where(is_[1], raw, est["cross"])
+        v = jnp.where((cmap == 1) & (row_colour == c), est["row"], est["col"])
+        v = jnp.where(cmap == other, est["diag"], v)
+        out.append(jnp.where(cmap == c, raw, v))
+    g = jnp.where(cmap == 1, raw, est["cross"])
     return jnp.stack([out[0], g, out[1]], axis=-1)
 
 
@@ -197,7 +198,8 @@ def demosaic(raw, pattern="RGGB", *, method="malvar"):
     check_choice(method, "method", DEMOSAIC_METHODS)
     if x.shape[-2] < 3 or x.shape[-1] < 3:
         raise ValueError(f"raw: expected a mosaic (..., H, W) with H, W >= 3, got {x.shape}")
-    return _demosaic(x, pattern, method)
+    cmap, row_colour = _site_maps(x.shape[-2], x.shape[-1], pattern)
+    return _demosaic(x, jnp.asarray(cmap), jnp.asarray(row_colour), method)
 
 
 def demosaic_bilinear(raw, pattern="RGGB"):
