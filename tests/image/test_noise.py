@@ -4,7 +4,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from jax.test_util import check_grads
 from scipy.stats import trim_mean
 
 from jaxgfx.image.noise import (
@@ -16,6 +15,36 @@ from jaxgfx.image.noise import (
 )
 
 KEY = jax.random.key(42)
+
+
+def check_grads_jit(f, args, order=1, *, eps=1e-6, rtol=1e-6, seed=0):
+    """Float64 reverse-mode gradient vs central finite differences along a random direction
+    (what ``jax.test_util.check_grads(f, args, order, modes=["rev"])`` checks, with every
+    evaluation jitted: the eager version costs seconds of tracing per call on CPU)."""
+    args = tuple(jnp.asarray(a, jnp.float64) for a in args)
+    rng = np.random.default_rng(seed)
+    u = jnp.asarray(rng.standard_normal(jnp.shape(f(*args))))
+    dirs = [jnp.asarray(rng.standard_normal(a.shape)) for a in args]
+    scalar = jax.jit(lambda *a: jnp.vdot(u, f(*a)))
+    grads = jax.jit(jax.grad(scalar, argnums=tuple(range(len(args)))))(*args)
+    plus = scalar(*(a + eps * d for a, d in zip(args, dirs, strict=True)))
+    minus = scalar(*(a - eps * d for a, d in zip(args, dirs, strict=True)))
+    fd = (plus - minus) / (2 * eps)
+    ad = sum(jnp.vdot(g, d) for g, d in zip(grads, dirs, strict=True))
+    np.testing.assert_allclose(float(ad), float(fd), rtol=rtol, atol=rtol)
+    if order == 2:
+        w = jnp.asarray(rng.standard_normal(len(args)))
+        grad_fn = jax.grad(scalar, argnums=tuple(range(len(args))))
+        check_grads_jit(
+            lambda *a: (
+                jnp.stack([jnp.vdot(g, d) for g, d in zip(grad_fn(*a), dirs, strict=True)]) * w
+            ),
+            args,
+            1,
+            eps=eps,
+            rtol=rtol,
+            seed=seed + 1,
+        )
 
 
 def _check_mean_var(samples, mean, var, n_sd=5.0):
@@ -53,10 +82,12 @@ def test_gaussian_noise_vmap_keys_are_independent():
 
 def test_gaussian_noise_grads(x64):
     x = jnp.linspace(0.0, 1.0, 12).reshape(3, 4)
-    check_grads(lambda x, s: add_gaussian_noise(KEY, x, sigma=s), (x, 0.1), 2, ["rev"])
+    check_grads_jit(lambda x, s: add_gaussian_noise(KEY, x, sigma=s), (x, 0.1), 2)
     y0 = add_gaussian_noise(KEY, x, sigma=0.0)
     assert bool(jnp.all(y0 == x))
-    g = jax.grad(lambda s: add_gaussian_noise(KEY, x, sigma=s).sum())(0.0)  # σ → 0: dy/dσ = z
+    g = jax.jit(jax.grad(lambda s: add_gaussian_noise(KEY, x, sigma=s).sum()))(
+        0.0
+    )  # σ → 0: dy/dσ = z
     z = (add_gaussian_noise(KEY, x, sigma=1.0) - x).sum()
     np.testing.assert_allclose(float(g), float(z), rtol=1e-12)
 
@@ -95,7 +126,11 @@ def test_impulse_noise():
     assert float(add_impulse_noise(KEY, x, amount=0.0).max()) == 0.0
 
 
-@pytest.mark.parametrize("method", ["exact", "gaussian"])
+@pytest.mark.parametrize(
+    "method",
+    # jax.random.poisson takes ~5 s of CPU to compile: the exact sampler runs with -m slow
+    [pytest.param("exact", marks=pytest.mark.slow), "gaussian"],
+)
 def test_poisson_gaussian_mean_variance(method):
     gain, read = 0.01, 0.01
     # one compiled program (gain, read_sigma traced) for both levels
@@ -119,8 +154,8 @@ def test_poisson_gaussian_approx_grads(x64):
     def f(x, g, r):
         return add_poisson_gaussian_noise(KEY, x, gain=g, read_sigma=r, method="gaussian")
 
-    check_grads(f, (x[1:], 0.01, 0.02), 1, ["rev"])
-    gx, gg, gr = jax.grad(lambda *a: f(*a).sum(), argnums=(0, 1, 2))(x, 0.01, 0.0)
+    check_grads_jit(f, (x[1:], 0.01, 0.02), 1)
+    gx, gg, gr = jax.jit(jax.grad(lambda *a: f(*a).sum(), argnums=(0, 1, 2)))(x, 0.01, 0.0)
     assert all(np.all(np.isfinite(np.asarray(v))) for v in (gx, gg, gr))
 
 
@@ -158,9 +193,9 @@ def test_temporal_median_removes_impulses():
 
 def test_temporal_average_grad(x64):
     frames = jnp.asarray(np.random.default_rng(3).random((5, 3, 4)))
-    g = jax.grad(lambda f: temporal_average(f).sum())(frames)
+    g = jax.jit(jax.grad(lambda f: temporal_average(f).sum()))(frames)
     np.testing.assert_allclose(np.asarray(g), 0.2)
-    check_grads(lambda f: temporal_average(f, method="trimmed", trim=0.2), (frames,), 1, ["rev"])
+    check_grads_jit(lambda f: temporal_average(f, method="trimmed", trim=0.2), (frames,), 1)
 
 
 @pytest.mark.parametrize(
