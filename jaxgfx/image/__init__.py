@@ -25,6 +25,7 @@ from .noise import temporal_average as temporal_average
 from .point import adjust_brightness_contrast as adjust_brightness_contrast
 from .point import cumulative_histogram as cumulative_histogram
 from .point import equalize_histogram as equalize_histogram
+from .point import equalize_histogram_soft as equalize_histogram_soft
 from .point import gamma_correct as gamma_correct
 from .point import histogram as histogram
 from .point import stretch_contrast as stretch_contrast
@@ -56,6 +57,7 @@ _IMGPOINT_ALL = [
     "adjust_brightness_contrast",
     "cumulative_histogram",
     "equalize_histogram",
+    "equalize_histogram_soft",
     "gamma_correct",
     "histogram",
     "stretch_contrast",

@@ -5,12 +5,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy.interpolate import PchipInterpolator
+from scipy.stats import norm
 from skimage.exposure import equalize_hist
 
 from jaxgfx.image.point import (
     adjust_brightness_contrast,
     cumulative_histogram,
     equalize_histogram,
+    equalize_histogram_soft,
     gamma_correct,
     histogram,
     stretch_contrast,
@@ -224,6 +226,27 @@ def test_equalize_histogram_per_channel_batch_float32(img):
     assert float(flat.min()) == 1.0
 
 
+def test_equalize_histogram_soft_matches_kernel_cdf(img, x64):
+    x = img[:12, :10].astype(np.float64)
+    h = 0.05
+    out = jax.jit(lambda x, h: equalize_histogram_soft(x, h, bins=512))(x, h)
+    # closed form F(x_i) = mean_j Φ((x_i - x_j)/h); grid interpolation error <= Δ²/8 · 0.242/h²
+    ref = norm.cdf((x.ravel()[:, None] - x.ravel()[None, :]) / h).mean(1).reshape(x.shape)
+    np.testing.assert_allclose(np.asarray(out), ref, atol=(1 / 511) ** 2 / 8 * 0.242 / h**2)
+    order = np.argsort(x.ravel())
+    assert np.all(np.diff(np.asarray(out).ravel()[order]) >= 0)  # order preserving
+    pc = equalize_histogram_soft(x, h, bins=512, per_channel=True)
+    ref1 = norm.cdf((x[..., 1].ravel()[:, None] - x[..., 1].ravel()[None, :]) / h).mean(1)
+    np.testing.assert_allclose(np.asarray(pc[..., 1]).ravel(), ref1, atol=1e-4)
+
+
+def test_equalize_histogram_soft_grads(x64):
+    x = jnp.asarray(np.random.default_rng(7).random((5, 6)))
+    check_grads_jit(lambda x, h: equalize_histogram_soft(x, h, bins=64), (x, 0.1), 1)
+    g = jax.jit(jax.grad(lambda x: equalize_histogram_soft(x, 1e-3).sum()))(jnp.zeros((3, 3)))
+    assert np.all(np.isfinite(np.asarray(g)))  # flat image
+
+
 # ---------------------------------------------------------------- brightness/contrast
 
 
@@ -250,6 +273,8 @@ def test_adjust_brightness_contrast(x64):
         (lambda: tone_curve_linear(0.5, [0.0, 0.0], [0.0, 1.0]), "xs"),
         (lambda: tone_curve_spline(0.5, [0.0, 1.0], [0.0, 1.0, 2.0]), "ys"),
         (lambda: tone_curve_spline(0.5, [0.0], [0.0]), "xs"),
+        (lambda: equalize_histogram_soft(np.zeros((4, 4)), 0.0), "bandwidth"),
+        (lambda: equalize_histogram_soft(np.zeros((4, 4)), 0.1, bins=1), "bins"),
     ],
 )
 def test_bad_input_raises(call, match):
