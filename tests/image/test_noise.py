@@ -92,6 +92,13 @@ def test_gaussian_noise_grads(x64):
     np.testing.assert_allclose(float(g), float(z), rtol=1e-12)
 
 
+def test_gaussian_noise_huge_sigma_and_batch():
+    y = add_gaussian_noise(KEY, jnp.zeros((2, 32, 32, 1)), sigma=1e30)
+    assert np.all(np.isfinite(np.asarray(y)))
+    _check_mean_var(np.asarray(y) / 1e30, 0.0, 1.0)
+    assert not np.allclose(np.asarray(y[0]), np.asarray(y[1]))  # batch items get fresh noise
+
+
 def test_salt_and_pepper_binomial_fractions():
     n = 128 * 128
     x = jnp.full((128, 128), 0.5)

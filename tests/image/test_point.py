@@ -130,6 +130,15 @@ def test_stretch_contrast_flat_image_and_grad(x64):
     check_grads_jit(lambda x: stretch_contrast(x, low=0.1, high=0.8, clip=False), (x,), 1)
 
 
+def test_stretch_contrast_huge_range(x64):
+    # 60 decades of dynamic range: quantiles and the ratio stay finite and exact
+    x = jnp.asarray(np.logspace(-30, 30, 40).reshape(5, 8))
+    out = stretch_contrast(x, low=0.0, high=1.0)
+    np.testing.assert_allclose(np.asarray(out), (np.asarray(x) - 1e-30) / (1e30 - 1e-30), 1e-12)
+    g = jax.jit(jax.grad(lambda x: stretch_contrast(x, clip=False).sum()))(x)
+    assert np.all(np.isfinite(np.asarray(g)))
+
+
 # ---------------------------------------------------------------- gamma
 
 
@@ -186,6 +195,16 @@ def test_tone_curve_spline_monotone_no_overshoot_and_float32():
     np.testing.assert_allclose(out, ref, atol=1e-6)
     # two knots: straight line
     np.testing.assert_allclose(float(tone_curve_spline(0.5, [0.0, 1.0], [0.0, 2.0])), 1.0)
+
+
+def test_tone_curve_spline_nearly_coincident_knots(x64):
+    xs = np.array([0.0, 0.5, 0.5 + 1e-9, 1.0])
+    ys = np.array([0.0, 0.2, 0.8, 1.0])  # a near-vertical step
+    x = np.linspace(0, 1, 41)
+    out = tone_curve_spline(x, xs, ys)
+    np.testing.assert_allclose(np.asarray(out), PchipInterpolator(xs, ys)(x), atol=1e-9)
+    g = jax.jit(jax.grad(lambda ys: tone_curve_spline(x, xs, ys).sum()))(jnp.asarray(ys))
+    assert np.all(np.isfinite(np.asarray(g)))
 
 
 def test_tone_curve_spline_grads(x64):
