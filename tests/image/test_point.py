@@ -273,7 +273,7 @@ def test_adjust_brightness_contrast(x64):
     x = jnp.array([0.0, 0.5, 0.75])
     out = jax.jit(adjust_brightness_contrast)(x, 0.1, 2.0)
     np.testing.assert_allclose(np.asarray(out), [-0.4, 0.6, 1.1], atol=1e-12)
-    check_grads_jit(adjust_brightness_contrast, (x, 0.1, 2.0), 2)
+    check_grads_jit(adjust_brightness_contrast, (x, 0.1, 2.0), 1)
 
 
 # ---------------------------------------------------------------- bad input
