@@ -16,6 +16,7 @@ from .fourier import fourier_highpass as fourier_highpass
 from .fourier import fourier_lowpass as fourier_lowpass
 from .fourier import frequency_grid as frequency_grid
 from .fourier import lowpass_transfer as lowpass_transfer
+from .noise import POISSON_GAUSSIAN_METHODS as POISSON_GAUSSIAN_METHODS
 from .noise import TEMPORAL_AVERAGE_METHODS as TEMPORAL_AVERAGE_METHODS
 from .noise import add_gaussian_noise as add_gaussian_noise
 from .noise import add_impulse_noise as add_impulse_noise
@@ -48,6 +49,7 @@ _IMGPOINT_ALL = [
     "fourier_lowpass",
     "frequency_grid",
     "lowpass_transfer",
+    "POISSON_GAUSSIAN_METHODS",
     "TEMPORAL_AVERAGE_METHODS",
     "add_gaussian_noise",
     "add_impulse_noise",

@@ -31,6 +31,7 @@ __all__ = [
     "add_poisson_gaussian_noise",
     "temporal_average",
     "TEMPORAL_AVERAGE_METHODS",
+    "POISSON_GAUSSIAN_METHODS",
 ]
 
 
