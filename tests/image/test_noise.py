@@ -72,6 +72,7 @@ def test_gaussian_noise_statistics_per_channel_sigma():
     assert float(yc.min()) >= 0.0 and float(yc.max()) <= 1.0
 
 
+@pytest.mark.slow  # ~2 s CPU (compile); run with -m slow
 def test_gaussian_noise_vmap_keys_are_independent():
     keys = jax.random.split(KEY, 4)
     ys = jax.vmap(lambda k: add_gaussian_noise(k, jnp.zeros((32, 32)), sigma=1.0))(keys)
@@ -188,6 +189,7 @@ def test_temporal_average_methods_match_numpy_scipy(rng):
     np.testing.assert_allclose(np.asarray(out), trim_mean(frames, 0.3, axis=0), rtol=1e-6)
 
 
+@pytest.mark.slow  # ~2 s CPU (compile); run with -m slow
 def test_temporal_median_removes_impulses():
     clean = jnp.full((32, 32), 0.25)
     keys = jax.random.split(KEY, 9)

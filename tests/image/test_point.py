@@ -197,6 +197,7 @@ def test_tone_curve_spline_monotone_no_overshoot_and_float32():
     np.testing.assert_allclose(float(tone_curve_spline(0.5, [0.0, 1.0], [0.0, 2.0])), 1.0)
 
 
+@pytest.mark.slow  # ~2 s CPU (compile); run with -m slow
 def test_tone_curve_spline_nearly_coincident_knots(x64):
     xs = np.array([0.0, 0.5, 0.5 + 1e-9, 1.0])
     ys = np.array([0.0, 0.2, 0.8, 1.0])  # a near-vertical step
