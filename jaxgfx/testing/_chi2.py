@@ -87,18 +87,23 @@ def chi2_test(
     wg = 0.5 * wg
     dz = 2.0 / res_theta
     dphi = 2.0 * math.pi / res_phi
-    z = -1.0 + (np.arange(res_theta)[:, None] + xg[None, :]) * dz  # (T, q)
+    # each cos θ cell [z0, z1] is integrated in θ (dω = sin θ dθ dφ), which clusters nodes
+    # towards the poles where peaked lobes (small roughness) concentrate
+    z_edges = np.clip(-1.0 + np.arange(res_theta + 1) * dz, -1.0, 1.0)
+    th_edges = np.arccos(z_edges)  # decreasing
+    th0, th1 = th_edges[1:], th_edges[:-1]  # per cell, th0 < th1
+    theta = th0[:, None] + (th1 - th0)[:, None] * xg[None, :]  # (T, q)
+    wth = (th1 - th0)[:, None] * wg[None, :] * np.sin(theta)  # (T, q)
     phi = (np.arange(res_phi)[:, None] + xg[None, :]) * dphi  # (P, q)
-    zz = z[:, None, :, None]
+    st = np.sin(theta)[:, None, :, None]
+    zz = np.cos(theta)[:, None, :, None]
     pp = phi[None, :, None, :]
-    r = np.sqrt(np.maximum(1.0 - zz * zz, 0.0))
     pts = np.stack(
-        np.broadcast_arrays(r * np.cos(pp), r * np.sin(pp), zz + 0.0 * pp), axis=-1
+        np.broadcast_arrays(st * np.cos(pp), st * np.sin(pp), zz + 0.0 * pp), axis=-1
     )  # (T, P, q, q, 3)
     pdf_vals = np.asarray(pdf_fn(jnp.asarray(pts.reshape(-1, 3), dtype=u1.dtype)), np.float64)
     pdf_vals = pdf_vals.reshape(res_theta, res_phi, ires, ires)
-    wq = wg[:, None] * wg[None, :]
-    integral = np.einsum("tpij,ij->tp", pdf_vals, wq) * dz * dphi
+    integral = np.einsum("tpij,ti,j->tp", pdf_vals, wth, wg) * dphi
     expected = integral * n_samples
     details = {"pdf_integral": float(integral.sum()), "expected": expected}
 

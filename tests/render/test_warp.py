@@ -1,6 +1,5 @@
 """Warps: Jacobian-determinant identity (pdf = 1/|det J|), inverses, chi², Distribution2D."""
 
-
 import jax
 import jax.numpy as jnp
 import numpy as np
