@@ -108,3 +108,41 @@ def test_hard_cases_values_and_grads_finite():
     # α = 1e-4 mirror-like conductor: wo = wi = n gives D/4 = 1/(4 π α²)
     vals, _ = run(1e-4, 1.5, 0.7, 50.0)
     assert np.isclose(float(vals[5][0, 0]), 1 / (4 * math.pi * 1e-8), rtol=1e-4)
+
+
+def test_check_grads_core_parameters_fast(x64):
+    """Default-run subset: α and IOR of the conductor, α / η / kd of rough plastic."""
+    wo = _unit(jnp.array([[0.3, 0.1, 0.9], [-0.5, 0.2, 0.4]]))
+    wi = _unit(jnp.array([[-0.2, -0.3, 0.8], [0.6, -0.1, 0.5]]))
+
+    @jax.jit
+    def f(alpha, eta, k, kd):
+        return jnp.concatenate(
+            [
+                RoughConductor(alpha, eta=eta, k=k).eval(wo, wi),
+                RoughPlastic(kd, alpha, eta=eta + 0.5).eval(wo, wi),
+            ]
+        )
+
+    check_grads(f, (0.3, 0.9, 2.4, 0.4), order=1, modes=["rev"], eps=1e-5)
+
+
+def test_hard_case_tiny_alpha_fast():
+    """GGX conductor at α = 1e-4, wo = n and grazing: finite values and α-gradients."""
+    d = _unit(jnp.array([[0.0, 0.0, 1.0], [1.0, 0.0, 1e-7], [0.6, 0.0, 0.8], [1.0, 0.0, 0.0]]))
+    wo, wi = jnp.repeat(d, 4, axis=0), jnp.tile(d, (4, 1))
+    u1, u2 = jnp.full((16,), 0.5), jnp.linspace(0.0, 0.999, 32).reshape(16, 2)
+
+    @jax.jit
+    def run(alpha):
+        def f(a):
+            b = RoughConductor(a)
+            s = b.sample(wo, u1, u2)
+            return b.eval(wo, wi), b.pdf(wo, wi), s.weight, s.pdf
+
+        return f(alpha), jax.grad(lambda a: sum(jnp.sum(jnp.tanh(x)) for x in f(a)))(alpha)
+
+    vals, g = run(1e-4)
+    for x in jax.tree_util.tree_leaves((vals, g)):
+        assert np.all(np.isfinite(np.asarray(x)))
+    assert np.isclose(float(vals[0][0, 0]), 1 / (4 * math.pi * 1e-8), rtol=1e-4)

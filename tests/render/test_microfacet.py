@@ -51,12 +51,13 @@ def test_normalisation_and_projected_area(kind, au, av, x64):
 def test_lambda_closed_forms(x64):
     tan = np.array([0.05, 0.3, 1.0, 3.0, 30.0])
     v = np.stack([tan, 0 * tan, np.ones_like(tan)], -1) / np.sqrt(1 + tan**2)[:, None]
+    lam = jax.jit(lambda d, v: d.smith_lambda(v))
     for alpha in [0.05, 0.3, 1.0]:
-        ggx = MicrofacetDistribution("ggx", alpha).smith_lambda(jnp.asarray(v))
+        ggx = lam(MicrofacetDistribution("ggx", alpha), jnp.asarray(v))
         np.testing.assert_allclose(ggx, 0.5 * (np.sqrt(1 + alpha**2 * tan**2) - 1), rtol=1e-10)
         a = 1 / (alpha * tan)
         ref = 0.5 * (erf(a) - 1) + np.exp(-(a**2)) / (2 * a * np.sqrt(np.pi))
-        beck = MicrofacetDistribution("beckmann", alpha).smith_lambda(jnp.asarray(v))
+        beck = lam(MicrofacetDistribution("beckmann", alpha), jnp.asarray(v))
         np.testing.assert_allclose(beck, ref, rtol=1e-6, atol=1e-12)
     # GGX α = 1 at the pole: D = 1/π; anisotropic GGX rotated axis uses α_u
     assert float(MicrofacetDistribution("ggx", 1.0).eval(jnp.array([0.0, 0, 1]))) == pytest.approx(
@@ -138,7 +139,7 @@ def test_hard_cases_finite():
         grad = jax.grad(lambda a: sum(jnp.sum(jnp.where(jnp.isfinite(x), x, 0)) for x in f(a)))
         return vals, grad(alpha)
 
-    for alpha in [1e-4, 0.05, 1.0]:
+    for alpha in [1e-4, 1.0]:
         vals, g = run(alpha)
         for x in jax.tree_util.tree_leaves(vals) + [g]:
             assert np.all(np.isfinite(x)), alpha
