@@ -173,7 +173,14 @@ def np_ggx_albedo(alpha, cos_o, n_theta=512, n_phi=256):
 _furnace = jax.jit(furnace, static_argnames="n")
 
 
-@pytest.mark.parametrize("alpha,cos_o", [(1.0, 1.0), (0.3, 0.5), (0.6, 0.2)])
+@pytest.mark.parametrize(
+    "alpha,cos_o",
+    [
+        (1.0, 1.0),
+        pytest.param(0.3, 0.5, marks=pytest.mark.slow),
+        pytest.param(0.6, 0.2, marks=pytest.mark.slow),
+    ],
+)
 def test_furnace_ggx_conductor(alpha, cos_o):
     ref = np_ggx_albedo(alpha, cos_o)
     mean, se = _furnace(RoughConductor(alpha), _dir(cos_o), key=jax.random.key(4), n=50_000)

@@ -104,6 +104,7 @@ def test_diffuse_reflectance_quadrature(eta, x64):
     assert float(fresnel_diffuse_reflectance(eta)) == pytest.approx(ref, abs=1e-9)
 
 
+@pytest.mark.slow
 def test_diffuse_reflectance_reciprocity_identity(x64):
     # 1 - F_dr(1/η) = (1 - F_dr(η)) / η²  (energy balance through the interface)
     eta = jnp.array([1.2, 1.5, 2.0])

@@ -119,6 +119,7 @@ def test_grads_wrt_alpha(x64):
     check_grads(f, (0.3, 0.5, 0.4), order=1, modes=["rev"])
 
 
+@pytest.mark.slow
 def test_hard_cases_finite():
     """α = 1e-4, grazing (cos θ = 0, 1e-7) and the pole: finite values and gradients."""
     m = jnp.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.6, 0.0, 0.8], [1.0, 0.0, 1e-7]])

@@ -72,7 +72,8 @@ def test_check_grads_fd():
 
 
 def test_furnace_lambert():
-    m, se = furnace(Diffuse(0.8), jnp.array([0.0, 0.6, 0.8]), key=jax.random.key(1), n=100)
+    fur = jax.jit(furnace, static_argnames="n")
+    m, se = fur(Diffuse(0.8), jnp.array([0.0, 0.6, 0.8]), key=jax.random.key(1), n=100)
     np.testing.assert_allclose(m, 0.8, rtol=1e-6)
     with pytest.raises(ValueError, match="wo"):
         furnace(Diffuse(), jnp.zeros(2), key=jax.random.key(0), n=10)
