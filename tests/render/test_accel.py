@@ -89,7 +89,14 @@ def test_matches_brute_force(scene, name):
     np.testing.assert_array_equal(occ, hit)
 
 
-@pytest.mark.parametrize("name", list(BUILDERS))
+@pytest.mark.parametrize(
+    "name",
+    [
+        "bvh",
+        pytest.param("grid", marks=pytest.mark.slow),
+        pytest.param("kdtree", marks=pytest.mark.slow),
+    ],
+)
 def test_rays_inside_closed_mesh_all_hit(name):
     ico = M.make_icosphere(2)
     acc = BUILDERS[name](ico)

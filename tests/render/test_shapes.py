@@ -211,10 +211,11 @@ def test_intersect_scene_shape_ids():
     rect = S.Rectangles([0, 0, 2.0], [4.0, 0, 0], [0, 4.0, 0])
     o = jnp.array([[0, 0, 0.0], [3, 0, 0]])
     d = jnp.array([[0, 0, 1.0], [0, 0, 1]])
-    h = jax.jit(S.intersect_scene)([sp, rect], o, d)
+    scene_jit = jax.jit(S.intersect_scene)
+    h = scene_jit([sp, rect], o, d, tmin=0.0)
     np.testing.assert_array_equal(h.shape_id, [1, -1])
     np.testing.assert_allclose(h.t[0], 2.0)
-    h = S.intersect_scene([sp, rect], o, d, tmin=2.5)
+    h = scene_jit([sp, rect], o, d, tmin=2.5)
     np.testing.assert_array_equal(h.shape_id, [0, -1])
     np.testing.assert_allclose(h.t[0], 4.0)
 
@@ -236,7 +237,8 @@ def test_sample_area_triangles_and_rects(key):
     v = jnp.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 0], [3, 0, 0], [0, 0, 2.0]])
     mesh = S.TriangleMesh(v, jnp.array([[0, 1, 2], [3, 4, 5]]))  # areas 0.5 and 3
     u = jax.random.uniform(key, (40000, 2))
-    p, n, pdf = S.sample_area(mesh, u)
+    sample = jax.jit(S.sample_area)
+    p, n, pdf = sample(mesh, u)
     np.testing.assert_allclose(pdf, 1 / 3.5, rtol=1e-6)
     second = np.abs(np.asarray(p)[:, 1]) < 1e-7  # points on the y = 0 triangle
     frac = 3 / 3.5
@@ -248,7 +250,7 @@ def test_sample_area_triangles_and_rects(key):
         np.asarray(n)[second], np.broadcast_to([0, -1, 0], (second.sum(), 3)), atol=1e-6
     )
     rect = S.Rectangles([0, 0, 0.0], [2.0, 0, 0], [0, 3.0, 0])
-    p, n, pdf = S.sample_area(rect, u)
+    p, n, pdf = sample(rect, u)
     np.testing.assert_allclose(pdf, 1 / 6)
     np.testing.assert_allclose(np.asarray(p).mean(0), [0, 0, 0], atol=0.05)
     assert np.all(np.abs(np.asarray(p)[:, :2]) <= [1, 1.5])
