@@ -1,0 +1,68 @@
+"""jaxgfx.render.bsdf: BSDF models in the local shading frame (normal ``+z``).
+
+Every model implements the :class:`BSDF` interface (``eval``, ``pdf``, ``sample``,
+``albedo``, ``has_delta``, ``is_transmissive``) with Mitsuba 3 conventions; see
+``docs/render_bsdf.md``. ``make_bsdf({"type": "diffuse", "reflectance": 0.5})`` builds one from
+a scene-description dict.
+"""
+
+from __future__ import annotations
+
+import inspect
+
+from jaxgfx.render.bsdf._base import BSDF as BSDF
+from jaxgfx.render.bsdf._base import BSDFSample as BSDFSample
+from jaxgfx.render.bsdf._conductor import Mirror as Mirror
+from jaxgfx.render.bsdf._dielectric import SmoothDielectric as SmoothDielectric
+from jaxgfx.render.bsdf._diffuse import Diffuse as Diffuse
+from jaxgfx.render.bsdf._phong import Phong as Phong
+from jaxgfx.render.bsdf._roughconductor import RoughConductor as RoughConductor
+from jaxgfx.render.bsdf._roughplastic import RoughPlastic as RoughPlastic
+
+__all__ = [
+    "BSDF",
+    "BSDFSample",
+    "Diffuse",
+    "Mirror",
+    "Phong",
+    "RoughConductor",
+    "SmoothDielectric",
+    "RoughPlastic",
+    "BSDF_TYPES",
+    "make_bsdf",
+]
+
+BSDF_TYPES = {
+    "diffuse": Diffuse,
+    "mirror": Mirror,
+    "conductor": Mirror,
+    "roughconductor": RoughConductor,
+    "dielectric": SmoothDielectric,
+    "roughplastic": RoughPlastic,
+    "phong": Phong,
+}
+
+
+def make_bsdf(desc: dict) -> BSDF:
+    """Build a BSDF from a description dict ``{"type": name, **parameters}``.
+
+    ``type`` is a key of :data:`BSDF_TYPES`; the other keys are the constructor's parameter
+    names (e.g. ``{"type": "roughconductor", "alpha": 0.2, "distribution": "beckmann"}``).
+    Raises ``ValueError`` naming an unknown type or an unknown parameter key.
+    """
+    if not isinstance(desc, dict):
+        raise TypeError(f"desc: expected a dict, got {type(desc).__name__}")
+    if "type" not in desc:
+        raise ValueError("desc: missing key 'type'")
+    kind = desc["type"]
+    if kind not in BSDF_TYPES:
+        raise ValueError(f"desc['type']: expected one of {tuple(BSDF_TYPES)}, got {kind!r}")
+    cls = BSDF_TYPES[kind]
+    params = {k: v for k, v in desc.items() if k != "type"}
+    allowed = [p for p in inspect.signature(cls.__init__).parameters if p != "self"]
+    for k in params:
+        if k not in allowed:
+            raise ValueError(
+                f"desc[{k!r}]: unknown parameter for {kind!r}; expected one of {allowed}"
+            )
+    return cls(**params)

@@ -1,0 +1,99 @@
+"""Smooth conductor: an ideal mirror with optional complex-IOR Fresnel reflectance."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from jaxgfx._checks import check_choice
+from jaxgfx.render.bsdf._base import BSDF, BSDFSample, mask3, prep_dirs, prep_u, rgb_param
+from jaxgfx.render.frame import reflect
+from jaxgfx.render.fresnel import fresnel_conductor, fresnel_schlick
+
+__all__ = ["Mirror", "fresnel_factor"]
+
+FRESNEL_MODES = ("none", "conductor", "schlick")
+
+
+def fresnel_factor(mode, cos_theta, reflectance, eta, k):
+    """RGB Fresnel factor shared by :class:`Mirror` and ``RoughConductor``.
+
+    ``"none"``: ``reflectance``; ``"conductor"``: ``reflectance · F_conductor(cos, eta, k)``;
+    ``"schlick"``: ``F_schlick(F0 = reflectance, cos)``.
+    """
+    c = cos_theta[..., None]
+    if mode == "none":
+        return jnp.broadcast_to(reflectance, jnp.broadcast_shapes(c.shape, reflectance.shape))
+    if mode == "conductor":
+        return reflectance * fresnel_conductor(c, eta, k)
+    return fresnel_schlick(reflectance, c)
+
+
+def _resolve(fresnel, eta, k):
+    if fresnel is None:
+        fresnel = "none" if eta is None else "conductor"
+    check_choice(fresnel, "fresnel", FRESNEL_MODES)
+    if fresnel == "conductor":
+        if eta is None:
+            raise ValueError("eta: required when fresnel='conductor'")
+        eta = rgb_param(eta, "eta")
+        k = rgb_param(0.0 if k is None else k, "k")
+    else:
+        eta = None if eta is None else rgb_param(eta, "eta")
+        k = None if k is None else rgb_param(k, "k")
+    return fresnel, eta, k
+
+
+class Mirror(BSDF):
+    """Ideal specular reflection (Mitsuba ``conductor``): ``wi = (-wo_x, -wo_y, wo_z)``.
+
+    ``f = reflectance · F(cos θ_o) δ(ω_i - ω_r) / |cos θ_i|`` (seed lecture 3,
+    ``f_mirror = δ(θ_i - θ_o) δ(φ_i - φ_o) / cos θ_i``). ``fresnel`` (static) is ``"none"``
+    (F = 1, the default when ``eta`` is not given), ``"conductor"`` (exact complex IOR
+    ``eta + i k`` per RGB channel) or ``"schlick"`` (``reflectance`` is F0).
+    ``eval`` and ``pdf`` are 0 (delta lobe); ``sample`` returns ``pdf = 1``, ``is_delta = True``
+    and ``weight = reflectance · F``.
+
+    Example: ``Mirror(eta=1.5, k=0.).sample(z, u1, u2).weight = 0.04`` at normal incidence.
+    """
+
+    reflectance: jnp.ndarray
+    eta: jnp.ndarray | None
+    k: jnp.ndarray | None
+    fresnel: str = eqx.field(static=True, default="none")
+
+    has_delta = True
+
+    def __init__(self, reflectance=1.0, *, eta=None, k=None, fresnel=None):
+        self.reflectance = rgb_param(reflectance, "reflectance")
+        self.fresnel, self.eta, self.k = _resolve(fresnel, eta, k)
+
+    @property
+    def albedo(self):
+        return self.reflectance
+
+    def eval(self, wo, wi):
+        wo, wi = prep_dirs(wo, wi)
+        shape = jnp.broadcast_shapes(wo.shape, wi.shape)
+        return jnp.zeros(shape, jnp.result_type(wo, wi, self.reflectance))
+
+    def pdf(self, wo, wi):
+        wo, wi = prep_dirs(wo, wi)
+        shape = jnp.broadcast_shapes(wo.shape, wi.shape)[:-1]
+        return jnp.zeros(shape, jnp.result_type(wo, wi))
+
+    def sample(self, wo, u1, u2):
+        wo = prep_dirs(wo)
+        u1, u2 = prep_u(u1, u2)
+        shape = jnp.broadcast_shapes(wo.shape[:-1], u1.shape, u2.shape[:-1])
+        wo = jnp.broadcast_to(wo, shape + (3,))
+        co = wo[..., 2]
+        valid = co > 0
+        f = fresnel_factor(self.fresnel, co, self.reflectance, self.eta, self.k)
+        return BSDFSample(
+            wi=reflect(wo),
+            pdf=jnp.where(valid, 1.0, 0.0).astype(co.dtype),
+            weight=mask3(valid, f),
+            is_delta=jnp.ones(shape, bool),
+            eta=jnp.ones(shape, co.dtype),
+        )

@@ -1,0 +1,116 @@
+"""Rough conductor: Cook–Torrance microfacet reflection with GGX or Beckmann normals."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from jaxgfx._math import safe_div, safe_normalize
+from jaxgfx.render.bsdf._base import BSDF, BSDFSample, mask3, prep_dirs, prep_u, rgb_param
+from jaxgfx.render.bsdf._conductor import _resolve, fresnel_factor
+from jaxgfx.render.frame import reflect
+from jaxgfx.render.microfacet import MicrofacetDistribution
+
+__all__ = ["RoughConductor"]
+
+
+def _dot(a, b):
+    return jnp.sum(a * b, axis=-1)
+
+
+class RoughConductor(BSDF):
+    """Cook & Torrance (1982) / Walter et al. (2007) microfacet conductor (Mitsuba
+    ``roughconductor``).
+
+    ``f(wo, wi) = F(wo·h) D(h) G(wo, wi, h) / (4 cos θ_o cos θ_i)``, ``h = (wo + wi)/|wo + wi|``,
+    with separable Smith ``G = G1(wo) G1(wi)``; ``eval`` returns ``f cos θ_i``. ``alpha`` (and
+    optional ``alpha_v`` for anisotropy) is the distribution's α (Mitsuba convention, not
+    squared), > 0 (1e-4 is fine). ``distribution`` (static): ``"ggx"`` | ``"beckmann"``.
+    ``fresnel`` (static): ``"none"`` (F = ``reflectance``, default without ``eta``),
+    ``"conductor"`` (``reflectance · F_conductor(eta + i k)``, RGB), ``"schlick"``
+    (``reflectance`` is F0, the seed's ``c_spec``). Sampling: GGX visible normals (Heitz 2018),
+    weight ``F G1(wi)``; Beckmann samples ``D cos θ_m``.
+
+    Example: GGX α = 1, F = 1, ``wo = wi = +z``: ``eval = D G / 4 = (1/π)(4/9)... `` see tests.
+    """
+
+    distribution: MicrofacetDistribution
+    reflectance: jnp.ndarray
+    eta: jnp.ndarray | None
+    k: jnp.ndarray | None
+    fresnel: str = eqx.field(static=True, default="none")
+
+    def __init__(
+        self,
+        alpha=0.1,
+        *,
+        alpha_v=None,
+        distribution="ggx",
+        reflectance=1.0,
+        eta=None,
+        k=None,
+        fresnel=None,
+        sample_visible=True,
+    ):
+        self.distribution = MicrofacetDistribution(
+            distribution, alpha, alpha_v, sample_visible=sample_visible
+        )
+        self.reflectance = rgb_param(reflectance, "reflectance")
+        self.fresnel, self.eta, self.k = _resolve(fresnel, eta, k)
+
+    @property
+    def albedo(self):
+        return self.reflectance
+
+    def _F(self, cos):
+        return fresnel_factor(self.fresnel, cos, self.reflectance, self.eta, self.k)
+
+    def eval(self, wo, wi):
+        wo, wi = prep_dirs(wo, wi)
+        co, ci = wo[..., 2], wi[..., 2]
+        valid = (co > 0) & (ci > 0)
+        h = safe_normalize(wo + wi)
+        d = self.distribution
+        val = safe_div(d.eval(h) * d.G(wo, wi, h), 4.0 * co)
+        return mask3(valid, val[..., None] * self._F(_dot(wo, h)))
+
+    def _pdf_m(self, wo, m):
+        """Density of ``wi = reflect(wo, m)`` given the microfacet normal ``m``."""
+        d = self.distribution
+        dm = d.eval(m)
+        if d.type == "ggx" and d.sample_visible:
+            return safe_div(d.smith_g1(wo, m) * dm, 4.0 * wo[..., 2])
+        return safe_div(dm * m[..., 2], 4.0 * _dot(wo, m))
+
+    def pdf(self, wo, wi):
+        wo, wi = prep_dirs(wo, wi)
+        valid = (wo[..., 2] > 0) & (wi[..., 2] > 0)
+        h = safe_normalize(wo + wi)
+        return jnp.where(valid, self._pdf_m(wo, h), 0.0)
+
+    def sample(self, wo, u1, u2):
+        wo = prep_dirs(wo)
+        u1, u2 = prep_u(u1, u2)
+        shape = jnp.broadcast_shapes(wo.shape[:-1], u1.shape, u2.shape[:-1])
+        wo = jnp.broadcast_to(wo, shape + (3,))
+        d = self.distribution
+        co = wo[..., 2]
+        wo_up = jnp.where((co > 0)[..., None], wo, jnp.array([0.0, 0.0, 1.0], wo.dtype))
+        m, _ = d.sample(wo_up, u2)
+        wi = reflect(wo, m)
+        dot_om = _dot(wo, m)
+        valid = (co > 0) & (wi[..., 2] > 0) & (dot_om > 0)
+        pdf = self._pdf_m(wo, m)
+        valid = valid & (pdf > 0)
+        F = self._F(dot_om)
+        if d.type == "ggx" and d.sample_visible:
+            w = d.smith_g1(wi, m)
+        else:
+            w = safe_div(d.G(wo, wi, m) * dot_om, co * m[..., 2])
+        return BSDFSample(
+            wi=wi,
+            pdf=jnp.where(valid, pdf, 0.0),
+            weight=mask3(valid, w[..., None] * F),
+            is_delta=jnp.zeros(shape, bool),
+            eta=jnp.ones(shape, co.dtype),
+        )
