@@ -125,8 +125,10 @@ def fresnel_diffuse_reflectance(eta):
 
     ``F_dr(eta) = 2 ∫₀¹ F(μ, eta) μ dμ``: fraction of uniformly diffuse (Lambertian) light
     reflected by a smooth interface of relative IOR ``eta`` (light arriving from the ``eta = 1``
-    side). For ``eta < 1`` the total-internal-reflection part ``μ < sqrt(1 - eta²)`` is integrated
-    analytically; the rest by 64-point Gauss–Legendre quadrature (differentiable in ``eta``).
+    side). For ``eta < 1`` the total-internal-reflection part ``μ < μ_c = sqrt(1 - eta²)`` is
+    integrated analytically (``μ_c²``) and the rest in the variable ``t = cos θ_t``
+    (``μ dμ = eta² t dt``, which removes the square-root kink at the critical angle); for
+    ``eta >= 1`` directly in ``μ``. 64-point Gauss–Legendre, differentiable in ``eta``.
     Used for the internal-scattering term of rough plastic (d'Eon & Irving 2011 give a fit).
 
     Example: ``fresnel_diffuse_reflectance(1.5) ≈ 0.0918``; ``(1/1.5) ≈ 0.5963``.
@@ -134,11 +136,13 @@ def fresnel_diffuse_reflectance(eta):
     eta = jnp.asarray(eta)
     if not jnp.issubdtype(eta.dtype, jnp.floating):
         eta = eta.astype(jnp.float32)
-    mu_c = safe_sqrt(1.0 - eta * eta)  # critical cosine (0 for eta >= 1)
-    x = jnp.asarray(_GL_X, eta.dtype)
-    w = jnp.asarray(_GL_W, eta.dtype)
-    lo = mu_c[..., None]
-    mu = lo + (1.0 - lo) * 0.5 * (x + 1.0)
-    f = fresnel_dielectric(mu, eta[..., None]).r
-    integral = jnp.sum(w * f * mu, axis=-1) * 0.5 * (1.0 - mu_c)
-    return 2.0 * integral + mu_c * mu_c
+    x = 0.5 * (jnp.asarray(_GL_X, eta.dtype) + 1.0)  # nodes on [0, 1]
+    w = 0.5 * jnp.asarray(_GL_W, eta.dtype)
+    e = eta[..., None]
+    # eta >= 1: 2 ∫ F(μ) μ dμ over [0, 1]
+    above = 2.0 * jnp.sum(w * fresnel_dielectric(x, e).r * x, axis=-1)
+    # eta < 1: μ_c² + 2 eta² ∫ F(μ(t)) t dt, μ(t) = sqrt(μ_c² + eta² t²)
+    mu_c2 = jnp.maximum(1.0 - eta * eta, 0.0)
+    mu_t = jnp.sqrt(mu_c2[..., None] + e * e * x * x)
+    below = mu_c2 + 2.0 * eta * eta * jnp.sum(w * fresnel_dielectric(mu_t, e).r * x, axis=-1)
+    return jnp.where(eta >= 1.0, above, below)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jax.scipy.special import erfc
 
@@ -68,10 +69,17 @@ class MicrofacetDistribution(eqx.Module):
             t = (m[..., 0] / au) ** 2 + (m[..., 1] / av) ** 2 + cz_s * cz_s
             d = 1.0 / (math.pi * au * av * t * t)
         else:
-            cz2 = cz_s * cz_s
-            expo = ((m[..., 0] / au) ** 2 + (m[..., 1] / av) ** 2) / cz2
-            ok = up & (expo < 1e4)
-            expo = jnp.where(ok, expo, 0.0)
+            # decide where D underflows on gradient-free values, then evaluate on safe inputs
+            # only (double-where: no inf partials reach the zero cotangents)
+            ng = jax.lax.stop_gradient
+            expo_ng = ((ng(m[..., 0]) / ng(au)) ** 2 + (ng(m[..., 1]) / ng(av)) ** 2) / ng(
+                cz_s * cz_s
+            )
+            ok = up & (expo_ng < 80.0)
+            mx = jnp.where(ok, m[..., 0], 0.0)
+            my = jnp.where(ok, m[..., 1], 0.0)
+            cz2 = jnp.where(ok, cz_s * cz_s, 1.0)
+            expo = ((mx / au) ** 2 + (my / av) ** 2) / cz2
             d = jnp.where(ok, jnp.exp(-expo) / (math.pi * au * av * cz2 * cz2), 0.0)
         return jnp.where(up, d, 0.0)
 

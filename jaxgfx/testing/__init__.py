@@ -1,1 +1,10 @@
-"""jaxgfx.testing (see docs/)."""
+"""jaxgfx.testing: public tools to test samplers and BSDFs (chi², finite differences, furnace).
+
+See ``docs/render_bsdf.md``.
+"""
+
+from jaxgfx.testing._chi2 import chi2_test as chi2_test
+from jaxgfx.testing._finite_difference import check_grads_fd as check_grads_fd
+from jaxgfx.testing._furnace import furnace as furnace
+
+__all__ = ["chi2_test", "check_grads_fd", "furnace"]

@@ -39,7 +39,7 @@ class Phong(BSDF):
       ``kd + ks <= 1``. ``eval = f cos θ_i``.
     * ``normalized=False`` (classic, seed lecture 3): ``L_o = L_i (kd (s·n) + ks (r·v)^n)``,
       i.e. ``eval = kd cos θ_i + ks cos^n α`` — neither reciprocal nor energy conserving
-      (``kd`` here is the seed's ``k_d = ρ/π`` per steradian... no 1/π is applied).
+      (no 1/π is applied to ``kd``, exactly as written in the lecture).
 
     Sampling: the specular lobe (``(n+1)/(2π) cos^n α`` around ``r``) with probability
     ``mean(ks) / (mean(kd) + mean(ks))``, otherwise cosine-weighted; ``weight = eval / pdf``.

@@ -31,7 +31,8 @@ class RoughConductor(BSDF):
     (``reflectance`` is F0, the seed's ``c_spec``). Sampling: GGX visible normals (Heitz 2018),
     weight ``F G1(wi)``; Beckmann samples ``D cos θ_m``.
 
-    Example: GGX α = 1, F = 1, ``wo = wi = +z``: ``eval = D G / 4 = (1/π)(4/9)... `` see tests.
+    Example: GGX α = 1, F = 1, ``wo = wi = +z``: D = 1/π, G = 1, so
+    ``eval = D G / 4 = 1/(4π) ≈ 0.0796``.
     """
 
     distribution: MicrofacetDistribution
