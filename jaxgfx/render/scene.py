@@ -3,7 +3,7 @@
 ``load_scene(desc)`` accepts a mapping or a path to a YAML file with the sections ``camera``,
 ``shapes``, ``materials``, ``emitters`` (and optional ``film``), e.g.::
 
-    camera: {origin: [0, 1.5, 5], target: [0, 1, 0], up: [0, 1, 0], fov: 45, width: 128, height: 128}
+    camera: {origin: [0, 1.5, 5], target: [0, 1, 0], fov: 45, width: 128, height: 128}
     shapes:
       - {type: sphere, center: [0, 1, 0], radius: 1, material: metal}
       - {type: rectangle, center: [0, 0, 0], normal: [0, 1, 0], size: [10, 10], material: floor}
@@ -137,10 +137,13 @@ class Scene(eqx.Module):
         getters = []
         for fields in rest_list:
             o = obj
-            for k, field in enumerate(fields):
+            for field in fields:
                 if not hasattr(o, field):
-                    names = [n for n, v in vars(o).items() if eqx.is_array(v) or
-                             isinstance(v, eqx.Module)]
+                    names = [
+                        n
+                        for n, v in vars(o).items()
+                        if eqx.is_array(v) or isinstance(v, eqx.Module)
+                    ]
                     raise ValueError(f"{path}: no parameter {field!r}; have {names}")
                 o = getattr(o, field)
             if not eqx.is_array(o):
@@ -402,7 +405,9 @@ def load_scene(desc, *, base_dir: str | None = None) -> Scene:
             shapes.append(shape)
             n_prims = shape.faces.shape[0] if sk == "mesh" else 1
             shape_mats.append(jnp.full((n_prims,), mi, jnp.int32))
-            area_lights.append(AreaLight(_rgb(ed["radiance"], f"{where}.radiance"), len(shapes) - 1))
+            area_lights.append(
+                AreaLight(_rgb(ed["radiance"], f"{where}.radiance"), len(shapes) - 1)
+            )
             emitter_shapes.append(shape)
         elif kind in ("constant", "envmap"):
             if environment is not None:
@@ -428,7 +433,9 @@ def load_scene(desc, *, base_dir: str | None = None) -> Scene:
             raise ValueError(f"{where}.type: expected one of {EMITTER_TYPES}, got {kind!r}")
     if not shapes:
         raise ValueError("shapes: the scene has no geometry")
-    point_lights = PointLights.create(jnp.stack(points_pos), jnp.stack(points_int)) if points_pos else None
+    point_lights = (
+        PointLights.create(jnp.stack(points_pos), jnp.stack(points_int)) if points_pos else None
+    )
     for i, sh in enumerate(emitter_shapes):
         if float(area(sh)) <= 0:
             raise ValueError(f"emitters: area light {i} has zero area")
@@ -451,5 +458,3 @@ def _black_material(names, materials):
         names.append("__black__")
         materials.append(make_bsdf({"type": "diffuse", "reflectance": 0.0}))
     return names.index("__black__")
-
-

@@ -21,8 +21,14 @@ KEY = jax.random.key(7)
 
 
 def _cam(origin, target, w=16, h=16, fov=20.0):
-    return {"origin": origin, "target": target, "up": [0, 0, 1] if origin[1] != 0 else [0, 1, 0],
-            "fov": fov, "width": w, "height": h}
+    return {
+        "origin": origin,
+        "target": target,
+        "up": [0, 0, 1] if origin[1] != 0 else [0, 1, 0],
+        "fov": fov,
+        "width": w,
+        "height": h,
+    }
 
 
 def _assert_mean(img, expected, *, n_sigma=5.0, floor=2e-3):
@@ -36,8 +42,15 @@ def _assert_mean(img, expected, *, n_sigma=5.0, floor=2e-3):
 def _plane_scene(emitters, reflectance=0.5, **cam):
     return {
         "camera": _cam([0, 3, 0.0], [0, 0, 0.0], **cam) | {"up": [0, 0, 1]},
-        "shapes": [{"type": "rectangle", "center": [0, 0, 0], "normal": [0, 1, 0],
-                    "size": [2.0, 2.0], "material": "m"}],
+        "shapes": [
+            {
+                "type": "rectangle",
+                "center": [0, 0, 0],
+                "normal": [0, 1, 0],
+                "size": [2.0, 2.0],
+                "material": "m",
+            }
+        ],
         "materials": {"m": {"type": "diffuse", "reflectance": reflectance}},
         "emitters": emitters,
     }
@@ -45,8 +58,14 @@ def _plane_scene(emitters, reflectance=0.5, **cam):
 
 def test_white_furnace_sphere():
     desc = {
-        "camera": {"origin": [0, 0, 4], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 20,
-                   "width": 16, "height": 16},
+        "camera": {
+            "origin": [0, 0, 4],
+            "target": [0, 0, 0],
+            "up": [0, 1, 0],
+            "fov": 20,
+            "width": 16,
+            "height": 16,
+        },
         "shapes": [{"type": "sphere", "center": [0, 0, 0], "radius": 1.0, "material": "w"}],
         "materials": {"w": {"type": "diffuse", "reflectance": 1.0}},
         "emitters": [{"type": "constant", "radiance": 1.0}],
@@ -101,13 +120,28 @@ def _polygon_irradiance(x, n, verts):
 
 def test_rectangular_area_light_irradiance():
     desc = _plane_scene(
-        [{"type": "area", "radiance": 3.0,
-          "shape": {"type": "rectangle", "center": [0.3, 1.0, 0.2], "normal": [0, -1, 0],
-                    "size": [1.0, 0.6]}}],
+        [
+            {
+                "type": "area",
+                "radiance": 3.0,
+                "shape": {
+                    "type": "rectangle",
+                    "center": [0.3, 1.0, 0.2],
+                    "normal": [0, -1, 0],
+                    "size": [1.0, 0.6],
+                },
+            }
+        ],
         fov=2.0,
     )
-    desc["camera"] = {"origin": [0, 0.5, 0.0001], "target": [0, 0, 0], "up": [0, 0, 1],
-                      "fov": 1.0, "width": 4, "height": 4}
+    desc["camera"] = {
+        "origin": [0, 0.5, 0.0001],
+        "target": [0, 0, 0],
+        "up": [0, 0, 1],
+        "fov": 1.0,
+        "width": 4,
+        "height": 4,
+    }
     scene = load_scene(desc)
     img = render(scene, KEY, spp=256, integrator="direct")
     rect = scene.emitter_shapes[0]
@@ -129,8 +163,14 @@ def test_whitted_direct_path_agree_on_direct_light():
 
 def test_mirror_sphere_reflects_sky():
     desc = {
-        "camera": {"origin": [0, 0, 4], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 10,
-                   "width": 8, "height": 8},
+        "camera": {
+            "origin": [0, 0, 4],
+            "target": [0, 0, 0],
+            "up": [0, 1, 0],
+            "fov": 10,
+            "width": 8,
+            "height": 8,
+        },
         "shapes": [{"type": "sphere", "center": [0, 0, 0], "radius": 1.0, "material": "m"}],
         "materials": {"m": {"type": "mirror"}},
         "emitters": [{"type": "constant", "radiance": 2.0}],
@@ -144,12 +184,23 @@ def test_mirror_sphere_reflects_sky():
 @pytest.mark.parametrize("integrator", ["path", "direct", "whitted"])
 def test_gradients_finite_wrt_roughness_and_albedo(integrator):
     desc = {
-        "camera": {"origin": [0, 1, 4], "target": [0, 0.5, 0], "up": [0, 1, 0], "fov": 40,
-                   "width": 8, "height": 8},
+        "camera": {
+            "origin": [0, 1, 4],
+            "target": [0, 0.5, 0],
+            "up": [0, 1, 0],
+            "fov": 40,
+            "width": 8,
+            "height": 8,
+        },
         "shapes": [
             {"type": "sphere", "center": [0, 0.5, 0], "radius": 0.5, "material": "metal"},
-            {"type": "rectangle", "center": [0, 0, 0], "normal": [0, 1, 0], "size": [4, 4],
-             "material": "floor"},
+            {
+                "type": "rectangle",
+                "center": [0, 0, 0],
+                "normal": [0, 1, 0],
+                "size": [4, 4],
+                "material": "floor",
+            },
         ],
         "materials": {
             "metal": {"type": "roughconductor", "alpha": 0.3},
@@ -157,15 +208,24 @@ def test_gradients_finite_wrt_roughness_and_albedo(integrator):
         },
         "emitters": [
             {"type": "point", "position": [1, 2, 1], "intensity": 5.0},
-            {"type": "area", "radiance": 4.0,
-             "shape": {"type": "rectangle", "center": [0, 2, 0], "normal": [0, -1, 0],
-                       "size": [1, 1]}},
+            {
+                "type": "area",
+                "radiance": 4.0,
+                "shape": {
+                    "type": "rectangle",
+                    "center": [0, 2, 0],
+                    "normal": [0, -1, 0],
+                    "size": [1, 1],
+                },
+            },
         ],
     }
     scene = load_scene(desc)
 
     def loss(alpha, rho):
-        s = scene.replace("materials.metal.alpha", alpha).replace("materials.floor.reflectance", rho)
+        s = scene.replace("materials.metal.alpha", alpha).replace(
+            "materials.floor.reflectance", rho
+        )
         return jnp.mean(render(s, KEY, spp=2, integrator=integrator, max_depth=3))
 
     ga, gr = jax.grad(loss, argnums=(0, 1))(jnp.float32(0.3), jnp.full(3, 0.5, jnp.float32))
@@ -176,14 +236,17 @@ def test_gradients_finite_wrt_roughness_and_albedo(integrator):
 @pytest.mark.parametrize(
     "patch, match",
     [
-        ({"shapes": [{"type": "sphere", "center": [0, 0, 0], "radius": 1, "material": "nope"}]},
-         "material"),
+        (
+            {"shapes": [{"type": "sphere", "center": [0, 0, 0], "radius": 1, "material": "nope"}]},
+            "material",
+        ),
         ({"shapes": [{"type": "sphere", "center": [0, 0, 0], "radius": -1}]}, "radius"),
-        ({"shapes": [{"type": "sphere", "center": [0, 0, 0], "radius": 1, "colour": 1}]},
-         "colour"),
+        ({"shapes": [{"type": "sphere", "center": [0, 0, 0], "radius": 1, "colour": 1}]}, "colour"),
         ({"shapes": [{"type": "cone"}]}, "type"),
-        ({"emitters": [{"type": "point", "position": [0, float("nan"), 0], "intensity": 1}]},
-         "position"),
+        (
+            {"emitters": [{"type": "point", "position": [0, float("nan"), 0], "intensity": 1}]},
+            "position",
+        ),
         ({"materials": {"m": {"type": "velvet"}}}, "materials.m"),
         ({"camrea": {}}, "camrea"),
     ],

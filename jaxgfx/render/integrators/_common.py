@@ -181,7 +181,9 @@ def sample_light(scene, p, u_sel, u2):
     for k in range(1, len(cands)):
         sel = cand_idx == k
         out = jax.tree_util.tree_map(
-            lambda a, b, sel=sel: jnp.where(sel.reshape(sel.shape + (1,) * (a.ndim - sel.ndim)), b, a),
+            lambda a, b, sel=sel: jnp.where(
+                sel.reshape(sel.shape + (1,) * (a.ndim - sel.ndim)), b, a
+            ),
             out,
             cands[k],
         )

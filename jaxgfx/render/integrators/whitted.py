@@ -75,7 +75,9 @@ def whitted_radiance(scene, o, d, u, *, max_depth: int):
             branches.append((jnp.full_like(ub[..., 3], 1.0 - 1e-6), False))
         new_o, new_d, new_beta = [], [], []
         for u1, want_reflect in branches:
-            s = C.dispatch(scene, mat, lambda m, u1=u1: m.sample(wo, u1, ub[..., 4:6]))
+            s = C.dispatch(
+                scene, mat, lambda m, u1=u1, wo=wo, u2=ub[..., 4:6]: m.sample(wo, u1, u2)
+            )
             reflected = s.wi[..., 2] * wo[..., 2] > 0
             ok = delta & s.is_delta & (reflected if want_reflect else ~reflected)
             w = jnp.where(ok[..., None], s.weight * s.pdf[..., None], 0.0)
