@@ -1,0 +1,179 @@
+"""Emitters: point lights, area lights (emitting shapes), constant and image environments.
+
+Conventions follow Mitsuba 3:
+
+- ``PointLights``: ``intensity`` in W/sr (radiance-like units per steradian); irradiance at
+  distance r falls off as ``intensity / r^2``.
+- ``AreaLight``: a shape of the scene emits constant ``radiance`` from its front side (the side
+  its geometric normal points to); it is also ordinary geometry (it occludes and is hit).
+- ``ConstantEnvironment``: radiance arriving from every direction.
+- ``EnvironmentMap``: latitude-longitude image, y-up, with Mitsuba's mapping
+  ``u = atan2(d_x, -d_z) / (2 pi)`` (wrapped to [0, 1)), ``v = acos(d_y) / pi``; importance
+  sampled by luminance x sin(theta) through a piecewise-constant 2-D distribution.
+
+All sampling routines take uniform numbers and return solid-angle densities.
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from jaxgfx._checks import as_float_array, check_finite
+from jaxgfx._math import safe_arccos, safe_atan2, safe_div, safe_sqrt
+from jaxgfx.render.warp import Distribution2D
+
+__all__ = [
+    "PointLights",
+    "AreaLight",
+    "ConstantEnvironment",
+    "EnvironmentMap",
+    "direction_to_latlong",
+    "latlong_to_direction",
+]
+
+
+def _rgb(x, name, *, nonnegative=True):
+    a = as_float_array(x, name)
+    check_finite(a, name)
+    if a.ndim == 0:
+        a = jnp.broadcast_to(a, (3,))
+    if a.shape[-1] != 3:
+        raise ValueError(f"{name}: expected a scalar or RGB triple, got shape {a.shape}")
+    if nonnegative and bool(jnp.any(a < 0)):
+        raise ValueError(f"{name}: expected non-negative values")
+    return a
+
+
+class PointLights(eqx.Module):
+    """``positions (P, 3)`` and ``intensities (P, 3)`` (W/sr)."""
+
+    positions: jnp.ndarray
+    intensities: jnp.ndarray
+
+    @classmethod
+    def create(cls, positions, intensities):
+        p = as_float_array(positions, "position")
+        check_finite(p, "position")
+        p = p.reshape(-1, 3)
+        i = _rgb(intensities, "intensity").reshape(-1, 3)
+        if i.shape[0] != p.shape[0]:
+            raise ValueError("intensity: expected one RGB intensity per point light")
+        return cls(p, i)
+
+    @property
+    def count(self) -> int:
+        return self.positions.shape[0]
+
+    def sample(self, index, p):
+        """Direction, distance and incident radiance-equivalent from light ``index`` at ``p``.
+
+        Returns ``(wi, dist, Li)`` where ``Li = I / dist^2`` (a delta distribution: pdf 1).
+        """
+        lp = self.positions[index]
+        v = lp - p
+        d2 = jnp.sum(v * v, -1)
+        dist = safe_sqrt(d2)
+        wi = safe_div(v, dist[..., None])
+        li = safe_div(self.intensities[index], d2[..., None])
+        return wi, dist, li
+
+
+class AreaLight(eqx.Module):
+    """Constant ``radiance (3,)`` emitted from the front side of scene shape ``shape_index``."""
+
+    radiance: jnp.ndarray
+    shape_index: int = eqx.field(static=True)
+
+
+class ConstantEnvironment(eqx.Module):
+    """Uniform radiance from all directions; sampled uniformly over the sphere."""
+
+    radiance: jnp.ndarray
+
+    def eval(self, d):
+        return jnp.broadcast_to(self.radiance, d.shape)
+
+    def sample(self, u):
+        z = 1.0 - 2.0 * u[..., 0]
+        r = safe_sqrt(1.0 - z * z)
+        phi = 2.0 * math.pi * u[..., 1]
+        wi = jnp.stack([r * jnp.cos(phi), r * jnp.sin(phi), z], -1)
+        pdf = jnp.full(u.shape[:-1], 1.0 / (4.0 * math.pi), u.dtype)
+        return wi, pdf, self.eval(wi)
+
+    def pdf(self, d):
+        return jnp.full(d.shape[:-1], 1.0 / (4.0 * math.pi), d.dtype)
+
+
+def direction_to_latlong(d):
+    """Unit direction (..., 3) -> (u, v) in [0, 1)^2 (Mitsuba envmap convention, y up)."""
+    u = safe_atan2(d[..., 0], -d[..., 2]) / (2.0 * math.pi)
+    u = u - jnp.floor(u)
+    v = safe_arccos(jnp.clip(d[..., 1], -1.0, 1.0)) / math.pi
+    return jnp.stack([u, v], -1)
+
+
+def latlong_to_direction(uv):
+    """Inverse of :func:`direction_to_latlong`; also returns ``sin(theta)``."""
+    phi = uv[..., 0] * 2.0 * math.pi
+    theta = uv[..., 1] * math.pi
+    st = jnp.sin(theta)
+    d = jnp.stack([st * jnp.sin(phi), jnp.cos(theta), -st * jnp.cos(phi)], -1)
+    return d, st
+
+
+class EnvironmentMap(eqx.Module):
+    """Lat-long environment ``image (H, W, 3)`` (linear radiance) times ``scale``."""
+
+    image: jnp.ndarray
+    scale: jnp.ndarray
+    distribution: Distribution2D
+
+    @classmethod
+    def create(cls, image, scale=1.0):
+        img = as_float_array(image, "envmap.image")
+        check_finite(img, "envmap.image")
+        if img.ndim != 3 or img.shape[-1] < 3 or min(img.shape[:2]) < 2:
+            raise ValueError(f"envmap.image: expected (H>=2, W>=2, 3), got shape {img.shape}")
+        img = jnp.maximum(img[..., :3], 0.0)
+        h = img.shape[0]
+        theta = (jnp.arange(h) + 0.5) / h * math.pi
+        lum = img @ jnp.asarray([0.2126, 0.7152, 0.0722], img.dtype)
+        dist = Distribution2D(lum * jnp.sin(theta)[:, None])
+        return cls(img, jnp.asarray(scale, img.dtype), dist)
+
+    def _lookup(self, uv):
+        # bilinear with wrap in u and clamp in v (texel centres at (i + 0.5) / n)
+        h, w = self.image.shape[:2]
+        x = uv[..., 0] * w - 0.5
+        y = uv[..., 1] * h - 0.5
+        x0 = jnp.floor(x)
+        y0 = jnp.floor(y)
+        fx = (x - x0)[..., None]
+        fy = (y - y0)[..., None]
+        x0 = x0.astype(jnp.int32)
+        y0 = y0.astype(jnp.int32)
+        xa, xb = x0 % w, (x0 + 1) % w
+        ya, yb = jnp.clip(y0, 0, h - 1), jnp.clip(y0 + 1, 0, h - 1)
+        im = self.image
+        top = im[ya, xa] * (1 - fx) + im[ya, xb] * fx
+        bot = im[yb, xa] * (1 - fx) + im[yb, xb] * fx
+        return top * (1 - fy) + bot * fy
+
+    def eval(self, d):
+        return self.scale * self._lookup(direction_to_latlong(d))
+
+    def sample(self, u):
+        uv, pdf_uv = self.distribution.sample(u)
+        wi, st = latlong_to_direction(uv)
+        pdf = safe_div(pdf_uv, 2.0 * math.pi * math.pi * st)
+        # piecewise-constant sampling density, bilinear radiance (exact pdf of the sampler)
+        return wi, pdf, self.eval(wi)
+
+    def pdf(self, d):
+        uv = direction_to_latlong(d)
+        st = safe_sqrt(1.0 - d[..., 1] ** 2)
+        return safe_div(self.distribution.pdf(uv), 2.0 * math.pi * math.pi * st)

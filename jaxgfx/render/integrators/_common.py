@@ -1,0 +1,191 @@
+"""Shared integrator machinery: scene intersection, material dispatch, shading frames,
+emission lookup, light sampling and the densities needed for multiple importance sampling."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from jaxgfx._math import safe_div, safe_sqrt
+from jaxgfx.render.frame import frame_from_normal, to_local, to_world
+from jaxgfx.render.ray import spawn_ray
+from jaxgfx.render.shapes import area, intersect_scene, sample_area
+
+__all__ = [
+    "intersect",
+    "occluded",
+    "hit_material",
+    "dispatch",
+    "shading_frame",
+    "emitted",
+    "sample_light",
+    "light_pdf_hit",
+    "env_pdf",
+    "mis_power",
+    "spawn_ray",
+    "to_local",
+    "to_world",
+]
+
+
+def intersect(scene, o, d, *, tmax=jnp.inf):
+    return intersect_scene(scene.shapes, o, d, tmin=0.0, tmax=tmax)
+
+
+def occluded(scene, o, d, tmax):
+    """True where something lies on the segment ``o + t d``, ``0 < t < tmax``."""
+    return intersect(scene, o, d, tmax=tmax).valid
+
+
+def hit_material(scene, hit):
+    """Material index per hit (0 where nothing was hit)."""
+    mat = jnp.zeros(hit.t.shape, jnp.int32)
+    for s, mats in enumerate(scene.shape_materials):
+        pid = jnp.clip(hit.prim_id, 0, mats.shape[0] - 1)
+        mat = jnp.where(hit.shape_id == s, mats[pid], mat)
+    return mat
+
+
+def dispatch(scene, mat_id, fn):
+    """Evaluate ``fn(bsdf)`` for every material of the scene and select per ray by ``mat_id``.
+
+    Only the materials the scene defines are evaluated (a one-material scene pays for one).
+    """
+    outs = [fn(m) for m in scene.materials]
+    if len(outs) == 1:
+        return outs[0]
+
+    def select(*xs):
+        r = xs[0]
+        for k in range(1, len(xs)):
+            x = xs[k]
+            m = (mat_id == k).reshape(mat_id.shape + (1,) * (x.ndim - mat_id.ndim))
+            r = jnp.where(m, x, r)
+        return r
+
+    return jax.tree_util.tree_map(select, *outs)
+
+
+def material_flag(scene, mat_id, attr):
+    flags = [bool(getattr(m, attr)) for m in scene.materials]
+    if all(flags):
+        return jnp.ones(mat_id.shape, bool)
+    if not any(flags):
+        return jnp.zeros(mat_id.shape, bool)
+    return jnp.asarray(flags)[mat_id]
+
+
+def shading_frame(scene, hit, d, mat_id):
+    """Shading frame and local ``wo``.
+
+    For reflection-only materials the normals are flipped to the side of the incoming ray
+    (two-sided shading); transmissive materials keep the geometric orientation so that
+    ``wo.z < 0`` means "inside".
+    """
+    trans = material_flag(scene, mat_id, "is_transmissive")
+    facing = jnp.sum(hit.ng * d, -1) < 0
+    flip = jnp.where(trans | facing, 1.0, -1.0)[..., None]
+    ng = hit.ng * flip
+    ns = hit.ns * flip
+    # keep the shading normal on the geometric side of the ray
+    ns = jnp.where((jnp.sum(ns * ng, -1) > 0)[..., None], ns, ng)
+    frame = frame_from_normal(ns)
+    wo = to_local(frame, -d)
+    return frame, ng, wo
+
+
+def emission_table(scene, dtype):
+    n = len(scene.shapes)
+    table = jnp.zeros((n, 3), dtype)
+    inv_area = jnp.zeros((n,), dtype)
+    for al, sh in zip(scene.area_lights, scene.emitter_shapes, strict=True):
+        table = table.at[al.shape_index].set(al.radiance.astype(dtype))
+        inv_area = inv_area.at[al.shape_index].set(1.0 / area(sh).astype(dtype))
+    return table, inv_area
+
+
+def emitted(scene, hit, d):
+    """Radiance emitted towards ``-d`` at hits on area lights (front side only)."""
+    if not scene.area_lights:
+        return jnp.zeros(d.shape, d.dtype)
+    table, _ = emission_table(scene, d.dtype)
+    sid = jnp.clip(hit.shape_id, 0, len(scene.shapes) - 1)
+    front = (jnp.sum(hit.ng * d, -1) < 0) & hit.valid
+    return jnp.where(front[..., None], table[sid], 0.0)
+
+
+def mis_power(a, b):
+    """Power heuristic (beta = 2) weight of a strategy with density ``a`` against ``b``."""
+    a2, b2 = a * a, b * b
+    return safe_div(a2, a2 + b2)
+
+
+def _selection_prob(scene, dtype):
+    return jnp.asarray(1.0 / max(scene.n_lights, 1), dtype)
+
+
+def light_pdf_hit(scene, p_prev, hit, d):
+    """Solid-angle density with which light sampling from ``p_prev`` picks this hit."""
+    if not scene.area_lights:
+        return jnp.zeros(hit.t.shape, d.dtype)
+    _, inv_area = emission_table(scene, d.dtype)
+    sid = jnp.clip(hit.shape_id, 0, len(scene.shapes) - 1)
+    cos_l = jnp.abs(jnp.sum(hit.ng * d, -1))
+    dist2 = jnp.sum((hit.p - p_prev) ** 2, -1)
+    pdf = safe_div(inv_area[sid] * dist2, cos_l)
+    return jnp.where(hit.valid, pdf * _selection_prob(scene, d.dtype), 0.0)
+
+
+def env_pdf(scene, d):
+    if scene.environment is None:
+        return jnp.zeros(d.shape[:-1], d.dtype)
+    return scene.environment.pdf(d) * _selection_prob(scene, d.dtype)
+
+
+def sample_light(scene, p, u_sel, u2):
+    """Pick a light uniformly and sample it from points ``p``.
+
+    Returns ``(wi, dist, Li, pdf, is_delta)``: world direction towards the light, distance
+    (inf for the environment), unoccluded incident radiance, solid-angle density including the
+    selection probability (1 x selection for point lights), and whether it is a delta light.
+    Light order: area lights, point lights, environment.
+    """
+    dtype = p.dtype
+    n = scene.n_lights
+    idx = jnp.minimum((u_sel * n).astype(jnp.int32), n - 1)
+    cands = []
+    for al, sh in zip(scene.area_lights, scene.emitter_shapes, strict=True):
+        pl, nl, pdf_a = sample_area(sh, u2)
+        v = pl - p
+        d2 = jnp.sum(v * v, -1)
+        dist = safe_sqrt(d2)
+        wi = safe_div(v, dist[..., None])
+        cos_l = -jnp.sum(nl * wi, -1)
+        li = jnp.where((cos_l > 0)[..., None], al.radiance.astype(dtype), 0.0)
+        pdf = safe_div(pdf_a * d2, jnp.abs(cos_l))
+        cands.append((wi, dist, li, pdf, jnp.zeros(p.shape[:-1], bool)))
+    na = len(scene.area_lights)
+    if scene.point_lights is not None:
+        j = jnp.clip(idx - na, 0, scene.point_lights.count - 1)
+        wi, dist, li = scene.point_lights.sample(j, p)
+        ones = jnp.ones(p.shape[:-1], dtype)
+        cands.append((wi, dist, li, ones, jnp.ones(p.shape[:-1], bool)))
+    if scene.environment is not None:
+        wi, pdf, li = scene.environment.sample(u2)
+        dist = jnp.full(p.shape[:-1], jnp.inf, dtype)
+        cands.append((wi, dist, li, pdf, jnp.zeros(p.shape[:-1], bool)))
+    # map light index -> candidate index
+    n_point = scene.point_lights.count if scene.point_lights is not None else 0
+    cand_idx = jnp.where(idx < na, idx, jnp.where(idx < na + n_point, na, na + (n_point > 0)))
+    out = cands[0]
+    for k in range(1, len(cands)):
+        sel = cand_idx == k
+        out = jax.tree_util.tree_map(
+            lambda a, b, sel=sel: jnp.where(
+                sel.reshape(sel.shape + (1,) * (a.ndim - sel.ndim)), b, a
+            ),
+            out,
+            cands[k],
+        )
+    wi, dist, li, pdf, is_delta = out
+    return wi, dist, li, pdf * _selection_prob(scene, dtype), is_delta

@@ -1,0 +1,25 @@
+"""Arbitrary output variables at the first hit: albedo (3), shading normal (3), depth (1)."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from jaxgfx.render.integrators import _common as C
+
+__all__ = ["aov", "AOV_CHANNELS"]
+
+AOV_CHANNELS = ("albedo.R", "albedo.G", "albedo.B", "nx", "ny", "nz", "depth")
+
+
+def aov(scene, o, d):
+    """``(..., 7)``: albedo RGB, world shading normal (facing the camera), hit distance ``t``.
+
+    Misses give zeros.
+    """
+    hit = C.intersect(scene, o, d)
+    mat = C.hit_material(scene, hit)
+    frame, _, _ = C.shading_frame(scene, hit, d, mat)
+    alb = C.dispatch(scene, mat, lambda m: jnp.broadcast_to(m.albedo, hit.p.shape))
+    v = hit.valid[..., None]
+    depth = jnp.where(hit.valid, hit.t, 0.0)[..., None]
+    return jnp.concatenate([jnp.where(v, alb, 0.0), jnp.where(v, frame.n, 0.0), depth], -1)
