@@ -337,7 +337,7 @@ def _bilateral_grid(y, sigma_spatial: float, sigma_range, range_bins: int):
     P = 2  # grid padding (blur radius in cells)
     x = jnp.moveaxis(y, -1, 1).reshape(N * C, H, W)
     B = N * C
-    vmin = jax.lax.stop_gradient(jnp.min(x, axis=(1, 2), keepdims=True))
+    vmin = jnp.min(x, axis=(1, 2), keepdims=True)
     Gh = int(math.floor((H - 1) / sigma_spatial)) + 2 * P + 2
     Gw = int(math.floor((W - 1) / sigma_spatial)) + 2 * P + 2
     Gz = range_bins + 2 * P + 2
