@@ -99,15 +99,28 @@ def pad_image(image, pad_h, pad_w, *, mode: str = "reflect"):
     return _pad_axis(x, ax_w, int(pad_w[0]), int(pad_w[1]), mode)
 
 
-def to_nhwc(x):
-    """Reshape an image to ``(N, H, W, C)``; returns it and a function undoing the reshape."""
+def pad_bhw(x, pad_h, pad_w, mode: str):
+    """Pad axes 1 and 2 of an internal ``(B, H, W)`` array (no checks)."""
+    x = _pad_axis(x, 1, int(pad_h[0]), int(pad_h[1]), mode)
+    return _pad_axis(x, 2, int(pad_w[0]), int(pad_w[1]), mode)
+
+
+def to_bhw(x):
+    """Reshape an image to ``(B, H, W)`` with channels folded into the batch (``B = N * C``),
+    so that W is the contiguous axis: shift-and-add runs 2-4x faster on CPU than on
+    channels-last data with C = 3 (or with a trailing unit axis). Returns it and a function
+    mapping a ``(B, H', W')`` result back to the input layout.
+    """
     shape = x.shape
     if x.ndim == 2:
-        y = x[None, :, :, None]
-    else:
-        y = x.reshape((-1,) + shape[-3:])
+        return x[None], lambda z: z[0]
+    H, W, C = shape[-3:]
+    y = x.reshape((-1, H, W, C))
+    y = y[..., 0] if C == 1 else jnp.moveaxis(y, -1, 1).reshape((-1, H, W))
 
     def undo(z):
-        return z.reshape(shape[:-3] + z.shape[1:]) if x.ndim > 2 else z[0, :, :, 0]
+        h, w = z.shape[1], z.shape[2]
+        z = z[..., None] if C == 1 else jnp.moveaxis(z.reshape((-1, C, h, w)), 1, -1)
+        return z.reshape(shape[:-3] + (h, w, C))
 
     return y, undo

@@ -31,7 +31,7 @@ import numpy as np
 
 from jaxgfx._checks import check_choice, check_finite, check_image, is_concrete
 
-from ._padding import check_padding, pad_image, to_nhwc
+from ._padding import check_padding, pad_bhw, to_bhw
 
 __all__ = [
     "CONVOLVE_METHODS",
@@ -131,13 +131,13 @@ def _conv1d_fft(xp, k, axis: int, n_out: int):
 
 
 def _conv1d(x, k, axis: int, padding: str, method: str):
-    """Same-size 1-d convolution of NHWC ``x`` along spatial ``axis`` (1 or 2)."""
+    """Same-size 1-d convolution of ``(B, H, W)`` ``x`` along spatial ``axis`` (1 or 2)."""
     L = k.shape[0]
     c = L // 2
     n = x.shape[axis]
     pads = [(0, 0)] * 2
     pads[axis - 1] = (L - 1 - c, c)
-    xp = pad_image(x, pads[0], pads[1], mode=padding)
+    xp = pad_bhw(x, pads[0], pads[1], padding)
     if method == "auto":
         method = "fft" if L > FFT_CROSSOVER_1D else "direct"
     if method == "fft":
@@ -151,18 +151,16 @@ def _conv2d_direct(xp, k, H: int, W: int):
         out = None
         for i in range(kh):
             for j in range(kw):
-                sl = xp[:, kh - 1 - i : kh - 1 - i + H, kw - 1 - j : kw - 1 - j + W, :]
+                sl = xp[:, kh - 1 - i : kh - 1 - i + H, kw - 1 - j : kw - 1 - j + W]
                 out = sl * k[i, j] if out is None else out + sl * k[i, j]
         return out
 
     def body(t, acc):
         i, j = t // kw, t % kw
-        sl = jax.lax.dynamic_slice(
-            xp, (0, kh - 1 - i, kw - 1 - j, 0), (xp.shape[0], H, W, xp.shape[3])
-        )
+        sl = jax.lax.dynamic_slice(xp, (0, kh - 1 - i, kw - 1 - j), (xp.shape[0], H, W))
         return acc + sl * k[i, j]
 
-    zero = jnp.zeros((xp.shape[0], H, W, xp.shape[3]), xp.dtype)
+    zero = jnp.zeros((xp.shape[0], H, W), xp.dtype)
     return jax.lax.fori_loop(0, kh * kw, body, zero)
 
 
@@ -171,8 +169,8 @@ def _conv2d_fft(xp, k, H: int, W: int):
     s = (_fast_len(xp.shape[1]), _fast_len(xp.shape[2]))
     X = jnp.fft.rfft2(xp, s=s, axes=(1, 2))
     K = jnp.fft.rfft2(k, s=s)
-    y = jnp.fft.irfft2(X * K[None, :, :, None], s=s, axes=(1, 2))
-    return y[:, kh - 1 : kh - 1 + H, kw - 1 : kw - 1 + W, :].astype(xp.dtype)
+    y = jnp.fft.irfft2(X * K[None], s=s, axes=(1, 2))
+    return y[:, kh - 1 : kh - 1 + H, kw - 1 : kw - 1 + W].astype(xp.dtype)
 
 
 def _prepare(image, padding, method, methods=CONVOLVE_METHODS):
@@ -214,10 +212,10 @@ def convolve(image, kernel, *, padding: str = "reflect", method: str = "auto"):
             )
         method = "fft" if k.size > FFT_CROSSOVER_2D else "direct"
     kh, kw = k.shape
-    y, undo = to_nhwc(x)
+    y, undo = to_bhw(x)
     H, W = y.shape[1], y.shape[2]
     ci, cj = kh // 2, kw // 2
-    yp = pad_image(y, (kh - 1 - ci, ci), (kw - 1 - cj, cj), mode=padding)
+    yp = pad_bhw(y, (kh - 1 - ci, ci), (kw - 1 - cj, cj), padding)
     if method == "fft":
         return undo(_conv2d_fft(yp, k, H, W))
     return undo(_conv2d_direct(yp, k, H, W))
@@ -247,7 +245,7 @@ def convolve_separable(
     x = _prepare(image, padding, method, ("auto", "direct", "fft"))
     kv = _check_kernel(kernel_v, "kernel_v", 1).astype(x.dtype)
     kh = _check_kernel(kernel_h, "kernel_h", 1).astype(x.dtype)
-    y, undo = to_nhwc(x)
+    y, undo = to_bhw(x)
     y = _conv1d(y, kv, 1, padding, method)
     y = _conv1d(y, kh, 2, padding, method)
     return undo(y)

@@ -16,8 +16,9 @@ import numpy as np
 from jaxgfx._checks import check_choice, check_image, check_nonnegative, check_positive
 from jaxgfx._math import safe_atan2, safe_div, safe_sqrt
 
-from ._padding import check_padding, pad_image, to_nhwc
-from .filters import gaussian_blur
+from ._padding import check_padding, pad_bhw, to_bhw
+from .convolve import _conv1d
+from .filters import _static_radius, gaussian_kernel1d
 
 __all__ = [
     "EDGE_OPERATORS",
@@ -31,21 +32,26 @@ __all__ = [
 ]
 
 
-def _smoothed_diff(image, smooth, padding):
-    x = check_image(image)
-    check_padding(padding)
-    y, undo = to_nhwc(x)
+def _smoothed_diff_bhw(y, smooth, padding):
     H, W = y.shape[1], y.shape[2]
-    p = pad_image(y, 1, 1, mode=padding)
+    p = pad_bhw(y, (1, 1), (1, 1), padding)
     s0, s1, s2 = smooth
 
     def sl(i, j):
-        return p[:, i : i + H, j : j + W, :]
+        return p[:, i : i + H, j : j + W]
 
     dx = [sl(i, 2) - sl(i, 0) for i in range(3)]  # f(x+1) - f(x-1) on rows y-1, y, y+1
     dy = [sl(2, j) - sl(0, j) for j in range(3)]
     gx = s0 * dx[0] + s1 * dx[1] + s2 * dx[2]
     gy = s0 * dy[0] + s1 * dy[1] + s2 * dy[2]
+    return gx, gy
+
+
+def _smoothed_diff(image, smooth, padding):
+    x = check_image(image)
+    check_padding(padding)
+    y, undo = to_bhw(x)
+    gx, gy = _smoothed_diff_bhw(y, smooth, padding)
     return undo(gx), undo(gy)
 
 
@@ -89,9 +95,9 @@ def roberts(image, *, padding: str = "reflect"):
     """
     x = check_image(image)
     check_padding(padding)
-    y, undo = to_nhwc(x)
+    y, undo = to_bhw(x)
     H, W = y.shape[1], y.shape[2]
-    p = pad_image(y, (0, 1), (0, 1), mode=padding)
+    p = pad_bhw(y, (0, 1), (0, 1), padding)
     g1 = p[:, 1 : H + 1, 1 : W + 1] - p[:, :H, :W]
     g2 = p[:, 1 : H + 1, :W] - p[:, :H, 1 : W + 1]
     return undo(g1), undo(g2)
@@ -136,15 +142,10 @@ def gradient_magnitude_direction(image, *, operator: str = "sobel", padding: str
 # --------------------------------------------------------------------------- Canny
 
 
-def _gray(x):
-    """NHWC -> NHW1 by the channel mean."""
-    return jnp.mean(x, axis=-1, keepdims=True)
-
-
 def _neighbours(mag, gx, gy):
-    """Magnitude interpolated one pixel forward/backward along the gradient (NHWC)."""
+    """Magnitude interpolated one pixel forward/backward along the gradient, ``(B, H, W)``."""
     H, W = mag.shape[1], mag.shape[2]
-    p = jnp.pad(mag, ((0, 0), (1, 1), (1, 1), (0, 0)))
+    p = jnp.pad(mag, ((0, 0), (1, 1), (1, 1)))
 
     def at(dy, dx):
         return p[:, 1 + dy : 1 + dy + H, 1 + dx : 1 + dx + W]
@@ -180,17 +181,21 @@ def _neighbours(mag, gx, gy):
 
 
 def _canny_magnitude(x, sigma, padding, truncate, radius):
-    y, undo = to_nhwc(x)
-    y = _gray(y)
-    y = gaussian_blur(y, sigma, truncate=truncate, radius=radius, padding=padding)
-    gx, gy = sobel(y, padding=padding)
+    if x.ndim > 2:
+        x = jnp.mean(x, axis=-1, keepdims=True)
+    y, undo = to_bhw(x)
+    r = _static_radius(sigma, truncate, radius)
+    if r > 0:
+        k = gaussian_kernel1d(sigma, r, dtype=y.dtype)
+        y = _conv1d(_conv1d(y, k, 1, padding, "auto"), k, 2, padding, "auto")
+    gx, gy = _smoothed_diff_bhw(y, (1.0, 2.0, 1.0), padding)
     mag = safe_sqrt(gx * gx + gy * gy)
     return mag, gx, gy, undo
 
 
 def _dilate8(e):
     H, W = e.shape[1], e.shape[2]
-    p = jnp.pad(e, ((0, 0), (1, 1), (1, 1), (0, 0)))
+    p = jnp.pad(e, ((0, 0), (1, 1), (1, 1)))
     out = e
     for dy in range(3):
         for dx in range(3):
@@ -218,7 +223,7 @@ def _border_mask(shape):
     H, W = shape[1], shape[2]
     m = np.zeros((H, W), bool)
     m[1:-1, 1:-1] = True
-    return jnp.asarray(m)[None, :, :, None]
+    return jnp.asarray(m)[None]
 
 
 def canny(
@@ -263,6 +268,7 @@ def canny(
         Array([0, 0, 0, 0, 1, 0, 0, 0, 0], dtype=int32)
     """
     x = check_image(image)
+    check_padding(padding)
     check_nonnegative(sigma, "sigma")
     low = 0.1 if low is None else low
     high = 0.2 if high is None else high
@@ -277,8 +283,8 @@ def canny(
     mag, gx, gy, undo = _canny_magnitude(x, sigma, padding, truncate, radius)
     if use_quantiles:
         flat = mag.reshape(mag.shape[0], -1)
-        lo = jnp.quantile(flat, low, axis=1)[:, None, None, None]
-        hi = jnp.quantile(flat, high, axis=1)[:, None, None, None]
+        lo = jnp.quantile(flat, low, axis=1)[:, None, None]
+        hi = jnp.quantile(flat, high, axis=1)[:, None, None]
     else:
         lo = jnp.asarray(low, mag.dtype)
         hi = jnp.asarray(high, mag.dtype)
@@ -320,6 +326,7 @@ def soft_canny(
         True
     """
     x = check_image(image)
+    check_padding(padding)
     check_nonnegative(sigma, "sigma")
     check_nonnegative(low, "low")
     check_nonnegative(high, "high")
@@ -334,7 +341,7 @@ def soft_canny(
     e = nms * jax.nn.sigmoid((mag - jnp.asarray(high, mag.dtype)) / t)
     H, W = e.shape[1], e.shape[2]
     for _ in range(iterations):
-        p = jnp.pad(e, ((0, 0), (1, 1), (1, 1), (0, 0)))
+        p = jnp.pad(e, ((0, 0), (1, 1), (1, 1)))
         pooled = e
         for dy in range(3):
             for dx in range(3):

@@ -26,7 +26,7 @@ from jaxgfx._checks import (
 )
 from jaxgfx._math import safe_div
 
-from ._padding import check_padding, pad_image, to_nhwc
+from ._padding import check_padding, pad_bhw, to_bhw
 from .convolve import _conv1d, convolve, convolve_separable
 
 __all__ = [
@@ -143,7 +143,7 @@ def _box1d(y, size: int, axis: int, padding: str):
         return _conv1d(y, k, axis, padding, "direct")
     pads = [(0, 0), (0, 0)]
     pads[axis - 1] = (r, r)
-    yp = pad_image(y, pads[0], pads[1], mode=padding)
+    yp = pad_bhw(y, pads[0], pads[1], padding)
     acc = jnp.float64 if y.dtype == jnp.float64 else jnp.float32
     cs = jnp.cumsum(yp.astype(acc), axis=axis)
     zshape = list(cs.shape)
@@ -175,7 +175,7 @@ def box_blur(image, size, *, padding: str = "reflect"):
     sh, sw = (size, size) if np.ndim(size) == 0 else tuple(size)
     check_odd_int(sh, "size")
     check_odd_int(sw, "size")
-    y, undo = to_nhwc(x)
+    y, undo = to_bhw(x)
     if sh > 1:
         y = _box1d(y, sh, 1, padding)
     if sw > 1:
@@ -257,10 +257,10 @@ def median_filter(image, size, *, padding: str = "reflect"):
     if size == 1:
         return x
     r = size // 2
-    y, undo = to_nhwc(x)
+    y, undo = to_bhw(x)
     H, W = y.shape[1], y.shape[2]
-    yp = pad_image(y, r, r, mode=padding)
-    shifts = [yp[:, i : i + H, j : j + W, :] for i in range(size) for j in range(size)]
+    yp = pad_bhw(y, (r, r), (r, r), padding)
+    shifts = [yp[:, i : i + H, j : j + W] for i in range(size) for j in range(size)]
     if size * size <= _MEDIAN_NETWORK_MAX:
         return undo(_median_select(shifts))
     stacked = jnp.stack(shifts, axis=0)
@@ -271,9 +271,9 @@ def median_filter(image, size, *, padding: str = "reflect"):
 
 
 def _bilateral_brute(y, sigma_spatial, sigma_range, radius: int, padding: str):
-    """Tomasi & Manduchi (1998) on NHWC ``y``: circular window of ``radius``."""
+    """Tomasi & Manduchi (1998) on ``(B, H, W)`` ``y``: circular window of ``radius``."""
     H, W = y.shape[1], y.shape[2]
-    yp = pad_image(y, radius, radius, mode=padding)
+    yp = pad_bhw(y, (radius, radius), (radius, radius), padding)
     offs = [
         (i, j)
         for i in range(-radius, radius + 1)
@@ -291,7 +291,7 @@ def _bilateral_brute(y, sigma_spatial, sigma_range, radius: int, padding: str):
         num = jnp.zeros_like(y)
         den = jnp.zeros_like(y)
         for i, j in offs:
-            q = yp[:, radius + i : radius + i + H, radius + j : radius + j + W, :]
+            q = yp[:, radius + i : radius + i + H, radius + j : radius + j + W]
             a, b = contrib(float(i), float(j), q)
             num, den = num + a, den + b
     else:
@@ -301,7 +301,7 @@ def _bilateral_brute(y, sigma_spatial, sigma_range, radius: int, padding: str):
         def body(t, carry):
             num, den = carry
             i, j = oi[t], oj[t]
-            q = jax.lax.dynamic_slice(yp, (0, radius + i, radius + j, 0), y.shape)
+            q = jax.lax.dynamic_slice(yp, (0, radius + i, radius + j), y.shape)
             a, b = contrib(i.astype(y.dtype), j.astype(y.dtype), q)
             return num + a, den + b
 
@@ -332,11 +332,10 @@ def _trilinear_corners(u, v, w):
 
 
 def _bilateral_grid(y, sigma_spatial: float, sigma_range, range_bins: int):
-    """Chen, Paris & Durand (2007) bilateral grid on NHWC ``y``, every channel on its own."""
-    N, H, W, C = y.shape
+    """Chen, Paris & Durand (2007) bilateral grid on ``(B, H, W)`` ``y`` (one grid per B)."""
+    B, H, W = y.shape
     P = 2  # grid padding (blur radius in cells)
-    x = jnp.moveaxis(y, -1, 1).reshape(N * C, H, W)
-    B = N * C
+    x = y
     vmin = jnp.min(x, axis=(1, 2), keepdims=True)
     Gh = int(math.floor((H - 1) / sigma_spatial)) + 2 * P + 2
     Gw = int(math.floor((W - 1) / sigma_spatial)) + 2 * P + 2
@@ -370,8 +369,7 @@ def _bilateral_grid(y, sigma_spatial: float, sigma_range, range_bins: int):
         g = flat_grid[flat]
         num = num + wt * g[..., 0]
         den = den + wt * g[..., 1]
-    out = safe_div(num, den)
-    return jnp.moveaxis(out.reshape(N, C, H, W), 1, -1)
+    return safe_div(num, den)
 
 
 def bilateral_Tomasi1998(image, sigma_spatial, sigma_range, *, radius=None, padding="reflect"):
@@ -458,7 +456,7 @@ def bilateral_filter(
         radius = max(1, int(round(1.5 * float(sigma_spatial))))
     if method == "auto":
         method = "brute" if radius <= 4 else "grid"
-    y, undo = to_nhwc(x)
+    y, undo = to_bhw(x)
     if method == "brute":
         radius = _static_radius(sigma_spatial, 1.5, radius, "sigma_spatial")
         ss = jnp.asarray(sigma_spatial, x.dtype)
