@@ -104,7 +104,7 @@ def test_gaussian_traced_sigma_needs_radius(img3):
 def test_gaussian_grads_sigma_image(x64, rng):
     x = jnp.asarray(rng.random((7, 6)))
     f = jax.jit(lambda im, s: gaussian_blur(im, s, radius=4, padding="symmetric"))
-    check_grads(f, (x, 1.3), order=2, modes=["rev"])
+    check_grads(f, (x, 1.3), order=1, modes=["rev"])
 
 
 def test_gaussian_vmap(img3):
@@ -166,28 +166,29 @@ def test_bilateral_brute_matches_cv2(ss, sr, img3):
 
 def test_bilateral_affine_equivariance_any_range(rng):
     # Arbitrary value range (log luminance): f(a x + b; sr a) = a f(x; sr) + b, for both methods.
-    x = rng.random((20, 24)).astype(np.float32)
+    x = rng.random((16, 16)).astype(np.float32)
     for method in ("brute", "grid"):
-        base = np.asarray(bilateral_filter(x, 2.0, 0.2, method=method))
-        big = np.asarray(bilateral_filter(30 * x - 17, 2.0, 6.0, method=method))
+        f = jax.jit(lambda im, sr, m=method: bilateral_filter(im, 2.0, sr, method=m, range_bins=5))
+        base = np.asarray(f(x, 0.2))
+        big = np.asarray(f(30 * x - 17, 6.0))
         np.testing.assert_allclose(big, 30 * base - 17, atol=2e-4 * 30, err_msg=method)
 
 
 def test_bilateral_grid_approximates_brute(rng):
     # Step edge + noise; the grid's measured mean error is a few % of sigma_range.
-    x = np.where(np.arange(48)[None, :] < 24, 0.2, 0.8) + 0.05 * rng.standard_normal((48, 48))
+    x = np.where(np.arange(32)[None, :] < 16, 0.2, 0.8) + 0.05 * rng.standard_normal((32, 32))
     x = x.astype(np.float32)
-    ss, sr = 3.0, 0.15
-    brute = np.asarray(bilateral_filter(x, ss, sr, method="brute", radius=9))
+    ss, sr = 2.0, 0.15
+    brute = np.asarray(bilateral_filter(x, ss, sr, method="brute", radius=6))
     grid = np.asarray(BILATERAL_METHODS["Chen2007"](x, ss, sr))
     err = np.abs(grid - brute)
     assert err.mean() < 0.1 * sr
     assert np.abs(grid - x).mean() < 0.05  # edge preserved, noise reduced
-    assert grid[:, 23].mean() < 0.3 and grid[:, 24].mean() > 0.7
+    assert grid[:, 15].mean() < 0.3 and grid[:, 16].mean() > 0.7
 
 
 def test_bilateral_grads(x64, rng):
-    x = jnp.asarray(rng.random((6, 6)))
+    x = jnp.asarray(rng.random((5, 5)))
     f = jax.jit(lambda im, ss, sr: bilateral_filter(im, ss, sr, method="brute", radius=2))
     check_grads(f, (x, 1.5, 0.3), order=1, modes=["rev"])
     g = jax.jit(lambda im, sr: bilateral_filter(im, 2.0, sr, method="grid", range_bins=4))
@@ -238,10 +239,10 @@ def test_log_matches_scipy(img3):
 
 
 def test_log_of_quadratic_is_four_a(x64):
-    yy, xx = np.mgrid[-20:21, -20:21].astype(np.float64)
-    out = laplacian_of_gaussian(3.0 * (yy**2 + xx**2), 1.5, truncate=8.0)
-    assert float(out[20, 20]) == pytest.approx(12.0, rel=1e-6)
-    assert float(out[25, 17]) == pytest.approx(12.0, rel=1e-6)
+    yy, xx = np.mgrid[-16:17, -16:17].astype(np.float64)
+    out = jax.jit(lambda im: laplacian_of_gaussian(im, 1.5, truncate=8.0))(3.0 * (yy**2 + xx**2))
+    assert float(out[16, 16]) == pytest.approx(12.0, rel=1e-6)
+    assert float(out[20, 13]) == pytest.approx(12.0, rel=1e-6)
 
 
 def test_log_grads(x64, rng):
@@ -290,8 +291,18 @@ def test_one_pixel_image(mode):
 
 def test_float64_preserved(x64, rng):
     x = rng.random((6, 6))
-    for out in (gaussian_blur(x, 1.0), box_blur(x, 3), median_filter(x, 3), sharpen(x)):
-        assert out.dtype == jnp.float64
+    for fn in (
+        lambda a: gaussian_blur(a, 1.0),
+        lambda a: box_blur(a, 17),
+        lambda a: median_filter(a, 3),
+        lambda a: bilateral_filter(a, 1.0, 0.1, method="grid", range_bins=4),
+        sharpen,
+        lambda a: laplacian_of_gaussian(a, 1.0),
+    ):
+        assert jax.eval_shape(fn, x).dtype == jnp.float64
+    np.testing.assert_allclose(
+        np.asarray(box_blur(x, 3)), ndi.uniform_filter(x, 3, mode="mirror"), rtol=1e-13
+    )
 
 
 def test_bad_inputs():
