@@ -113,10 +113,10 @@ def bench_filters(n, repeats):
                 cv2.Sobel(img, -1, 1, 0, borderType=B),
                 cv2.Sobel(img, -1, 0, 1, borderType=B),
             ),
-            lambda: (
-                skimage.filters.sobel_h(gray),
-                skimage.filters.sobel_v(gray),
-            ),
+            lambda: [
+                (skimage.filters.sobel_h(img[..., c]), skimage.filters.sobel_v(img[..., c]))
+                for c in range(3)
+            ],
         ),
         "canny_sigma1.4_gray": (
             lambda a: jimg.canny(a, 1.4, 0.1, 0.3),
