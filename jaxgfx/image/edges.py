@@ -204,40 +204,15 @@ def _dilate8(e):
     return out
 
 
-def _run_fill(e, weak, axis: int):
-    """Mark every pixel of a weak run (along ``axis``) that contains a marked pixel.
-
-    Forward and backward ``associative_scan`` of the boolean recurrence
-    ``f[i] = e[i] | (weak[i] & f[i - 1])``, composed as affine maps ``f -> a | (b & f)``.
-    """
-
-    def combine(p, q):
-        a1, b1 = p
-        a2, b2 = q
-        return a2 | (b2 & a1), b2 & b1
-
-    fwd, _ = jax.lax.associative_scan(combine, (e, weak), axis=axis)
-    bwd, _ = jax.lax.associative_scan(combine, (e, weak), axis=axis, reverse=True)
-    return fwd | bwd
-
-
-def _hysteresis(strong, weak):
-    """Weak pixels 8-connected to strong ones, ``(B, H, W)`` booleans.
-
-    Each round fills whole horizontal and vertical weak runs that touch the edge set (scans),
-    then dilates by one 8-neighbourhood step inside ``weak``; rounds repeat in a
-    ``lax.while_loop`` until nothing changes, so the round count grows with the number of
-    turns of a contour rather than its length.
-    """
-
+def _hysteresis(strong, weak, steps_per_check: int = 8):
     def cond(state):
         return state[1]
 
     def body(state):
         e, _ = state
-        new = _run_fill(e, weak, 2)
-        new = _run_fill(new, weak, 1)
-        new = weak & _dilate8(new)
+        new = e
+        for _ in range(steps_per_check):
+            new = weak & _dilate8(new)
         return new, jnp.any(new != e)
 
     e, _ = jax.lax.while_loop(cond, body, (strong, jnp.array(True)))
@@ -268,8 +243,7 @@ def canny(
     Sobel ``(gx, gy)``; magnitude ``hypot(gx, gy)``; non-maximum suppression against the
     magnitude *interpolated* at one pixel forward and backward along the gradient (as
     scikit-image); double threshold; hysteresis: weak pixels 8-connected to strong ones, by
-    row/column run filling (scans) and 8-neighbour dilation in a ``lax.while_loop`` until
-    nothing changes. The one-pixel image
+    iterated dilation in a ``lax.while_loop`` until nothing changes. The one-pixel image
     border is never an edge (as scikit-image).
 
     Thresholds are absolute on the (unnormalised, ``cv2.Sobel``-scale) Sobel magnitude of the
