@@ -144,6 +144,19 @@ def test_hysteresis_vs_connected_components():
     np.testing.assert_array_equal(np.asarray(got)[0], want)
 
 
+def test_hysteresis_long_snake():
+    # One 8-connected serpentine path of ~1000 px seeded at one end: all of it survives.
+    w = np.zeros((64, 64), bool)
+    for i in range(1, 63, 4):
+        w[i, 1:62] = True
+    for k, i in enumerate(range(1, 59, 4)):
+        w[i : i + 5, 61 if k % 2 == 0 else 1] = True
+    seed = np.zeros_like(w)
+    seed[1, 1] = True
+    got = _hysteresis(jnp.asarray(seed)[None], jnp.asarray(w)[None])
+    np.testing.assert_array_equal(np.asarray(got)[0], w)
+
+
 def test_canny_flat_and_tiny():
     assert not np.any(np.asarray(_canny80(np.full((80, 80), 0.3, np.float32), 1.0, 0.1, 0.2)))
     assert not np.any(np.asarray(canny(np.ones((1, 1)), 1.0)))
