@@ -177,3 +177,14 @@ def test_bad_inputs():
         pad_image(np.ones((4, 4)), -1, 0)
     with pytest.raises(TypeError, match="image"):
         convolve("abc", k)
+
+
+def test_jit_pad_and_separable(rng):
+    x = rng.random((7, 6, 2)).astype(np.float32)
+    f = jax.jit(lambda a: pad_image(a, (2, 9), (0, 3), mode="symmetric"))
+    want = np.pad(x, [(2, 9), (0, 3), (0, 0)], mode="symmetric")
+    np.testing.assert_array_equal(np.asarray(f(x)), want)
+    kv, kh = rng.random(3).astype(np.float32), rng.random(5).astype(np.float32)
+    g = jax.jit(lambda a, v, h: convolve_separable(a, v, h, padding="edge"))
+    want = np.stack([np_convolve(x[..., c], np.outer(kv, kh), "edge") for c in range(2)], -1)
+    np.testing.assert_allclose(np.asarray(g(x, kv, kh)), want, atol=1e-5)

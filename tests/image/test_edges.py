@@ -194,3 +194,14 @@ def test_bad_inputs(img):
         canny(np.ones(5), 1.0)
     with pytest.raises(ValueError, match="temperature"):
         soft_canny(img, 1.0, 0.1, 0.2, temperature=0.0)
+
+
+def test_jit_matches_eager_operators(img):
+    for op in ("sobel", "prewitt", "roberts"):
+        f = jax.jit(lambda a, o=op: image_gradients(a, operator=o, padding="symmetric"))
+        for got, want in zip(
+            f(img), image_gradients(img, operator=op, padding="symmetric"), strict=True
+        ):
+            np.testing.assert_allclose(np.asarray(got), np.asarray(want), atol=1e-6)
+    g1, _ = jax.jit(roberts)(img)
+    np.testing.assert_allclose(np.asarray(g1)[:-1, :-1], img[1:, 1:] - img[:-1, :-1], atol=1e-6)

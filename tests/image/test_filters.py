@@ -331,3 +331,13 @@ def test_bad_inputs():
         laplacian_of_gaussian(x, 0.0)
     with pytest.raises(ValueError, match="range_bins"):
         jax.jit(lambda im: bilateral_filter(im, 2.0, 0.1, method="grid"))(x)
+
+
+def test_jit_matches_eager_small_filters(rng):
+    x = rng.random((9, 8, 2)).astype(np.float32)
+    for fn in (
+        lambda a: box_blur(a, (3, 5), padding="wrap"),
+        lambda a: median_filter(a, 3, padding="symmetric"),
+        lambda a: gaussian_kernel1d(a[0, 0, 0] + 0.5, 3),
+    ):
+        np.testing.assert_allclose(np.asarray(jax.jit(fn)(x)), np.asarray(fn(x)), atol=1e-6)
