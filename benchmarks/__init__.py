@@ -1,0 +1,1 @@
+"""Benchmarks: speed (and speed vs error) against peers, JSON out."""
