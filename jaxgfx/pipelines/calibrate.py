@@ -63,8 +63,8 @@ class SyntheticConfig:
             raise ValueError("synthetic.height/width: expected at least 8 pixels")
         if len(self.exposure_times) < 2 or any(t <= 0 for t in self.exposure_times):
             raise ValueError("synthetic.exposure_times: expected >= 2 positive times")
-        if self.bits not in (8, 10, 12, 14, 16):
-            raise ValueError(f"synthetic.bits: expected 8, 10, 12, 14 or 16, got {self.bits}")
+        if self.bits not in (8, 16):
+            raise ValueError(f"synthetic.bits: expected 8 or 16, got {self.bits}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -142,44 +142,59 @@ class _Steps:
 
 
 def _plot_response(path, responses: dict, truth=None, title="camera response"):
+    """Plot g(Z) = ln to_linear(Z) per channel for each fitted response (and the truth,
+    shifted by the best constant ln offset, since the anchor is arbitrary)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     z = np.linspace(0.0, 1.0, 256)
+
+    def curve(resp):
+        zz = np.ascontiguousarray(np.broadcast_to(z[:, None], (256, resp.channels)), np.float32)
+        return np.log(np.maximum(np.asarray(resp.to_linear_normalized(zz), np.float64), 1e-12))
+
     colors = ("tab:red", "tab:green", "tab:blue")
-    fig, ax = plt.subplots(figsize=(6, 4.2))
     styles = ["-", "--", "-.", ":"]
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    ref = None
     for k, (name, resp) in enumerate(responses.items()):
-        x = np.asarray(resp.to_linear(np.broadcast_to(z[:, None], (256, 3)).astype(np.float32)))
-        for c in range(x.shape[-1]):
+        g = curve(resp)
+        if ref is None:
+            ref = g[:, min(1, g.shape[1] - 1)]
+        for c in range(g.shape[1]):
             ax.plot(
                 z * 255,
-                np.log(np.maximum(x[:, c], 1e-12)),
+                g[:, c],
                 styles[k % len(styles)],
                 color=colors[c % 3],
                 lw=1.2,
-                label=f"{name}" if c == 0 else None,
+                label=name if c == 0 else None,
             )
     if truth is not None:
-        x = np.asarray(truth.to_linear(np.broadcast_to(z[:, None], (256, 3)).astype(np.float32)))
-        ax.plot(
-            z * 255,
-            np.log(np.maximum(x[:, 1], 1e-12)),
-            color="k",
-            lw=2,
-            alpha=0.4,
-            label="ground truth (G)",
-        )
+        g = curve(truth)[:, min(1, truth.channels - 1)]
+        sl = slice(10, 246)
+        g = g + np.mean(ref[sl] - g[sl]) if ref is not None else g
+        ax.plot(z * 255, g, color="k", lw=2.5, alpha=0.35, label="ground truth (G)")
     ax.set_xlabel("pixel level Z (of 255)")
-    ax.set_ylabel("g(Z) = ln exposure")
+    ax.set_ylabel("g(Z) = ln relative exposure")
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _response_summary(resp) -> dict:
+    out = {}
+    for name, value in vars(resp).items():
+        if hasattr(value, "shape") and np.size(value) <= 4096:
+            out[name] = np.asarray(value).tolist()
+        elif isinstance(value, (str, int, float, bool)):
+            out[name] = value
+    return out
 
 
 def _preview(radiance: np.ndarray, key: float) -> np.ndarray:
@@ -247,7 +262,7 @@ def _run_ldr(cfg, images, times, truth, out_dir, steps: _Steps, report: dict):
     radiance = np.asarray(radiance, np.float32)
     variance = np.asarray(variance, np.float32)
     steps.start("evaluate")
-    report["response"] = {"method": cfg.response.method, "summary": _jsonable(resp.summary())}
+    report["response"] = {"method": cfg.response.method, "summary": _response_summary(resp)}
     curves = {cfg.response.method: resp}
     if truth is not None:
         true_resp, true_radiance = truth
@@ -293,11 +308,19 @@ def _run_raw(cfg, files, out_dir, steps: _Steps, report: dict):
     report["raw_calibration"] = _jsonable(cal.to_dict())
     steps.start("merge")
     norm = np.stack([r.normalized() for r in (raws[i] for i in order)])[..., None]
-    ratios = np.asarray(cal.exposure_ratios, np.float64)
-    eff_times = times[0] * ratios if ratios.shape == times.shape else times
-    resp = hdr.linear_response(channels=1)
+    ratios = np.asarray(cal.ratios.ratios, np.float64)
+    ref = int(np.asarray(cal.ratios.reference))
+    good = ratios.shape == times.shape and np.all(np.isfinite(ratios)) and np.all(ratios > 0)
+    eff_times = times[ref] * ratios if good else times
+    resp = hdr.CameraResponse.gamma(1.0, channels=1, anchor="unit")
+    weighting = "noise" if cal.noise is not None else "hat"
     rad, var = hdr.merge_radiance(
-        norm, eff_times, resp, weighting="noise", noise=cal.noise, return_variance=True
+        np.clip(norm, 0.0, 1.0),
+        eff_times,
+        resp,
+        weighting=weighting,
+        noise=cal.noise,
+        return_variance=True,
     )
     steps.start("demosaic")
     rgb = np.asarray(image.demosaic(np.asarray(rad)[..., 0], pattern, method=cfg.demosaic))
@@ -354,7 +377,7 @@ def run_calibrate(
                     bits=s.bits,
                     gain=s.gain,
                     read_sigma=s.read_sigma,
-                )[0]
+                ).images
                 truth = (true_resp, np.asarray(radiance))
                 report["synthetic"] = {"response": s.response, "bits": s.bits}
             images = np.asarray(images)

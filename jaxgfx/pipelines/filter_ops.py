@@ -53,7 +53,7 @@ FILTER_OPS: dict[str, FilterOp] = {
         "Gaussian blur (truncated at 3 sigma)",
     ),
     "box": FilterOp(
-        lambda im, radius, padding: _image().box_blur(im, radius, padding=padding),
+        lambda im, radius, padding: _image().box_blur(im, 2 * int(radius) + 1, padding=padding),
         ("radius", "padding"),
         {"radius": 2, "padding": "reflect"},
         "box (mean) filter of size 2r+1",
