@@ -14,12 +14,14 @@ __all__ = ["recover_debevec", "default_levels", "debevec_solve"]
 
 
 def default_levels(code_max: float, n_levels: int | None) -> int:
-    """Table size: 256 for 8-bit, ``n_levels`` (default 1024) bins for 16-bit / float data."""
+    """Table size: ``n_levels`` if given, else 256 (16-bit and float data are binned to 256
+    levels: with 1024 the float32 normal equations lose accuracy, measured curve error
+    0.02 → 0.15 at 512 bins on a 16-bit 1e6:1 stack)."""
     if n_levels is not None:
         if isinstance(n_levels, bool) or not isinstance(n_levels, int) or n_levels < 8:
             raise ValueError(f"n_levels: expected an integer >= 8, got {n_levels!r}")
         return n_levels
-    return 256 if code_max in (1.0, 255.0) else 1024
+    return 256
 
 
 def smoothness_matrix(n_levels, dtype):
@@ -98,7 +100,7 @@ def recover_debevec(
     ``z``: ``(N, H, W, C)`` normalised stack, ``t``: ``(N,)`` ascending seconds. Samples
     ``n_samples`` pixels per channel with :func:`select_samples` (stratified over intensity,
     away from edges, deterministic for a ``key``), bins levels to ``n_levels`` (256 for 8-bit
-    and float input, 1024 for 16-bit by default), solves the least-squares system with
+    16-bit and float input by default), solves the least-squares system with
     ``weighting`` (Debevec's hat) and smoothness ``lam``, then makes the table strictly
     increasing with :func:`monotone_repair` (OpenCV's ``CalibrateDebevec`` does not).
     Returns a ``"table"`` :class:`CameraResponse`; ``diagnostics["residual_rms"]`` is the

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import functools
+
+import jax
 import jax.numpy as jnp
 
 from .._math import safe_log
@@ -22,6 +25,11 @@ def response_curve_error(resp: CameraResponse, true_resp: CameraResponse, *, lev
     lo, hi = levels
     if not 0 <= lo < hi <= 255:
         raise ValueError(f"levels: expected 0 <= lo < hi <= 255, got {levels}")
+    return _curve_err(resp, true_resp, lo, hi)
+
+
+@functools.partial(jax.jit, static_argnums=(2, 3))
+def _curve_err(resp, true_resp, lo, hi):
     c = max(resp.channels, true_resp.channels)
     dt = jnp.result_type(resp.params.dtype, true_resp.params.dtype)
     zn = jnp.broadcast_to((jnp.arange(lo, hi + 1, dtype=dt) / 255.0)[:, None], (hi - lo + 1, c))
@@ -43,6 +51,11 @@ def radiance_error(E, E_true):
     E_true = jnp.asarray(E_true)
     if E.shape != E_true.shape:
         raise ValueError(f"E, E_true: shapes must match, got {E.shape} and {E_true.shape}")
+    return _rad_err(E, E_true)
+
+
+@jax.jit
+def _rad_err(E, E_true):
     d = safe_log(E) - safe_log(E_true)
     d = d - jnp.median(d)
     return jnp.median(jnp.abs(d))

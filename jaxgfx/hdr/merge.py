@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 
@@ -83,13 +85,24 @@ def merge_radiance(
     dt = jnp.result_type(z.dtype, response.params.dtype)
     z = z.astype(dt)
     t = t.astype(dt)
-    out = _merge(z, t, response, weighting, noise, domain, code_max, return_variance)
+    noise_arr = None if noise is None else _noise_arrays(noise, c, dt)
+    out = _merge(
+        z,
+        t,
+        response,
+        noise_arr,
+        weighting=weighting,
+        domain=domain,
+        code_max=code_max,
+        return_variance=return_variance,
+    )
     if squeeze:
         out = jax.tree_util.tree_map(lambda a: a[..., 0], out)
     return out
 
 
-def _merge(z, t, response, weighting, noise, domain, code_max, return_variance):
+@functools.partial(jax.jit, static_argnames=("weighting", "domain", "code_max", "return_variance"))
+def _merge(z, t, response, noise, *, weighting, domain, code_max, return_variance):
     c = z.shape[-1]
     dt = z.dtype
     tb = t[:, None, None, None]
@@ -99,7 +112,7 @@ def _merge(z, t, response, weighting, noise, domain, code_max, return_variance):
     if need_deriv:
         dxdz = response.derivative_normalized(z)
     if noise is not None:
-        gain, read = _noise_arrays(noise, c, dt)
+        gain, read = noise
         x1 = response.to_linear_normalized(jnp.ones((c,), dt))
         xs = x / x1
         var_x = (gain * jnp.maximum(xs, 0.0) + read) * x1 * x1  # in to_linear units²

@@ -12,6 +12,10 @@ Conventions
 
 from __future__ import annotations
 
+import functools
+
+import jax
+
 from .._checks import check_choice
 from ._debevec import recover_debevec
 from ._model import CameraResponse, resolve_anchor
@@ -54,6 +58,17 @@ def recover_response(images, exposure_times, *, method: str = "debevec", **optio
     z, t, code_max, _ = prepare_stack(images, exposure_times, min_frames=2)
     if "anchor" in options:
         options["anchor"] = resolve_anchor(options["anchor"])
-    if "key" in options and options["key"] is None:
-        del options["key"]
-    return RESPONSE_METHODS[method](z, t, code_max, **options)
+    key = options.pop("key", None)
+    if key is None:
+        key = jax.random.key(0)
+    try:
+        opts = tuple(sorted(options.items()))
+        hash(opts)
+    except TypeError:
+        raise TypeError("options: expected hashable option values (numbers, strings)") from None
+    return _recover_jit(z, t, key, method=method, code_max=code_max, opts=opts)
+
+
+@functools.partial(jax.jit, static_argnames=("method", "code_max", "opts"))
+def _recover_jit(z, t, key, *, method, code_max, opts):
+    return RESPONSE_METHODS[method](z, t, code_max, key=key, **dict(opts))

@@ -7,6 +7,7 @@ read noise, clipping, quantisation).
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import jax
@@ -68,6 +69,11 @@ def synthetic_radiance(key, height: int, width: int, *, dynamic_range: float = 1
     check_positive(dynamic_range, "dynamic_range")
     if dynamic_range <= 1:
         raise ValueError(f"dynamic_range: expected a ratio > 1, got {dynamic_range}")
+    return _radiance_jit(key, jnp.asarray(dynamic_range, jnp.float32), height, width, channels)
+
+
+@functools.partial(jax.jit, static_argnums=(2, 3, 4))
+def _radiance_jit(key, dynamic_range, height, width, channels):
     yy, xx = jnp.meshgrid(
         jnp.linspace(0.0, 1.0, height), jnp.linspace(0.0, 1.0, width), indexing="ij"
     )
@@ -154,6 +160,25 @@ def make_bracketed_stack(
     check_positive(t, "exposure_times")
     if not isinstance(response, CameraResponse):
         raise TypeError(f"response: expected a CameraResponse, got {type(response).__name__}")
+    out = _stack_jit(
+        key,
+        radiance,
+        t,
+        response,
+        jnp.asarray(gain, radiance.dtype),
+        jnp.asarray(read_sigma, radiance.dtype),
+        bits=bits,
+        clip=clip,
+    )
+    if squeeze:
+        out = out._replace(
+            images=out.images[..., 0], radiance=out.radiance[..., 0], linear=out.linear[..., 0]
+        )
+    return out
+
+
+@functools.partial(jax.jit, static_argnames=("bits", "clip"))
+def _stack_jit(key, radiance, t, response, gain, read_sigma, *, bits, clip):
     c = radiance.shape[-1]
     lin = radiance[None] * t[:, None, None, None]
     k1, k2 = jax.random.split(key)
@@ -174,6 +199,4 @@ def make_bracketed_stack(
     noise = NoiseParams(
         jnp.full((c,), gain, radiance.dtype), jnp.full((c,), read_sigma**2, radiance.dtype)
     )
-    if squeeze:
-        img, radiance, lin = img[..., 0], radiance[..., 0], lin[..., 0]
     return BracketedStack(img, t, radiance, response, noise, lin)
