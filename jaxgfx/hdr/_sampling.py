@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 __all__ = ["select_samples", "level_index", "monotone_repair"]
 
@@ -30,25 +31,29 @@ def select_samples(key, z, *, n_samples=2048, n_bins=32, max_candidates=1 << 16,
     bool (False where a bin had fewer pixels than its quota).
     """
     n, h, w, c = z.shape
-    s = jnp.sum(z, axis=0)  # (H, W, C)
-    pad = jnp.pad(s, ((1, 1), (1, 1), (0, 0)), mode="edge")
-    grad = (
-        jnp.maximum(
-            jnp.maximum(jnp.abs(pad[1:-1, 2:] - s), jnp.abs(pad[1:-1, :-2] - s)),
-            jnp.maximum(jnp.abs(pad[2:, 1:-1] - s), jnp.abs(pad[:-2, 1:-1] - s)),
+    stride = _stride_for(h, w, max_candidates)
+    oy = (h - 1 - ((h - 1) // stride) * stride) // 2
+    ox = (w - 1 - ((w - 1) // stride) * stride) // 2
+    ys = np.arange(oy, h, stride)
+    xs = np.arange(ox, w, stride)
+
+    def at(dy, dx):  # stack sum at the candidates shifted by (dy, dx), edge-clamped
+        yy = np.clip(ys + dy, 0, h - 1)
+        xx = np.clip(xs + dx, 0, w - 1)
+        return jnp.sum(z[:, yy[:, None], xx[None, :], :], axis=0)
+
+    s_c = at(0, 0)  # (h', w', C)
+    g_c = (
+        jnp.max(
+            jnp.stack([jnp.abs(at(dy, dx) - s_c) for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0))]),
+            axis=0,
         )
         / n
     )
-    yy = jnp.arange(h)[:, None, None]
-    xx = jnp.arange(w)[None, :, None]
     b = min(border, (h - 1) // 2, (w - 1) // 2)
-    inner = (yy >= b) & (yy < h - b) & (xx >= b) & (xx < w - b)
-    stride = _stride_for(h, w, max_candidates)
-    oy = (h - (h // stride - 1) * stride - 1) // 2 if h >= stride else 0
-    ox = (w - (w // stride - 1) * stride - 1) // 2 if w >= stride else 0
-    sl = (slice(oy, None, stride), slice(ox, None, stride))
-    s_c, g_c, in_c = s[sl], grad[sl], jnp.broadcast_to(inner, s.shape)[sl]
-    zc = z[(slice(None),) + sl]  # (N, h', w', C)
+    inner = ((ys >= b) & (ys < h - b))[:, None] & ((xs >= b) & (xs < w - b))[None, :]
+    in_c = jnp.broadcast_to(jnp.asarray(inner)[..., None], s_c.shape)
+    zc = z[:, ys[:, None], xs[None, :], :]  # (N, h', w', C)
     m = s_c.shape[0] * s_c.shape[1]
     jitter = jax.random.uniform(key, (m, c), dtype=z.dtype)
     score = g_c.reshape(m, c) + 1e-3 * jitter + jnp.where(in_c.reshape(m, c), 0.0, 10.0)

@@ -7,7 +7,7 @@ import numpy as np
 
 from .._checks import check_finite, is_concrete
 
-__all__ = ["prepare_stack", "code_max_for"]
+__all__ = ["prepare_stack", "code_max_for", "normalize_stack"]
 
 
 def code_max_for(dtype) -> float:
@@ -22,7 +22,9 @@ def code_max_for(dtype) -> float:
     raise TypeError(f"images: expected uint8, uint16 or float pixels, got dtype {dt}")
 
 
-def prepare_stack(images, exposure_times, *, min_frames: int = 1, sort: bool = True):
+def prepare_stack(
+    images, exposure_times, *, min_frames: int = 1, sort: bool = True, raw: bool = False
+):
     """Check a bracketed stack and return ``(z, t, code_max, squeeze)``.
 
     ``images``: ``(N, H, W, C)`` or ``(N, H, W)`` array, or a sequence of N equally shaped
@@ -30,6 +32,8 @@ def prepare_stack(images, exposure_times, *, min_frames: int = 1, sort: bool = T
     Returns normalised levels ``z`` of shape ``(N, H, W, C)`` in ``[0, 1]`` (float32, or
     float64 for float64 input), times ``t`` ``(N,)`` sorted ascending (frames reordered
     with them when ``sort``), the code maximum and whether a channel axis was added.
+    With ``raw=True`` the frames are returned unconverted and unsorted (integer codes stay
+    integers; see :func:`normalize_stack`, which does the rest inside jit).
     """
     if isinstance(images, (list, tuple)):
         if len(images) == 0:
@@ -91,12 +95,29 @@ def prepare_stack(images, exposure_times, *, min_frames: int = 1, sort: bool = T
                     "images: float pixels must be normalised to [0, 1], "
                     f"got range [{a.min():.4g}, {a.max():.4g}]"
                 )
+    elif raw:
+        z = images
     else:
         ftype = jnp.float64 if t.dtype == jnp.float64 else jnp.float32
         z = images.astype(ftype) / code_max
+    if raw:
+        return z, t, code_max, squeeze
     t = t.astype(z.dtype)
     if sort:
         order = jnp.argsort(t)
         t = t[order]
         z = z[order]
     return z, t, code_max, squeeze
+
+
+def normalize_stack(images, t, code_max):
+    """Traced counterpart of ``prepare_stack(raw=True)``: levels to ``[0, 1]`` and frames
+    sorted by ascending time. Returns ``(z, t)``."""
+    if jnp.issubdtype(images.dtype, jnp.floating):
+        z = images
+    else:
+        ftype = jnp.float64 if t.dtype == jnp.float64 else jnp.float32
+        z = images.astype(ftype) / code_max
+    t = t.astype(z.dtype)
+    order = jnp.argsort(t)
+    return z[order], t[order]

@@ -78,12 +78,14 @@ def merge_radiance(
         raise TypeError(f"response: expected a CameraResponse, got {type(response).__name__}")
     if weighting == "noise" and noise is None:
         raise ValueError('noise: weighting="noise" needs a noise model (.gain, .read_variance)')
-    z, t, code_max, squeeze = prepare_stack(images, exposure_times, min_frames=1)
+    z, t, code_max, squeeze = prepare_stack(images, exposure_times, min_frames=1, raw=True)
     c = z.shape[-1]
     if response.channels not in (1, c):
         raise ValueError(f"response: has {response.channels} channels but the images have {c}")
-    dt = jnp.result_type(z.dtype, response.params.dtype)
-    z = z.astype(dt)
+    fdt = z.dtype if jnp.issubdtype(z.dtype, jnp.floating) else jnp.float32
+    dt = jnp.result_type(fdt, response.params.dtype, t.dtype)
+    if jnp.issubdtype(z.dtype, jnp.floating):
+        z = z.astype(dt)
     t = t.astype(dt)
     noise_arr = None if noise is None else _noise_arrays(noise, c, dt)
     out = _merge(
@@ -103,29 +105,55 @@ def merge_radiance(
 
 @functools.partial(jax.jit, static_argnames=("weighting", "domain", "code_max", "return_variance"))
 def _merge(z, t, response, noise, *, weighting, domain, code_max, return_variance):
+    """``z``: normalised float levels, or integer codes (then every per-level quantity is
+    computed once on the ``code_max + 1`` levels and gathered: a lookup table)."""
     c = z.shape[-1]
-    dt = z.dtype
+    dt = t.dtype
     tb = t[:, None, None, None]
-    x = response.to_linear_normalized(z)  # (N, H, W, C)
     step = 1.0 / code_max if code_max > 1.0 else 1.0 / 255.0
     need_deriv = weighting == "noise" or return_variance
-    if need_deriv:
-        dxdz = response.derivative_normalized(z)
-    if noise is not None:
-        gain, read = noise
-        x1 = response.to_linear_normalized(jnp.ones((c,), dt))
-        xs = x / x1
-        var_x = (gain * jnp.maximum(xs, 0.0) + read) * x1 * x1  # in to_linear units²
+    x1 = response.to_linear_normalized(jnp.ones((c,), dt))
+
+    def per_level(zz):
+        out = {"x": response.to_linear_normalized(zz)}
+        if weighting != "noise":
+            out["w"] = WEIGHTINGS[weighting](zz)
+        if need_deriv:
+            dxdz = response.derivative_normalized(zz)
+            var_x = dxdz * dxdz * (step * step / 12.0)
+            if noise is not None:
+                gain, read = noise
+                xs = out["x"] / x1
+                var_x = var_x + (gain * jnp.maximum(xs, 0.0) + read) * x1 * x1
+            out["var_x"] = var_x
+            out["valid"] = ((zz > 0.5 * step) & (zz < 1.0 - 0.5 * step)).astype(dt)
+        return out
+
+    if jnp.issubdtype(z.dtype, jnp.floating):
+        q = per_level(z)
+        z_lo = z
     else:
-        var_x = jnp.zeros_like(x)
-    if need_deriv:
-        var_x = var_x + dxdz * dxdz * (step * step / 12.0)
+        levels = jnp.broadcast_to(
+            jnp.linspace(0.0, 1.0, int(code_max) + 1, dtype=dt)[:, None], (int(code_max) + 1, c)
+        )
+        lut = per_level(levels)
+        codes = z.astype(jnp.int32)
+        ch = jnp.arange(c)
+        q = {k: v[codes, ch] for k, v in lut.items()}
+        z_lo = None
+    x = q["x"]
+    var_x = q.get("var_x")
     if weighting == "noise":
-        valid = (z > 0.5 * step) & (z < 1.0 - 0.5 * step)
         ok_var = var_x > 0
-        w = jnp.where(valid & ok_var, tb * tb / jnp.where(ok_var, var_x, 1.0), 0.0)
+        w = jnp.where((q["valid"] > 0) & ok_var, tb * tb / jnp.where(ok_var, var_x, 1.0), 0.0)
     else:
-        w = WEIGHTINGS[weighting](z)
+        w = q["w"]
+    i_short = jnp.argmin(t)
+    i_long = jnp.argmax(t)
+    if z_lo is None:
+        use_short = z[i_short].astype(jnp.int32) * 2 >= int(code_max)
+    else:
+        use_short = z[i_short] >= 0.5
     e_j = x / tb
     wsum = jnp.sum(w, axis=0)
     ok = wsum > 0
@@ -135,8 +163,7 @@ def _merge(z, t, response, noise, *, weighting, domain, code_max, return_varianc
     else:
         le = jnp.sum(w * safe_log(e_j), axis=0) / den
         e = jnp.exp(le)
-    use_short = z[0] >= 0.5
-    fallback = jnp.where(use_short, e_j[0], e_j[-1])
+    fallback = jnp.where(use_short, e_j[i_short], e_j[i_long])
     e = jnp.where(ok, e, fallback)
     if not return_variance:
         return e

@@ -21,7 +21,7 @@ from ._debevec import recover_debevec
 from ._model import CameraResponse, resolve_anchor
 from ._parametric import recover_gamma, recover_polynomial, recover_spline
 from ._robertson import recover_robertson
-from ._stack import prepare_stack
+from ._stack import normalize_stack, prepare_stack
 
 __all__ = ["CameraResponse", "recover_response", "RESPONSE_METHODS"]
 
@@ -55,7 +55,7 @@ def recover_response(images, exposure_times, *, method: str = "debevec", **optio
     ``method="gamma"``.
     """
     check_choice(method, "method", tuple(RESPONSE_METHODS.keys()))
-    z, t, code_max, _ = prepare_stack(images, exposure_times, min_frames=2)
+    raw, t, code_max, _ = prepare_stack(images, exposure_times, min_frames=2, raw=True)
     if "anchor" in options:
         options["anchor"] = resolve_anchor(options["anchor"])
     key = options.pop("key", None)
@@ -66,9 +66,10 @@ def recover_response(images, exposure_times, *, method: str = "debevec", **optio
         hash(opts)
     except TypeError:
         raise TypeError("options: expected hashable option values (numbers, strings)") from None
-    return _recover_jit(z, t, key, method=method, code_max=code_max, opts=opts)
+    return _recover_jit(raw, t, key, method=method, code_max=code_max, opts=opts)
 
 
 @functools.partial(jax.jit, static_argnames=("method", "code_max", "opts"))
-def _recover_jit(z, t, key, *, method, code_max, opts):
+def _recover_jit(raw, t, key, *, method, code_max, opts):
+    z, t = normalize_stack(raw, t, code_max)
     return RESPONSE_METHODS[method](z, t, code_max, key=key, **dict(opts))
