@@ -1,0 +1,133 @@
+"""Curve families behind :class:`CameraResponse` (normalised units: z, x in [0, 1], x(1) = 1).
+
+Each kind maps normalised pixel level ``z`` to *un-anchored* linear exposure ``base(z)`` and
+back. ``params`` has a kind-specific leading shape and a trailing channel axis ``C``.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from .._math import safe_pow, safe_sqrt
+
+__all__ = ["base_to_linear", "base_from_linear", "interp_channels", "ANALYTIC_KINDS"]
+
+_TINY = 1e-30
+
+
+def interp_channels(x, xp, fp):
+    """Per-channel ``jnp.interp``: ``x`` ``(..., C)``, ``xp``/``fp`` ``(L, C)`` → ``(..., C)``."""
+    c = xp.shape[-1]
+    x = jnp.broadcast_to(x, x.shape[:-1] + (c,)) if x.ndim else jnp.broadcast_to(x, (c,))
+    flat = x.reshape(-1, c)
+    out = jax.vmap(jnp.interp, in_axes=(1, 1, 1), out_axes=1)(flat, xp, fp)
+    return out.reshape(x.shape)
+
+
+def table_lookup(z, table):
+    """Piecewise-linear interpolation of ``table`` ``(L, C)`` on uniform knots over [0, 1]."""
+    n = table.shape[0]
+    u = jnp.clip(z, 0.0, 1.0) * (n - 1)
+    i0 = jnp.clip(jnp.floor(u), 0, n - 2).astype(jnp.int32)
+    frac = u - i0
+    ch = jnp.arange(table.shape[1])
+    lo = table[i0, ch]
+    hi = table[i0 + 1, ch]
+    return lo + frac * (hi - lo)
+
+
+# --- analytic ground-truth curves (all with base(1) = 1) -------------------------------------
+_SK, _SS = 0.3, 1.6  # s-curve knee and slope
+_SC = 1.0 + _SK**_SS
+_LOG_A = 100.0
+
+
+def _aces(x):
+    return x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14)
+
+
+_ACES4 = float(_aces(4.0))
+
+
+def _srgb_fwd(x):
+    return jnp.where(x <= 0.0031308, 12.92 * x, 1.055 * safe_pow(x, 1.0 / 2.4) - 0.055)
+
+
+def _srgb_inv(z):
+    return jnp.where(z <= 0.04045, z / 12.92, safe_pow((z + 0.055) / 1.055, 2.4))
+
+
+def _scurve_fwd(x):
+    p = safe_pow(x, _SS)
+    return _SC * p / (p + _SK**_SS)
+
+
+def _scurve_inv(z):
+    u = jnp.clip(z / _SC, 0.0, 1.0 / _SC)
+    return _SK * safe_pow(u / (1.0 - u), 1.0 / _SS)
+
+
+def _filmic_fwd(x):
+    x = jnp.maximum(x, 0.0)
+    return _aces(4.0 * x) / _ACES4
+
+
+def _filmic_inv(z):
+    y = jnp.clip(z, 0.0, 1.0) * _ACES4
+    a = 2.51 - 2.43 * y
+    b = 0.03 - 0.59 * y
+    c = -0.14 * y
+    return (-b + safe_sqrt(b * b - 4.0 * a * c)) / (2.0 * a) / 4.0
+
+
+def _log_fwd(x):
+    return jnp.log1p(_LOG_A * jnp.maximum(x, 0.0)) / jnp.log1p(_LOG_A)
+
+
+def _log_inv(z):
+    return jnp.expm1(z * jnp.log1p(_LOG_A)) / _LOG_A
+
+
+ANALYTIC_KINDS = {
+    "srgb": (_srgb_inv, _srgb_fwd),
+    "s-curve": (_scurve_inv, _scurve_fwd),
+    "filmic": (_filmic_inv, _filmic_fwd),
+    "log": (_log_inv, _log_fwd),
+}
+
+
+def base_to_linear(kind, params, z):
+    """Un-anchored ``x = base(z)`` for normalised ``z`` ``(..., C)``."""
+    if kind == "gamma":
+        return safe_pow(jnp.clip(z, 0.0, 1.0), params)
+    if kind == "polynomial":
+        zc = jnp.clip(z, 0.0, 1.0)
+        out = jnp.zeros_like(zc * params[0])
+        for k in range(params.shape[0] - 1, -1, -1):  # Horner
+            out = out * zc + params[k]
+        return out
+    if kind == "table":
+        return jnp.exp(table_lookup(z, params))
+    inv, _ = ANALYTIC_KINDS[kind]
+    return inv(jnp.clip(z, 0.0, 1.0)) + 0.0 * params
+
+
+def base_from_linear(kind, params, x):
+    """Inverse of :func:`base_to_linear`: normalised level for un-anchored exposure ``x``."""
+    if kind == "gamma":
+        return safe_pow(jnp.maximum(x, 0.0), 1.0 / params)
+    if kind == "polynomial":
+        grid = jnp.linspace(0.0, 1.0, 4097, dtype=params.dtype)[:, None]
+        xs = jax.lax.cummax(base_to_linear(kind, params, grid), axis=0)
+        xs = xs + grid * 1e-7  # strictly increasing for interpolation
+        return interp_channels(x, xs, jnp.broadcast_to(grid, xs.shape))
+    if kind == "table":
+        n = params.shape[0]
+        grid = jnp.broadcast_to(
+            jnp.linspace(0.0, 1.0, n, dtype=params.dtype)[:, None], params.shape
+        )
+        lx = jnp.log(jnp.maximum(x, _TINY))
+        return interp_channels(lx, params, grid)
+    _, fwd = ANALYTIC_KINDS[kind]
+    return fwd(x) + 0.0 * params

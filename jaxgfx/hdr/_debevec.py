@@ -1,0 +1,142 @@
+"""Debevec & Malik (1997) response recovery: weighted least squares for g = ln f^{-1}."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from .._checks import check_nonnegative
+from ._model import CameraResponse, resolve_anchor
+from ._sampling import level_index, monotone_repair, select_samples
+from .weighting import get_weighting
+
+__all__ = ["recover_debevec", "default_levels", "debevec_solve"]
+
+
+def default_levels(code_max: float, n_levels: int | None) -> int:
+    """Table size: ``n_levels`` if given, else 256 (16-bit and float data are binned to 256
+    levels: with 1024 the float32 normal equations lose accuracy, measured curve error
+    0.02 → 0.15 at 512 bins on a 16-bit 1e6:1 stack)."""
+    if n_levels is not None:
+        if isinstance(n_levels, bool) or not isinstance(n_levels, int) or n_levels < 8:
+            raise ValueError(f"n_levels: expected an integer >= 8, got {n_levels!r}")
+        return n_levels
+    return 256
+
+
+def smoothness_matrix(n_levels, dtype):
+    """``R`` with ``g^T R g`` = mean over knots ``k = 1…L−2`` of ``(hat(z_k) g''(z_k))²``,
+    ``g''`` the second difference on the normalised level axis (Debevec & Malik's smoothness
+    term, made independent of the table size ``L``)."""
+    import numpy as np
+
+    n = n_levels
+    z = np.linspace(0.0, 1.0, n)
+    k = np.arange(1, n - 1)
+    hat = 2.0 * np.minimum(z[k], 1.0 - z[k])
+    hz2 = (1.0 / (n - 1)) ** 2
+    d2 = np.zeros((n - 2, n))
+    d2[k - 1, k - 1] = 1.0 / hz2
+    d2[k - 1, k] = -2.0 / hz2
+    d2[k - 1, k + 1] = 1.0 / hz2
+    rw = hat**2 / (n - 2)
+    return jnp.asarray((d2.T * rw[None, :]) @ d2, dtype)
+
+
+def debevec_solve(levels, weights, log_t, n_levels, lam, anchor_index):
+    """Solve Debevec–Malik's system for one channel by eliminating the per-pixel unknowns.
+
+    Minimises ``Σ_ij W_ij² (g[Z_ij] − u_i − ln t_j)² / Σ W² + λ S(g) + g[m]²`` over the
+    table ``g`` (``L``) and the pixel log-irradiances ``u`` (``P``):
+    ``u`` enters block-diagonally, so the Schur complement leaves an ``L × L`` SPD system
+    (built by scatter-adds in ``O(P N²)``), solved densely. ``S`` is :func:`smoothness_matrix`.
+
+    ``levels``/``weights``: ``(P, N)``; ``log_t``: ``(N,)``. Returns ``g`` ``(L,)``.
+    """
+    p, n = levels.shape
+    dt = weights.dtype
+    w2 = weights * weights
+    tot = jnp.maximum(jnp.sum(w2), jnp.finfo(dt).tiny)
+    w2 = w2 / tot
+    flat = levels.reshape(-1)
+    diag = jax.ops.segment_sum(w2.reshape(-1), flat, num_segments=n_levels)
+    rhs_g = jax.ops.segment_sum((w2 * log_t[None, :]).reshape(-1), flat, num_segments=n_levels)
+    d = jnp.sum(w2, axis=1)  # (P,)
+    has = d > 0
+    dinv = jnp.where(has, 1.0 / jnp.where(has, d, 1.0), 0.0)
+    rhs_u = -jnp.sum(w2 * log_t[None, :], axis=1)  # (P,)
+    # Schur complement  S = H_gu D^-1 H_gu^T  by scatter of the N^2 pairs of each pixel
+    pair_val = (w2[:, :, None] * w2[:, None, :]) * dinv[:, None, None]
+    pair_idx = levels[:, :, None] * n_levels + levels[:, None, :]
+    s = jax.ops.segment_sum(
+        pair_val.reshape(-1), pair_idx.reshape(-1), num_segments=n_levels * n_levels
+    ).reshape(n_levels, n_levels)
+    corr = jax.ops.segment_sum(
+        (-w2 * (rhs_u * dinv)[:, None]).reshape(-1), flat, num_segments=n_levels
+    )
+    a = jnp.diag(diag) - s
+    b = rhs_g - corr
+    a = a + lam * smoothness_matrix(n_levels, dt)
+    a = a.at[anchor_index, anchor_index].add(1.0)
+    a = a + jnp.eye(n_levels, dtype=dt) * (1e-7 * jnp.mean(jnp.diag(a)))
+    g = jnp.linalg.solve(a, b)
+    return g
+
+
+def recover_debevec(
+    z,
+    t,
+    code_max,
+    *,
+    key=None,
+    n_samples: int = 4096,
+    lam: float = 1e-6,
+    n_levels: int | None = None,
+    weighting: str = "hat",
+    anchor="mid",
+):
+    """Debevec & Malik (1997) response recovery (method ``"debevec"``).
+
+    ``z``: ``(N, H, W, C)`` normalised stack, ``t``: ``(N,)`` ascending seconds. Samples
+    ``n_samples`` pixels per channel with :func:`select_samples` (stratified over intensity,
+    away from edges, deterministic for a ``key``), bins levels to ``n_levels`` (256 for 8-bit
+    16-bit and float input by default), solves the least-squares system with
+    ``weighting`` (Debevec's hat) and smoothness ``lam``, then makes the table strictly
+    increasing with :func:`monotone_repair` (OpenCV's ``CalibrateDebevec`` does not).
+    Returns a ``"table"`` :class:`CameraResponse`; ``diagnostics["residual_rms"]`` is the
+    weighted RMS of the data equations per channel (in ln units).
+    """
+    check_nonnegative(lam, "lam")
+    anchor_z = resolve_anchor(anchor)
+    n_lev = default_levels(code_max, n_levels)
+    wfun = get_weighting(weighting)
+    if key is None:
+        key = jax.random.key(0)
+    samples, valid = select_samples(key, z, n_samples=n_samples)
+    lev = level_index(samples, n_lev)  # (C, P, N)
+    zq = lev.astype(z.dtype) / (n_lev - 1)
+    w = wfun(zq) * valid[..., None].astype(z.dtype)
+    log_t = jnp.log(t)
+    m = (n_lev - 1) // 2
+    g = jax.vmap(lambda lv, ww: debevec_solve(lv, ww, log_t, n_lev, lam, m))(lev, w)  # (C, L)
+    # residuals of the data equations at the optimum
+    gz = jnp.take_along_axis(g[:, None, :], lev.reshape(lev.shape[0], 1, -1), axis=2).reshape(
+        lev.shape
+    )
+    h = gz - log_t
+    w2 = w * w
+    den = jnp.sum(w2, axis=2, keepdims=True)
+    u = jnp.sum(w2 * h, axis=2, keepdims=True) / jnp.where(den > 0, den, 1.0)
+    res = jnp.sqrt(
+        jnp.sum(w2 * (h - u) ** 2, axis=(1, 2)) / jnp.maximum(jnp.sum(w2, axis=(1, 2)), 1e-30)
+    )
+    table = monotone_repair(g.T, m)
+    return CameraResponse(
+        table,
+        "table",
+        "debevec",
+        float(code_max),
+        anchor_z,
+        None,
+        {"residual_rms": res, "raw_log_exposure": g.T},
+    )

@@ -1,0 +1,202 @@
+"""Synthetic HDR scenes and bracketed exposure stacks with known ground truth.
+
+Used by the tests, the benchmarks and ``make demo``: a scene radiance map with a known
+dynamic range, ground-truth response curves, and a sensor simulation (photon shot noise,
+read noise, clipping, quantisation).
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from .._checks import check_choice, check_nonnegative, check_positive
+from ._curves import ANALYTIC_KINDS
+from ._model import CameraResponse
+
+__all__ = [
+    "synthetic_radiance",
+    "synthetic_response",
+    "make_bracketed_stack",
+    "BracketedStack",
+    "NoiseParams",
+    "SYNTHETIC_RESPONSES",
+]
+
+SYNTHETIC_RESPONSES = ("gamma2.2", "srgb", "s-curve", "filmic", "log")
+
+
+class NoiseParams(NamedTuple):
+    """Poisson–Gaussian sensor noise in normalised linear units (1 = clipping level):
+    ``Var(x) = gain · x + read_variance``, per channel ``(C,)``."""
+
+    gain: jax.Array
+    read_variance: jax.Array
+
+
+class BracketedStack(NamedTuple):
+    """Output of :func:`make_bracketed_stack`.
+
+    ``images`` ``(N, H, W, C)`` (uint8 / uint16 / float), ``exposure_times`` ``(N,)``,
+    ``radiance`` ``(H, W, C)`` ground truth, ``response`` the true :class:`CameraResponse`,
+    ``noise`` the :class:`NoiseParams` used, ``linear`` ``(N, H, W, C)`` clean exposures
+    ``radiance · t`` before noise and clipping.
+    """
+
+    images: jax.Array
+    exposure_times: jax.Array
+    radiance: jax.Array
+    response: CameraResponse
+    noise: NoiseParams
+    linear: jax.Array
+
+
+def synthetic_radiance(key, height: int, width: int, *, dynamic_range: float = 1e4, channels=3):
+    """A deterministic structured HDR scene ``(height, width, channels)`` with values in
+    ``[1 / dynamic_range, 1]`` (min and max both attained).
+
+    Content, in log10 radiance: a horizontal ramp spanning the range, a grid of flat patches
+    (uniform steps through the range), a smooth vertical shading, a band-limited texture
+    (from ``key``), coloured tints per channel, and a bright "sun" disc (the maximum) with a
+    glow in the upper right. Example: ``synthetic_radiance(key, 64, 64).max() → 1.0``.
+    """
+    for v, nm in ((height, "height"), (width, "width")):
+        if isinstance(v, bool) or not isinstance(v, int) or v < 8:
+            raise ValueError(f"{nm}: expected an integer >= 8, got {v!r}")
+    check_positive(dynamic_range, "dynamic_range")
+    if dynamic_range <= 1:
+        raise ValueError(f"dynamic_range: expected a ratio > 1, got {dynamic_range}")
+    return _radiance_jit(key, jnp.asarray(dynamic_range, jnp.float32), height, width, channels)
+
+
+@functools.partial(jax.jit, static_argnums=(2, 3, 4))
+def _radiance_jit(key, dynamic_range, height, width, channels):
+    yy, xx = jnp.meshgrid(
+        jnp.linspace(0.0, 1.0, height), jnp.linspace(0.0, 1.0, width), indexing="ij"
+    )
+    f = 0.8 * xx + 0.15 * (1.0 - yy)
+    # patches: 6 x 6 grid in the lower-left area
+    py = jnp.floor(yy * 6.0)
+    px = jnp.floor(xx * 6.0)
+    patch_level = (py * 6.0 + px) / 35.0
+    in_patch = (jnp.mod(yy * 6.0, 1.0) > 0.2) & (jnp.mod(xx * 6.0, 1.0) > 0.2) & (py >= 3)
+    f = jnp.where(in_patch, patch_level, f)
+    # texture: low-resolution noise upsampled bilinearly
+    k1, k2 = jax.random.split(key)
+    coarse = jax.random.normal(k1, (height // 4 + 2, width // 4 + 2))
+    tex = jax.image.resize(coarse, (height, width), method="linear")
+    f = f + 0.04 * tex
+    # sun: disc at the maximum plus glow
+    r = jnp.sqrt((yy - 0.18) ** 2 + (xx - 0.82) ** 2)
+    f = jnp.where(r < 0.06, 2.0, f + 0.3 * jnp.exp(-((r / 0.15) ** 2)))
+    lo, hi = jnp.min(f), jnp.max(jnp.where(r < 0.06, -jnp.inf, f))
+    span = jnp.log10(dynamic_range)
+    # map non-sun content to [-span, -0.15*span]; the sun to 0
+    logv = jnp.where(r < 0.06, 0.0, (f - lo) / (hi - lo) * 0.85 * span - span)
+    tints = jnp.asarray([1.0, 0.8, 0.6, 0.9])[:channels]
+    tint_shift = (
+        jnp.log10(tints)[None, None, :] * (1.0 - jnp.exp(-(((f - lo) / (hi - lo)) ** 2)))[..., None]
+    )
+    logv = logv[..., None] + jnp.where((r < 0.06)[..., None], 0.0, tint_shift)
+    logv = jnp.clip(logv, -span, 0.0)
+    # make sure the minimum is attained exactly
+    logv = logv.at[-1, 0, :].set(-span)
+    del k2
+    return (10.0**logv).astype(jnp.float32)
+
+
+def synthetic_response(name: str, *, channels: int = 3) -> CameraResponse:
+    """A ground-truth response curve: ``"gamma2.2"``, ``"srgb"``, ``"s-curve"``,
+    ``"filmic"`` (ACES-like shoulder), ``"log"`` (log encoding, ``ln(1 + 100x)``).
+
+    All map linear ``x ∈ [0, 1]`` (1 = clipping) to normalised levels with ``f(1) = 1``,
+    anchored like every response (``to_linear(0.5) = 1``). Example:
+    ``synthetic_response("gamma2.2").from_linear_normalized(1.0)`` → ``0.5``.
+    """
+    check_choice(name, "name", SYNTHETIC_RESPONSES)
+    if name == "gamma2.2":
+        return CameraResponse.gamma(2.2, channels=channels)
+    assert name in ANALYTIC_KINDS
+    return CameraResponse.analytic(name, channels=channels)
+
+
+def make_bracketed_stack(
+    key,
+    radiance,
+    exposure_times,
+    response,
+    *,
+    bits: int | None = 8,
+    gain: float = 1e-4,
+    read_sigma: float = 1e-3,
+    clip: bool = True,
+) -> BracketedStack:
+    """Simulate a bracketed capture of ``radiance`` ``(H, W, C)`` (or ``(H, W)``).
+
+    Frame ``j`` sees linear exposure ``x = radiance · t_j`` (1 = the clipping level),
+    perturbed by Poisson–Gaussian noise ``x + sqrt(gain · x) n₁ + read_sigma n₂`` (Gaussian
+    approximation of shot noise; ``gain`` is 1 / full-well in normalised units), clipped to
+    ``[0, 1]`` when ``clip``, mapped through ``response`` (a :class:`CameraResponse`,
+    ``x = 1`` ↦ level 1 whatever its anchor), and quantised to ``bits`` (8 → uint8,
+    16 → uint16, ``None`` → float in ``[0, 1]``, no quantisation). ``gain = read_sigma = 0``
+    gives noise-free data.
+    """
+    check_nonnegative(gain, "gain")
+    check_nonnegative(read_sigma, "read_sigma")
+    if bits not in (8, 16, None):
+        raise ValueError(f"bits: expected 8, 16 or None, got {bits!r}")
+    radiance = jnp.asarray(radiance)
+    squeeze = radiance.ndim == 2
+    if squeeze:
+        radiance = radiance[..., None]
+    if radiance.ndim != 3:
+        raise ValueError(f"radiance: expected shape (H, W) or (H, W, C), got {radiance.shape}")
+    t = jnp.asarray(exposure_times, radiance.dtype)
+    if t.ndim != 1 or t.shape[0] < 1:
+        raise ValueError(f"exposure_times: expected shape (N,), got {t.shape}")
+    check_positive(t, "exposure_times")
+    if not isinstance(response, CameraResponse):
+        raise TypeError(f"response: expected a CameraResponse, got {type(response).__name__}")
+    out = _stack_jit(
+        key,
+        radiance,
+        t,
+        response,
+        jnp.asarray(gain, radiance.dtype),
+        jnp.asarray(read_sigma, radiance.dtype),
+        bits=bits,
+        clip=clip,
+    )
+    if squeeze:
+        out = out._replace(
+            images=out.images[..., 0], radiance=out.radiance[..., 0], linear=out.linear[..., 0]
+        )
+    return out
+
+
+@functools.partial(jax.jit, static_argnames=("bits", "clip"))
+def _stack_jit(key, radiance, t, response, gain, read_sigma, *, bits, clip):
+    c = radiance.shape[-1]
+    lin = radiance[None] * t[:, None, None, None]
+    k1, k2 = jax.random.split(key)
+    n1 = jax.random.normal(k1, lin.shape, lin.dtype)
+    n2 = jax.random.normal(k2, lin.shape, lin.dtype)
+    x = lin + jnp.sqrt(gain * jnp.maximum(lin, 0.0)) * n1 + read_sigma * n2
+    x = jnp.clip(x, 0.0, 1.0) if clip else jnp.maximum(x, 0.0)
+    # response anchored so that x = 1 maps to level 1
+    x1 = response.to_linear_normalized(jnp.ones((c,), x.dtype))
+    zn = response.from_linear_normalized(x * x1)
+    zn = jnp.clip(zn, 0.0, 1.0)
+    if bits is None:
+        img = zn
+    else:
+        qmax = 2.0**bits - 1.0
+        dtype = jnp.uint8 if bits == 8 else jnp.uint16
+        img = jnp.round(zn * qmax).astype(dtype)
+    noise = NoiseParams(
+        jnp.full((c,), gain, radiance.dtype), jnp.full((c,), read_sigma**2, radiance.dtype)
+    )
+    return BracketedStack(img, t, radiance, response, noise, lin)

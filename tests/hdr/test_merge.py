@@ -1,0 +1,127 @@
+"""Radiance merge: closed forms, ground truth, hard cases, variance, gradients, jit."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from jax.test_util import check_grads
+
+from jaxgfx import hdr
+
+from ._stacks import stack
+
+_merge = jax.jit(hdr.merge_radiance, static_argnames=("weighting", "domain", "return_variance"))
+LIN = hdr.CameraResponse(jnp.ones((1,)), "gamma", "linear", 1.0, 1.0)  # x = z
+
+
+def test_weights_known_values():
+    z = jnp.asarray([0.0, 0.25, 0.5, 0.95, 1.0])
+    np.testing.assert_allclose(hdr.weight_hat(z), [0, 0.5, 1, 0.1, 0], atol=1e-6)
+    np.testing.assert_allclose(hdr.weight_linear(z), [0, 0.25 / 0.9, 0.5 / 0.9, 0.5, 0], atol=1e-6)
+    g = (np.exp(-16 * (np.asarray(z) - 0.5) ** 2) - np.exp(-4)) / (1 - np.exp(-4))
+    np.testing.assert_allclose(hdr.weight_gaussian(z), g, atol=1e-6)
+
+
+@pytest.mark.parametrize("domain", ["linear", "log"])
+def test_linear_response_closed_form(domain):
+    # pixel 0 seen at 0.2 and 0.4 (E = 0.2); pixel 1 clipped in the long frame (E = 0.3)
+    imgs = jnp.asarray([[[0.2, 0.3]], [[0.4, 1.0]]])  # (N=2, H=1, W=2)
+    e = _merge(imgs, jnp.asarray([1.0, 2.0]), LIN, domain=domain)
+    np.testing.assert_allclose(np.asarray(e), [[0.2, 0.3]], rtol=1e-6)
+
+
+def test_all_saturated_and_all_dark_pixels():
+    imgs = jnp.asarray([[[1.0, 0.0, 0.5]], [[1.0, 0.0, 1.0]], [[1.0, 0.0, 1.0]]])
+    t = jnp.asarray([1.0, 4.0, 16.0])
+    e = np.asarray(_merge(imgs, t, LIN))
+    # saturated everywhere: shortest exposure's (lower-bound) value; dark: longest (0 here)
+    np.testing.assert_allclose(e, [[1.0, 0.0, 0.5]], rtol=1e-6)
+    e, v = _merge(imgs, t, LIN, return_variance=True)
+    assert np.all(np.isfinite(np.asarray(v))) and np.all(np.isfinite(np.asarray(e)))
+
+
+def test_noise_free_merge_is_exact(x64):
+    """Float, noise-free, true response: E = radiance · const wherever some frame is unclipped."""
+    st = stack("filmic", bits=None, gain=0.0, read_sigma=0.0, size=32)
+    z = st.images.astype(jnp.float64)
+    for w in ("hat", "gaussian", "linear"):
+        e = np.asarray(hdr.merge_radiance(z, st.exposure_times, st.response, weighting=w))
+        ratio = e / np.asarray(st.radiance)
+        # inputs are float32-rounded (radiance, levels), hence 3e-6 and not 1e-12
+        np.testing.assert_allclose(ratio, np.median(ratio), rtol=3e-6, err_msg=w)
+
+
+def test_no_dark_sun_and_no_nan():
+    st = stack("srgb")
+    resp = hdr.recover_response(st.images, st.exposure_times)
+    e = np.asarray(_merge(st.images, st.exposure_times, resp))
+    assert np.all(np.isfinite(e)) and np.all(e > 0)
+    sun = np.asarray(st.radiance)[..., 0] >= 0.999
+    assert sun.sum() > 10
+    # the sun (radiance 1) is clipped in every frame, even the shortest (t = 1): it gets the
+    # shortest frame's lower bound to_linear(255) / 1, and stays the brightest thing
+    bound = np.asarray(resp.to_linear(jnp.full((3,), 255.0)))
+    # (a few read 254 in the shortest frame, from noise: tiny weight, value within 1e-3)
+    np.testing.assert_allclose(e[sun], np.broadcast_to(bound, e[sun].shape), rtol=1e-3)
+    assert e[sun].min() >= e[~sun].max()
+
+
+def test_noise_weighting_variance_matches_monte_carlo():
+    """Inverse-variance merge (Granados 2010) on linear 12-bit-like data: the predicted
+    variance matches the spread over 48 noise realisations, and it beats the hat weights."""
+    rad = stack("gamma2.2", size=32).radiance
+    t = jnp.asarray([1.0, 4.0, 16.0])
+    resp = hdr.CameraResponse(jnp.ones((3,)), "gamma", "linear", 65535.0, 1.0)
+    gain, read = 2e-4, 2e-3
+
+    def one(k):
+        st = hdr.make_bracketed_stack(k, rad, t, resp, bits=16, gain=gain, read_sigma=read)
+        e_n, v_n = hdr.merge_radiance(
+            st.images, t, resp, weighting="noise", noise=st.noise, return_variance=True
+        )
+        e_h = hdr.merge_radiance(st.images, t, resp)
+        return e_n, v_n, e_h
+
+    e_n, v_n, e_h = jax.jit(jax.vmap(one))(jax.random.split(jax.random.key(3), 48))
+    emp = np.var(np.asarray(e_n), axis=0, ddof=1)
+    pred = np.mean(np.asarray(v_n), axis=0)
+    ok = np.asarray(rad) < 0.9  # not clipped in the shortest frame
+    ratio = emp[ok] / pred[ok]
+    # 47 dof: the chi2 sample-variance ratio has sd ~ sqrt(2/47) = 0.21 per pixel
+    assert 0.85 < np.median(ratio) < 1.15
+    mse_n = np.mean((np.asarray(e_n) - np.asarray(rad)) ** 2 / np.asarray(rad) ** 2)
+    mse_h = np.mean((np.asarray(e_h) - np.asarray(rad)) ** 2 / np.asarray(rad) ** 2)
+    assert mse_n < 0.8 * mse_h
+
+
+def test_merge_gradients(x64):
+    st = stack("gamma2.2", bits=None, gain=0.0, read_sigma=0.0, size=16)
+    z = st.images[:3, 4:8, 4:8].astype(jnp.float64)
+    t = jnp.asarray([1.0, 4.0, 16.0], jnp.float64)
+    z = jnp.clip(z, 0.02, 0.98)
+
+    def f(gam, tt):
+        r = hdr.CameraResponse(gam, "gamma", "g", 1.0, 0.5)
+        return hdr.merge_radiance(z, tt, r, weighting="gaussian")
+
+    check_grads(f, (jnp.asarray([2.2, 2.0, 1.9]), t), order=1, modes=["rev"])
+    noise = hdr.NoiseParams(jnp.full((3,), 1e-4), jnp.full((3,), 1e-6))
+
+    def g(gam):
+        r = hdr.CameraResponse(gam, "gamma", "g", 1.0, 0.5)
+        return hdr.merge_radiance(z, t, r, weighting="noise", noise=noise, domain="log")
+
+    check_grads(g, (jnp.asarray([2.2, 2.0, 1.9]),), order=1, modes=["rev"])
+
+
+def test_merge_bad_inputs():
+    imgs = np.zeros((2, 4, 4, 3), np.uint8)
+    with pytest.raises(ValueError, match="weighting"):
+        hdr.merge_radiance(imgs, [1.0, 2.0], LIN, weighting="box")
+    with pytest.raises(ValueError, match="noise"):
+        hdr.merge_radiance(imgs, [1.0, 2.0], LIN, weighting="noise")
+    with pytest.raises(TypeError, match="response"):
+        hdr.merge_radiance(imgs, [1.0, 2.0], "gamma")
+    two = hdr.CameraResponse(jnp.ones((2,)), "gamma", "g", 1.0, 0.5)
+    with pytest.raises(ValueError, match="channels"):
+        hdr.merge_radiance(imgs, [1.0, 2.0], two)
