@@ -53,7 +53,7 @@ class SyntheticConfig:
     width: int = 320
     dynamic_range: float = 1.0e4
     response: str = "filmic"
-    exposure_times: tuple[float, ...] = (1 / 256, 1 / 64, 1 / 16, 1 / 4, 1.0)
+    exposure_times: tuple[float, ...] = (0.5, 4.0, 32.0, 256.0, 2048.0)
     bits: int = 8
     gain: float = 2.0e-4
     read_sigma: float = 1.0e-3
