@@ -113,6 +113,20 @@ def _collect_inputs(inputs) -> list[str]:
     return files
 
 
+SIDECAR_NAMES = ("exposure_times.txt", "exposure_times.yaml", "exposure_times.json")
+
+
+def _find_sidecar(inputs) -> str | None:
+    """An ``exposure_times.{txt,yaml,json}`` file inside an input directory, if any."""
+    for item in inputs or []:
+        if os.path.isdir(item):
+            for name in SIDECAR_NAMES:
+                path = os.path.join(item, name)
+                if os.path.exists(path):
+                    return path
+    return None
+
+
 class _Steps:
     """Progress reporting (tqdm) plus per-step wall-clock timings for the report."""
 
@@ -359,7 +373,9 @@ def run_calibrate(
             steps.start("load")
             truth = None
             if files:
-                images, times = io.read_ldr_stack(files, exposure_times=cfg.exposure_times)
+                images, times = io.read_ldr_stack(
+                    files, exposure_times=cfg.exposure_times, sidecar=_find_sidecar(inputs)
+                )
             else:
                 s = cfg.synthetic
                 key = jax.random.key(s.seed)
