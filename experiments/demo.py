@@ -1,5 +1,6 @@
 """``make demo``: the main job (camera calibration + HDR merge) on the embedded synthetic
-stack, plus the image-processing demo. Writes everything under ``--out`` (default ``out/``)."""
+stack, the image-processing demo, and a render of configs/scenes/example.yaml. Writes
+everything under ``--out`` (default ``out/``)."""
 
 from __future__ import annotations
 
@@ -34,6 +35,13 @@ def main(argv=None) -> int:
     img_dir = os.path.join(args.out, "image")
     res = run_image_demo(img_dir)
     print(f"[image] {len(res['paths'])} outputs in {os.path.abspath(img_dir)}")
+
+    scene_path = os.path.join("configs", "scenes", "example.yaml")
+    if os.path.exists(scene_path):
+        from jaxgfx.cli import main as cli_main
+
+        out = os.path.join(args.out, "render", "example.exr")
+        cli_main(["render", scene_path, out, "--spp", "16", "--integrator", "path"])
     return 0
 
 

@@ -192,3 +192,14 @@ class MicrofacetDistribution(eqx.Module):
         sx = self.alpha_u * t * jnp.cos(phi)
         sy = self.alpha_v * t * jnp.sin(phi)
         return safe_normalize(jnp.stack([-sx, -sy, jnp.ones_like(sx)], axis=-1))
+
+
+def reflection_pdf(distribution: MicrofacetDistribution, wo, m):
+    """Solid-angle density of ``wi = reflect(wo, m)`` when ``m`` is drawn by
+    ``distribution.sample(wo, u)``: ``pdf_m / (4 |wo . m|)`` (Walter et al. 2007, eq. 14),
+    written for the visible-normal (``G1 D / (4 cos_o)``) and full (``D cos_m / (4 wo.m)``) cases.
+    """
+    dm = distribution.eval(m)
+    if distribution.type == "ggx" and distribution.sample_visible:
+        return safe_div(distribution.smith_g1(wo, m) * dm, 4.0 * wo[..., 2])
+    return safe_div(dm * m[..., 2], 4.0 * jnp.sum(wo * m, axis=-1))

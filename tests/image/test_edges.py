@@ -114,6 +114,7 @@ def test_canny_agrees_with_skimage(sigma):
         assert (mine == ref).mean() >= 0.99
 
 
+@pytest.mark.slow  # ~7 s of compile; keeps the default run of tests/image under 120 s CPU
 def test_canny_quantiles_vs_skimage():
     im = shapes_image(3)
     mine = np.asarray(canny(im, 1.5, 0.8, 0.9, use_quantiles=True))

@@ -13,38 +13,9 @@ from jaxgfx.image.noise import (
     add_salt_and_pepper,
     temporal_average,
 )
+from jaxgfx.testing import check_grads_jit
 
 KEY = jax.random.key(42)
-
-
-def check_grads_jit(f, args, order=1, *, eps=1e-6, rtol=1e-6, seed=0):
-    """Float64 reverse-mode gradient vs central finite differences along a random direction
-    (what ``jax.test_util.check_grads(f, args, order, modes=["rev"])`` checks, with every
-    evaluation jitted: the eager version costs seconds of tracing per call on CPU)."""
-    args = tuple(jnp.asarray(a, jnp.float64) for a in args)
-    rng = np.random.default_rng(seed)
-    u = jnp.asarray(rng.standard_normal(jnp.shape(f(*args))))
-    dirs = [jnp.asarray(rng.standard_normal(a.shape)) for a in args]
-    scalar = jax.jit(lambda *a: jnp.vdot(u, f(*a)))
-    grads = jax.jit(jax.grad(scalar, argnums=tuple(range(len(args)))))(*args)
-    plus = scalar(*(a + eps * d for a, d in zip(args, dirs, strict=True)))
-    minus = scalar(*(a - eps * d for a, d in zip(args, dirs, strict=True)))
-    fd = (plus - minus) / (2 * eps)
-    ad = sum(jnp.vdot(g, d) for g, d in zip(grads, dirs, strict=True))
-    np.testing.assert_allclose(float(ad), float(fd), rtol=rtol, atol=rtol)
-    if order == 2:
-        w = jnp.asarray(rng.standard_normal(len(args)))
-        grad_fn = jax.grad(scalar, argnums=tuple(range(len(args))))
-        check_grads_jit(
-            lambda *a: (
-                jnp.stack([jnp.vdot(g, d) for g, d in zip(grad_fn(*a), dirs, strict=True)]) * w
-            ),
-            args,
-            1,
-            eps=eps,
-            rtol=rtol,
-            seed=seed + 1,
-        )
 
 
 def _check_mean_var(samples, mean, var, n_sd=5.0):

@@ -9,7 +9,7 @@ from jaxgfx._math import safe_div, safe_normalize
 from jaxgfx.render.bsdf._base import BSDF, BSDFSample, mask3, prep_dirs, prep_u, rgb_param
 from jaxgfx.render.bsdf._conductor import _resolve, fresnel_factor
 from jaxgfx.render.frame import reflect
-from jaxgfx.render.microfacet import MicrofacetDistribution
+from jaxgfx.render.microfacet import MicrofacetDistribution, reflection_pdf
 
 __all__ = ["RoughConductor"]
 
@@ -77,11 +77,7 @@ class RoughConductor(BSDF):
 
     def _pdf_m(self, wo, m):
         """Density of ``wi = reflect(wo, m)`` given the microfacet normal ``m``."""
-        d = self.distribution
-        dm = d.eval(m)
-        if d.type == "ggx" and d.sample_visible:
-            return safe_div(d.smith_g1(wo, m) * dm, 4.0 * wo[..., 2])
-        return safe_div(dm * m[..., 2], 4.0 * _dot(wo, m))
+        return reflection_pdf(self.distribution, wo, m)
 
     def pdf(self, wo, wi):
         wo, wi = prep_dirs(wo, wi)

@@ -19,7 +19,7 @@ from jaxgfx.render.bsdf._base import (
 )
 from jaxgfx.render.frame import reflect
 from jaxgfx.render.fresnel import fresnel_dielectric, fresnel_diffuse_reflectance
-from jaxgfx.render.microfacet import MicrofacetDistribution
+from jaxgfx.render.microfacet import MicrofacetDistribution, reflection_pdf
 from jaxgfx.render.warp import square_to_cosine_hemisphere
 
 __all__ = ["RoughPlastic"]
@@ -111,11 +111,7 @@ class RoughPlastic(BSDF):
         return safe_div(ps, ps + pd, fill=0.5)
 
     def _pdf_spec(self, wo, m):
-        d = self.distribution
-        dm = d.eval(m)
-        if d.type == "ggx" and d.sample_visible:
-            return safe_div(d.smith_g1(wo, m) * dm, 4.0 * wo[..., 2])
-        return safe_div(dm * m[..., 2], 4.0 * _dot(wo, m))
+        return reflection_pdf(self.distribution, wo, m)
 
     def pdf(self, wo, wi):
         wo, wi = prep_dirs(wo, wi)
