@@ -38,3 +38,52 @@ __all__ = [
     "weight_gaussian",
     "weight_linear",
 ]
+
+# --- pixel encodings (docs/io.md); noise, RAW calibration, alignment (docs/raw_calibration.md)
+from .align import ALIGN_METHODS as ALIGN_METHODS
+from .align import SHIFT_MODES as SHIFT_MODES
+from .align import align_stack as align_stack
+from .align import mtb_align as mtb_align
+from .align import phase_correlation as phase_correlation
+from .align import shift_image as shift_image
+from .encodings import ENCODINGS as ENCODINGS
+from .encodings import half_roundtrip as half_roundtrip
+from .encodings import logluv24_decode as logluv24_decode
+from .encodings import logluv24_encode as logluv24_encode
+from .encodings import logluv32_decode as logluv32_decode
+from .encodings import logluv32_encode as logluv32_encode
+from .encodings import rgbe_decode as rgbe_decode
+from .encodings import rgbe_encode as rgbe_encode
+from .noise import NoiseModel as NoiseModel
+from .noise import fit_photon_transfer as fit_photon_transfer
+from .raw_calibration import RawCalibration as RawCalibration
+from .raw_calibration import calibrate_raw_stack as calibrate_raw_stack
+from .raw_calibration import estimate_black_level as estimate_black_level
+from .raw_calibration import estimate_exposure_ratios as estimate_exposure_ratios
+from .raw_calibration import estimate_white_level as estimate_white_level
+from .raw_calibration import linearity_check as linearity_check
+
+__all__ += [
+    "ALIGN_METHODS",
+    "SHIFT_MODES",
+    "align_stack",
+    "mtb_align",
+    "phase_correlation",
+    "shift_image",
+    "ENCODINGS",
+    "half_roundtrip",
+    "logluv24_decode",
+    "logluv24_encode",
+    "logluv32_decode",
+    "logluv32_encode",
+    "rgbe_decode",
+    "rgbe_encode",
+    "NoiseModel",
+    "fit_photon_transfer",
+    "RawCalibration",
+    "calibrate_raw_stack",
+    "estimate_black_level",
+    "estimate_exposure_ratios",
+    "estimate_white_level",
+    "linearity_check",
+]
