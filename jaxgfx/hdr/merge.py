@@ -139,7 +139,9 @@ def _merge(z, t, response, noise, *, weighting, domain, code_max, return_varianc
         lut = per_level(levels)
         codes = z.astype(jnp.int32)
         ch = jnp.arange(c)
-        q = {k: v[codes, ch] for k, v in lut.items()}
+        q = {k: v[codes, ch] for k, v in lut.items() if k != "w"}
+        if "w" in lut:  # elementwise weights are cheaper to compute than to gather
+            q["w"] = WEIGHTINGS[weighting](codes.astype(dt) * (1.0 / code_max))
         z_lo = None
     x = q["x"]
     var_x = q.get("var_x")
