@@ -181,7 +181,15 @@ def test_mirror_sphere_reflects_sky():
         np.testing.assert_allclose(img, 2.0, rtol=1e-4)
 
 
-@pytest.mark.parametrize("integrator", ["path", "direct", "whitted"])
+@pytest.mark.parametrize(
+    "integrator",
+    [
+        "path",
+        # 40-70 s of XLA compilation each on 2 cores: run with `make test-slow`
+        pytest.param("direct", marks=pytest.mark.slow),
+        pytest.param("whitted", marks=pytest.mark.slow),
+    ],
+)
 def test_gradients_finite_wrt_roughness_and_albedo(integrator):
     desc = {
         "camera": {
