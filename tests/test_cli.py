@@ -29,9 +29,7 @@ def test_filter_box_radius_and_canny(png, tmp_path):
     src, img = png
     dst = tmp_path / "box.exr"
     assert main(["filter", str(src), str(dst), "--op", "box", "--radius", "1"]) == 0
-    np.testing.assert_allclose(
-        io.read_exr(str(dst)), np.asarray(image.box_blur(img, 3)), atol=1e-6
-    )
+    np.testing.assert_allclose(io.read_exr(str(dst)), np.asarray(image.box_blur(img, 3)), atol=1e-6)
     edges = apply_filter(img, "canny", sigma=1.0, low=0.05, high=0.2)
     assert edges.dtype == np.float32 and set(np.unique(edges)) <= {0.0, 1.0}
 
