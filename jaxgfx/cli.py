@@ -133,8 +133,8 @@ def _cmd_render(args) -> int:
     os.makedirs(parent, exist_ok=True)
     io.write_exr(args.output, np.ascontiguousarray(img, np.float32))
     png = os.path.splitext(args.output)[0] + ".png"
-    rgb = img[..., :3] if args.integrator != "aov" else img[..., :3]
-    io.write_png(png, np.asarray(linear_to_srgb(np.clip(rgb, 0.0, 1.0))))
+    # AOV images: the PNG shows the albedo channels
+    io.write_png(png, np.asarray(linear_to_srgb(np.clip(img[..., :3], 0.0, 1.0))))
     n = img.shape[0] * img.shape[1] * args.spp
     print(
         f"wrote {args.output} and {png} ({dt:.2f} s incl. compile, {n / dt / 1e6:.2f} M samples/s)"

@@ -242,7 +242,7 @@ def _jsonable(x: Any):
     return x
 
 
-def _write_outputs(out_dir, radiance, variance, steps: _Steps, cfg: CalibrateConfig) -> dict:
+def _write_outputs(out_dir, radiance, variance, cfg: CalibrateConfig) -> dict:
     from jaxgfx import io
 
     paths = {}
@@ -291,7 +291,7 @@ def _run_ldr(cfg, images, times, truth, out_dir, steps: _Steps, report: dict):
             }
         report["errors_vs_ground_truth"] = errs
     steps.start("write outputs")
-    paths = _write_outputs(out_dir, radiance, variance, steps, cfg)
+    paths = _write_outputs(out_dir, radiance, variance, cfg)
     paths["response_plot"] = os.path.join(out_dir, "response.png")
     _plot_response(paths["response_plot"], curves, truth[0] if truth is not None else None)
     return paths
@@ -342,7 +342,7 @@ def _run_raw(cfg, files, out_dir, steps: _Steps, report: dict):
         image.demosaic(np.asarray(var)[..., 0], pattern, method="bilinear"), np.float32
     )
     steps.start("write outputs")
-    return _write_outputs(out_dir, rgb.astype(np.float32), var_rgb, steps, cfg)
+    return _write_outputs(out_dir, rgb.astype(np.float32), var_rgb, cfg)
 
 
 def run_calibrate(

@@ -23,6 +23,7 @@ import jax.numpy as jnp
 
 from jaxgfx._checks import as_float_array, check_finite
 from jaxgfx._math import safe_arccos, safe_atan2, safe_div, safe_sqrt
+from jaxgfx.render.bsdf._base import rgb_param
 from jaxgfx.render.warp import Distribution2D
 
 __all__ = [
@@ -33,18 +34,6 @@ __all__ = [
     "direction_to_latlong",
     "latlong_to_direction",
 ]
-
-
-def _rgb(x, name, *, nonnegative=True):
-    a = as_float_array(x, name)
-    check_finite(a, name)
-    if a.ndim == 0:
-        a = jnp.broadcast_to(a, (3,))
-    if a.shape[-1] != 3:
-        raise ValueError(f"{name}: expected a scalar or RGB triple, got shape {a.shape}")
-    if nonnegative and bool(jnp.any(a < 0)):
-        raise ValueError(f"{name}: expected non-negative values")
-    return a
 
 
 class PointLights(eqx.Module):
@@ -58,7 +47,7 @@ class PointLights(eqx.Module):
         p = as_float_array(positions, "position")
         check_finite(p, "position")
         p = p.reshape(-1, 3)
-        i = _rgb(intensities, "intensity").reshape(-1, 3)
+        i = rgb_param(intensities, "intensity").reshape(-1, 3)
         if i.shape[0] != p.shape[0]:
             raise ValueError("intensity: expected one RGB intensity per point light")
         return cls(p, i)

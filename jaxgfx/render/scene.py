@@ -40,6 +40,7 @@ import numpy as np
 
 from jaxgfx._checks import as_float_array, check_finite
 from jaxgfx.render.bsdf import make_bsdf
+from jaxgfx.render.bsdf._base import rgb_param
 from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera
 from jaxgfx.render.emitters import AreaLight, ConstantEnvironment, EnvironmentMap, PointLights
 from jaxgfx.render.film import make_filter
@@ -208,14 +209,9 @@ def _num(x, where, *, positive=False):
 
 
 def _rgb(x, where):
-    a = as_float_array(x, where)
-    check_finite(a, where)
-    if a.ndim == 0:
-        a = jnp.broadcast_to(a, (3,))
+    a = rgb_param(x, where)
     if a.shape != (3,):
         raise ValueError(f"{where}: expected a number or an RGB triple, got shape {a.shape}")
-    if bool(jnp.any(a < 0)):
-        raise ValueError(f"{where}: expected non-negative values")
     return a
 
 
