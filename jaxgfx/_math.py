@@ -6,6 +6,9 @@ multiplies a zero cotangent by an infinite/NaN partial derivative (the "double w
 
 from __future__ import annotations
 
+import math
+
+import jax
 import jax.numpy as jnp
 
 __all__ = [
@@ -18,6 +21,12 @@ __all__ = [
     "safe_arccos",
     "safe_atan2",
     "eps_for",
+    "sum_last",
+    "max_last",
+    "vdot",
+    "fusion_barrier",
+    "sincos",
+    "take_rows",
 ]
 
 
@@ -27,6 +36,151 @@ def eps_for(x) -> float:
     if not jnp.issubdtype(dt, jnp.floating):
         dt = jnp.float32
     return float(jnp.finfo(dt).eps)
+
+
+def sum_last(x, *, keepdims=False):
+    """Sum over the last axis; unrolled into elementwise adds when it is short (<= 4).
+
+    XLA on CPU turns ``jnp.sum(v, -1)`` over a minor axis of length 3 into a separate reduction
+    kernel that breaks loop fusion; the unrolled form fuses with its neighbours and is ~10x
+    faster for ``(N, 3)`` vectors (measured: 47 ms -> 4.8 ms for 10 normalisations of 262k
+    vectors). Results equal ``jnp.sum`` up to summation order.
+    """
+    n = x.shape[-1]
+    if n > 4:
+        return jnp.sum(x, axis=-1, keepdims=keepdims)
+    r = x[..., 0]
+    for i in range(1, n):
+        r = r + x[..., i]
+    return r[..., None] if keepdims else r
+
+
+def max_last(x, *, keepdims=False):
+    """Maximum over the last axis, unrolled when it is short (see :func:`sum_last`)."""
+    n = x.shape[-1]
+    if n > 4:
+        return jnp.max(x, axis=-1, keepdims=keepdims)
+    r = x[..., 0]
+    for i in range(1, n):
+        r = jnp.maximum(r, x[..., i])
+    return r[..., None] if keepdims else r
+
+
+def vdot(a, b, *, keepdims=False):
+    """Dot product over the last axis of broadcastable ``a, b (..., n)`` (fusion-friendly)."""
+    return sum_last(a * b, keepdims=keepdims)
+
+
+def fusion_barrier(tree):
+    """Identity on a pytree of arrays that XLA materialises instead of fusing through.
+
+    XLA's CPU fusion duplicates cheap producers into every consumer; in deep select chains (the
+    hit records of a scene, a BSDF dispatch) it recomputes whole intersection tests many times
+    (measured 5x slower scene intersection, 4x longer compiles). ``lax.optimization_barrier``
+    is expanded away before fusion on CPU, so this wraps the values in a ``lax.cond`` on a
+    runtime predicate (always true) whose two branches are both the identity. Differentiable,
+    jittable and vmappable (under ``vmap`` with batched values it becomes a select: correct, no
+    barrier).
+    """
+    leaves = [x for x in jax.tree_util.tree_leaves(tree) if x.size > 0]
+    if not leaves:
+        return tree
+    first = leaves[0].reshape(-1)[0].astype(jnp.float32)
+    pred = jax.lax.bitcast_convert_type(first, jnp.int32) != 0x7FBADBAD  # a NaN payload
+    return jax.lax.cond(pred, lambda t: t, lambda t: jax.tree_util.tree_map(_same, t), tree)
+
+
+def _same(x):
+    return x if x.dtype == bool else x + jnp.zeros((), x.dtype)
+
+
+# Cody-Waite split of pi/2 (fdlibm's pio2_1 / pio2_1t for float64, float32 hi/lo for float32)
+_PIO2 = {
+    "float32": (1.5707963705062866, -4.371139000186241e-08),
+    "float64": (1.57079632673412561417e00, 6.07710050650619224932e-11),
+}
+# minimax polynomials on [-pi/4, pi/4]: Cephes sinf/cosf (float32), fdlibm kernel_sin/cos (f64)
+_SIN = {
+    "float32": (-1.6666654611e-1, 8.3321608736e-3, -1.9515295891e-4),
+    "float64": (
+        -1.66666666666666324348e-01,
+        8.33333333332248946124e-03,
+        -1.98412698298579493134e-04,
+        2.75573137070700676789e-06,
+        -2.50507602534068634195e-08,
+        1.58969099521155010221e-10,
+    ),
+}
+_COS = {
+    "float32": (4.166664568298827e-2, -1.388731625493765e-3, 2.443315711809948e-5),
+    "float64": (
+        4.16666666666666019037e-02,
+        -1.38888888888741095749e-03,
+        2.48015872894767294178e-05,
+        -2.75573143513906633035e-07,
+        2.08757232129817482790e-09,
+        -1.13596475577881948265e-11,
+    ),
+}
+
+
+def _horner(z, coeffs):
+    r = jnp.full_like(z, coeffs[-1])
+    for c in coeffs[-2::-1]:
+        r = r * z + c
+    return r
+
+
+@jax.custom_jvp
+def sincos(x):
+    """``(sin x, cos x)`` from one range reduction and two polynomials.
+
+    XLA on CPU evaluates ``jnp.sin`` / ``jnp.cos`` with a scalar call per element (~11 ns each,
+    10x a vectorised ``exp``); this form uses only multiply-adds and selects, so it vectorises
+    and fuses (~1 ns). Range reduction ``x = k pi/2 + r`` (Cody & Waite 1980) with
+    ``|r| <= pi/4``, then the Cephes (float32) or fdlibm (float64) minimax polynomials.
+    Accuracy: within 2 ulp of ``numpy.sin``/``cos`` for ``|x| <= 1e4`` (float32) and
+    ``|x| <= 1e6`` (float64); larger arguments lose accuracy (not used by the renderer).
+    Derivatives are exact (``d sin = cos dx``).
+
+    Example: ``sincos(jnp.pi / 6)`` → ``(0.5, 0.8660254)``.
+    """
+    x = jnp.asarray(x)
+    if not jnp.issubdtype(x.dtype, jnp.floating):
+        x = x.astype(jnp.float32)
+    key = "float64" if x.dtype == jnp.float64 else "float32"
+    hi, lo = _PIO2[key]
+    k = jnp.round(x * (2.0 / math.pi))
+    r = (x - k * hi) - k * lo
+    z = r * r
+    s = r + r * z * _horner(z, _SIN[key])
+    c = 1.0 - 0.5 * z + z * z * _horner(z, _COS[key])
+    q = k.astype(jnp.int32) & 3
+    sin = jnp.where(q == 0, s, jnp.where(q == 1, c, jnp.where(q == 2, -s, -c)))
+    cos = jnp.where(q == 0, c, jnp.where(q == 1, -s, jnp.where(q == 2, -c, s)))
+    return sin, cos
+
+
+@sincos.defjvp
+def _sincos_jvp(primals, tangents):
+    (x,), (dx,) = primals, tangents
+    s, c = sincos(x)
+    return (s, c), (c * dx, -s * dx)
+
+
+def take_rows(arr, idx):
+    """``arr[idx]`` for a small table ``arr (N, ...)``: a chain of selects when ``N <= 8``
+    (XLA CPU gathers do not fuse; for one to a few spheres or rectangles the selects are
+    several times faster), an ordinary gather otherwise."""
+    n = arr.shape[0]
+    if n > 8:
+        return arr[idx]
+    batch = idx.shape
+    idx = idx.reshape(batch + (1,) * (arr.ndim - 1))
+    out = jnp.broadcast_to(arr[0], batch + arr.shape[1:])
+    for i in range(1, n):
+        out = jnp.where(idx == i, arr[i], out)
+    return out
 
 
 def safe_div(a, b, *, fill=0.0):
@@ -64,6 +218,8 @@ def safe_pow(x, p):
 
 def safe_norm(v, *, axis=-1, keepdims=False):
     """Euclidean norm with zero (not NaN) gradient at the zero vector."""
+    if axis == -1 or axis == v.ndim - 1:
+        return safe_sqrt(sum_last(v * v, keepdims=keepdims))
     return safe_sqrt(jnp.sum(v * v, axis=axis, keepdims=keepdims))
 
 

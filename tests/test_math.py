@@ -80,3 +80,56 @@ def test_typing_aliases_import():
     import jaxgfx.typing as t
 
     assert t.Image is not None and t.AnyImage is not None
+
+
+# ---------------------------------------------------------------- fusion-friendly helpers
+
+
+def test_sincos_matches_numpy_f32():
+    x = np.linspace(-1e4, 1e4, 200001).astype(np.float32)
+    s, c = jax.jit(_math.sincos)(x)
+    xs = x.astype(np.float64)
+    # 2 ulp of 1.0 in float32
+    assert np.abs(np.asarray(s, np.float64) - np.sin(xs)).max() < 2.4e-7
+    assert np.abs(np.asarray(c, np.float64) - np.cos(xs)).max() < 2.4e-7
+    s, c = _math.sincos(jnp.float32(np.pi / 6))
+    np.testing.assert_allclose([s, c], [0.5, np.sqrt(3) / 2], rtol=2e-7)
+
+
+def test_sincos_matches_numpy_f64_and_grads(x64):
+    x = np.linspace(-1e6, 1e6, 200001)
+    s, c = jax.jit(_math.sincos)(jnp.asarray(x))
+    assert np.abs(np.asarray(s) - np.sin(x)).max() < 4.5e-16
+    assert np.abs(np.asarray(c) - np.cos(x)).max() < 4.5e-16
+    xs = jnp.asarray([-7.0, -0.3, 0.0, 0.785398, 2.5, 100.0])
+    check_grads(lambda t: _math.sincos(t)[0] + 2 * _math.sincos(t)[1], (xs,), order=2)
+
+
+def test_sum_max_last_and_vdot():
+    rng = np.random.default_rng(0)
+    for n in (1, 2, 3, 4, 7):
+        x = rng.normal(size=(5, 6, n)).astype(np.float32)
+        np.testing.assert_allclose(_math.sum_last(x), x.sum(-1), rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(_math.max_last(x), x.max(-1))
+        np.testing.assert_allclose(
+            _math.sum_last(x, keepdims=True), x.sum(-1, keepdims=True), rtol=1e-6, atol=1e-6
+        )
+        np.testing.assert_allclose(
+            jax.jit(_math.vdot)(x, x[::-1]), (x * x[::-1]).sum(-1), rtol=1e-5, atol=1e-6
+        )
+
+
+def test_fusion_barrier_is_identity_with_gradients(x64):
+    x = jnp.asarray([0.5, -2.0, 3.0])
+    tree = {"a": x, "b": x > 0}
+    out = jax.jit(_math.fusion_barrier)(tree)
+    np.testing.assert_array_equal(out["a"], x)
+    np.testing.assert_array_equal(out["b"], [True, False, True])
+    # a value whose bit pattern equals the sentinel still passes through (both branches agree)
+    sentinel = jax.lax.bitcast_convert_type(jnp.int32(0x7FBADBAD), jnp.float32)
+    np.testing.assert_array_equal(
+        jnp.isnan(_math.fusion_barrier(jnp.stack([sentinel, 1.0]))), [True, False]
+    )
+    check_grads(lambda v: (_math.fusion_barrier(v * v) ** 2).sum(), (x,), order=2)
+    g = jax.vmap(lambda v: _math.fusion_barrier(v).sum())(jnp.ones((4, 3)))
+    np.testing.assert_array_equal(g, [3.0] * 4)

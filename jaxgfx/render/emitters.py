@@ -22,7 +22,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from jaxgfx._checks import as_float_array, check_finite
-from jaxgfx._math import safe_arccos, safe_atan2, safe_div, safe_sqrt
+from jaxgfx._math import safe_arccos, safe_atan2, safe_div, safe_sqrt, sincos, sum_last, take_rows
 from jaxgfx.render.bsdf._base import rgb_param
 from jaxgfx.render.warp import Distribution2D
 
@@ -61,12 +61,12 @@ class PointLights(eqx.Module):
 
         Returns ``(wi, dist, Li)`` where ``Li = I / dist^2`` (a delta distribution: pdf 1).
         """
-        lp = self.positions[index]
+        lp = take_rows(self.positions, index)
         v = lp - p
-        d2 = jnp.sum(v * v, -1)
+        d2 = sum_last(v * v)
         dist = safe_sqrt(d2)
         wi = safe_div(v, dist[..., None])
-        li = safe_div(self.intensities[index], d2[..., None])
+        li = safe_div(take_rows(self.intensities, index), d2[..., None])
         return wi, dist, li
 
 
@@ -89,7 +89,8 @@ class ConstantEnvironment(eqx.Module):
         z = 1.0 - 2.0 * u[..., 0]
         r = safe_sqrt(1.0 - z * z)
         phi = 2.0 * math.pi * u[..., 1]
-        wi = jnp.stack([r * jnp.cos(phi), r * jnp.sin(phi), z], -1)
+        sp, cp = sincos(phi)
+        wi = jnp.stack([r * cp, r * sp, z], -1)
         pdf = jnp.full(u.shape[:-1], 1.0 / (4.0 * math.pi), u.dtype)
         return wi, pdf, self.eval(wi)
 
@@ -109,8 +110,9 @@ def latlong_to_direction(uv):
     """Inverse of :func:`direction_to_latlong`; also returns ``sin(theta)``."""
     phi = uv[..., 0] * 2.0 * math.pi
     theta = uv[..., 1] * math.pi
-    st = jnp.sin(theta)
-    d = jnp.stack([st * jnp.sin(phi), jnp.cos(theta), -st * jnp.cos(phi)], -1)
+    st, ct = sincos(theta)
+    sp, cp = sincos(phi)
+    d = jnp.stack([st * sp, ct, -st * cp], -1)
     return d, st
 
 

@@ -12,11 +12,11 @@ Filters follow Mitsuba 3's defaults: ``box`` (radius 0.5 px) and ``gaussian``
 from __future__ import annotations
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 from jax.scipy.special import erf, erfinv
 
 from jaxgfx._checks import check_positive
+from jaxgfx.render.sampler import uniform
 
 __all__ = ["BoxFilter", "GaussianFilter", "make_filter", "pixel_samples", "FILTERS"]
 
@@ -66,7 +66,7 @@ def pixel_samples(key, width: int, height: int, spp: int, rfilter=None):
     """
     rfilter = rfilter or BoxFilter()
     n = int(round(spp**0.5))
-    u = jax.random.uniform(key, (height, width, spp, 2))
+    u = uniform(key, (height, width, spp, 2))
     if n * n == spp and spp > 1:
         iy, ix = jnp.divmod(jnp.arange(spp), n)
         u = (jnp.stack([ix, iy], -1) + u) / n

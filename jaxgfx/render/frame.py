@@ -9,7 +9,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax.numpy as jnp
 
-from jaxgfx._math import safe_div, safe_sqrt
+from jaxgfx._math import safe_div, safe_sqrt, sum_last
 
 __all__ = [
     "Frame",
@@ -30,7 +30,7 @@ __all__ = [
 
 def dot(a, b):
     """Dot product over the last axis: ``(..., 3), (..., 3) -> (...)``."""
-    return jnp.sum(a * b, axis=-1)
+    return sum_last(a * b)
 
 
 class Frame(eqx.Module):

@@ -20,7 +20,7 @@ import jax.numpy as jnp
 from jax.scipy.special import erfc
 
 from jaxgfx._checks import as_float_array, check_choice, check_positive
-from jaxgfx._math import safe_div, safe_normalize, safe_sqrt
+from jaxgfx._math import safe_div, safe_normalize, safe_sqrt, sincos, sum_last
 
 __all__ = ["MicrofacetDistribution", "MICROFACET_TYPES"]
 
@@ -110,7 +110,7 @@ class MicrofacetDistribution(eqx.Module):
         """Smith masking ``G1(v, m) = χ⁺(v·m / v·n) / (1 + Λ(v))`` in ``[0, 1]``."""
         lam = self.smith_lambda(v)
         g = jnp.where(jnp.isinf(lam), 0.0, 1.0 / (1.0 + jnp.where(jnp.isinf(lam), 0.0, lam)))
-        ok = jnp.sum(v * m, axis=-1) * v[..., 2] > 0
+        ok = sum_last(v * m) * v[..., 2] > 0
         return jnp.where(ok, g, 0.0)
 
     def G(self, wo, wi, m, *, height_correlated=False):
@@ -121,9 +121,7 @@ class MicrofacetDistribution(eqx.Module):
         lo, li = self.smith_lambda(wo), self.smith_lambda(wi)
         inf = jnp.isinf(lo) | jnp.isinf(li)
         g = 1.0 / (1.0 + jnp.where(inf, 0.0, lo + li))
-        ok = (jnp.sum(wo * m, axis=-1) * wo[..., 2] > 0) & (
-            jnp.sum(wi * m, axis=-1) * wi[..., 2] > 0
-        )
+        ok = (sum_last(wo * m) * wo[..., 2] > 0) & (sum_last(wi * m) * wi[..., 2] > 0)
         return jnp.where(ok & ~inf, g, 0.0)
 
     # ------------------------------------------------------------------ sampling
@@ -147,50 +145,57 @@ class MicrofacetDistribution(eqx.Module):
         d = self.eval(m)
         if self.type == "ggx" and self.sample_visible:
             cz = wi[..., 2]
-            dot = jnp.maximum(jnp.sum(wi * m, axis=-1), 0.0)
+            dot = jnp.maximum(sum_last(wi * m), 0.0)
             return safe_div(self.smith_g1(wi, m) * dot * d, cz)
         return d * jnp.maximum(m[..., 2], 0.0)
 
     def _sample_ggx_vndf(self, wi, u):
+        # Heitz 2018, written per component: XLA fuses it into one loop (the vector form with
+        # stack/cross was split into several kernels that each recomputed the shared terms).
         au, av = self.alpha_u, self.alpha_v
-        vh = safe_normalize(jnp.stack([au * wi[..., 0], av * wi[..., 1], wi[..., 2]], axis=-1))
-        lensq = vh[..., 0] ** 2 + vh[..., 1] ** 2
+        hx, hy, hz = au * wi[..., 0], av * wi[..., 1], wi[..., 2]
+        n = safe_sqrt(hx * hx + hy * hy + hz * hz)
+        inv_n = safe_div(1.0, n)
+        hx, hy, hz = hx * inv_n, hy * inv_n, hz * inv_n
+        lensq = hx * hx + hy * hy
         has = lensq > 0
         inv = jnp.where(has, 1.0 / safe_sqrt(jnp.where(has, lensq, 1.0)), 0.0)
-        t1 = jnp.stack(
-            [
-                jnp.where(has, -vh[..., 1] * inv, 1.0),
-                jnp.where(has, vh[..., 0] * inv, 0.0),
-                jnp.zeros_like(lensq),
-            ],
-            axis=-1,
-        )
-        t2 = jnp.cross(vh, t1)
+        t1x = jnp.where(has, -hy * inv, 1.0)
+        t1y = jnp.where(has, hx * inv, 0.0)
+        # t2 = vh x t1 with t1z = 0
+        t2x, t2y, t2z = -hz * t1y, hz * t1x, hx * t1y - hy * t1x
         r = safe_sqrt(u[..., 0])
         phi = 2.0 * math.pi * u[..., 1]
-        p1 = r * jnp.cos(phi)
-        p2 = r * jnp.sin(phi)
-        s = 0.5 * (1.0 + vh[..., 2])
+        sp, cp = sincos(phi)
+        p1 = r * cp
+        p2 = r * sp
+        s = 0.5 * (1.0 + hz)
         p2 = (1.0 - s) * safe_sqrt(1.0 - p1 * p1) + s * p2
         p3 = safe_sqrt(1.0 - p1 * p1 - p2 * p2)
-        nh = p1[..., None] * t1 + p2[..., None] * t2 + p3[..., None] * vh
-        ne = jnp.stack([au * nh[..., 0], av * nh[..., 1], jnp.maximum(nh[..., 2], 0.0)], axis=-1)
-        return safe_normalize(ne)
+        nx = p1 * t1x + p2 * t2x + p3 * hx
+        ny = p1 * t1y + p2 * t2y + p3 * hy
+        nz = p2 * t2z + p3 * hz
+        ex, ey, ez = au * nx, av * ny, jnp.maximum(nz, 0.0)
+        ln = safe_sqrt(ex * ex + ey * ey + ez * ez)
+        il = safe_div(1.0, ln)
+        return jnp.stack([ex * il, ey * il, ez * il], axis=-1)
 
     def _sample_ggx_full(self, u):
         # slopes of GGX: radial tan²θ = α² u/(1-u) along the anisotropic ellipse
         phi = 2.0 * math.pi * u[..., 1]
         t = safe_sqrt(u[..., 0] / jnp.maximum(1.0 - u[..., 0], 1e-12))
-        sx = self.alpha_u * t * jnp.cos(phi)
-        sy = self.alpha_v * t * jnp.sin(phi)
+        sp, cp = sincos(phi)
+        sx = self.alpha_u * t * cp
+        sy = self.alpha_v * t * sp
         return safe_normalize(jnp.stack([-sx, -sy, jnp.ones_like(sx)], axis=-1))
 
     def _sample_beckmann_full(self, u):
         # Beckmann slopes are Gaussian with variance α²/2 per axis (Box–Muller)
         phi = 2.0 * math.pi * u[..., 1]
         t = safe_sqrt(-jnp.log(jnp.maximum(1.0 - u[..., 0], 1e-30)))
-        sx = self.alpha_u * t * jnp.cos(phi)
-        sy = self.alpha_v * t * jnp.sin(phi)
+        sp, cp = sincos(phi)
+        sx = self.alpha_u * t * cp
+        sy = self.alpha_v * t * sp
         return safe_normalize(jnp.stack([-sx, -sy, jnp.ones_like(sx)], axis=-1))
 
 
@@ -202,4 +207,4 @@ def reflection_pdf(distribution: MicrofacetDistribution, wo, m):
     dm = distribution.eval(m)
     if distribution.type == "ggx" and distribution.sample_visible:
         return safe_div(distribution.smith_g1(wo, m) * dm, 4.0 * wo[..., 2])
-    return safe_div(dm * m[..., 2], 4.0 * jnp.sum(wo * m, axis=-1))
+    return safe_div(dm * m[..., 2], 4.0 * sum_last(wo * m))

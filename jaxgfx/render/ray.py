@@ -17,6 +17,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
+from jaxgfx._math import sum_last
+
 __all__ = ["Hit", "empty_hit", "merge_hits", "offset_ray_origin", "spawn_ray"]
 
 
@@ -127,5 +129,5 @@ def spawn_ray(
     p = jnp.asarray(p)
     n = jnp.asarray(n, p.dtype)
     d = jnp.asarray(d, p.dtype)
-    side = jnp.where(jnp.sum(n * d, axis=-1, keepdims=True) < 0, -1.0, 1.0).astype(p.dtype)
+    side = jnp.where(sum_last(n * d, keepdims=True) < 0, -1.0, 1.0).astype(p.dtype)
     return offset_ray_origin(p, side * n), d

@@ -10,6 +10,7 @@ from jaxgfx._checks import check_choice
 from jaxgfx.render.film import pixel_samples
 from jaxgfx.render.integrators import INTEGRATORS, aov, path_radiance, whitted_radiance
 from jaxgfx.render.integrators.path import N_RANDOM
+from jaxgfx.render.sampler import uniform
 
 __all__ = ["render"]
 
@@ -57,7 +58,7 @@ def _render(scene, key, spp, integrator, max_depth, rr_depth):
         if integrator == "aov":
             val = aov(scene, o, d)
         else:
-            u = jax.random.uniform(jax.random.fold_in(ku, s), (h, w, max_depth, N_RANDOM), dtype)
+            u = uniform(jax.random.fold_in(ku, s), (h, w, max_depth, N_RANDOM), dtype)
             if integrator == "path":
                 val = path_radiance(scene, o, d, u, max_depth=max_depth, rr_depth=rr_depth)
             else:

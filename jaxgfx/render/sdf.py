@@ -16,7 +16,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from jaxgfx._checks import check_positive
-from jaxgfx._math import safe_div, safe_norm, safe_normalize
+from jaxgfx._math import max_last, safe_div, safe_norm, safe_normalize, sum_last
 from jaxgfx.render.ray import Hit
 
 __all__ = [
@@ -79,7 +79,7 @@ class SDFSphere(SDF):
 
 def _box(q):
     outside = safe_norm(jnp.maximum(q, 0.0))
-    inside = jnp.minimum(jnp.max(q, axis=-1), 0.0)
+    inside = jnp.minimum(max_last(q), 0.0)
     return outside + inside
 
 
@@ -142,7 +142,7 @@ class SDFPlane(SDF):
         self.offset = _scalar(offset, "offset")
 
     def __call__(self, p):
-        return jnp.sum(p * safe_normalize(self.normal), -1) - self.offset
+        return sum_last(p * safe_normalize(self.normal)) - self.offset
 
 
 class SDFCapsule(SDF):
@@ -160,7 +160,7 @@ class SDFCapsule(SDF):
     def __call__(self, p):
         pa = p - self.a
         ba = self.b - self.a
-        h = jnp.clip(safe_div(jnp.sum(pa * ba, -1), jnp.sum(ba * ba)), 0.0, 1.0)
+        h = jnp.clip(safe_div(sum_last(pa * ba), jnp.sum(ba * ba)), 0.0, 1.0)
         return safe_norm(pa - h[..., None] * ba) - self.radius
 
 
@@ -320,7 +320,7 @@ def sphere_trace(
     t = jnp.where(hit, t, 0.0)
     p0 = o_sg + t[..., None] * d_sg
     g = sg(jax.grad(lambda q: jnp.sum(f_sg(q)))(p0))
-    gd = jnp.sum(g * d_sg, -1)
+    gd = sum_last(g * d_sg)
     f_live = sdf(o + t[..., None] * d)
     t = t - safe_div(f_live - sg(f_live), gd)
     p = o + t[..., None] * d

@@ -14,7 +14,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from jaxgfx._checks import as_float_array
-from jaxgfx._math import safe_div, safe_pow, safe_sqrt
+from jaxgfx._math import safe_div, safe_pow, safe_sqrt, sincos, sum_last
 
 __all__ = [
     "square_to_uniform_disk_concentric",
@@ -73,13 +73,14 @@ def square_to_uniform_disk_concentric(u):
     phi = jnp.where(
         first, _QUARTER_PI * safe_div(y, x), 0.5 * math.pi - _QUARTER_PI * safe_div(x, y)
     )
-    return jnp.stack([r * jnp.cos(phi), r * jnp.sin(phi)], axis=-1)
+    sp, cp = sincos(phi)
+    return jnp.stack([r * cp, r * sp], axis=-1)
 
 
 def square_to_uniform_disk_concentric_pdf(p):
     """Area density of the concentric disk warp: ``1/π`` inside the unit disk, else 0."""
     p = jnp.asarray(p)
-    inside = jnp.sum(p * p, axis=-1) <= 1.0
+    inside = sum_last(p * p) <= 1.0
     return jnp.where(inside, _INV_PI, 0.0).astype(p.dtype)
 
 
@@ -104,7 +105,8 @@ def uniform_disk_to_square_concentric(p):
 def _z_phi_to_dir(z, u1):
     r = safe_sqrt(1.0 - z * z)
     phi = _TWO_PI * u1
-    return jnp.stack([r * jnp.cos(phi), r * jnp.sin(phi), z], axis=-1)
+    sp, cp = sincos(phi)
+    return jnp.stack([r * cp, r * sp, z], axis=-1)
 
 
 def square_to_uniform_sphere(u):
@@ -146,7 +148,7 @@ def uniform_hemisphere_to_square(v):
 def square_to_cosine_hemisphere(u):
     """Cosine-weighted hemisphere (Malley's method on the concentric disk); pdf ``cos θ / π``."""
     p = square_to_uniform_disk_concentric(u)
-    z = safe_sqrt(1.0 - jnp.sum(p * p, axis=-1))
+    z = safe_sqrt(1.0 - sum_last(p * p))
     return jnp.concatenate([p, z[..., None]], axis=-1)
 
 

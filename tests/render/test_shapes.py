@@ -359,3 +359,44 @@ def test_bad_inputs():
         S.sample_area(S.Spheres(jnp.zeros(3), 1.0), jnp.zeros((4, 3)))
     with pytest.raises(TypeError, match="shape"):
         S.intersect("sphere", jnp.zeros(3), jnp.ones(3))
+
+
+def test_two_phase_scene_intersection_matches_per_shape_merge(key):
+    """intersect_scene groups shapes by type; the records must equal a per-shape merge."""
+    from jaxgfx.render.ray import empty_hit, merge_hits
+
+    shapes = [
+        S.Spheres([[0, 0, 5.0], [1.5, 0.5, 7.0]], [1.0, 1.2]),
+        S.Rectangles([0.5, -0.5, 3.0], [2.0, 0, 0], [0, 1.0, 0.5]),
+        S.Spheres([[-1.0, -1.0, 4.0]], [0.7]),
+        S.TriangleMesh(jnp.array([[-2, -2, 6.0], [2, -2, 6], [0, 2, 6]]), jnp.array([[0, 1, 2]])),
+        S.Rectangles(
+            [[-1, 1, 2.5], [1, 1, 9.0]], [[1.0, 0, 0], [3, 0, 0]], [[0, 1.0, 0], [0, 3, 0]]
+        ),
+    ]
+    k1, k2 = jax.random.split(key)
+    o = jnp.zeros((4000, 3))
+    d = jax.random.normal(k1, (4000, 3)) * jnp.array([0.4, 0.4, 0.1]) + jnp.array([0, 0, 1.0])
+    d = d / jnp.linalg.norm(d, axis=-1, keepdims=True)
+    h = jax.jit(S.intersect_scene)(shapes, o, d)
+    ref = empty_hit((4000,))
+    for i, s in enumerate(shapes):
+        ref = merge_hits(ref, S.intersect(s, o, d, shape_id=i))
+    np.testing.assert_array_equal(h.valid, ref.valid)
+    np.testing.assert_array_equal(h.shape_id, ref.shape_id)
+    np.testing.assert_array_equal(h.prim_id, ref.prim_id)
+    assert len(set(np.asarray(h.shape_id).tolist())) == 6  # every shape and misses occur
+    for f in ("t", "p", "ng", "ns", "uv"):
+        a, b = np.asarray(getattr(h, f)), np.asarray(getattr(ref, f))
+        np.testing.assert_allclose(
+            np.where(np.isfinite(b), a, 0), np.where(np.isfinite(b), b, 0), atol=2e-5
+        )
+    occ = jax.jit(S.occluded_scene)(shapes, o, d, jnp.full((4000,), 5.0))
+    np.testing.assert_array_equal(occ, ref.valid & (ref.t < 5.0))
+
+
+def test_take_rows_matches_gather(key):
+    for n in (1, 3, 8, 9):
+        arr = jax.random.normal(key, (n, 3))
+        idx = jax.random.randint(key, (50, 4), 0, n)
+        np.testing.assert_array_equal(jax.jit(S.take_rows)(arr, idx), arr[idx])

@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgfx._math import max_last, sum_last
 from jaxgfx.render.ray import Hit
 from jaxgfx.render.shapes import TriangleMesh, _rays, primitive_hit
 
@@ -28,7 +29,7 @@ def slab(bmin, bmax, o, inv, t0, t1):
     """Entry/exit ``(tn, tf, hit)`` of the ray against boxes ``bmin, bmax (..., 3)``."""
     ta = (bmin - o) * inv
     tb = (bmax - o) * inv
-    tn = jnp.maximum(jnp.max(jnp.minimum(ta, tb), axis=-1), t0)
+    tn = jnp.maximum(max_last(jnp.minimum(ta, tb)), t0)
     tf = jnp.minimum(jnp.min(jnp.maximum(ta, tb), axis=-1) * _GROW[jnp.dtype(o.dtype)], t1)
     return tn, tf, tn <= tf
 
@@ -39,14 +40,14 @@ def tri_chunk(tris, idx, mask, o, d, tmin, tmax):
     v0, v1, v2 = tri[:, 0], tri[:, 1], tri[:, 2]
     e1, e2 = v1 - v0, v2 - v0
     P = jnp.cross(d, e2)
-    det = jnp.sum(P * e1, -1)
+    det = sum_last(P * e1)
     ok = det != 0
     inv_det = 1.0 / jnp.where(ok, det, 1.0)
     T = o - v0
-    b1 = jnp.sum(P * T, -1) * inv_det
+    b1 = sum_last(P * T) * inv_det
     Q = jnp.cross(T, e1)
-    b2 = jnp.sum(Q * d, -1) * inv_det
-    t = jnp.sum(Q * e2, -1) * inv_det
+    b2 = sum_last(Q * d) * inv_det
+    t = sum_last(Q * e2) * inv_det
     hit = mask & ok & (b1 >= 0) & (b2 >= 0) & (b1 + b2 <= 1) & (t > tmin) & (t < tmax)
     t = jnp.where(hit, t, jnp.inf)
     j = jnp.argmin(t)
@@ -92,6 +93,12 @@ class TriangleAccel(eqx.Module):
         re-intersection of the found triangle)."""
         o, d, _, prim = self._run(o, d, tmin, tmax, False)
         return primitive_hit(self.mesh, prim, o, d, prim >= 0, shape_id=shape_id)
+
+    def closest_t(self, o, d, *, tmin=0.0, tmax=jnp.inf):
+        """Nearest ``(t, prim_id)`` per ray (``t = inf`` where nothing is hit); not
+        differentiable (see :func:`jaxgfx.render.shapes.intersect_scene`)."""
+        _, _, t, prim = self._run(o, d, tmin, tmax, False)
+        return jnp.where(prim >= 0, t, jnp.inf), jnp.maximum(prim, 0)
 
     def occluded(self, o, d, tmax, *, tmin=0.0):
         """Any-hit query for shadow rays: True where some triangle lies in ``(tmin, tmax)``.

@@ -8,7 +8,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from jaxgfx._checks import check_nonnegative
-from jaxgfx._math import safe_div, safe_pow
+from jaxgfx._math import safe_div, safe_pow, sum_last
 from jaxgfx.render.bsdf._base import (
     BSDF,
     INV_PI,
@@ -26,7 +26,7 @@ __all__ = ["Phong"]
 
 
 def _dot(a, b):
-    return jnp.sum(a * b, axis=-1)
+    return sum_last(a * b)
 
 
 class Phong(BSDF):

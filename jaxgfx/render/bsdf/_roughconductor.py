@@ -5,7 +5,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax.numpy as jnp
 
-from jaxgfx._math import safe_div, safe_normalize
+from jaxgfx._math import safe_div, safe_normalize, sum_last
 from jaxgfx.render.bsdf._base import BSDF, BSDFSample, mask3, prep_dirs, prep_u, rgb_param
 from jaxgfx.render.bsdf._conductor import _resolve, fresnel_factor
 from jaxgfx.render.frame import reflect
@@ -15,7 +15,7 @@ __all__ = ["RoughConductor"]
 
 
 def _dot(a, b):
-    return jnp.sum(a * b, axis=-1)
+    return sum_last(a * b)
 
 
 class RoughConductor(BSDF):

@@ -6,10 +6,10 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from jaxgfx._math import safe_div, safe_sqrt
+from jaxgfx._math import safe_div, safe_sqrt, sum_last, take_rows
 from jaxgfx.render.frame import frame_from_normal, to_local, to_world
 from jaxgfx.render.ray import spawn_ray
-from jaxgfx.render.shapes import area, intersect_scene, sample_area
+from jaxgfx.render.shapes import area, intersect_scene, occluded_scene, sample_area
 
 __all__ = [
     "intersect",
@@ -34,7 +34,7 @@ def intersect(scene, o, d, *, tmax=jnp.inf):
 
 def occluded(scene, o, d, tmax):
     """True where something lies on the segment ``o + t d``, ``0 < t < tmax``."""
-    return intersect(scene, o, d, tmax=tmax).valid
+    return occluded_scene(scene.shapes, o, d, tmax)
 
 
 def hit_material(scene, hit):
@@ -42,7 +42,7 @@ def hit_material(scene, hit):
     mat = jnp.zeros(hit.t.shape, jnp.int32)
     for s, mats in enumerate(scene.shape_materials):
         pid = jnp.clip(hit.prim_id, 0, mats.shape[0] - 1)
-        mat = jnp.where(hit.shape_id == s, mats[pid], mat)
+        mat = jnp.where(hit.shape_id == s, take_rows(mats, pid), mat)
     return mat
 
 
@@ -83,12 +83,12 @@ def shading_frame(scene, hit, d, mat_id):
     ``wo.z < 0`` means "inside".
     """
     trans = material_flag(scene, mat_id, "is_transmissive")
-    facing = jnp.sum(hit.ng * d, -1) < 0
+    facing = sum_last(hit.ng * d) < 0
     flip = jnp.where(trans | facing, 1.0, -1.0)[..., None]
     ng = hit.ng * flip
     ns = hit.ns * flip
     # keep the shading normal on the geometric side of the ray
-    ns = jnp.where((jnp.sum(ns * ng, -1) > 0)[..., None], ns, ng)
+    ns = jnp.where((sum_last(ns * ng) > 0)[..., None], ns, ng)
     frame = frame_from_normal(ns)
     wo = to_local(frame, -d)
     return frame, ng, wo
@@ -110,8 +110,8 @@ def emitted(scene, hit, d):
         return jnp.zeros(d.shape, d.dtype)
     table, _ = emission_table(scene, d.dtype)
     sid = jnp.clip(hit.shape_id, 0, len(scene.shapes) - 1)
-    front = (jnp.sum(hit.ng * d, -1) < 0) & hit.valid
-    return jnp.where(front[..., None], table[sid], 0.0)
+    front = (sum_last(hit.ng * d) < 0) & hit.valid
+    return jnp.where(front[..., None], take_rows(table, sid), 0.0)
 
 
 def mis_power(a, b):
@@ -130,9 +130,9 @@ def light_pdf_hit(scene, p_prev, hit, d):
         return jnp.zeros(hit.t.shape, d.dtype)
     _, inv_area = emission_table(scene, d.dtype)
     sid = jnp.clip(hit.shape_id, 0, len(scene.shapes) - 1)
-    cos_l = jnp.abs(jnp.sum(hit.ng * d, -1))
-    dist2 = jnp.sum((hit.p - p_prev) ** 2, -1)
-    pdf = safe_div(inv_area[sid] * dist2, cos_l)
+    cos_l = jnp.abs(sum_last(hit.ng * d))
+    dist2 = sum_last((hit.p - p_prev) ** 2)
+    pdf = safe_div(take_rows(inv_area, sid) * dist2, cos_l)
     return jnp.where(hit.valid, pdf * _selection_prob(scene, d.dtype), 0.0)
 
 
@@ -157,10 +157,10 @@ def sample_light(scene, p, u_sel, u2):
     for al, sh in zip(scene.area_lights, scene.emitter_shapes, strict=True):
         pl, nl, pdf_a = sample_area(sh, u2)
         v = pl - p
-        d2 = jnp.sum(v * v, -1)
+        d2 = sum_last(v * v)
         dist = safe_sqrt(d2)
         wi = safe_div(v, dist[..., None])
-        cos_l = -jnp.sum(nl * wi, -1)
+        cos_l = -sum_last(nl * wi)
         li = jnp.where((cos_l > 0)[..., None], al.radiance.astype(dtype), 0.0)
         pdf = safe_div(pdf_a * d2, jnp.abs(cos_l))
         cands.append((wi, dist, li, pdf, jnp.zeros(p.shape[:-1], bool)))

@@ -11,7 +11,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from jaxgfx._math import safe_div
+from jaxgfx._math import fusion_barrier, max_last, safe_div
 from jaxgfx.render.integrators import _common as C
 
 __all__ = ["path_radiance", "N_RANDOM"]
@@ -45,28 +45,31 @@ def path_radiance(scene, o, d, u, *, max_depth: int, rr_depth: int = 5, nee: boo
         )
         alive = alive & hit.valid
         mat = C.hit_material(scene, hit)
-        frame, ng, wo = C.shading_frame(scene, hit, d, mat)
+        frame, ng, wo = fusion_barrier(C.shading_frame(scene, hit, d, mat))
 
         if has_lights:
-            wi, dist, li, lpdf, l_delta = C.sample_light(scene, hit.p, ub[..., 0], ub[..., 1:3])
+            wi, dist, li, lpdf, l_delta = fusion_barrier(
+                C.sample_light(scene, hit.p, ub[..., 0], ub[..., 1:3])
+            )
             so, sd = C.spawn_ray(hit.p, ng, wi)
             shadow_tmax = jnp.where(jnp.isfinite(dist), dist * (1 - 1e-4), jnp.inf)
             vis = ~C.occluded(scene, so, sd, shadow_tmax)
             wi_local = C.to_local(frame, wi)
-            f = C.dispatch(scene, mat, lambda m: m.eval(wo, wi_local))
-            bpdf = C.dispatch(scene, mat, lambda m: m.pdf(wo, wi_local))
+            f, bpdf = fusion_barrier(
+                C.dispatch(scene, mat, lambda m: (m.eval(wo, wi_local), m.pdf(wo, wi_local)))
+            )
             w = jnp.where(l_delta, 1.0, C.mis_power(lpdf, bpdf))
             contrib = f * li * safe_div(w, lpdf)[..., None]
             ok = alive & vis & (lpdf > 0)
             L = L + jnp.where(ok[..., None], beta * contrib, 0.0)
 
-        s = C.dispatch(scene, mat, lambda m: m.sample(wo, ub[..., 3], ub[..., 4:6]))
+        s = fusion_barrier(C.dispatch(scene, mat, lambda m: m.sample(wo, ub[..., 3], ub[..., 4:6])))
         wi_world = C.to_world(frame, s.wi)
         beta = beta * s.weight
-        alive = alive & (s.pdf > 0) & jnp.any(s.weight > 0, -1)
+        alive = alive & (s.pdf > 0) & (max_last(s.weight) > 0)
         o_next, d_next = C.spawn_ray(hit.p, ng, wi_world)
         # Russian roulette (Mitsuba: after rr_depth bounces, survival = min(max(beta), 0.95))
-        q = jnp.clip(jnp.max(beta, -1), 0.0, 0.95)
+        q = jnp.clip(max_last(beta), 0.0, 0.95)
         rr = depth >= rr_depth - 1
         survive = jnp.where(rr, ub[..., 6] < q, True)
         beta = jnp.where(rr, safe_div(beta, q[..., None]), beta)
