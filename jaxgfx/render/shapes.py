@@ -481,8 +481,10 @@ def intersect_scene(shapes, o, d, *, tmin=0.0, tmax=jnp.inf) -> Hit:
     Each element is a shape accepted by :func:`intersect`, an acceleration structure (with
     ``closest_t`` and a ``mesh``), or any object with the methods
     ``closest_t(o, d, *, tmin, tmax) -> (t, prim_id)`` (non-differentiable search, ``t = inf``
-    on misses) and ``hit(prim_id, o, d, valid) -> Hit`` (differentiable record). Two phases: the nearest ``(t, shape, primitive)`` is found
-    with the cheap tests of every shape, then ONE differentiable hit record is built per shape
+    on misses) and ``hit(prim_id, o, d, valid) -> Hit`` (differentiable record).
+
+    Two phases: the nearest ``(t, shape, primitive)`` is found with the cheap tests of every
+    shape, then ONE differentiable hit record is built per shape
     type (all spheres of the scene together, all rectangles together, each mesh), so a scene of
     many analytic shapes costs one record, not one per shape.
     """
