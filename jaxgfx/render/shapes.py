@@ -535,7 +535,12 @@ def intersect_scene(shapes, o, d, *, tmin=0.0, tmax=jnp.inf) -> Hit:
         out = h if out is None else merge_hits(out, h)
     if out is None:
         return empty_hit(batch, o.dtype)
-    return fusion_barrier(out)
+    # materialise the record, except uv: XLA then drops uv (arccos/atan2 for spheres) when no
+    # texture reads it
+    t, v, p, ng, ns, prim, shp = fusion_barrier(
+        (out.t, out.valid, out.p, out.ng, out.ns, out.prim_id, out.shape_id)
+    )
+    return Hit(t=t, valid=v, p=p, ng=ng, ns=ns, uv=out.uv, prim_id=prim, shape_id=shp)
 
 
 def occluded_scene(shapes, o, d, tmax, *, tmin=0.0):

@@ -14,34 +14,53 @@ import jax.numpy as jnp
 from jaxgfx._math import fusion_barrier, max_last, safe_div
 from jaxgfx.render.integrators import _common as C
 
-__all__ = ["path_radiance", "N_RANDOM"]
+__all__ = ["path_radiance", "N_RANDOM", "STRATEGIES"]
 
 N_RANDOM = 7  # uniform numbers per bounce: light select, light (2), bsdf lobe, bsdf (2), RR
 
 
-def _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta):
+STRATEGIES = ("mis", "light", "bsdf")
+
+
+def _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy):
     le = C.emitted(scene, hit, d)
-    lpdf = C.light_pdf_hit(scene, p_prev, hit, d)
     if scene.environment is not None:
         miss = ~hit.valid
         le = le + jnp.where(miss[..., None], scene.environment.eval(d), 0.0)
-        lpdf = jnp.where(miss, C.env_pdf(scene, d), lpdf)
+    if strategy == "bsdf":  # emitters are found only by BSDF sampling: full weight
+        return le
+    if strategy == "light":  # only camera rays and specular chains see emitters directly
+        return jnp.where(prev_delta[..., None], le, 0.0)
+    lpdf = C.light_pdf_hit(scene, p_prev, hit, d)
+    if scene.environment is not None:
+        lpdf = jnp.where(~hit.valid, C.env_pdf(scene, d), lpdf)
     w = jnp.where(prev_delta, 1.0, C.mis_power(prev_pdf, lpdf))
     return le * w[..., None]
 
 
-def path_radiance(scene, o, d, u, *, max_depth: int, rr_depth: int = 5, nee: bool = True):
-    """Radiance along rays ``o, d (..., 3)`` with uniform numbers ``u (..., max_depth, 7)``."""
+def path_radiance(scene, o, d, u, *, max_depth: int, rr_depth: int = 5, strategy: str = "mis"):
+    """Radiance along rays ``o, d (..., 3)`` with uniform numbers ``u (..., max_depth, 7)``.
+
+    ``strategy`` selects how direct light is estimated at each vertex: ``"mis"`` (light
+    sampling and BSDF sampling combined with the power heuristic, Veach 1997), ``"light"``
+    (light sampling only; emitters hit by BSDF-sampled rays count only after specular
+    bounces) or ``"bsdf"`` (BSDF sampling only, no shadow rays; point lights are then never
+    found). All three are unbiased for area and environment lights; they differ in variance.
+    """
+    if strategy not in STRATEGIES:
+        raise ValueError(f"strategy: expected one of {STRATEGIES}, got {strategy!r}")
     dtype = o.dtype
     batch = o.shape[:-1]
-    has_lights = scene.n_lights > 0 and nee
+    has_lights = scene.n_lights > 0 and strategy != "bsdf"
 
     def bounce(carry, xs):
         o, d, beta, L, alive, prev_pdf, prev_delta, p_prev = carry
         ub, depth = xs
         hit = C.intersect(scene, o, d)
         L = L + jnp.where(
-            alive[..., None], beta * _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta), 0
+            alive[..., None],
+            beta * _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy),
+            0,
         )
         alive = alive & hit.valid
         mat = C.hit_material(scene, hit)
@@ -58,7 +77,10 @@ def path_radiance(scene, o, d, u, *, max_depth: int, rr_depth: int = 5, nee: boo
             f, bpdf = fusion_barrier(
                 C.dispatch(scene, mat, lambda m: (m.eval(wo, wi_local), m.pdf(wo, wi_local)))
             )
-            w = jnp.where(l_delta, 1.0, C.mis_power(lpdf, bpdf))
+            if strategy == "mis":
+                w = jnp.where(l_delta, 1.0, C.mis_power(lpdf, bpdf))
+            else:
+                w = jnp.ones_like(lpdf)
             contrib = f * li * safe_div(w, lpdf)[..., None]
             ok = alive & vis & (lpdf > 0)
             L = L + jnp.where(ok[..., None], beta * contrib, 0.0)
@@ -94,5 +116,5 @@ def path_radiance(scene, o, d, u, *, max_depth: int, rr_depth: int = 5, nee: boo
     # last vertex: emission only
     o, d, beta, L, alive, prev_pdf, prev_delta, p_prev = carry
     hit = C.intersect(scene, o, d)
-    term = _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta)
+    term = _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy)
     return L + jnp.where(alive[..., None], beta * term, 0.0)
