@@ -507,3 +507,47 @@ def test_rough_plastic_documented_difference_at_alpha_0_3(mi):
     b = _replicates_mitsuba(desc, 32, 2).mean((0, 1, 2))
     rel = (a - b) / b
     assert np.all(rel > 0.002) and np.all(rel < 0.05), rel
+
+
+@pytest.mark.slow
+def test_example_scene_gaussian_filter(mi):
+    """configs/scenes/example.yaml (Gaussian filter, point + area light, glass, GGX, sky)."""
+    from jaxgfx.config import read_yaml
+
+    desc = read_yaml(
+        os.path.join(os.path.dirname(__file__), "..", "..", "configs", "scenes", "example.yaml")
+    )
+    desc["camera"]["width"] = desc["camera"]["height"] = RES
+    _check("example", desc, spp=64, max_depth=4)
+
+
+@pytest.mark.slow
+def test_obj_mesh_and_sphere_emitter(mi, tmp_path):
+    """A 320-triangle OBJ with vertex normals (BVH path) lit by a spherical area light, and
+    the same mesh without normals (flat shading: Mitsuba's face_normals)."""
+    from jaxgfx.render.mesh import make_icosphere, save_obj
+    from jaxgfx.render.shapes import TriangleMesh
+
+    m = make_icosphere(2, radius=0.6, center=(0.0, 0.6, 0.0))
+    save_obj(tmp_path / "smooth.obj", m)
+    save_obj(tmp_path / "flat.obj", TriangleMesh(m.vertices, m.faces))
+    desc = {
+        "camera": _camera(),
+        "shapes": [
+            {"type": "mesh", "file": "smooth.obj", "material": "metal"},
+            {"type": "mesh", "file": "flat.obj", "material": "floor", "translate": [1.3, 0, -0.5]},
+            FLOOR,
+        ],
+        "materials": {
+            "metal": {"type": "roughconductor", "alpha": 0.2, "reflectance": [0.9, 0.8, 0.6]},
+            "floor": {"type": "diffuse", "reflectance": 0.6},
+        },
+        "emitters": [
+            {
+                "type": "area",
+                "radiance": [6, 6, 6],
+                "shape": {"type": "sphere", "center": [-1.0, 2.0, 1.0], "radius": 0.4},
+            },
+        ],
+    }
+    _check("mesh", desc, spp=32, max_depth=3, base_dir=os.fspath(tmp_path))
