@@ -1,7 +1,7 @@
 """Renderer benchmark: samples/s of jaxgfx vs Mitsuba 3, compile time, equal-time error.
 
     python -m benchmarks.render [--quick] [--out FILE] [--plot DIR] [--ref-cache DIR]
-                                [--no-mitsuba]
+                                [--no-mitsuba | --mitsuba-variant scalar_rgb]
 
 1. Speed. Scenes: ``configs/scenes/example.yaml`` at 128^2 and 256^2 with ``direct`` and
    ``path`` (max_depth 3), and a 99 224-triangle mesh scene (a UV sphere written as a PLY to a
@@ -334,12 +334,16 @@ def main(argv=None):
     ap.add_argument("--plot", default=None, help="write speed_vs_error.png into this folder")
     ap.add_argument("--ref-cache", default=tempfile.gettempdir(), help="reference .npy folder")
     ap.add_argument("--no-mitsuba", action="store_true", help="jaxgfx only")
+    ap.add_argument(
+        "--mitsuba-variant", default=None, help="force a variant (default llvm_ad_rgb, else scalar)"
+    )
     args = ap.parse_args(argv)
 
     quick = args.quick
     spp = 4 if quick else 16
     repeat = 1 if quick else 3
-    mi, variant = (None, None) if args.no_mitsuba else _mitsuba(["llvm_ad_rgb", "scalar_rgb"])
+    prefs = [args.mitsuba_variant] if args.mitsuba_variant else ["llvm_ad_rgb", "scalar_rgb"]
+    mi, variant = (None, None) if args.no_mitsuba else _mitsuba(prefs)
     doc = {
         "benchmark": "render",
         "machine": {
