@@ -21,6 +21,9 @@ Mapping of conventions (jaxgfx -> Mitsuba 3), each checked by ``tests/render/tes
   ``conductor``, ``roughconductor`` and ``roughplastic`` are one-sided (black from behind), so they
   are wrapped in ``twosided``. ``dielectric`` is not wrapped. Emitter shapes without a material
   get a black ``diffuse`` (jaxgfx's default) instead of Mitsuba's grey default.
+* anisotropic roughness (``alpha_v``) is exported on rectangles only: jaxgfx's tangent is the
+  Duff et al. frame around the normal everywhere, Mitsuba's is ``dp/du`` (longitude on spheres,
+  the uv map on meshes), so highlights would be rotated (``NotImplementedError``).
 * ``eta`` (interior / exterior IOR) -> ``int_ior = eta``, ``ext_ior = 1``. Conductors with
   ``fresnel: none`` (F = 1) -> Mitsuba ``material: none`` (eta 0, k 1: |F| = 1) times
   ``specular_reflectance``; ``fresnel: conductor`` -> ``eta``, ``k``, ``specular_reflectance``;
@@ -386,12 +389,20 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
     default = _twosided({"type": "diffuse", "reflectance": _rgb(0.5)})
     black = {"type": "diffuse", "reflectance": _rgb(0.0)}
 
-    def material_of(d, where, fallback):
+    def material_of(d, where, fallback, shape_type=None):
         name = d.get("material")
         if not name:
             return fallback
         if name not in mats:
             raise ValueError(f"{where}.material: unknown material {name!r}; have {list(mats)}")
+        inner = mats[name].get("bsdf", mats[name])
+        if "alpha_u" in inner and shape_type in ("sphere", "mesh"):
+            # jaxgfx's tangent is the Duff et al. frame around the normal; Mitsuba's is dp/du
+            # (longitude on spheres, the uv parametrisation on meshes): rotated highlights.
+            raise NotImplementedError(
+                f"{where}.material: anisotropic {name!r} on a {shape_type}: the tangent frames "
+                "of jaxgfx and Mitsuba differ there (rectangles only)"
+            )
         return mats[name]
 
     # -- shapes
@@ -403,7 +414,7 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
     for i, sd in enumerate(shapes):
         where = f"shapes[{i}]"
         sh = _shape(sd, where, base_dir, work_dir, mi)
-        sh["bsdf"] = material_of(sd, where, default)
+        sh["bsdf"] = material_of(sd, where, default, sd["type"])
         out[f"shape_{i}"] = sh
 
     # -- emitters
@@ -421,7 +432,7 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
             if isinstance(ed["shape"], Mapping) and "material" in ed["shape"]:
                 raise ValueError(f"{where}.shape.material: put 'material' on the emitter")
             sh = _shape(ed["shape"], f"{where}.shape", base_dir, work_dir, mi)
-            sh["bsdf"] = material_of(ed, where, black)
+            sh["bsdf"] = material_of(ed, where, black, ed["shape"]["type"])
             sh["emitter"] = {"type": "area", "radiance": _rgb(S._rgb(ed["radiance"], where))}
             out[f"emitter_{i}"] = sh
         elif kind == "point":

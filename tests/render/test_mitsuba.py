@@ -191,6 +191,14 @@ def test_integrator_mapping():
         ({"shapes": [{"type": "mesh", "file": "nowhere.obj"}]}, ValueError, r"shapes\[0\]\.file"),
         ({"camera": {**_camera(), "fov": 200}}, ValueError, "fov"),
         ({"cameras": {}}, ValueError, "cameras"),
+        (
+            {
+                "shapes": [{"type": "sphere", "center": [0, 0, 0], "radius": 1, "material": "a"}],
+                "materials": {"a": {"type": "roughconductor", "alpha": 0.1, "alpha_v": 0.3}},
+            },
+            NotImplementedError,
+            r"shapes\[0\]\.material: anisotropic",
+        ),
     ],
 )
 def test_bad_descriptions_raise_naming_the_field(patch, exc, match):
@@ -354,19 +362,23 @@ DIFFUSE_SCENE = {
         "floor": {"type": "diffuse", "reflectance": [0.8, 0.5, 0.3]},
         "wall": {"type": "diffuse", "reflectance": [0.2, 0.6, 0.7]},
     },
-    "emitters": [_area()],
+    # off-centre lights: a mirrored or flipped image fails the per-pixel test
+    "emitters": [_area(), {"type": "point", "position": [1.5, 1.0, 1.0], "intensity": [2, 2, 2]}],
 }
 
 
-def test_diffuse_plane_area_light(mi):
+def test_diffuse_plane_area_and_point_light(mi):
     _check("diffuse", DIFFUSE_SCENE, spp=64, max_depth=3)
 
 
 def test_comparison_has_power(mi):
-    """A 5 % darker floor in Mitsuba must be rejected by the same criterion."""
+    """A 5 % darker floor in Mitsuba, or a mirrored image, must be rejected."""
     if "diffuse" not in _CACHE:
-        _CACHE["diffuse"] = (_replicates_ours(DIFFUSE_SCENE, 64, 3), None)
-    a = _CACHE["diffuse"][0]
+        _CACHE["diffuse"] = (
+            _replicates_ours(DIFFUSE_SCENE, 64, 3),
+            _replicates_mitsuba(DIFFUSE_SCENE, 64, 3),
+        )
+    a, b_same = _CACHE["diffuse"]
     desc = {
         **DIFFUSE_SCENE,
         "materials": {
@@ -377,6 +389,8 @@ def test_comparison_has_power(mi):
     b = _replicates_mitsuba(desc, 64, 3)
     mean_ok, frac, report = _compare(a, b)
     assert not mean_ok, report
+    _, frac, report = _compare(a, b_same[:, :, ::-1])  # left-right mirrored
+    assert frac < 0.9, report
 
 
 def test_rough_conductor_sphere(mi):
@@ -420,6 +434,7 @@ def test_smooth_dielectric_sphere(mi):
     _check("dielectric", desc, spp=64, max_depth=5)
 
 
+@pytest.mark.slow
 def test_point_light_off_centre(mi):
     """Also checks image orientation (the light is to the right of the camera)."""
     desc = {
@@ -462,28 +477,20 @@ def test_envmap_orientation(mi, tmp_path):
 
 def test_rough_plastic(mi):
     desc = {
-        "camera": _camera(),
-        "shapes": [
-            {"type": "sphere", "center": [0, 0.7, 0], "radius": 0.7, "material": "plastic"},
-            FLOOR,
-        ],
+        "camera": _camera(target=(0, 0.7, 0)),
+        "shapes": [{"type": "sphere", "center": [0, 0.7, 0], "radius": 0.7, "material": "p"}],
         "materials": {
-            "plastic": {
-                "type": "roughplastic",
-                "alpha": 0.05,
-                "diffuse_reflectance": [0.2, 0.4, 0.8],
-            },
-            "floor": {"type": "diffuse", "reflectance": 0.5},
+            "p": {"type": "roughplastic", "alpha": 0.05, "diffuse_reflectance": [0.2, 0.4, 0.8]}
         },
         "emitters": [_area(), {"type": "constant", "radiance": [0.3, 0.3, 0.3]}],
     }
     # The image-mean test resolves the documented model difference (jaxgfx uses the smooth
     # interface's transmittance for the diffuse base, Mitsuba 3 tabulates the rough one;
-    # docs/render_bsdf.md): measured +0.5 / +0.7 / +1.1 % (R, G, B) at alpha = 0.05, 3.5-5.5
+    # docs/render_bsdf.md): measured +0.3 / +0.5 / +0.8 % (R, G, B) at alpha = 0.05, several
     # standard errors. Per pixel the images agree; the mean difference must stay in the
     # documented direction and size.
-    a = _replicates_ours(desc, 64, 3)
-    b = _replicates_mitsuba(desc, 64, 3)
+    a = _replicates_ours(desc, 64, 2)
+    b = _replicates_mitsuba(desc, 64, 2)
     _, frac, report = _compare(a, b)
     assert frac >= 0.975, report
     rel = a.mean((0, 1, 2)) / b.mean((0, 1, 2)) - 1
@@ -551,3 +558,88 @@ def test_obj_mesh_and_sphere_emitter(mi, tmp_path):
         ],
     }
     _check("mesh", desc, spp=32, max_depth=3, base_dir=os.fspath(tmp_path))
+
+
+def test_tangent_frames_agree_on_rectangles_not_on_spheres(mi):
+    """Why anisotropic materials are exported on rectangles only."""
+    from jaxgfx.render.frame import frame_from_normal
+
+    sc = mi.load_dict(
+        {
+            "type": "scene",
+            "s": {"type": "sphere", "center": [0, 0, 0], "radius": 1},
+            **{
+                "r": to_mitsuba_dict(
+                    {
+                        "camera": _camera(),
+                        "shapes": [
+                            {"type": "rectangle", "center": [0, -2, 0], "normal": [0.2, 1, 0.3]}
+                        ],
+                    },
+                    mi=mi,
+                )["shape_0"]
+            },
+        }
+    )
+
+    def frames(o, d):
+        si = sc.ray_intersect(mi.Ray3f(mi.Point3f(*o), mi.Vector3f(*d)))
+        n = np.array(si.sh_frame.n)
+        return np.array(si.sh_frame.s), np.asarray(frame_from_normal(n).s, np.float64)
+
+    s_mi, s_ours = frames([0, 3, 0], [0.1, -1, 0.05])  # hits the sphere off the pole
+    assert abs(np.dot(s_mi, s_ours)) < 0.99
+    s_mi, s_ours = frames([0.2, -1, 0.1], [0, -1, 0])  # hits the rectangle
+    np.testing.assert_allclose(s_mi, s_ours, atol=1e-5)
+
+
+@pytest.mark.slow
+def test_conductors_beckmann_anisotropic_fov_y_backfacing_light(mi):
+    """Beckmann, complex-IOR conductor, anisotropic GGX (on a rectangle), non-square image with
+    a vertical fov, and an area light seen from behind (black in both)."""
+    desc = {
+        "camera": {
+            "origin": [0, 2, 4.5],
+            "target": [0, 0.4, 0],
+            "fov": 40,
+            "fov_axis": "y",
+            "width": 40,
+            "height": 24,
+        },
+        "shapes": [
+            {"type": "sphere", "center": [-0.8, 0.5, 0], "radius": 0.5, "material": "beck"},
+            {"type": "sphere", "center": [0.6, 0.5, 0], "radius": 0.5, "material": "gold"},
+            {**FLOOR, "material": "aniso"},
+        ],
+        "materials": {
+            "beck": {
+                "type": "roughconductor",
+                "distribution": "beckmann",
+                "alpha": 0.25,
+                "reflectance": 0.8,
+            },
+            "gold": {"type": "conductor", "eta": [0.2, 0.45, 1.4], "k": [3.6, 2.4, 1.8]},
+            "aniso": {
+                "type": "roughconductor",
+                "alpha": 0.05,
+                "alpha_v": 0.4,
+                "eta": [1.6, 1.0, 0.6],
+                "k": [3.0, 2.5, 2.0],
+            },
+        },
+        "emitters": [
+            _area(radiance=20.0),
+            {
+                "type": "area",
+                "radiance": [20, 0, 0],
+                "shape": {
+                    "type": "rectangle",
+                    "center": [0, 1.6, -1.0],
+                    "normal": [0, 0, -1],
+                    "size": [1.0, 0.4],
+                },
+            },
+            {"type": "constant", "radiance": [0.4, 0.4, 0.45]},
+        ],
+    }
+    _check("conductors", desc, spp=64, max_depth=3)
