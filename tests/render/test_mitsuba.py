@@ -131,6 +131,21 @@ def test_material_mapping_values():
     assert plastic["distribution"] == "ggx"
 
 
+def test_yaml_path_example_scene():
+    path = os.path.join(os.path.dirname(__file__), "..", "..", "configs", "scenes", "example.yaml")
+    d = to_mitsuba_dict(path)
+    assert d["sensor"]["fov"] == 45.0 and d["sensor"]["fov_axis"] == "x"
+    assert d["sensor"]["film"]["rfilter"] == {"type": "gaussian", "stddev": 0.5}
+    assert (d["sensor"]["film"]["width"], d["sensor"]["film"]["height"]) == (128, 128)
+    assert [d[f"shape_{i}"]["type"] for i in range(3)] == ["sphere", "sphere", "rectangle"]
+    assert d["shape_1"]["bsdf"]["type"] == "dielectric"  # transmissive: not wrapped
+    assert d["shape_0"]["bsdf"]["bsdf"]["alpha"] == pytest.approx(0.3)
+    assert [d[f"emitter_{i}"]["type"] for i in range(3)] == ["rectangle", "point", "constant"]
+    assert d["emitter_0"]["emitter"]["type"] == "area"
+    assert d["emitter_0"]["bsdf"]["reflectance"]["value"] == [0.0, 0.0, 0.0]
+    np.testing.assert_allclose(d["emitter_1"]["position"], [2, 3, 1])
+
+
 def test_envmap_regrid_known_values():
     img = np.zeros((2, 3, 3), np.float32)
     img[1] = 1.0
@@ -557,7 +572,7 @@ def test_obj_mesh_and_sphere_emitter(mi, tmp_path):
             },
         ],
     }
-    _check("mesh", desc, spp=32, max_depth=3, base_dir=os.fspath(tmp_path))
+    _check("mesh", desc, spp=8, max_depth=3, base_dir=os.fspath(tmp_path))
 
 
 def test_tangent_frames_agree_on_rectangles_not_on_spheres(mi):
