@@ -48,6 +48,7 @@ Mapping of conventions (jaxgfx -> Mitsuba 3), each checked by ``tests/render/tes
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 from collections.abc import Mapping
 
@@ -272,7 +273,8 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
         elif "vertices" in d and "faces" in d:
             # validated exactly as load_scene does, then written as a PLY for Mitsuba
             m = S._mesh({k: d[k] for k in ("vertices", "faces")}, where, base_dir)
-            path = os.path.join(_work_dir(work_dir), f"mesh_{abs(hash(where))}.ply")
+            name = re.sub(r"[^A-Za-z0-9]+", "_", where).strip("_")
+            path = os.path.join(work_dir(), f"{name}.ply")
             mesh_io.save_ply(path, m)
             out = {"type": "ply", "filename": path}
         else:
@@ -293,11 +295,17 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
     raise ValueError(f"{where}.type: expected one of {S.SHAPE_TYPES}, got {kind!r}")
 
 
-def _work_dir(work_dir):
-    if work_dir is None:
-        work_dir = tempfile.mkdtemp(prefix="jaxgfx_mitsuba_")
-    os.makedirs(work_dir, exist_ok=True)
-    return os.fspath(work_dir)
+class _WorkDir:
+    """The folder for generated files, created on first use (a temp folder when None)."""
+
+    def __init__(self, path):
+        self.path = None if path is None else os.fspath(path)
+
+    def __call__(self) -> str:
+        if self.path is None:
+            self.path = tempfile.mkdtemp(prefix="jaxgfx_mitsuba_")
+        os.makedirs(self.path, exist_ok=True)
+        return self.path
 
 
 # -------------------------------------------------------------------------------------------
@@ -332,6 +340,7 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
         base_dir = base_dir or os.path.dirname(os.path.abspath(os.fspath(desc)))
         desc = read_yaml(desc)
     S._expect_keys(desc, "scene", ("camera", "shapes"), ("materials", "emitters", "film"))
+    work_dir = _WorkDir(work_dir)
 
     # -- sensor
     cam = desc["camera"]
@@ -469,7 +478,7 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
                     raise ValueError(f"{where}.image: expected (H, W, 3), got shape {img.shape}")
                 from jaxgfx.io import write_exr
 
-                path = os.path.join(_work_dir(work_dir), f"envmap_{i}.exr")
+                path = os.path.join(work_dir(), f"envmap_{i}.exr")
                 write_exr(path, envmap_for_mitsuba(img))
                 scale = S._num(ed.get("scale", 1.0), f"{where}.scale")
                 out[f"emitter_{i}"] = {"type": "envmap", "filename": path, "scale": float(scale)}
@@ -538,10 +547,17 @@ def render_mitsuba(
         raise ValueError(f"spp: expected a positive integer, got {spp!r}")
     integ = mitsuba_integrator(integrator, max_depth=max_depth, rr_depth=rr_depth)
     mi = import_mitsuba(variant)
-    d = to_mitsuba_dict(desc, base_dir=base_dir, work_dir=work_dir, mi=mi)
-    d["integrator"] = integ
-    d["sensor"]["sampler"]["sample_count"] = int(spp)
-    scene = mi.load_dict(d)
+    # generated files (envmap, inline meshes) are read by load_dict; a temp folder is removed
+    tmp = tempfile.TemporaryDirectory(prefix="jaxgfx_mitsuba_") if work_dir is None else None
+    try:
+        wd = tmp.name if tmp is not None else work_dir
+        d = to_mitsuba_dict(desc, base_dir=base_dir, work_dir=wd, mi=mi)
+        d["integrator"] = integ
+        d["sensor"]["sampler"]["sample_count"] = int(spp)
+        scene = mi.load_dict(d)
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
     img = mi.render(scene, spp=int(spp), seed=int(seed))
     return np.array(img, dtype=np.float32)[..., :3]
 
