@@ -1,0 +1,408 @@
+"""Renderer benchmark: samples/s of jaxgfx vs Mitsuba 3, compile time, equal-time error.
+
+    python -m benchmarks.render [--quick] [--out FILE] [--plot DIR] [--ref-cache DIR]
+                                [--no-mitsuba | --mitsuba-variant scalar_rgb]
+
+1. Speed. Scenes: ``configs/scenes/example.yaml`` at 128^2 and 256^2 with ``direct`` and
+   ``path`` (max_depth 3), and a 99 224-triangle mesh scene (a UV sphere written as a PLY to a
+   temporary folder, so both renderers load the same file) at 128^2, path depth 3, 4 spp (the
+   others 16; ``--quick``: 4 spp, 128^2 only, a 6 240-triangle sphere, 1 repeat). jaxgfx: one
+   warm-up call, then the median of ``repeat`` calls; ``compile_s`` = first call minus the
+   median; samples/s = W H spp / median. Mitsuba 3 renders the same scenes through
+   :func:`jaxgfx.render.mitsuba.to_mitsuba_dict` in ``llvm_ad_rgb`` when it works (sets
+   ``DRJIT_LIBLLVM_PATH`` to Debian's ``libLLVM.so.19.1`` if present and unset), otherwise
+   ``scalar_rgb``: a warm-up render (LLVM JIT compilation), then the median of ``repeat``.
+2. Equal-time error at 64^2 (example scene without its point light: a delta light cannot be
+   reached by BSDF sampling, which would make that strategy biased): RMSE against a 4096-spp
+   jaxgfx MIS reference (cached as .npy in ``--ref-cache``, default the system temp folder) vs
+   seconds (m x the median time of one 4-spp call), for light sampling only, BSDF sampling
+   only and MIS (power heuristic), at spp = 4 m, m = 1, 2, 4, ... The MIS column is the
+   library's ``path_radiance``; the two
+   single-strategy estimators are defined here (``_single_strategy_radiance``) from the
+   integrator's own building blocks because ``path_radiance`` has no strategy switch (its
+   ``nee=False`` still MIS-weights emitter hits, which is biased).
+
+Prints one JSON document (progress to stderr); ``--plot DIR`` writes ``speed_vs_error.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgfx.config import read_yaml
+from jaxgfx.render.film import pixel_samples
+from jaxgfx.render.integrators import _common as C
+from jaxgfx.render.integrators.path import N_RANDOM, path_radiance
+from jaxgfx.render.mesh import make_uv_sphere, save_ply
+from jaxgfx.render.render import render
+from jaxgfx.render.scene import load_scene
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+EXAMPLE = os.path.join(ROOT, "configs", "scenes", "example.yaml")
+LLVM19 = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"
+
+
+def _log(*a):
+    print(*a, file=sys.stderr, flush=True)
+
+
+def _with_res(desc, w, h=None):
+    d = copy.deepcopy(desc)
+    d["camera"]["width"], d["camera"]["height"] = int(w), int(h or w)
+    return d
+
+
+def mesh_scene(tmp_dir, n_rings=158, res=128):
+    """Scene around a ``4 n (n - 1)``-triangle UV sphere (99 224 for n = 158) saved as PLY."""
+    path = os.path.join(tmp_dir, f"sphere_{n_rings}.ply")
+    m = make_uv_sphere(n_rings, radius=1.0, center=(0.0, 1.0, 0.0))
+    save_ply(path, m)
+    desc = read_yaml(EXAMPLE)
+    desc = _with_res(desc, res)
+    desc["shapes"][0] = {"type": "mesh", "file": path, "material": "metal"}
+    return desc, int(m.faces.shape[0])
+
+
+# -------------------------------------------------------------------------------------------
+# speed
+
+
+def _median_time(fn, repeat):
+    ts = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t)
+    return statistics.median(ts)
+
+
+def bench_jaxgfx(desc, *, spp, integrator, max_depth, repeat):
+    t = time.perf_counter()
+    scene = load_scene(desc)
+    jax.block_until_ready(scene)
+    build = time.perf_counter() - t
+    key = jax.random.key(0)
+
+    def run():
+        return render(scene, key, spp=spp, integrator=integrator, max_depth=max_depth)
+
+    t = time.perf_counter()
+    img = run().block_until_ready()
+    first = time.perf_counter() - t
+    med = _median_time(lambda: run().block_until_ready(), repeat)
+    w, h = scene.width, scene.height
+    return {
+        "load_s": round(build, 3),
+        "first_call_s": round(first, 3),
+        "compile_s": round(max(first - med, 0.0), 3),
+        "time_s": round(med, 4),
+        "samples_per_s": round(w * h * spp / med),
+        "mean": float(np.asarray(img).mean()),
+    }
+
+
+def _mitsuba(variant_pref):
+    """Import mitsuba with the first working variant of ``variant_pref``; (mi, variant)."""
+    if "llvm_ad_rgb" in variant_pref and "DRJIT_LIBLLVM_PATH" not in os.environ:
+        if os.path.exists(LLVM19):
+            os.environ["DRJIT_LIBLLVM_PATH"] = LLVM19
+    try:
+        import mitsuba as mi
+    except ImportError:
+        return None, None
+    for v in variant_pref:
+        if v not in mi.variants():
+            continue
+        try:
+            mi.set_variant(v)
+            if v.startswith("llvm"):  # Dr.Jit only fails when the backend is first used
+                mi.load_dict({"type": "scene"})
+                _ = mi.Float(1.0) + 1.0
+                mi.Float(_).numpy()
+            return mi, v
+        except Exception as e:  # pragma: no cover - depends on the installation
+            _log(f"mitsuba variant {v} unavailable: {e}")
+    return None, None
+
+
+def bench_mitsuba(mi, desc, *, spp, integrator, max_depth, repeat):
+    from jaxgfx.render.mitsuba import mitsuba_integrator, to_mitsuba_dict
+
+    t = time.perf_counter()
+    d = to_mitsuba_dict(desc, mi=mi)
+    d["integrator"] = mitsuba_integrator(integrator, max_depth=max_depth)
+    d["sensor"]["sampler"]["sample_count"] = spp
+    scene = mi.load_dict(d)
+    build = time.perf_counter() - t
+
+    def run(seed=0):
+        img = mi.render(scene, spp=spp, seed=seed)
+        return np.array(img)  # forces evaluation in JIT variants
+
+    t = time.perf_counter()
+    img = run()
+    first = time.perf_counter() - t
+    med = _median_time(lambda: run(1), repeat)
+    w, h = desc["camera"]["width"], desc["camera"]["height"]
+    return {
+        "load_s": round(build, 3),
+        "first_call_s": round(first, 3),
+        "compile_s": round(max(first - med, 0.0), 3),
+        "time_s": round(med, 4),
+        "samples_per_s": round(w * h * spp / med),
+        "mean": float(img[..., :3].mean()),
+    }
+
+
+# -------------------------------------------------------------------------------------------
+# equal-time error
+
+
+def _single_strategy_radiance(scene, o, d, u, *, max_depth, strategy, rr_depth=5):
+    """Unidirectional path tracing with ONE strategy for non-delta vertices (weights 1).
+
+    ``"light"``: next-event estimation only; emitters reached by BSDF-sampled rays count only
+    after delta bounces (and for camera rays). ``"bsdf"``: no NEE; every emitter hit counts.
+    Same random-number layout, Russian roulette and depth convention as ``path_radiance``.
+    """
+    light = strategy == "light"
+    batch = o.shape[:-1]
+
+    def bounce(carry, xs):
+        o, d, beta, L, alive, prev_delta = carry
+        ub, depth = xs
+        hit = C.intersect(scene, o, d)
+        le = C.emitted(scene, hit, d)
+        if scene.environment is not None:
+            le = le + jnp.where((~hit.valid)[..., None], scene.environment.eval(d), 0.0)
+        count = alive & prev_delta if light else alive
+        L = L + jnp.where(count[..., None], beta * le, 0.0)
+        alive = alive & hit.valid
+        mat = C.hit_material(scene, hit)
+        frame, ng, wo = C.shading_frame(scene, hit, d, mat)
+        if light and scene.n_lights > 0:
+            wi, dist, li, lpdf, _ = C.sample_light(scene, hit.p, ub[..., 0], ub[..., 1:3])
+            so, sd = C.spawn_ray(hit.p, ng, wi)
+            vis = ~C.occluded(
+                scene, so, sd, jnp.where(jnp.isfinite(dist), dist * (1 - 1e-4), jnp.inf)
+            )
+            f = C.dispatch(scene, mat, lambda m: m.eval(wo, C.to_local(frame, wi)))
+            ok = alive & vis & (lpdf > 0)
+            L = L + jnp.where(
+                ok[..., None], beta * f * li / jnp.where(ok, lpdf, 1.0)[..., None], 0.0
+            )
+        s = C.dispatch(scene, mat, lambda m: m.sample(wo, ub[..., 3], ub[..., 4:6]))
+        beta = beta * s.weight
+        alive = alive & (s.pdf > 0) & jnp.any(s.weight > 0, -1)
+        o2, d2 = C.spawn_ray(hit.p, ng, C.to_world(frame, s.wi))
+        q = jnp.clip(jnp.max(beta, -1), 0.0, 0.95)
+        rr = depth >= rr_depth - 1
+        alive = alive & jnp.where(rr, ub[..., 6] < q, True)
+        beta = jnp.where(rr, beta / jnp.where(q > 0, q, 1.0)[..., None], beta)
+        beta = jnp.where(alive[..., None], beta, 0.0)
+        return (o2, d2, beta, L, alive, s.is_delta), None
+
+    dtype = o.dtype
+    carry = (
+        o,
+        d,
+        jnp.ones(batch + (3,), dtype),
+        jnp.zeros(batch + (3,), dtype),
+        jnp.ones(batch, bool),
+        jnp.ones(batch, bool),
+    )
+    us = jnp.moveaxis(u[..., : max_depth - 1, :], -2, 0)
+    carry, _ = jax.lax.scan(bounce, carry, (us, jnp.arange(max_depth - 1)))
+    o, d, beta, L, alive, prev_delta = carry
+    hit = C.intersect(scene, o, d)
+    le = C.emitted(scene, hit, d)
+    if scene.environment is not None:
+        le = le + jnp.where((~hit.valid)[..., None], scene.environment.eval(d), 0.0)
+    count = alive & prev_delta if light else alive
+    return L + jnp.where(count[..., None], beta * le, 0.0)
+
+
+def make_strategy_renderer(strategy, *, spp, max_depth):
+    """Jitted ``f(scene, key) -> (H, W, 3)`` mean of ``spp`` samples with one strategy."""
+
+    @jax.jit
+    def f(scene, key):
+        w, h = scene.width, scene.height
+        kp, ku = jax.random.split(key)
+        px = pixel_samples(kp, w, h, spp, scene.rfilter)
+
+        def one(s, acc):
+            o, d = scene.camera.generate_ray(px[:, :, s, :])
+            u = jax.random.uniform(jax.random.fold_in(ku, s), (h, w, max_depth, N_RANDOM))
+            if strategy == "mis":
+                v = path_radiance(scene, o, d, u, max_depth=max_depth)
+            else:
+                v = _single_strategy_radiance(
+                    scene, o, d, u, max_depth=max_depth, strategy=strategy
+                )
+            return acc + v
+
+        return jax.lax.fori_loop(0, spp, one, jnp.zeros((h, w, 3))) / spp
+
+    return f
+
+
+def equal_time(*, res, max_depth, ref_spp, spp_steps, base_spp, cache_dir):
+    desc = _with_res(read_yaml(EXAMPLE), res)
+    desc["emitters"] = [e for e in desc["emitters"] if e["type"] != "point"]
+    scene = load_scene(desc)
+    ref_path = os.path.join(cache_dir, f"jaxgfx_render_ref_{res}_{max_depth}_{ref_spp}.npy")
+    if os.path.exists(ref_path):
+        ref = np.load(ref_path)
+        _log(f"reference from cache {ref_path}")
+    else:
+        chunk = make_strategy_renderer("mis", spp=64, max_depth=max_depth)
+        n = max(ref_spp // 64, 1)
+        t = time.perf_counter()
+        acc = 0.0
+        for i in range(n):
+            acc = acc + np.asarray(chunk(scene, jax.random.key(10_000 + i)), np.float64)
+        ref = acc / n
+        _log(f"reference {n * 64} spp in {time.perf_counter() - t:.1f} s -> {ref_path}")
+        os.makedirs(cache_dir, exist_ok=True)
+        np.save(ref_path, ref)
+    out = {"res": res, "max_depth": max_depth, "ref_spp": ref_spp, "strategies": {}}
+    for strategy in ("light", "bsdf", "mis"):
+        f = make_strategy_renderer(strategy, spp=base_spp, max_depth=max_depth)
+        t = time.perf_counter()
+        f(scene, jax.random.key(0)).block_until_ready()
+        compile_s = time.perf_counter() - t
+        t1 = _median_time(lambda f=f: f(scene, jax.random.key(1)).block_until_ready(), 3)
+        rows = []
+        for m in spp_steps:
+            # error of the mean of m independent calls; cost = m x the median call time
+            acc = np.zeros(ref.shape)
+            for i in range(m):
+                acc += np.asarray(f(scene, jax.random.key(100 + i)), np.float64)
+            rmse = float(np.sqrt(np.mean((acc / m - ref) ** 2)))
+            rows.append({"spp": m * base_spp, "seconds": round(m * t1, 4), "rmse": rmse})
+        out["strategies"][strategy] = {
+            "compile_s": round(compile_s - t1, 3),
+            "seconds_per_spp": round(t1 / base_spp, 5),
+            "rows": rows,
+        }
+        _log(strategy, json.dumps(rows[-1]))
+    return out
+
+
+def plot(doc, out_dir):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    et = doc["equal_time"]
+    fig, ax = plt.subplots(figsize=(5, 4))
+    for name, s in et["strategies"].items():
+        ax.loglog(
+            [r["seconds"] for r in s["rows"]], [r["rmse"] for r in s["rows"]], "o-", label=name
+        )
+    ax.set_xlabel("seconds (jaxgfx, CPU)")
+    ax.set_ylabel(f"RMSE vs {et['ref_spp']}-spp reference")
+    ax.set_title(f"example scene (no point light), {et['res']}², path depth {et['max_depth']}")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    os.makedirs(out_dir, exist_ok=True)
+    path = os.path.join(out_dir, "speed_vs_error.png")
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="small spp, 1 repeat, 256-spp reference")
+    ap.add_argument("--out", default=None, help="also write the JSON here")
+    ap.add_argument("--plot", default=None, help="write speed_vs_error.png into this folder")
+    ap.add_argument("--ref-cache", default=tempfile.gettempdir(), help="reference .npy folder")
+    ap.add_argument("--no-mitsuba", action="store_true", help="jaxgfx only")
+    ap.add_argument(
+        "--mitsuba-variant", default=None, help="force a variant (default llvm_ad_rgb, else scalar)"
+    )
+    args = ap.parse_args(argv)
+
+    quick = args.quick
+    spp = 4 if quick else 16
+    repeat = 1 if quick else 3
+    prefs = [args.mitsuba_variant] if args.mitsuba_variant else ["llvm_ad_rgb", "scalar_rgb"]
+    mi, variant = (None, None) if args.no_mitsuba else _mitsuba(prefs)
+    doc = {
+        "benchmark": "render",
+        "machine": {
+            "platform": platform.platform(),
+            "cpus": os.cpu_count(),
+            "jax": jax.__version__,
+            "backend": jax.default_backend(),
+        },
+        "mitsuba": None if mi is None else {"version": mi.__version__, "variant": variant},
+        "spp": spp,
+        "repeat": repeat,
+        "speed": [],
+    }
+    base = read_yaml(EXAMPLE)
+    cases = []
+    for res in (128,) if quick else (128, 256):
+        for integ in ("direct", "path"):
+            cases.append((f"example_{res}", _with_res(base, res), integ))
+    with tempfile.TemporaryDirectory(prefix="jaxgfx_bench_render_") as tmp:
+        mdesc, n_tri = mesh_scene(tmp, n_rings=40 if quick else 158)
+        cases.append((f"mesh_{n_tri}_128", mdesc, "path"))
+        for name, desc, integ in cases:
+            # the BVH scene is ~100x slower per sample in jaxgfx (while_loop traversal): 4 spp
+            spp = 4 if name.startswith("mesh") else doc["spp"]
+            row = {
+                "scene": name,
+                "width": desc["camera"]["width"],
+                "integrator": integ,
+                "max_depth": 3 if integ == "path" else 2,
+                "spp": spp,
+            }
+            row["jaxgfx"] = bench_jaxgfx(
+                desc, spp=spp, integrator=integ, max_depth=3, repeat=repeat
+            )
+            if mi is not None:
+                row["mitsuba"] = bench_mitsuba(
+                    mi, desc, spp=spp, integrator=integ, max_depth=3, repeat=repeat
+                )
+                row["mitsuba_over_jaxgfx"] = round(
+                    row["mitsuba"]["samples_per_s"] / row["jaxgfx"]["samples_per_s"], 2
+                )
+            doc["speed"].append(row)
+            _log(json.dumps(row))
+    doc["equal_time"] = equal_time(
+        res=32 if quick else 64,
+        max_depth=3,
+        ref_spp=256 if quick else 4096,
+        spp_steps=(1, 2, 4) if quick else (1, 2, 4, 8, 16, 32),
+        base_spp=4,
+        cache_dir=args.ref_cache,
+    )
+    if args.plot:
+        doc["plot"] = plot(doc, args.plot)
+    text = json.dumps(doc, indent=1)
+    print(text)
+    if args.out:
+        with open(args.out, "w") as fh:
+            fh.write(text + "\n")
+
+
+if __name__ == "__main__":
+    main()
