@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-dev
 export JAX_PLATFORMS ?= cpu
 
-.PHONY: demo test test-slow bench lint clean venv
+.PHONY: demo test test-slow test-mitsuba bench bench-render lint clean venv
 
 $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
@@ -26,10 +26,20 @@ test: $(STAMP)
 	$(PY) -m pytest -q
 
 test-slow: $(STAMP)
-	$(PY) -m pytest -q -m slow
+	$(PY) -m pytest -q -m 'slow and not mitsuba'
+
+# Mitsuba 3 comparison renders (scalar_rgb variant: needs only the PyPI wheel)
+test-mitsuba: $(STAMP)
+	$(PY) -m pip install -q -e '.[dev,mitsuba]'
+	$(PY) -m pytest -q -m mitsuba
 
 bench: $(STAMP)
 	$(PY) -m benchmarks.image_filters
+
+# renderer: samples/s vs Mitsuba 3 (llvm_ad_rgb needs `apt-get install libllvm19`), equal-time RMSE
+bench-render: $(STAMP)
+	$(PY) -m pip install -q -e '.[dev,mitsuba]'
+	$(PY) -m benchmarks.render --plot out/bench
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check jaxgfx tests experiments benchmarks

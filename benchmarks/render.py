@@ -16,11 +16,8 @@
    reached by BSDF sampling, which would make that strategy biased): RMSE against a 4096-spp
    jaxgfx MIS reference (cached as .npy in ``--ref-cache``, default the system temp folder) vs
    seconds (m x the median time of one 4-spp call), for light sampling only, BSDF sampling
-   only and MIS (power heuristic), at spp = 4 m, m = 1, 2, 4, ... The MIS column is the
-   library's ``path_radiance``; the two
-   single-strategy estimators are defined here (``_single_strategy_radiance``) from the
-   integrator's own building blocks because ``path_radiance`` has no strategy switch (its
-   ``nee=False`` still MIS-weights emitter hits, which is biased).
+   only and MIS (power heuristic), at spp = 4 m, m = 1, 2, 4, ...: the library's
+   ``render(..., strategy="light" | "bsdf" | "mis")``.
 
 Prints one JSON document (progress to stderr); ``--plot DIR`` writes ``speed_vs_error.png``.
 """
@@ -38,13 +35,9 @@ import tempfile
 import time
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from jaxgfx.config import read_yaml
-from jaxgfx.render.film import pixel_samples
-from jaxgfx.render.integrators import _common as C
-from jaxgfx.render.integrators.path import N_RANDOM, path_radiance
 from jaxgfx.render.mesh import make_uv_sphere, save_ply
 from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
@@ -170,91 +163,14 @@ def bench_mitsuba(mi, desc, *, spp, integrator, max_depth, repeat):
 # equal-time error
 
 
-def _single_strategy_radiance(scene, o, d, u, *, max_depth, strategy, rr_depth=5):
-    """Unidirectional path tracing with ONE strategy for non-delta vertices (weights 1).
-
-    ``"light"``: next-event estimation only; emitters reached by BSDF-sampled rays count only
-    after delta bounces (and for camera rays). ``"bsdf"``: no NEE; every emitter hit counts.
-    Same random-number layout, Russian roulette and depth convention as ``path_radiance``.
-    """
-    light = strategy == "light"
-    batch = o.shape[:-1]
-
-    def bounce(carry, xs):
-        o, d, beta, L, alive, prev_delta = carry
-        ub, depth = xs
-        hit = C.intersect(scene, o, d)
-        le = C.emitted(scene, hit, d)
-        if scene.environment is not None:
-            le = le + jnp.where((~hit.valid)[..., None], scene.environment.eval(d), 0.0)
-        count = alive & prev_delta if light else alive
-        L = L + jnp.where(count[..., None], beta * le, 0.0)
-        alive = alive & hit.valid
-        mat = C.hit_material(scene, hit)
-        frame, ng, wo = C.shading_frame(scene, hit, d, mat)
-        if light and scene.n_lights > 0:
-            wi, dist, li, lpdf, _ = C.sample_light(scene, hit.p, ub[..., 0], ub[..., 1:3])
-            so, sd = C.spawn_ray(hit.p, ng, wi)
-            vis = ~C.occluded(
-                scene, so, sd, jnp.where(jnp.isfinite(dist), dist * (1 - 1e-4), jnp.inf)
-            )
-            f = C.dispatch(scene, mat, lambda m: m.eval(wo, C.to_local(frame, wi)))
-            ok = alive & vis & (lpdf > 0)
-            L = L + jnp.where(
-                ok[..., None], beta * f * li / jnp.where(ok, lpdf, 1.0)[..., None], 0.0
-            )
-        s = C.dispatch(scene, mat, lambda m: m.sample(wo, ub[..., 3], ub[..., 4:6]))
-        beta = beta * s.weight
-        alive = alive & (s.pdf > 0) & jnp.any(s.weight > 0, -1)
-        o2, d2 = C.spawn_ray(hit.p, ng, C.to_world(frame, s.wi))
-        q = jnp.clip(jnp.max(beta, -1), 0.0, 0.95)
-        rr = depth >= rr_depth - 1
-        alive = alive & jnp.where(rr, ub[..., 6] < q, True)
-        beta = jnp.where(rr, beta / jnp.where(q > 0, q, 1.0)[..., None], beta)
-        beta = jnp.where(alive[..., None], beta, 0.0)
-        return (o2, d2, beta, L, alive, s.is_delta), None
-
-    dtype = o.dtype
-    carry = (
-        o,
-        d,
-        jnp.ones(batch + (3,), dtype),
-        jnp.zeros(batch + (3,), dtype),
-        jnp.ones(batch, bool),
-        jnp.ones(batch, bool),
-    )
-    us = jnp.moveaxis(u[..., : max_depth - 1, :], -2, 0)
-    carry, _ = jax.lax.scan(bounce, carry, (us, jnp.arange(max_depth - 1)))
-    o, d, beta, L, alive, prev_delta = carry
-    hit = C.intersect(scene, o, d)
-    le = C.emitted(scene, hit, d)
-    if scene.environment is not None:
-        le = le + jnp.where((~hit.valid)[..., None], scene.environment.eval(d), 0.0)
-    count = alive & prev_delta if light else alive
-    return L + jnp.where(count[..., None], beta * le, 0.0)
-
-
 def make_strategy_renderer(strategy, *, spp, max_depth):
-    """Jitted ``f(scene, key) -> (H, W, 3)`` mean of ``spp`` samples with one strategy."""
+    """``f(scene, key) -> (H, W, 3)``: mean of ``spp`` samples with one direct-light strategy
+    (``render(..., strategy=...)``: "mis", "light" or "bsdf")."""
 
-    @jax.jit
     def f(scene, key):
-        w, h = scene.width, scene.height
-        kp, ku = jax.random.split(key)
-        px = pixel_samples(kp, w, h, spp, scene.rfilter)
-
-        def one(s, acc):
-            o, d = scene.camera.generate_ray(px[:, :, s, :])
-            u = jax.random.uniform(jax.random.fold_in(ku, s), (h, w, max_depth, N_RANDOM))
-            if strategy == "mis":
-                v = path_radiance(scene, o, d, u, max_depth=max_depth)
-            else:
-                v = _single_strategy_radiance(
-                    scene, o, d, u, max_depth=max_depth, strategy=strategy
-                )
-            return acc + v
-
-        return jax.lax.fori_loop(0, spp, one, jnp.zeros((h, w, 3))) / spp
+        return render(
+            scene, key, spp=spp, integrator="path", max_depth=max_depth, strategy=strategy
+        )
 
     return f
 

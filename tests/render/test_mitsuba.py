@@ -259,6 +259,7 @@ def test_inline_mesh_written_as_ply(tmp_path):
 # against Mitsuba 3
 
 
+@pytest.mark.mitsuba
 def test_look_at_matches_mitsuba(mi):
     desc = {
         "camera": {**_camera(origin=(1, 2, 3), target=(-0.5, 0.2, 0.1)), "up": [0.1, 1, 0]},
@@ -285,6 +286,7 @@ def _env_image(h=8, w=16):
     return (img * np.array([1.0, 0.7, 0.5])).astype(np.float32)
 
 
+@pytest.mark.mitsuba
 def test_envmap_lookup_equals_mitsuba(mi, tmp_path):
     """Deterministic: Mitsuba's envmap eval of the re-gridded map == jaxgfx's eval."""
     from jaxgfx.io import write_exr
@@ -382,10 +384,12 @@ DIFFUSE_SCENE = {
 }
 
 
+@pytest.mark.mitsuba
 def test_diffuse_plane_area_and_point_light(mi):
     _check("diffuse", DIFFUSE_SCENE, spp=64, max_depth=3)
 
 
+@pytest.mark.mitsuba
 def test_comparison_has_power(mi):
     """A 5 % darker floor in Mitsuba, or a mirrored image, must be rejected."""
     if "diffuse" not in _CACHE:
@@ -408,6 +412,7 @@ def test_comparison_has_power(mi):
     assert frac < 0.9, report
 
 
+@pytest.mark.mitsuba
 def test_rough_conductor_sphere(mi):
     desc = {
         "camera": _camera(),
@@ -429,6 +434,7 @@ def test_rough_conductor_sphere(mi):
     _check("roughconductor", desc, spp=64, max_depth=3)
 
 
+@pytest.mark.mitsuba
 @pytest.mark.slow
 def test_smooth_dielectric_sphere(mi):
     desc = {
@@ -449,6 +455,7 @@ def test_smooth_dielectric_sphere(mi):
     _check("dielectric", desc, spp=64, max_depth=5)
 
 
+@pytest.mark.mitsuba
 @pytest.mark.slow
 def test_point_light_off_centre(mi):
     """Also checks image orientation (the light is to the right of the camera)."""
@@ -469,6 +476,7 @@ def test_point_light_off_centre(mi):
     assert a[:, RES // 2 :].mean() > a[:, : RES // 2].mean()  # the lit side is on the right
 
 
+@pytest.mark.mitsuba
 def test_envmap_orientation(mi, tmp_path):
     from jaxgfx.io import write_exr
 
@@ -490,6 +498,7 @@ def test_envmap_orientation(mi, tmp_path):
     )
 
 
+@pytest.mark.mitsuba
 def test_rough_plastic(mi):
     desc = {
         "camera": _camera(target=(0, 0.7, 0)),
@@ -512,6 +521,7 @@ def test_rough_plastic(mi):
     assert np.all(rel > 0) and np.all(rel < 0.02), report
 
 
+@pytest.mark.mitsuba
 @pytest.mark.slow
 def test_rough_plastic_documented_difference_at_alpha_0_3(mi):
     """jaxgfx's roughplastic uses the smooth interface's transmittance (docs/render_bsdf.md);
@@ -531,6 +541,7 @@ def test_rough_plastic_documented_difference_at_alpha_0_3(mi):
     assert np.all(rel > 0.002) and np.all(rel < 0.05), rel
 
 
+@pytest.mark.mitsuba
 @pytest.mark.slow
 def test_example_scene_gaussian_filter(mi):
     """configs/scenes/example.yaml (Gaussian filter, point + area light, glass, GGX, sky)."""
@@ -543,6 +554,7 @@ def test_example_scene_gaussian_filter(mi):
     _check("example", desc, spp=64, max_depth=4)
 
 
+@pytest.mark.mitsuba
 @pytest.mark.slow
 def test_obj_mesh_and_sphere_emitter(mi, tmp_path):
     """A 320-triangle OBJ with vertex normals (BVH path) lit by a spherical area light, and
@@ -575,6 +587,7 @@ def test_obj_mesh_and_sphere_emitter(mi, tmp_path):
     _check("mesh", desc, spp=8, max_depth=3, base_dir=os.fspath(tmp_path))
 
 
+@pytest.mark.mitsuba
 def test_tangent_frames_agree_on_rectangles_not_on_spheres(mi):
     """Why anisotropic materials are exported on rectangles only."""
     from jaxgfx.render.frame import frame_from_normal
@@ -608,6 +621,7 @@ def test_tangent_frames_agree_on_rectangles_not_on_spheres(mi):
     np.testing.assert_allclose(s_mi, s_ours, atol=1e-5)
 
 
+@pytest.mark.mitsuba
 @pytest.mark.slow
 def test_conductors_beckmann_anisotropic_fov_y_backfacing_light(mi):
     """Beckmann, complex-IOR conductor, anisotropic GGX (on a rectangle), non-square image with

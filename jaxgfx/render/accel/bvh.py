@@ -81,8 +81,11 @@ class BVH(TriangleAccel):
             tfar = jnp.where(near == left, ctn[1], ctn[0])
             both = hl & hr
             push = both & (sp < STACK_SIZE)
-            sn = jnp.where(push, sn.at[sp].set(far), sn)
-            st = jnp.where(push, st.at[sp].set(tfar), st)
+            # Write the slot above the top unconditionally (it is free; an index past the end
+            # is dropped): a plain in-place update of the loop carry. Selecting between the old
+            # and the updated stack copied both (N, 64) stacks every iteration under vmap.
+            sn = sn.at[sp].set(far, mode="drop")
+            st = st.at[sp].set(tfar, mode="drop")
             sp = sp + push.astype(jnp.int32)
             descend = hl | hr
             # otherwise pop
