@@ -160,6 +160,75 @@ def bench_mitsuba(mi, desc, *, spp, integrator, max_depth, repeat):
 
 
 # -------------------------------------------------------------------------------------------
+# "model only what a scene needs": cost of each feature
+
+
+def feature_costs(*, res, spp, repeat):
+    """ns per direct-lighting sample as scene features are added one at a time: a scene that
+    does not use refraction, point lights, an environment or a second material type must not
+    pay for them (the integrators compile only what the scene contains)."""
+    base = {
+        "camera": {
+            "origin": [0, 1.5, 5],
+            "target": [0, 1, 0],
+            "fov": 45,
+            "width": res,
+            "height": res,
+        },
+        "shapes": [
+            {"type": "sphere", "center": [0, 1, 0], "radius": 1, "material": "floor"},
+            {
+                "type": "rectangle",
+                "center": [0, 0, 0],
+                "normal": [0, 1, 0],
+                "size": [10, 10],
+                "material": "floor",
+            },
+        ],
+        "materials": {"floor": {"type": "diffuse", "reflectance": 0.5}},
+        "emitters": [
+            {
+                "type": "area",
+                "radiance": 10.0,
+                "shape": {
+                    "type": "rectangle",
+                    "center": [0, 4, 0],
+                    "normal": [0, -1, 0],
+                    "size": [2, 2],
+                },
+            },
+        ],
+    }
+    steps = []
+    d = copy.deepcopy(base)
+    steps.append(("diffuse + area light", copy.deepcopy(d)))
+    d["materials"]["metal"] = {"type": "roughconductor", "alpha": 0.3}
+    d["shapes"][0]["material"] = "metal"
+    steps.append(("+ rough conductor", copy.deepcopy(d)))
+    d["emitters"].append({"type": "point", "position": [2, 3, 1], "intensity": 50.0})
+    steps.append(("+ point light", copy.deepcopy(d)))
+    d["emitters"].append({"type": "constant", "radiance": 0.1})
+    steps.append(("+ constant environment", copy.deepcopy(d)))
+    d["materials"]["glass"] = {"type": "dielectric"}
+    d["shapes"].append(
+        {"type": "sphere", "center": [1.8, 0.5, 1.0], "radius": 0.5, "material": "glass"}
+    )
+    steps.append(("+ glass sphere (refraction)", copy.deepcopy(d)))
+    rows = []
+    for name, desc in steps:
+        r = bench_jaxgfx(desc, spp=spp, integrator="direct", max_depth=2, repeat=repeat)
+        rows.append(
+            {
+                "scene": name,
+                "ns_per_sample": round(1e9 / r["samples_per_s"], 1),
+                "compile_s": r["compile_s"],
+            }
+        )
+        _log(json.dumps(rows[-1]))
+    return rows
+
+
+# -------------------------------------------------------------------------------------------
 # equal-time error
 
 
@@ -253,7 +322,13 @@ def main(argv=None):
     ap.add_argument(
         "--mitsuba-variant", default=None, help="force a variant (default llvm_ad_rgb, else scalar)"
     )
+    ap.add_argument(
+        "--sections",
+        default="speed,mesh,features,equal_time",
+        help="comma-separated subset of speed,mesh,features,equal_time",
+    )
     args = ap.parse_args(argv)
+    sections = set(args.sections.split(","))
 
     quick = args.quick
     spp = 4 if quick else 16
@@ -275,12 +350,13 @@ def main(argv=None):
     }
     base = read_yaml(EXAMPLE)
     cases = []
-    for res in (128,) if quick else (128, 256):
+    for res in ((128,) if quick else (128, 256)) if "speed" in sections else ():
         for integ in ("direct", "path"):
             cases.append((f"example_{res}", _with_res(base, res), integ))
     with tempfile.TemporaryDirectory(prefix="jaxgfx_bench_render_") as tmp:
-        mdesc, n_tri = mesh_scene(tmp, n_rings=40 if quick else 158)
-        cases.append((f"mesh_{n_tri}_128", mdesc, "path"))
+        if "mesh" in sections:
+            mdesc, n_tri = mesh_scene(tmp, n_rings=40 if quick else 158)
+            cases.append((f"mesh_{n_tri}_128", mdesc, "path"))
         for name, desc, integ in cases:
             # the BVH scene is ~100x slower per sample in jaxgfx (while_loop traversal): 4 spp
             spp = 4 if name.startswith("mesh") else doc["spp"]
@@ -303,16 +379,19 @@ def main(argv=None):
                 )
             doc["speed"].append(row)
             _log(json.dumps(row))
-    doc["equal_time"] = equal_time(
-        res=32 if quick else 64,
-        max_depth=3,
-        ref_spp=256 if quick else 4096,
-        spp_steps=(1, 2, 4) if quick else (1, 2, 4, 8, 16, 32),
-        base_spp=4,
-        cache_dir=args.ref_cache,
-    )
-    if args.plot:
-        doc["plot"] = plot(doc, args.plot)
+    if "features" in sections:
+        doc["feature_costs"] = feature_costs(res=128, spp=4 if quick else 16, repeat=repeat)
+    if "equal_time" in sections:
+        doc["equal_time"] = equal_time(
+            res=32 if quick else 64,
+            max_depth=3,
+            ref_spp=256 if quick else 4096,
+            spp_steps=(1, 2, 4) if quick else (1, 2, 4, 8, 16, 32),
+            base_spp=4,
+            cache_dir=args.ref_cache,
+        )
+        if args.plot:
+            doc["plot"] = plot(doc, args.plot)
     text = json.dumps(doc, indent=1)
     print(text)
     if args.out:
