@@ -118,71 +118,38 @@ def _polygon_irradiance(x, n, verts):
     return abs(e) / 2.0
 
 
-def test_rectangular_area_light_irradiance():
-    desc = _plane_scene(
-        [
-            {
-                "type": "area",
-                "radiance": 3.0,
-                "shape": {
-                    "type": "rectangle",
-                    "center": [0.3, 1.0, 0.2],
-                    "normal": [0, -1, 0],
-                    "size": [1.0, 0.6],
-                },
-            }
-        ],
-        fov=2.0,
-    )
+def _lamp_over_plane(center, size, radiance, res):
+    """A rectangular lamp facing down over the albedo-0.5 plane, seen by a narrow camera looking
+    straight down at the origin; returns the scene and the closed-form pixel value
+    (rho / pi * L * E_unit, Lambert's polygon formula at the origin)."""
+    lamp = {"type": "rectangle", "center": center, "normal": [0, -1, 0], "size": size}
+    desc = _plane_scene([{"type": "area", "radiance": radiance, "shape": lamp}])
     desc["camera"] = {
         "origin": [0, 0.5, 0.0001],
         "target": [0, 0, 0],
         "up": [0, 0, 1],
         "fov": 1.0,
-        "width": 4,
-        "height": 4,
+        "width": res,
+        "height": res,
     }
     scene = load_scene(desc)
-    img = render(scene, KEY, spp=256, integrator="direct")
     rect = scene.emitter_shapes[0]
     c, eu, ev = (np.asarray(a[0], np.float64) for a in (rect.centers, rect.edge_u, rect.edge_v))
     verts = [c - eu / 2 - ev / 2, c + eu / 2 - ev / 2, c + eu / 2 + ev / 2, c - eu / 2 + ev / 2]
     e = _polygon_irradiance(np.zeros(3), np.array([0, 1.0, 0]), verts)
-    _assert_mean(img, np.full(3, 0.5 / math.pi * 3.0 * e))
+    return scene, np.full(3, 0.5 / math.pi * radiance * e)
+
+
+def test_rectangular_area_light_irradiance():
+    scene, expected = _lamp_over_plane([0.3, 1.0, 0.2], [1.0, 0.6], 3.0, 4)
+    img = render(scene, KEY, spp=256, integrator="direct")
+    _assert_mean(img, expected)
 
 
 def test_light_bsdf_and_mis_strategies_agree_with_polygon_formula():
     """All three direct-light strategies are unbiased; BSDF sampling is the noisiest for a
     small light and MIS is close to the better single strategy (Veach 1997)."""
-    desc = _plane_scene(
-        [
-            {
-                "type": "area",
-                "radiance": 20.0,
-                "shape": {
-                    "type": "rectangle",
-                    "center": [0.2, 1.0, -0.1],
-                    "normal": [0, -1, 0],
-                    "size": [0.4, 0.3],
-                },
-            }
-        ]
-    )
-    desc["camera"] = {
-        "origin": [0, 0.5, 0.0001],
-        "target": [0, 0, 0],
-        "up": [0, 0, 1],
-        "fov": 1.0,
-        "width": 8,
-        "height": 8,
-    }
-    scene = load_scene(desc)
-    rect = scene.emitter_shapes[0]
-    c, eu, ev = (np.asarray(a[0], np.float64) for a in (rect.centers, rect.edge_u, rect.edge_v))
-    verts = [c - eu / 2 - ev / 2, c + eu / 2 - ev / 2, c + eu / 2 + ev / 2, c - eu / 2 + ev / 2]
-    expected = np.full(
-        3, 0.5 / math.pi * 20.0 * _polygon_irradiance(np.zeros(3), np.array([0, 1.0, 0]), verts)
-    )
+    scene, expected = _lamp_over_plane([0.2, 1.0, -0.1], [0.4, 0.3], 20.0, 8)
     var = {}
     for strategy in ("mis", "light", "bsdf"):
         img = render(scene, KEY, spp=64, integrator="direct", strategy=strategy)
