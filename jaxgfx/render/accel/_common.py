@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgfx._math import max_last, sum_last
+from jaxgfx._math import max_last
 from jaxgfx.render.ray import Hit
 from jaxgfx.render.shapes import TriangleMesh, _rays, primitive_hit
 
@@ -30,28 +30,47 @@ def slab(bmin, bmax, o, inv, t0, t1):
     ta = (bmin - o) * inv
     tb = (bmax - o) * inv
     tn = jnp.maximum(max_last(jnp.minimum(ta, tb)), t0)
-    tf = jnp.minimum(jnp.min(jnp.maximum(ta, tb), axis=-1) * _GROW[jnp.dtype(o.dtype)], t1)
+    far = jnp.maximum(ta, tb)
+    far = jnp.minimum(jnp.minimum(far[..., 0], far[..., 1]), far[..., 2])  # unrolled min
+    tf = jnp.minimum(far * _GROW[jnp.dtype(o.dtype)], t1)
     return tn, tf, tn <= tf
 
 
 def tri_chunk(tris, idx, mask, o, d, tmin, tmax):
-    """Möller-Trumbore on ``tris[idx]`` (``idx (K,)``); returns ``(t_min, slot)`` over the chunk."""
-    tri = tris[jnp.maximum(idx, 0)]
-    v0, v1, v2 = tri[:, 0], tri[:, 1], tri[:, 2]
-    e1, e2 = v1 - v0, v2 - v0
-    P = jnp.cross(d, e2)
-    det = sum_last(P * e1)
+    """Möller-Trumbore on ``tris[idx]`` (``idx (K,)``); returns ``(t_min, slot)`` over the chunk.
+
+    Written per component with an unrolled minimum over the K slots: XLA CPU fuses it into
+    one loop (the vector form with cross products and an argmin reduction was split into
+    several kernels per traversal step).
+    """
+    tri = tris[jnp.maximum(idx, 0)]  # (K, 3, 3)
+    v0 = [tri[:, 0, i] for i in range(3)]
+    e1 = [tri[:, 1, i] - v0[i] for i in range(3)]
+    e2 = [tri[:, 2, i] - v0[i] for i in range(3)]
+    dx, dy, dz = d[0], d[1], d[2]
+    # P = d x e2
+    px = dy * e2[2] - dz * e2[1]
+    py = dz * e2[0] - dx * e2[2]
+    pz = dx * e2[1] - dy * e2[0]
+    det = px * e1[0] + py * e1[1] + pz * e1[2]
     ok = det != 0
     inv_det = 1.0 / jnp.where(ok, det, 1.0)
-    T = o - v0
-    b1 = sum_last(P * T) * inv_det
-    Q = jnp.cross(T, e1)
-    b2 = sum_last(Q * d) * inv_det
-    t = sum_last(Q * e2) * inv_det
+    tx, ty, tz = o[0] - v0[0], o[1] - v0[1], o[2] - v0[2]
+    b1 = (px * tx + py * ty + pz * tz) * inv_det
+    # Q = T x e1
+    qx = ty * e1[2] - tz * e1[1]
+    qy = tz * e1[0] - tx * e1[2]
+    qz = tx * e1[1] - ty * e1[0]
+    b2 = (qx * dx + qy * dy + qz * dz) * inv_det
+    t = (qx * e2[0] + qy * e2[1] + qz * e2[2]) * inv_det
     hit = mask & ok & (b1 >= 0) & (b2 >= 0) & (b1 + b2 <= 1) & (t > tmin) & (t < tmax)
     t = jnp.where(hit, t, jnp.inf)
-    j = jnp.argmin(t)
-    return t[j], j
+    best, j = t[0], jnp.int32(0)
+    for k in range(1, t.shape[0]):
+        closer = t[k] < best
+        best = jnp.where(closer, t[k], best)
+        j = jnp.where(closer, k, j)
+    return best, j
 
 
 def as_numpy_triangles(mesh: TriangleMesh):
