@@ -45,11 +45,14 @@ from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera
 from jaxgfx.render.emitters import AreaLight, ConstantEnvironment, EnvironmentMap, PointLights
 from jaxgfx.render.film import make_filter
 from jaxgfx.render.frame import frame_from_normal
+from jaxgfx.render.sdf import sdf_from_dict
+from jaxgfx.render.sdf_shape import SDFShape
 from jaxgfx.render.shapes import Rectangles, Spheres, TriangleMesh, area
+from jaxgfx.render.textured import Textured, make_textured
 
 __all__ = ["Scene", "load_scene", "SHAPE_TYPES", "EMITTER_TYPES"]
 
-SHAPE_TYPES = ("sphere", "rectangle", "mesh")
+SHAPE_TYPES = ("sphere", "rectangle", "mesh", "sdf")
 EMITTER_TYPES = ("area", "point", "constant", "envmap")
 BVH_MIN_TRIANGLES = 64
 
@@ -130,6 +133,17 @@ class Scene(eqx.Module):
         if not rest:
             raise ValueError(f"{path}: expected a field name after the object")
         obj = getter(self)
+        prefix = []
+        if isinstance(obj, Textured):
+            # textured parameter: materials.NAME.FIELD.image / .color0; others: the BSDF's
+            if rest[0] in obj.textures:
+                if len(rest) < 2:
+                    raise ValueError(f"{path}: {rest[0]!r} is a texture; name its parameter")
+                prefix = [("textures", rest[0])]
+                obj, rest = obj.textures[rest[0]], rest[1:]
+            else:
+                prefix = ["bsdf"]
+                obj = obj.bsdf
         # aliases: isotropic roughness `alpha` sets both microfacet alphas
         if rest == ["alpha"] and hasattr(obj, "distribution") and not hasattr(obj, "alpha"):
             rest_list = [["distribution", "alpha_u"], ["distribution", "alpha_v"]]
@@ -150,10 +164,10 @@ class Scene(eqx.Module):
             if not eqx.is_array(o):
                 raise ValueError(f"{path}: {fields[-1]!r} is not an array parameter")
 
-            def where(s, fields=fields):
+            def where(s, fields=(*prefix, *fields)):
                 o = getter(s)
                 for f in fields:
-                    o = getattr(o, f)
+                    o = getattr(o, f[0])[f[1]] if isinstance(f, tuple) else getattr(o, f)
                 return o
 
             getters.append(where)
@@ -293,6 +307,14 @@ def _shape_from_desc(d, where, base_dir):
             d, where, ("type",), (*common, "file", "vertices", "faces", "translate", "scale")
         )
         return "mesh", _mesh(d, where, base_dir)
+    if kind == "sdf":
+        _expect_keys(d, where, ("type", "expr"), (*common, "max_steps", "eps"))
+        expr = d["expr"]
+        sdf = sdf_from_dict(dict(expr) if isinstance(expr, Mapping) else expr, path=f"{where}.expr")
+        try:
+            return "sdf", SDFShape(sdf, d.get("max_steps", 128), d.get("eps", 1e-4))
+        except ValueError as e:
+            raise ValueError(f"{where}.{e}") from None
     raise ValueError(f"{where}.type: expected one of {SHAPE_TYPES}, got {kind!r}")
 
 
@@ -329,7 +351,7 @@ def load_scene(desc, *, base_dir: str | None = None) -> Scene:
     names, materials = [], []
     for name, md in mats_desc.items():
         try:
-            materials.append(make_bsdf(dict(md)))
+            materials.append(make_textured(dict(md), make_bsdf, where="", base_dir=base_dir))
         except (ValueError, TypeError) as e:
             raise ValueError(f"materials.{name}: {e}") from None
         names.append(str(name))
@@ -355,7 +377,7 @@ def load_scene(desc, *, base_dir: str | None = None) -> Scene:
         where = f"shapes[{i}]"
         kind, shape = _shape_from_desc(sd, where, base_dir)
         mi = material_index(sd, where)
-        if kind == "mesh":
+        if kind in ("mesh", "sdf"):
             meshes.append((shape, mi))
         else:
             groups[kind].append(shape)
@@ -367,6 +389,10 @@ def load_scene(desc, *, base_dir: str | None = None) -> Scene:
             shapes.append(_concat(groups[kind]))
             shape_mats.append(jnp.asarray(group_mats[kind], jnp.int32))
     for m, mi in meshes:
+        if isinstance(m, SDFShape):
+            shapes.append(m)
+            shape_mats.append(jnp.full((1,), mi, jnp.int32))
+            continue
         if m.faces.shape[0] >= BVH_MIN_TRIANGLES:
             from jaxgfx.render.accel.bvh import build_bvh
 
@@ -392,6 +418,8 @@ def load_scene(desc, *, base_dir: str | None = None) -> Scene:
         elif kind == "area":
             _expect_keys(ed, where, ("type", "shape", "radiance"), ("material",))
             sk, shape = _shape_from_desc(ed["shape"], f"{where}.shape", base_dir)
+            if sk == "sdf":
+                raise ValueError(f"{where}.shape: SDF shapes cannot be area lights (no area)")
             if "material" in ed["shape"]:
                 raise ValueError(f"{where}.shape.material: put 'material' on the emitter")
             if ed.get("material"):

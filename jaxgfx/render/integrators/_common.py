@@ -46,12 +46,14 @@ def hit_material(scene, hit):
     return mat
 
 
-def dispatch(scene, mat_id, fn):
+def dispatch(scene, mat_id, fn, *, uv=None):
     """Evaluate ``fn(bsdf)`` for every material of the scene and select per ray by ``mat_id``.
 
     Only the materials the scene defines are evaluated (a one-material scene pays for one).
+    Textured materials (``jaxgfx.render.textured.Textured``) are resolved at the hit ``uv``.
     """
-    outs = [fn(m) for m in scene.materials]
+    # [scenefeat] textures: only materials with an ``at`` method pay for a lookup
+    outs = [fn(m.at(uv) if hasattr(m, "at") else m) for m in scene.materials]
     if len(outs) == 1:
         return outs[0]
 

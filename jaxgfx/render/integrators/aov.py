@@ -19,7 +19,7 @@ def aov(scene, o, d):
     hit = C.intersect(scene, o, d)
     mat = C.hit_material(scene, hit)
     frame, _, _ = C.shading_frame(scene, hit, d, mat)
-    alb = C.dispatch(scene, mat, lambda m: jnp.broadcast_to(m.albedo, hit.p.shape))
+    alb = C.dispatch(scene, mat, lambda m: jnp.broadcast_to(m.albedo, hit.p.shape), uv=hit.uv)
     v = hit.valid[..., None]
     depth = jnp.where(hit.valid, hit.t, 0.0)[..., None]
     return jnp.concatenate([jnp.where(v, alb, 0.0), jnp.where(v, frame.n, 0.0), depth], -1)

@@ -75,7 +75,9 @@ def path_radiance(scene, o, d, u, *, max_depth: int, rr_depth: int = 5, strategy
             vis = ~C.occluded(scene, so, sd, shadow_tmax)
             wi_local = C.to_local(frame, wi)
             f, bpdf = fusion_barrier(
-                C.dispatch(scene, mat, lambda m: (m.eval(wo, wi_local), m.pdf(wo, wi_local)))
+                C.dispatch(
+                    scene, mat, lambda m: (m.eval(wo, wi_local), m.pdf(wo, wi_local)), uv=hit.uv
+                )
             )
             if strategy == "mis":
                 w = jnp.where(l_delta, 1.0, C.mis_power(lpdf, bpdf))
@@ -85,7 +87,9 @@ def path_radiance(scene, o, d, u, *, max_depth: int, rr_depth: int = 5, strategy
             ok = alive & vis & (lpdf > 0)
             L = L + jnp.where(ok[..., None], beta * contrib, 0.0)
 
-        s = fusion_barrier(C.dispatch(scene, mat, lambda m: m.sample(wo, ub[..., 3], ub[..., 4:6])))
+        s = fusion_barrier(
+            C.dispatch(scene, mat, lambda m: m.sample(wo, ub[..., 3], ub[..., 4:6]), uv=hit.uv)
+        )
         wi_world = C.to_world(frame, s.wi)
         beta = beta * s.weight
         alive = alive & (s.pdf > 0) & (max_last(s.weight) > 0)

@@ -27,7 +27,7 @@ def _direct(scene, hit, frame, ng, wo, mat, alive, u):
         so, sd = C.spawn_ray(hit.p, ng, wi)
         tmax = jnp.where(jnp.isfinite(dist), dist * (1 - 1e-4), jnp.inf)
         vis = ~C.occluded(scene, so, sd, tmax)
-        f = C.dispatch(scene, mat, lambda m: m.eval(wo, C.to_local(frame, wi)))
+        f = C.dispatch(scene, mat, lambda m: m.eval(wo, C.to_local(frame, wi)), uv=hit.uv)
         ok = alive & vis & (pdf > 0)
         return jnp.where(ok[..., None], f * li * safe_div(1.0, pdf)[..., None], 0.0)
 
@@ -76,7 +76,10 @@ def whitted_radiance(scene, o, d, u, *, max_depth: int):
         new_o, new_d, new_beta = [], [], []
         for u1, want_reflect in branches:
             s = C.dispatch(
-                scene, mat, lambda m, u1=u1, wo=wo, u2=ub[..., 4:6]: m.sample(wo, u1, u2)
+                scene,
+                mat,
+                lambda m, u1=u1, wo=wo, u2=ub[..., 4:6]: m.sample(wo, u1, u2),
+                uv=hit.uv,
             )
             reflected = s.wi[..., 2] * wo[..., 2] > 0
             ok = delta & s.is_delta & (reflected if want_reflect else ~reflected)

@@ -1,0 +1,285 @@
+"""Textures and SDF shapes in scene descriptions.
+
+References: Mitsuba 3's checkerboard convention (closed form), colour-science's sRGB decoding
+for PNG textures, per-ray BSDFs against BSDFs built with constant parameters, finite differences
+for texel / radius gradients, and an analytic sphere for the sphere-traced SDF sphere.
+"""
+
+import math
+
+import colour
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from jax.test_util import check_grads
+from PIL import Image
+
+from jaxgfx.render.bsdf import Diffuse, RoughConductor
+from jaxgfx.render.render import render
+from jaxgfx.render.scene import load_scene
+from jaxgfx.render.sdf import SDFSphere
+from jaxgfx.render.sdf_shape import SDFShape
+from jaxgfx.render.shapes import Spheres, intersect
+from jaxgfx.render.texture import Texture
+from jaxgfx.render.textured import Checkerboard, Textured, texture_eval, texture_from_dict
+
+KEY = jax.random.key(3)
+
+
+# ------------------------------------------------------------------------------------------
+# textures
+
+
+def test_checkerboard_mitsuba_convention():
+    tex = texture_from_dict({"type": "checkerboard", "color0": [1, 0, 0], "color1": 0.25})
+    uv = jnp.array([[0.25, 0.25], [0.75, 0.25], [0.25, 0.75], [0.75, 0.75], [1.25, -0.25]])
+    got = np.asarray(texture_eval(tex, uv))
+    c0, c1 = [1, 0, 0], [0.25] * 3
+    np.testing.assert_array_equal(got, [c0, c1, c1, c0, c1])
+    # scale multiplies uv: with scale 2 the cell size is 1/4
+    tex2 = texture_from_dict({"type": "checkerboard", "scale": 2})
+    got2 = np.asarray(texture_eval(tex2, jnp.array([[0.1, 0.1], [0.3, 0.1]])))
+    np.testing.assert_allclose(got2[:, 0], [0.4, 0.2], rtol=1e-6)
+
+
+def test_bitmap_png_srgb_decoding(tmp_path):
+    rng = np.random.default_rng(0)
+    px = rng.integers(0, 256, (3, 4, 3), dtype=np.uint8)
+    Image.fromarray(px).save(tmp_path / "t.png")
+    tex = texture_from_dict({"type": "bitmap", "file": "t.png"}, base_dir=str(tmp_path))
+    ref = colour.cctf_decoding(px / 255.0, function="sRGB")
+    np.testing.assert_allclose(np.asarray(tex.image), ref, atol=2e-6)
+    raw = texture_from_dict({"type": "bitmap", "file": str(tmp_path / "t.png"), "raw": True})
+    np.testing.assert_allclose(np.asarray(raw.image), px / 255.0, atol=1e-6)
+
+
+def test_bitmap_errors(tmp_path):
+    with pytest.raises(ValueError, match=r"materials.m: reflectance.file"):
+        load_scene(_plane_scene({"type": "bitmap", "file": str(tmp_path / "missing.png")}))
+    with pytest.raises(ValueError, match="reflectance.type"):
+        load_scene(_plane_scene({"type": "noise"}))
+    with pytest.raises(ValueError, match="reflectance: unknown key"):
+        load_scene(_plane_scene({"type": "bitmap", "image": [[0.5]], "gamma": 2}))
+    bad = {"type": "roughconductor", "alpha": {"type": "bitmap", "image": [[0.1, 0.0]]}}
+    with pytest.raises(ValueError, match="alpha: texture values must be positive"):
+        load_scene(_plane_scene(None, material=bad))
+    with pytest.raises(ValueError, match="reflectance.wrap"):
+        load_scene(_plane_scene({"type": "bitmap", "image": [[0.5]], "wrap": "tile"}))
+
+
+def test_textured_at_matches_per_ray_bsdfs(x64):
+    """RGB reflectance and scalar GGX alpha per ray equal BSDFs built with those constants."""
+    alpha_img = jnp.array([[0.05, 0.3], [0.6, 1.0]])
+    refl_img = jnp.array([[[0.9, 0.5, 0.1], [0.2, 0.4, 0.8]], [[1.0, 1.0, 1.0], [0.3, 0.3, 0.3]]])
+    texs = {
+        "alpha": texture_from_dict({"type": "bitmap", "image": alpha_img, "filter": "nearest"}),
+        "reflectance": texture_from_dict(
+            {"type": "bitmap", "image": refl_img, "filter": "nearest"}
+        ),
+    }
+    mat = Textured(RoughConductor(0.5), texs)
+    uv = jnp.array([[0.25, 0.25], [0.75, 0.25], [0.25, 0.75], [0.75, 0.75]])
+    wo = jnp.array([[0.3, 0.1, 0.95], [-0.5, 0.2, 0.84], [0.0, 0.7, 0.71], [0.1, -0.2, 0.97]])
+    wo = wo / jnp.linalg.norm(wo, axis=-1, keepdims=True)
+    wi = jnp.array([[-0.2, 0.3, 0.93], [0.4, 0.4, 0.82], [0.1, -0.6, 0.79], [0.6, 0.0, 0.8]])
+    wi = wi / jnp.linalg.norm(wi, axis=-1, keepdims=True)
+    u1 = jnp.full(4, 0.3)
+    u2 = jnp.array([[0.2, 0.7], [0.5, 0.1], [0.9, 0.4], [0.3, 0.3]])
+
+    @jax.jit
+    def per_ray(mat):
+        b = mat.at(uv)
+        return b.eval(wo, wi), b.pdf(wo, wi), b.sample(wo, u1, u2)
+
+    f, pdf, s = per_ray(mat)
+    a_flat = np.asarray(alpha_img).reshape(-1)
+    r_flat = np.asarray(refl_img).reshape(-1, 3)
+    for i in range(4):
+        ref = RoughConductor(float(a_flat[i]), reflectance=r_flat[i])
+        np.testing.assert_allclose(f[i], ref.eval(wo[i], wi[i]), rtol=1e-10)
+        np.testing.assert_allclose(pdf[i], ref.pdf(wo[i], wi[i]), rtol=1e-10)
+        si = ref.sample(wo[i], u1[i], u2[i])
+        np.testing.assert_allclose(s.wi[i], si.wi, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(s.weight[i], si.weight, rtol=1e-9)
+
+    def loss(img):
+        t = Textured(Diffuse(0.5), {"reflectance": Texture(img)})
+        return jnp.sum(t.at(uv * 0.9 + 0.03).eval(wo, wi))
+
+    check_grads(loss, (refl_img,), order=1, modes=["rev"])
+
+
+def _plane_scene(tex, *, material=None, width=8):
+    mat = material or {"type": "diffuse", "reflectance": tex}
+    return {
+        "camera": {
+            "origin": [0, 3, 0.01],
+            "target": [0, 0, 0],
+            "up": [0, 0, -1],
+            "fov": 30,
+            "width": width,
+            "height": width,
+        },
+        "shapes": [
+            {
+                "type": "rectangle",
+                "center": [0, 0, 0],
+                "normal": [0, 1, 0],
+                "size": [2.0, 2.0],
+                "material": "m",
+            }
+        ],
+        "materials": {"m": mat},
+        "emitters": [{"type": "point", "position": [0.3, 2.0, 0.2], "intensity": 10}],
+    }
+
+
+TEX_IMG = np.array([[[0.9, 0.5, 0.1], [0.2, 0.4, 0.8]], [[0.6, 0.6, 0.6], [0.3, 0.1, 0.7]]])
+
+
+def test_constant_texture_renders_like_plain_material_and_texel_gradient():
+    const = {"type": "bitmap", "image": np.full((2, 2, 3), 0.3)}
+    a = render(load_scene(_plane_scene(const)), KEY, spp=4, integrator="direct")
+    b = render(load_scene(_plane_scene(0.3)), KEY, spp=4, integrator="direct")
+    assert float(jnp.mean(b)) > 0.05
+    np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-5, atol=1e-6)
+
+    # texel gradient: the image is linear in the texels (direct light, diffuse), so central
+    # differences with the same key are exact up to float32 rounding
+    scene = load_scene(_plane_scene({"type": "bitmap", "image": TEX_IMG}))
+    path = "materials.m.reflectance.image"
+    w = jnp.linspace(0.5, 1.5, 3)
+
+    def loss(img):
+        return jnp.sum(
+            jnp.mean(render(scene.replace(path, img), KEY, spp=4, integrator="direct"), (0, 1)) * w
+        )
+
+    x0 = jnp.asarray(TEX_IMG, jnp.float32)
+    g = jax.grad(loss)(x0)
+    assert np.all(np.isfinite(g)) and float(jnp.max(jnp.abs(g))) > 1e-3
+    h = 0.05
+    for idx in [(0, 0, 0), (0, 1, 2), (1, 0, 1), (1, 1, 0)]:
+        fd = (loss(x0.at[idx].add(h)) - loss(x0.at[idx].add(-h))) / (2 * h)
+        np.testing.assert_allclose(g[idx], fd, rtol=2e-3, atol=1e-5)
+    assert scene.get(path).shape == (2, 2, 3)
+
+
+def test_checkerboard_albedo_aov():
+    """AOV albedo of a checkerboard plane is exactly one of the two colours, half each."""
+    tex = {"type": "checkerboard", "color0": [0.8, 0.1, 0.1], "color1": [0.1, 0.1, 0.8], "scale": 2}
+    img = np.asarray(render(load_scene(_plane_scene(tex, width=16)), KEY, spp=1, integrator="aov"))
+    alb = img[..., :3].reshape(-1, 3)
+    is0 = np.all(np.abs(alb - [0.8, 0.1, 0.1]) < 1e-6, -1)
+    is1 = np.all(np.abs(alb - [0.1, 0.1, 0.8]) < 1e-6, -1)
+    assert np.all(is0 | is1)
+    assert 0.35 < is0.mean() < 0.65
+
+
+# ------------------------------------------------------------------------------------------
+# SDF shapes
+
+
+def test_sdf_shape_closest_t_matches_analytic_sphere(rng):
+    c, r = np.array([0.2, -0.1, 0.3]), 0.8
+    shape = SDFShape(SDFSphere(c, r), max_steps=256, eps=1e-5)
+    o = rng.normal(size=(256, 3)) * 3
+    d = c + rng.normal(size=(256, 3)) * 0.6 - o  # about half of the rays hit
+    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    o, d = jnp.asarray(o, jnp.float32), jnp.asarray(d, jnp.float32)
+    t, _ = jax.jit(lambda o, d: shape.closest_t(o, d, tmin=0.0, tmax=jnp.inf))(o, d)
+    ref = intersect(Spheres(c, r), o, d)
+    np.testing.assert_array_equal(np.isfinite(t), np.asarray(ref.valid))
+    v = np.asarray(ref.valid)
+    assert 40 < v.sum() < 216
+    np.testing.assert_allclose(np.asarray(t)[v], np.asarray(ref.t)[v], atol=2e-3)  # grazing
+    # hit record: point and normal
+    h = shape.hit(jnp.zeros(256, jnp.int32), o, d, jnp.asarray(v))
+    np.testing.assert_allclose(np.asarray(h.p)[v], np.asarray(ref.p)[v], atol=2e-3)
+    np.testing.assert_allclose(np.asarray(h.ng)[v], np.asarray(ref.ng)[v], atol=3e-3)
+
+
+def test_sdf_shape_from_inside_and_from_its_surface():
+    shape = SDFShape(SDFSphere([0.0, 0.0, 0.0], 1.0))
+    # camera inside: hits the far wall at t = 1
+    t, _ = shape.closest_t(jnp.zeros((1, 3)), jnp.array([[0.0, 0.6, 0.8]]), tmin=0.0, tmax=jnp.inf)
+    np.testing.assert_allclose(t, [1.0], atol=1e-3)
+    # rays leaving the surface outward: no self-hit; inward: chord 2 cos(theta)
+    p = jnp.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    d = jnp.array([[0.6, 0.0, 0.8], [0.6, 0.0, -0.8]])
+    t, _ = shape.closest_t(p, d, tmin=0.0, tmax=jnp.inf)
+    assert not np.isfinite(t[0])
+    np.testing.assert_allclose(t[1], 1.6, atol=2e-3)
+
+
+def _sphere_scene(kind, radius=1.0, *, origin=(0, 0, 4), fov=40):
+    if kind == "sdf":
+        shape = {"type": "sdf", "expr": {"op": "sphere", "center": [0, 0, 0], "radius": radius}}
+    else:
+        shape = {"type": "sphere", "center": [0, 0, 0], "radius": radius}
+    return load_scene(
+        {
+            "camera": {
+                "origin": list(origin),
+                "target": [0, 0, 0],
+                "fov": fov,
+                "width": 12,
+                "height": 12,
+            },
+            "shapes": [shape | {"material": "m"}],
+            "materials": {"m": {"type": "diffuse", "reflectance": 0.7}},
+            "emitters": [
+                {"type": "point", "position": [1.5, 2.0, 3.0], "intensity": 30},
+                {"type": "constant", "radiance": 0.2},
+            ],
+        }
+    )
+
+
+def test_sdf_sphere_renders_like_analytic_sphere_and_radius_gradient():
+    a = render(_sphere_scene("sdf"), KEY, spp=4, integrator="direct")
+    b = render(_sphere_scene("analytic"), KEY, spp=4, integrator="direct")
+    assert float(jnp.mean(b)) > 0.05
+    np.testing.assert_allclose(float(jnp.mean(a)), float(jnp.mean(b)), rtol=5e-3)
+    close = np.abs(np.asarray(a) - np.asarray(b)) < 2e-3
+    assert close.mean() > 0.95
+
+    # zoomed in (every pixel sees the sphere: no silhouette), d mean / d radius: SDF (implicit
+    # differentiation) vs analytic sphere vs central differences
+    def loss(kind, r):
+        s = _sphere_scene(kind, origin=(0, 0, 2.2), fov=20)
+        s = s.replace("shapes.0.sdf.radius" if kind == "sdf" else "shapes.0.radii", r)
+        return jnp.mean(render(s, KEY, spp=4, integrator="direct"))
+
+    g_sdf = jax.grad(lambda r: loss("sdf", r))(jnp.float32(1.0))
+    g_ana = jax.grad(lambda r: loss("analytic", r))(jnp.float32(1.0))
+    h = 0.01
+    fd = (loss("analytic", 1.0 + h) - loss("analytic", 1.0 - h)) / (2 * h)
+    assert np.isfinite(g_sdf) and abs(float(g_ana)) > 1e-2
+    np.testing.assert_allclose(g_ana, fd, rtol=0.05)
+    np.testing.assert_allclose(g_sdf, g_ana, rtol=0.05)
+
+
+def test_sdf_scene_errors():
+    sdf = {"type": "sdf", "expr": {"op": "sphere", "center": [0, 0, 0], "radius": 1}}
+    base = {
+        "camera": {"origin": [0, 0, 4], "target": [0, 0, 0], "fov": 40, "width": 4, "height": 4}
+    }
+    with pytest.raises(ValueError, match="SDF shapes cannot be area lights"):
+        load_scene(
+            base | {"shapes": [sdf], "emitters": [{"type": "area", "shape": sdf, "radiance": 1}]}
+        )
+    with pytest.raises(ValueError, match=r"shapes\[0\].max_steps"):
+        load_scene(base | {"shapes": [sdf | {"max_steps": 0}]})
+    with pytest.raises(ValueError, match=r"shapes\[0\].expr: unknown op"):
+        load_scene(base | {"shapes": [{"type": "sdf", "expr": {"op": "blob"}}]})
+    with pytest.raises(ValueError, match=r"shapes\[0\]: unknown key"):
+        load_scene(base | {"shapes": [sdf | {"steps": 3}]})
+    assert math.isclose(float(load_scene(base | {"shapes": [sdf]}).get("shapes.0.sdf.radius")), 1.0)
+
+
+def test_checkerboard_module_example():
+    t = Textured(Diffuse(0.5), {"reflectance": Checkerboard(jnp.ones(3), jnp.zeros(3))})
+    np.testing.assert_array_equal(t.at(jnp.array([0.25, 0.25])).reflectance, [1, 1, 1])
+    np.testing.assert_array_equal(t.at(jnp.array([0.75, 0.25])).reflectance, [0, 0, 0])
