@@ -1,0 +1,180 @@
+"""Per-pixel z-tests of renders against independent higher-sample references of the same
+integrator (Mitsuba 3's render regression practice), with negative controls showing the test
+can fail.
+
+Each side renders ``K`` independent images of ``spp`` samples with different keys; per pixel the
+mean ``m`` and the sample variance ``s²`` over the ``K`` images give
+``z = (m_test - m_ref) / sqrt(s²_test / K_test + s²_ref / K_ref)``. With ``K = 32`` both
+variances have 31 degrees of freedom, so under the null hypothesis ``|z| > 3`` happens for about
+0.4 % of the pixels (t distribution with ~60 dof); the test requires ≥ 97.5 % of the pixel
+channels with ``|z| < 3``. Pixels whose samples are all identical (zero variance on both sides)
+pass when the means agree to float32 rounding.
+"""
+
+import os
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxgfx.render.film import pixel_samples
+from jaxgfx.render.integrators.path import N_RANDOM, STRATEGIES, path_radiance
+from jaxgfx.render.render import render
+from jaxgfx.render.sampler import uniform
+from jaxgfx.render.scene import load_scene
+
+EXAMPLE = os.path.join(os.path.dirname(__file__), "..", "..", "configs", "scenes", "example.yaml")
+
+
+def _example(width=16, *, floor=0.5, metal=1.0, full=True):
+    """The example scene (configs/scenes/example.yaml) at ``width``²; ``full=False`` drops the
+    glass sphere and the constant sky (a smaller program: compiles ~3x faster)."""
+    import yaml
+
+    with open(EXAMPLE) as f:
+        desc = yaml.safe_load(f)
+    if not full:
+        desc["shapes"] = [s for s in desc["shapes"] if s.get("material") != "glass"]
+        desc["materials"].pop("glass")
+        desc["emitters"] = [e for e in desc["emitters"] if e["type"] != "constant"]
+    desc["camera"] |= {"width": width, "height": width}
+    desc["materials"]["floor"]["reflectance"] = [floor] * 3
+    desc["materials"]["metal"]["reflectance"] = metal
+    return load_scene(desc)
+
+
+def _stats(scene, seed, k, spp, integrator, max_depth=3):
+    """Per-pixel mean and variance of the mean over ``k`` independent renders (one compile:
+    ``spp`` is static, the keys are not)."""
+    keys = jax.random.split(jax.random.key(seed), k)
+    x = np.stack(
+        [
+            np.asarray(render(scene, kk, spp=spp, integrator=integrator, max_depth=max_depth))
+            for kk in keys
+        ]
+    ).astype(np.float64)
+    return x.mean(0), x.var(0, ddof=1) / k
+
+
+def z_pass_fraction(ref, test, *, threshold=3.0):
+    """Fraction of pixel channels with ``|z| < threshold`` (see the module docstring)."""
+    (m_r, v_r), (m_t, v_t) = ref, test
+    var = v_r + v_t
+    diff = np.abs(m_t - m_r)
+    exact = diff <= 1e-5 * (1.0 + np.abs(m_r))
+    z = np.where(var > 0, diff / np.sqrt(np.where(var > 0, var, 1.0)), np.inf)
+    return float(np.mean(exact | (z < threshold)))
+
+
+K, SPP = 32, 32
+
+
+def test_ztest_direct_passes_and_detects_a_10_percent_albedo_change():
+    scene = _example(full=False)
+    ref = _stats(scene, 1, K, SPP, "direct")
+    frac = z_pass_fraction(ref, _stats(scene, 2, K, SPP, "direct"))
+    assert frac >= 0.975, frac
+    # negative control: floor and metal albedo +10 % → many pixels fail
+    biased = _stats(_example(floor=0.55, metal=1.1, full=False), 2, K, SPP, "direct")
+    frac_bad = z_pass_fraction(ref, biased)
+    assert frac_bad < 0.9, frac_bad
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("integrator", ["path", "whitted", "direct"])
+def test_ztest_24px_each_integrator(integrator):
+    scene = _example(24)
+    ref = _stats(scene, 11, 2 * K, SPP, integrator)
+    frac = z_pass_fraction(ref, _stats(scene, 12, K, SPP, integrator))
+    assert frac >= 0.975, frac
+    biased = _stats(_example(24, floor=0.55, metal=1.1), 12, K, SPP, integrator)
+    frac_bad = z_pass_fraction(ref, biased)
+    assert frac_bad < 0.9, frac_bad
+
+
+# ------------------------------------------------------------------------------------------
+# environment-map importance sampling
+
+
+@eqx.filter_jit
+def _render_strategy(scene, key, spp, strategy):
+    """Direct illumination (``max_depth = 2``) with one sampling strategy of ``path_radiance``:
+    ``"mis"``, ``"light"`` (light sampling only) or ``"bsdf"`` (BSDF sampling only)."""
+    w, h = scene.width, scene.height
+    kp, ku = jax.random.split(key)
+    px = pixel_samples(kp, w, h, spp, scene.rfilter)
+
+    def one(s, acc):
+        o, d = scene.camera.generate_ray(px[:, :, s, :])
+        u = uniform(jax.random.fold_in(ku, s), (h, w, 2, N_RANDOM), px.dtype)
+        return acc + path_radiance(scene, o, d, u, max_depth=2, strategy=strategy)
+
+    return jax.lax.fori_loop(0, spp, one, jnp.zeros((h, w, 3), px.dtype)) / spp
+
+
+def _strategy_stats(scene, seed, k, spp, strategy):
+    keys = jax.random.split(jax.random.key(seed), k)
+    x = np.stack([np.asarray(_render_strategy(scene, kk, spp, strategy)) for kk in keys])
+    x = x.astype(np.float64)
+    return x.mean(0), x.var(0, ddof=1) / k
+
+
+def _env_scene(emitter, width=12):
+    return load_scene(
+        {
+            "camera": {
+                "origin": [0, 1.0, 3.0],
+                "target": [0, 0.2, 0],
+                "fov": 50,
+                "width": width,
+                "height": width,
+            },
+            "shapes": [
+                {"type": "sphere", "center": [0, 0.5, 0], "radius": 0.5, "material": "m"},
+                {
+                    "type": "rectangle",
+                    "center": [0, 0, 0],
+                    "normal": [0, 1, 0],
+                    "size": [3, 3],
+                    "material": "m",
+                },
+            ],
+            "materials": {"m": {"type": "diffuse", "reflectance": 0.6}},
+            "emitters": [emitter],
+        }
+    )
+
+
+def test_constant_envmap_matches_constant_emitter():
+    img = np.full((8, 16, 3), 0.7, np.float32)
+    env = _env_scene({"type": "envmap", "image": img})
+    const = _env_scene({"type": "constant", "radiance": 0.7})
+    a = _stats(env, 21, 16, 16, "direct")
+    b = _stats(const, 22, 16, 16, "direct")
+    assert z_pass_fraction(a, b) >= 0.975
+    np.testing.assert_allclose(a[0].mean(), b[0].mean(), rtol=5 * np.sqrt(a[1].mean()) / 0.3)
+
+
+def _peaked_env(sharp=False):
+    """Dim sky (0.05) plus a bright spot (peak 500) above the scene: a Gaussian of 1.5 texels
+    (``sharp=False``) or a hard 2x2-texel square (``sharp=True``, whose bilinear radiance
+    against the piecewise-constant sampling density makes light-only sampling heavy-tailed)."""
+    img = np.full((16, 32, 3), 0.05, np.float32)
+    if sharp:
+        img[3:5, 9:11] = 500.0
+    else:
+        i, j = np.mgrid[0:16, 0:32]
+        img += (500.0 * np.exp(-((i - 4.0) ** 2 + (j - 10.0) ** 2) / (2 * 1.5**2)))[..., None]
+    return {"type": "envmap", "image": img}
+
+
+@pytest.mark.slow
+def test_peaked_envmap_light_bsdf_mis_agree_and_mis_reduces_variance():
+    scene = _env_scene(_peaked_env())
+    res = {s: _strategy_stats(scene, 30 + i, 32, 16, s) for i, s in enumerate(STRATEGIES)}
+    for s in ("light", "bsdf"):
+        assert z_pass_fraction(res["mis"], res[s]) >= 0.975, s
+    var = {s: float(np.mean(v)) for s, (_, v) in res.items()}
+    assert var["mis"] < 0.5 * var["bsdf"], var
