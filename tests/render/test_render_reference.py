@@ -13,16 +13,12 @@ pass when the means agree to float32 rounding.
 
 import os
 
-import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgfx.render.film import pixel_samples
-from jaxgfx.render.integrators.path import N_RANDOM, STRATEGIES, path_radiance
+from jaxgfx.render.integrators.path import STRATEGIES
 from jaxgfx.render.render import render
-from jaxgfx.render.sampler import uniform
 from jaxgfx.render.scene import load_scene
 
 EXAMPLE = os.path.join(os.path.dirname(__file__), "..", "..", "configs", "scenes", "example.yaml")
@@ -98,25 +94,16 @@ def test_ztest_24px_each_integrator(integrator):
 # environment-map importance sampling
 
 
-@eqx.filter_jit
-def _render_strategy(scene, key, spp, strategy):
-    """Direct illumination (``max_depth = 2``) with one sampling strategy of ``path_radiance``:
-    ``"mis"``, ``"light"`` (light sampling only) or ``"bsdf"`` (BSDF sampling only)."""
-    w, h = scene.width, scene.height
-    kp, ku = jax.random.split(key)
-    px = pixel_samples(kp, w, h, spp, scene.rfilter)
-
-    def one(s, acc):
-        o, d = scene.camera.generate_ray(px[:, :, s, :])
-        u = uniform(jax.random.fold_in(ku, s), (h, w, 2, N_RANDOM), px.dtype)
-        return acc + path_radiance(scene, o, d, u, max_depth=2, strategy=strategy)
-
-    return jax.lax.fori_loop(0, spp, one, jnp.zeros((h, w, 3), px.dtype)) / spp
-
-
 def _strategy_stats(scene, seed, k, spp, strategy):
+    """Direct illumination with one sampling strategy: ``"mis"``, ``"light"`` (light sampling
+    only) or ``"bsdf"`` (BSDF sampling only); mean and variance of the mean over ``k`` renders."""
     keys = jax.random.split(jax.random.key(seed), k)
-    x = np.stack([np.asarray(_render_strategy(scene, kk, spp, strategy)) for kk in keys])
+    x = np.stack(
+        [
+            np.asarray(render(scene, kk, spp=spp, integrator="direct", strategy=strategy))
+            for kk in keys
+        ]
+    )
     x = x.astype(np.float64)
     return x.mean(0), x.var(0, ddof=1) / k
 
