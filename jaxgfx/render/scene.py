@@ -8,9 +8,11 @@
       - {type: sphere, center: [0, 1, 0], radius: 1, material: metal}
       - {type: rectangle, center: [0, 0, 0], normal: [0, 1, 0], size: [10, 10], material: floor}
       - {type: mesh, file: bunny.obj, material: floor}
+      - {type: sdf, expr: {op: sphere, center: [2, 1, 0], radius: 0.5}, material: floor,
+         max_steps: 128, eps: 1e-4}                    # sphere traced (SDFShape)
     materials:
       metal: {type: roughconductor, distribution: ggx, alpha: 0.3}
-      floor: {type: diffuse, reflectance: [0.5, 0.5, 0.5]}
+      floor: {type: diffuse, reflectance: {type: checkerboard, color0: 0.8, color1: 0.2, scale: 8}}
     emitters:
       - {type: area, shape: {type: rectangle, center: [0, 4, 0], normal: [0, -1, 0], size: [2, 2]},
          radiance: [10, 10, 10]}
@@ -26,7 +28,11 @@ integrators evaluate only the material types present.
 (also ``camera.fov``, ``emitters.point.intensities``, ``emitters.area.0.radiance``, nested
 fields such as ``materials.metal.distribution.alpha_u``; ``alpha`` of a microfacet material
 sets both ``alpha_u`` and ``alpha_v``).
-``scene.get(path)`` reads one.
+``scene.get(path)`` reads one. Any RGB / float material parameter may be a texture
+(``{type: bitmap, file|image, wrap, filter, raw}`` or ``{type: checkerboard, ...}``, see
+:mod:`jaxgfx.render.textured`); texels are leaves (``materials.floor.reflectance.image``,
+``materials.floor.reflectance.color0``). SDF parameters: ``shapes.I.sdf.radius`` (``I`` indexes
+``scene.shapes``). Details and measurements: docs/render_scenes.md.
 """
 
 from __future__ import annotations

@@ -6,6 +6,7 @@ for texel / radius gradients, and an analytic sphere for the sphere-traced SDF s
 """
 
 import math
+import os
 
 import colour
 import jax
@@ -295,3 +296,13 @@ def test_checkerboard_module_example():
     t = Textured(Diffuse(0.5), {"reflectance": Checkerboard(jnp.ones(3), jnp.zeros(3))})
     np.testing.assert_array_equal(t.at(jnp.array([0.25, 0.25])).reflectance, [1, 1, 1])
     np.testing.assert_array_equal(t.at(jnp.array([0.75, 0.25])).reflectance, [0, 0, 0])
+
+
+def test_example_yamls_load():
+    root = os.path.join(os.path.dirname(__file__), "..", "..", "configs", "scenes")
+    tex = load_scene(os.path.join(root, "textured.yaml"))
+    assert [type(m).__name__ for m in tex.materials][:3] == ["Textured"] * 3
+    alpha = tex.get("materials.brushed.alpha.image")
+    assert alpha.shape == (2, 4, 1) and float(alpha.min()) == pytest.approx(0.05)
+    sdf = load_scene(os.path.join(root, "sdf.yaml"))
+    assert sum(isinstance(s, SDFShape) for s in sdf.shapes) == 2
