@@ -115,6 +115,8 @@ class Textured(eqx.Module):
         return self.bsdf.is_transmissive
 
     def at(self, uv):
+        if uv is None:
+            raise ValueError("uv: a textured material needs the hit uv (dispatch(..., uv=hit.uv))")
         out = self.bsdf
         for name, tex in self.textures.items():
             val = texture_eval(tex, uv)

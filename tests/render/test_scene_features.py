@@ -296,6 +296,10 @@ def test_checkerboard_module_example():
     t = Textured(Diffuse(0.5), {"reflectance": Checkerboard(jnp.ones(3), jnp.zeros(3))})
     np.testing.assert_array_equal(t.at(jnp.array([0.25, 0.25])).reflectance, [1, 1, 1])
     np.testing.assert_array_equal(t.at(jnp.array([0.75, 0.25])).reflectance, [0, 0, 0])
+    with pytest.raises(ValueError, match="uv: a textured material needs the hit uv"):
+        t.at(None)
+    with pytest.raises(ValueError, match="not a texturable parameter"):
+        Textured(Diffuse(0.5), {"roughness": Checkerboard(jnp.ones(1), jnp.zeros(1))})
 
 
 def test_example_yamls_load():
