@@ -310,3 +310,21 @@ def test_example_yamls_load():
     assert alpha.shape == (2, 4, 1) and float(alpha.min()) == pytest.approx(0.05)
     sdf = load_scene(os.path.join(root, "sdf.yaml"))
     assert sum(isinstance(s, SDFShape) for s in sdf.shapes) == 2
+
+
+def test_sdf_hit_gradients_float64(x64):
+    """Implicit differentiation of the SDF hit: ``t`` w.r.t. radius and centre against finite
+    differences (check_grads) and the closed form ``dt/dr = -1`` for rays through the centre."""
+    o = jnp.array([[0.0, 0.0, -3.0], [0.3, 0.2, -3.0], [2.5, 0.1, 0.2]])
+    d = jnp.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [-1.0, 0.0, 0.0]])
+    valid = jnp.ones(3, bool)
+
+    @jax.jit
+    def t_of(r, c):
+        shape = SDFShape(SDFSphere(c, r), max_steps=400, eps=1e-11)
+        return shape.hit(jnp.zeros(3, jnp.int32), o, d, valid).t
+
+    r0, c0 = jnp.float64(1.0), jnp.array([0.0, 0.0, 0.05])
+    check_grads(t_of, (r0, c0), order=1, modes=["rev"], eps=1e-5, rtol=1e-4, atol=1e-6)
+    g = jax.jacrev(t_of)(r0, c0)
+    np.testing.assert_allclose(g[0], -1.0, rtol=1e-8)
