@@ -16,6 +16,7 @@ All scenes of one structure share one compiled program (only array leaves change
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -63,21 +64,27 @@ def _direct(scene):
     return render(scene, KEY, spp=SPP, integrator="direct")
 
 
-def _loss(alpha, albedo, scene):
-    s = scene.replace("materials.floor.alpha", alpha)
-    s = s.replace("materials.floor.reflectance", albedo)
-    return jnp.mean(_direct(s))
+@eqx.filter_jit
+def _img_grads(alpha, refl, scene):
+    """Image and gradients of its mean w.r.t. the floor's α and reflectance, in ONE compiled
+    program (forward and backward share the compile; cheaper than render + jax.grad)."""
+
+    def f(alpha, refl):
+        s = scene.replace("materials.floor.alpha", alpha)
+        img = _direct(s.replace("materials.floor.reflectance", refl))
+        return jnp.mean(img), img
+
+    (_, img), (ga, gr) = jax.value_and_grad(f, argnums=(0, 1), has_aux=True)(alpha, refl)
+    return img, ga, gr
 
 
-_grad = jax.jit(jax.grad(_loss, argnums=(0, 1)))
+R0 = jnp.full(3, 0.9, jnp.float32)
 
 
 @pytest.mark.parametrize("alpha", [1e-4, 1.0])
 def test_alpha_extremes_finite_with_gradients(alpha):
-    rough = _metal_scene(ROUGH)
-    img = _direct(rough.replace("materials.floor.alpha", alpha))
+    img, ga, gb = _img_grads(jnp.float32(alpha), R0, _metal_scene(ROUGH))
     assert np.all(np.isfinite(img)) and float(jnp.max(img)) > 0.1
-    ga, gb = _grad(jnp.float32(alpha), jnp.full(3, 0.9, jnp.float32), rough)
     assert np.isfinite(ga) and np.all(np.isfinite(gb)), (alpha, ga, gb)
     # the image is linear in the (Fresnel-free) reflectance: d mean / d R = mean / R
     np.testing.assert_allclose(float(jnp.sum(gb)), float(jnp.mean(img)) / 0.9, rtol=1e-3)
@@ -85,7 +92,7 @@ def test_alpha_extremes_finite_with_gradients(alpha):
 
 def test_alpha_1e4_matches_mirror():
     rough = _metal_scene(ROUGH)
-    a = _direct(rough.replace("materials.floor.alpha", 1e-4))
+    a, _, _ = _img_grads(jnp.float32(1e-4), R0, rough)
     b = _direct(_metal_scene({"type": "mirror", "reflectance": 0.9}))
     assert float(jnp.max(b)) > 1.0  # the light is seen in the mirror
     np.testing.assert_allclose(float(jnp.mean(a)), float(jnp.mean(b)), rtol=0.03)
@@ -104,11 +111,19 @@ def test_grazing_and_parallel_finite_with_gradients(case):
         kw = {"cam_origin": (0, 0.0, 3.9), "cam_target": (0, 0.0, 0.0)}
     else:  # light at floor level facing sideways: grazing incidence on the floor
         kw = {"light": {"center": [-1.5, 0.05, 0], "normal": [1, 0, 0], "size": [0.1, 1.0]}}
-    scene = _metal_scene(ROUGH, **kw)
-    img = np.asarray(_direct(scene))
+    img, ga, gb = _img_grads(jnp.float32(0.3), R0, _metal_scene(ROUGH, **kw))
     assert np.all(np.isfinite(img)) and np.all(img >= 0)
-    ga, gb = _grad(jnp.float32(0.3), jnp.full(3, 0.9, jnp.float32), scene)
     assert np.isfinite(ga) and np.all(np.isfinite(gb)), (ga, gb)
+
+
+@eqx.filter_jit
+def _img_grad_albedo(scene, albedo, spp):
+    def f(a):
+        img = render(scene.replace("materials.m.reflectance", a), KEY, spp=spp, integrator="direct")
+        return jnp.mean(img), img
+
+    (_, img), g = jax.value_and_grad(f, has_aux=True)(albedo)
+    return img, g
 
 
 def _mesh_plane_scene(albedo=0.5):
@@ -137,14 +152,13 @@ def _mesh_plane_scene(albedo=0.5):
     from jaxgfx.render.shapes import TriangleMesh
 
     mesh = TriangleMesh(mesh.vertices, mesh.faces, normals)
-    import equinox as eqx
-
     return eqx.tree_at(lambda s: s.shapes[0], scene, mesh)
 
 
 def test_backfacing_shading_normals_and_degenerate_triangle_closed_form():
     scene = _mesh_plane_scene()
-    img = np.asarray(render(scene, KEY, spp=16, integrator="direct"))  # stratified 4x4
+    img, gr = _img_grad_albedo(scene, jnp.full(3, 0.5, jnp.float32), 16)  # stratified 4x4
+    img = np.asarray(img)
     assert np.all(np.isfinite(img))
     # closed form per pixel: mean over a 6x6 grid of the pixel footprint (box filter)
     h = w = 8
@@ -164,11 +178,6 @@ def test_backfacing_shading_normals_and_degenerate_triangle_closed_form():
     ref = (0.5 / math.pi * 16.0 * cos / r2).mean((-1, -2))
     np.testing.assert_allclose(img[..., 0], ref, rtol=0.02)
     # gradient w.r.t. the albedo: the image is linear in it, d mean / d rho = mean / rho
-    gr = jax.grad(
-        lambda a: jnp.mean(
-            render(scene.replace("materials.m.reflectance", a), KEY, spp=16, integrator="direct")
-        )
-    )(jnp.full(3, 0.5, jnp.float32))
     np.testing.assert_allclose(float(jnp.sum(gr)), img.mean() / 0.5, rtol=1e-3)
 
 
@@ -193,15 +202,10 @@ def test_camera_inside_sphere_closed_form():
     a, r, intensity = 0.5, 2.0, 10.0
     scene = _inside_sphere(a, r, intensity)
     e1 = a * intensity / (math.pi * r * r)
-    direct = np.asarray(render(scene, KEY, spp=SPP, integrator="direct"))
-    np.testing.assert_allclose(direct, e1, rtol=1e-4)
+    direct, g = _img_grad_albedo(scene, jnp.full(3, a, jnp.float32), SPP)
+    np.testing.assert_allclose(np.asarray(direct), e1, rtol=1e-4)
     path = np.asarray(render(scene, KEY, spp=SPP, integrator="path", max_depth=3), np.float64)
     x = path.reshape(-1)
     se = x.std(ddof=1) / math.sqrt(x.size)
     assert abs(x.mean() - e1 * (1 + a)) < 5 * se + 1e-4, (x.mean(), e1 * (1 + a), se)
-    g = jax.grad(
-        lambda al: jnp.mean(
-            render(scene.replace("materials.m.reflectance", al), KEY, spp=SPP, integrator="direct")
-        )
-    )(jnp.full(3, a, jnp.float32))
     np.testing.assert_allclose(np.asarray(g), intensity / (math.pi * r * r) / 3, rtol=1e-4)
