@@ -9,6 +9,7 @@ import math
 import os
 
 import colour
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -139,31 +140,44 @@ def _plane_scene(tex, *, material=None, width=8):
 TEX_IMG = np.array([[[0.9, 0.5, 0.1], [0.2, 0.4, 0.8]], [[0.6, 0.6, 0.6], [0.3, 0.1, 0.7]]])
 
 
+@eqx.filter_jit
+def _img_and_grad(scene, path, value, w):
+    """``direct`` image (4 spp) of ``scene`` with parameter ``path`` set to ``value``, and the
+    gradient of ``sum_c w_c mean(image_c)`` w.r.t. ``value``, in ONE compiled program (the
+    finite differences reuse it, so each scene structure compiles once)."""
+
+    def f(v):
+        img = render(scene.replace(path, v), KEY, spp=4, integrator="direct")
+        return jnp.sum(jnp.mean(img, (0, 1)) * w), img
+
+    (_, img), g = jax.value_and_grad(f, has_aux=True)(value)
+    return img, g
+
+
+def _weighted(img, w):
+    return float(np.sum(np.asarray(img, np.float64).mean((0, 1)) * np.asarray(w)))
+
+
 def test_constant_texture_renders_like_plain_material_and_texel_gradient():
-    const = {"type": "bitmap", "image": np.full((2, 2, 3), 0.3)}
-    a = render(load_scene(_plane_scene(const)), KEY, spp=4, integrator="direct")
+    path = "materials.m.reflectance.image"
+    w = jnp.linspace(0.5, 1.5, 3)
+    scene = load_scene(_plane_scene({"type": "bitmap", "image": TEX_IMG}))
+    const = jnp.full((2, 2, 3), 0.3, jnp.float32)
+    a, _ = _img_and_grad(scene, path, const, w)
     b = render(load_scene(_plane_scene(0.3)), KEY, spp=4, integrator="direct")
     assert float(jnp.mean(b)) > 0.05
     np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-5, atol=1e-6)
 
     # texel gradient: the image is linear in the texels (direct light, diffuse), so central
     # differences with the same key are exact up to float32 rounding
-    scene = load_scene(_plane_scene({"type": "bitmap", "image": TEX_IMG}))
-    path = "materials.m.reflectance.image"
-    w = jnp.linspace(0.5, 1.5, 3)
-
-    def loss(img):
-        return jnp.sum(
-            jnp.mean(render(scene.replace(path, img), KEY, spp=4, integrator="direct"), (0, 1)) * w
-        )
-
     x0 = jnp.asarray(TEX_IMG, jnp.float32)
-    g = jax.grad(loss)(x0)
+    _, g = _img_and_grad(scene, path, x0, w)
     assert np.all(np.isfinite(g)) and float(jnp.max(jnp.abs(g))) > 1e-3
     h = 0.05
     for idx in [(0, 0, 0), (0, 1, 2), (1, 0, 1), (1, 1, 0)]:
-        fd = (loss(x0.at[idx].add(h)) - loss(x0.at[idx].add(-h))) / (2 * h)
-        np.testing.assert_allclose(g[idx], fd, rtol=2e-3, atol=1e-5)
+        hi = _weighted(_img_and_grad(scene, path, x0.at[idx].add(h), w)[0], w)
+        lo = _weighted(_img_and_grad(scene, path, x0.at[idx].add(-h), w)[0], w)
+        np.testing.assert_allclose(g[idx], (hi - lo) / (2 * h), rtol=2e-3, atol=1e-5)
     assert scene.get(path).shape == (2, 2, 3)
 
 
@@ -238,8 +252,15 @@ def _sphere_scene(kind, radius=1.0, *, origin=(0, 0, 4), fov=40):
     )
 
 
+W3 = jnp.full(3, 1.0 / 3.0, jnp.float32)
+
+
+def _radius(kind):
+    return "shapes.0.sdf.radius" if kind == "sdf" else "shapes.0.radii"
+
+
 def test_sdf_sphere_renders_like_analytic_sphere():
-    a = render(_sphere_scene("sdf"), KEY, spp=4, integrator="direct")
+    a, _ = _img_and_grad(_sphere_scene("sdf"), _radius("sdf"), jnp.float32(1.0), W3)
     b = render(_sphere_scene("analytic"), KEY, spp=4, integrator="direct")
     assert float(jnp.mean(b)) > 0.05
     np.testing.assert_allclose(float(jnp.mean(a)), float(jnp.mean(b)), rtol=5e-3)
@@ -247,30 +268,28 @@ def test_sdf_sphere_renders_like_analytic_sphere():
     assert close.mean() > 0.95
 
 
-def _radius_loss(kind, r):
+def _radius_grad_fd(kind, h=0.01):
     # zoomed in: every pixel sees the sphere, so there is no silhouette (whose motion AD of a
     # path tracer without edge sampling does not see) and d mean / d radius is smooth
     s = _sphere_scene(kind, origin=(0, 0, 2.2), fov=20)
-    s = s.replace("shapes.0.sdf.radius" if kind == "sdf" else "shapes.0.radii", r)
-    return jnp.mean(render(s, KEY, spp=4, integrator="direct"))
-
-
-def _radius_fd(kind, h=0.01):
-    return (_radius_loss(kind, 1.0 + h) - _radius_loss(kind, 1.0 - h)) / (2 * h)
+    _, g = _img_and_grad(s, _radius(kind), jnp.float32(1.0), W3)
+    hi = _weighted(_img_and_grad(s, _radius(kind), jnp.float32(1.0 + h), W3)[0], W3)
+    lo = _weighted(_img_and_grad(s, _radius(kind), jnp.float32(1.0 - h), W3)[0], W3)
+    return float(g), (hi - lo) / (2 * h)
 
 
 def test_sdf_radius_gradient_matches_finite_differences():
     """Implicit differentiation of the sphere-traced hit vs central differences (same key)."""
-    g = jax.grad(lambda r: _radius_loss("sdf", r))(jnp.float32(1.0))
-    assert np.isfinite(g) and abs(float(g)) > 1e-2
-    np.testing.assert_allclose(g, _radius_fd("sdf"), rtol=0.05)
+    g, fd = _radius_grad_fd("sdf")
+    assert np.isfinite(g) and abs(g) > 1e-2
+    np.testing.assert_allclose(g, fd, rtol=0.05)
 
 
 @pytest.mark.slow
 def test_sdf_radius_gradient_matches_analytic_sphere():
-    g_sdf = jax.grad(lambda r: _radius_loss("sdf", r))(jnp.float32(1.0))
-    g_ana = jax.grad(lambda r: _radius_loss("analytic", r))(jnp.float32(1.0))
-    np.testing.assert_allclose(g_ana, _radius_fd("analytic"), rtol=0.05)
+    g_sdf, _ = _radius_grad_fd("sdf")
+    g_ana, fd_ana = _radius_grad_fd("analytic")
+    np.testing.assert_allclose(g_ana, fd_ana, rtol=0.05)
     np.testing.assert_allclose(g_sdf, g_ana, rtol=0.05)
 
 
