@@ -165,3 +165,16 @@ def test_peaked_envmap_light_bsdf_mis_agree_and_mis_reduces_variance():
         assert z_pass_fraction(res["mis"], res[s]) >= 0.975, s
     var = {s: float(np.mean(v)) for s, (_, v) in res.items()}
     assert var["mis"] < 0.5 * var["bsdf"], var
+
+
+@pytest.mark.slow
+def test_sharp_envmap_sun_light_sampling_is_unbiased_and_low_variance():
+    """A hard 2x2-texel sun: the sampling density comes from the texel-averaged bilinear
+    radiance, so light-only sampling covers the half-texel ring the bilinear lookup lights up
+    (before: variance 8.7 and 8 % low; after: 0.024, agreeing with MIS)."""
+    scene = _env_scene(_peaked_env(sharp=True))
+    res = {s: _strategy_stats(scene, 30 + i, 32, 16, s) for i, s in enumerate(STRATEGIES)}
+    assert z_pass_fraction(res["mis"], res["light"]) >= 0.975
+    var = {s: float(np.mean(v)) for s, (_, v) in res.items()}
+    assert var["light"] < 2.0 * var["mis"], var
+    assert var["mis"] < 0.1 * var["bsdf"], var
