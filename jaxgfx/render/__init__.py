@@ -2,8 +2,10 @@
 
 Entry points: :func:`load_scene` (dict / YAML -> :class:`Scene`) and :func:`render`.
 Building blocks live in submodules: ``camera``, ``film``, ``ray``, ``shapes``, ``sdf``, ``mesh``,
-``accel``, ``frame``, ``warp``, ``fresnel``, ``microfacet``, ``bsdf``, ``texture``, ``emitters``,
-``integrators``. See docs/render.md, docs/render_bsdf.md and docs/render_geometry.md.
+``accel``, ``frame``, ``warp``, ``fresnel``, ``microfacet``, ``bsdf``, ``texture``, ``textured``,
+``sdf_shape``, ``emitters``, ``integrators``, ``sampler`` (counter-based uniform numbers) and
+``mitsuba`` (export to Mitsuba 3 for comparisons). See docs/render.md, docs/render_bsdf.md,
+docs/render_geometry.md and docs/render_scenes.md.
 """
 
 from jaxgfx.render import accel as accel
@@ -25,10 +27,13 @@ from jaxgfx.render.ray import spawn_ray as spawn_ray
 from jaxgfx.render.render import render as render
 from jaxgfx.render.scene import Scene as Scene
 from jaxgfx.render.scene import load_scene as load_scene
+from jaxgfx.render.sdf_shape import SDFShape as SDFShape
 from jaxgfx.render.shapes import Rectangles as Rectangles
 from jaxgfx.render.shapes import Spheres as Spheres
 from jaxgfx.render.shapes import TriangleMesh as TriangleMesh
 from jaxgfx.render.shapes import intersect_scene as intersect_scene
+from jaxgfx.render.textured import Checkerboard as Checkerboard
+from jaxgfx.render.textured import Textured as Textured
 
 __all__ = [
     "accel",
@@ -54,4 +59,7 @@ __all__ = [
     "spawn_ray",
     "load_obj",
     "load_ply",
+    "SDFShape",
+    "Textured",
+    "Checkerboard",
 ]

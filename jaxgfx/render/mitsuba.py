@@ -181,6 +181,13 @@ def _material(md, where) -> dict:
         raise ValueError(f"{where}: expected a mapping with a 'type' key")
     if md.get("type") == "phong":
         raise NotImplementedError(f"{where}.type: 'phong' has no Mitsuba 3 counterpart")
+    from jaxgfx.render.textured import is_texture_desc
+
+    for k, v in md.items():
+        if is_texture_desc(v):
+            raise NotImplementedError(
+                f"{where}.{k}: textured parameters are not exported to Mitsuba (yet)"
+            )
     try:
         m = B.make_bsdf(dict(md))
     except (ValueError, TypeError) as e:
@@ -234,6 +241,8 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
         raise ValueError(f"{where}: expected a mapping with a 'type' key")
     kind = d["type"]
     common = ("type", "material")
+    if kind == "sdf":
+        raise NotImplementedError(f"{where}.type: SDF shapes have no Mitsuba 3 counterpart")
     if kind == "sphere":
         S._expect_keys(d, where, ("type", "center", "radius"), common)
         c = np.asarray(S._vec(d["center"], f"{where}.center"), np.float64)
@@ -283,11 +292,6 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
         if "translate" in d or "scale" in d:
             sc = np.broadcast_to(np.asarray(d.get("scale", 1.0), np.float64), (3,))
             tr = np.asarray(S._vec(d.get("translate", [0.0, 0.0, 0.0]), f"{where}.translate"))
-            if np.any(sc != sc[0]) and m.normals is not None:
-                raise NotImplementedError(
-                    f"{where}.scale: jaxgfx keeps vertex normals untransformed under a "
-                    "non-uniform scale while Mitsuba transforms them; use a uniform scale"
-                )
             mat = np.diag([*sc, 1.0])
             mat[:3, 3] = tr
             out["to_world"] = _transform(mat, mi)

@@ -45,6 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgfx._checks import as_float_array, check_finite
+from jaxgfx._math import safe_normalize
 from jaxgfx.render.bsdf import make_bsdf
 from jaxgfx.render.bsdf._base import rgb_param
 from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera
@@ -292,7 +293,10 @@ def _mesh(d, where, base_dir):
     if "translate" in d or "scale" in d:
         s = as_float_array(d.get("scale", 1.0), f"{where}.scale")
         t = _vec(d.get("translate", [0.0, 0.0, 0.0]), f"{where}.translate")
-        m = TriangleMesh(m.vertices * s + t, m.faces, m.normals, m.uvs)
+        normals = m.normals
+        if normals is not None:  # normals transform with the inverse transpose: n / s
+            normals = safe_normalize(normals / s)
+        m = TriangleMesh(m.vertices * s + t, m.faces, normals, m.uvs)
     return m
 
 

@@ -672,3 +672,20 @@ def test_conductors_beckmann_anisotropic_fov_y_backfacing_light(mi):
         ],
     }
     _check("conductors", desc, spp=64, max_depth=3)
+
+
+def test_unexportable_features_name_the_field():
+    desc = {
+        "camera": _camera(),
+        "shapes": [dict(FLOOR)],
+        "materials": {"floor": {"type": "diffuse", "reflectance": {"type": "checkerboard"}}},
+        "emitters": [{"type": "constant", "radiance": 1.0}],
+    }
+    with pytest.raises(NotImplementedError, match=r"materials.floor.reflectance"):
+        to_mitsuba_dict(desc)
+    desc["materials"]["floor"] = {"type": "diffuse"}
+    desc["shapes"].append(
+        {"type": "sdf", "expr": {"op": "sphere", "center": [0, 1, 0], "radius": 1.0}}
+    )
+    with pytest.raises(NotImplementedError, match=r"shapes\[1\].type"):
+        to_mitsuba_dict(desc)

@@ -347,3 +347,24 @@ def test_sdf_hit_gradients_float64(x64):
     check_grads(t_of, (r0, c0), order=1, modes=["rev"], eps=1e-5, rtol=1e-4, atol=1e-6)
     g = jax.jacrev(t_of)(r0, c0)
     np.testing.assert_allclose(g[0], -1.0, rtol=1e-8)
+
+
+def test_mesh_scale_transforms_vertex_normals_by_inverse_transpose(tmp_path):
+    # a tilted plane z = x with vertex normals (-1, 0, 1)/sqrt2; scaling x by 2 gives z = x/2,
+    # whose normal is (-1, 0, 2)/sqrt5 = normalize(n / s)
+    obj = tmp_path / "tilted.obj"
+    obj.write_text("v 0 0 0\nv 1 0 1\nv 0 1 0\nvn -0.7071068 0 0.7071068\nf 1//1 2//1 3//1\n")
+    desc = {
+        "camera": {"origin": [0, 0, 5], "target": [0, 0, 0], "fov": 30, "width": 4, "height": 4},
+        "shapes": [{"type": "mesh", "file": str(obj), "scale": [2.0, 1.0, 1.0]}],
+        "emitters": [{"type": "constant", "radiance": 1.0}],
+    }
+    from jaxgfx.render.scene import load_scene
+
+    mesh = load_scene(desc).shapes[0]
+    mesh = getattr(mesh, "mesh", mesh)
+    expected = np.array([-1.0, 0, 2]) / np.sqrt(5)
+    np.testing.assert_allclose(mesh.normals, np.tile(expected, (3, 1)), rtol=1e-6, atol=1e-7)
+    v = np.asarray(mesh.vertices)
+    ng = np.cross(v[1] - v[0], v[2] - v[0])
+    np.testing.assert_allclose(np.abs(ng / np.linalg.norm(ng)), np.abs(expected), atol=1e-6)
