@@ -292,6 +292,7 @@ def plot(doc, out_dir):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     et = doc["equal_time"]
     fig, ax = plt.subplots(figsize=(5, 4))
@@ -299,6 +300,8 @@ def plot(doc, out_dir):
         ax.loglog(
             [r["seconds"] for r in s["rows"]], [r["rmse"] for r in s["rows"]], "o-", label=name
         )
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_xlabel("seconds (jaxgfx, CPU)")
     ax.set_ylabel(f"RMSE vs {et['ref_spp']}-spp reference")
     ax.set_title(f"example scene (no point light), {et['res']}², path depth {et['max_depth']}")
