@@ -31,7 +31,8 @@ class SDFShape(eqx.Module):
     from inside. Rays that start within ``4 eps`` of the surface (secondary rays spawned from
     it) first step off it by ``4 eps`` along the normal towards the side ``d`` points to, so
     they do not re-hit their own origin; the step stops when ``|sdf| < eps max(1, t)``.
-    ``hit(prim_id, o, d, valid) -> Hit``: re-traces and returns the record with ``t``
+    ``hit(prim_id, o, d, valid, t=None) -> Hit``: the record at the search's ``t`` (re-traced
+    when ``t`` is not given), with ``t``
     made differentiable by one implicit-function step ``t - (f - sg f) / sg(grad f . d)``, so
     ``dt/dθ = -(∂f/∂θ) / (grad f · d)`` for every SDF parameter θ (radius, centre ...);
     normals ``normalize(grad f)``; ``uv`` is the spherical (φ/2π, θ/π) map of the normal.
@@ -97,9 +98,14 @@ class SDFShape(eqx.Module):
         t, _ = self._trace(o, d, tmin, tmax)
         return t, jnp.zeros(t.shape, jnp.int32)
 
-    def hit(self, prim_id, o, d, valid) -> Hit:
+    def hit(self, prim_id, o, d, valid, t=None) -> Hit:
         sg = jax.lax.stop_gradient
-        t, o_start = self._trace(o, d, 0.0, jnp.inf)
+        if t is None:
+            t, o_start = self._trace(o, d, 0.0, jnp.inf)
+        else:  # the search already ran (intersect_scene passes its t): only redo the start
+            batch = jnp.broadcast_shapes(o.shape, d.shape)[:-1]
+            o_start, _ = self._start(sg(self.sdf), sg(o), sg(d), jnp.zeros(batch, o.dtype))
+            t = sg(t)
         valid = valid & jnp.isfinite(t)
         t = jnp.where(valid, t, 0.0)
         # differentiable origin: the push off the surface is a constant offset

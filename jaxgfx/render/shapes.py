@@ -481,7 +481,8 @@ def intersect_scene(shapes, o, d, *, tmin=0.0, tmax=jnp.inf) -> Hit:
     Each element is a shape accepted by :func:`intersect`, an acceleration structure (with
     ``closest_t`` and a ``mesh``), or any object with the methods
     ``closest_t(o, d, *, tmin, tmax) -> (t, prim_id)`` (non-differentiable search, ``t = inf``
-    on misses) and ``hit(prim_id, o, d, valid) -> Hit`` (differentiable record).
+    on misses) and ``hit(prim_id, o, d, valid, t) -> Hit`` (differentiable record at the
+    search's ``t``).
 
     Two phases: the nearest ``(t, shape, primitive)`` is found with the cheap tests of every
     shape, then ONE differentiable hit record is built per shape
@@ -523,7 +524,7 @@ def intersect_scene(shapes, o, d, *, tmin=0.0, tmax=jnp.inf) -> Hit:
                     sel = sel | (sid == i)
             gpid = pid + off
         if hasattr(shape, "hit"):  # custom shapes (e.g. SDFs): their own record
-            h = shape.hit(gpid, o, d, valid & sel)
+            h = shape.hit(gpid, o, d, valid & sel, t=best)
         else:
             shape = shape.mesh if hasattr(shape, "mesh") else shape
             h = primitive_hit(shape, gpid, o, d, valid & sel, shape_id=0)
