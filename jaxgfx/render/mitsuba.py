@@ -466,20 +466,7 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
                     "radiance": _rgb(S._rgb(ed["radiance"], f"{where}.radiance")),
                 }
             else:
-                S._expect_keys(ed, where, ("type",), ("file", "image", "scale"))
-                if "file" in ed:
-                    from jaxgfx import io
-
-                    path = os.fspath(ed["file"])
-                    if not os.path.isabs(path) and base_dir:
-                        path = os.path.join(base_dir, path)
-                    img = io.read_any(path)
-                elif "image" in ed:
-                    img = np.asarray(ed["image"], np.float32)
-                else:
-                    raise ValueError(f"{where}: expected 'file' or 'image'")
-                if img.ndim != 3 or img.shape[-1] < 3:
-                    raise ValueError(f"{where}.image: expected (H, W, 3), got shape {img.shape}")
+                img = S.envmap_image(ed, where, base_dir)
                 from jaxgfx.io import write_exr
 
                 path = os.path.join(work_dir(), f"envmap_{i}.exr")

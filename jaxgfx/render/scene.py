@@ -198,6 +198,26 @@ class Scene(eqx.Module):
 # loading
 
 
+def envmap_image(ed, where, base_dir=None) -> np.ndarray:
+    """The lat-long image of an ``envmap`` emitter description (``file`` relative to
+    ``base_dir``, or an inline ``image``), validated to ``(H, W, >=3)``."""
+    _expect_keys(ed, where, ("type",), ("file", "image", "scale"))
+    if "file" in ed:
+        from jaxgfx import io
+
+        path = os.fspath(ed["file"])
+        if not os.path.isabs(path) and base_dir:
+            path = os.path.join(base_dir, path)
+        img = io.read_any(path)
+    elif "image" in ed:
+        img = np.asarray(ed["image"], np.float32)
+    else:
+        raise ValueError(f"{where}: expected 'file' or 'image'")
+    if img.ndim != 3 or img.shape[-1] < 3:
+        raise ValueError(f"{where}.image: expected (H, W, 3), got shape {img.shape}")
+    return img
+
+
 def _expect_keys(d, where, required=(), optional=()):
     if not isinstance(d, Mapping):
         raise ValueError(f"{where}: expected a mapping, got {type(d).__name__}")
@@ -450,19 +470,9 @@ def load_scene(desc, *, base_dir: str | None = None) -> Scene:
                 _expect_keys(ed, where, ("type", "radiance"))
                 environment = ConstantEnvironment(_rgb(ed["radiance"], f"{where}.radiance"))
             else:
-                _expect_keys(ed, where, ("type",), ("file", "image", "scale"))
-                if "file" in ed:
-                    from jaxgfx import io
-
-                    path = ed["file"]
-                    if not os.path.isabs(path) and base_dir:
-                        path = os.path.join(base_dir, path)
-                    img = io.read_any(path)
-                elif "image" in ed:
-                    img = np.asarray(ed["image"], np.float32)
-                else:
-                    raise ValueError(f"{where}: expected 'file' or 'image'")
-                environment = EnvironmentMap.create(img, ed.get("scale", 1.0))
+                environment = EnvironmentMap.create(
+                    envmap_image(ed, where, base_dir), ed.get("scale", 1.0)
+                )
         else:
             raise ValueError(f"{where}.type: expected one of {EMITTER_TYPES}, got {kind!r}")
     if not shapes:
