@@ -1,5 +1,6 @@
 """``make demo``: the main job (camera calibration + HDR merge) on the embedded synthetic
-stack, the image-processing demo, and a render of configs/scenes/example.yaml. Writes
+stack, the image-processing demo, and renders of configs/scenes/example.yaml and
+textured.yaml. Writes
 everything under ``--out`` (default ``out/``)."""
 
 from __future__ import annotations
@@ -36,12 +37,14 @@ def main(argv=None) -> int:
     res = run_image_demo(img_dir)
     print(f"[image] {len(res['paths'])} outputs in {os.path.abspath(img_dir)}")
 
-    scene_path = os.path.join("configs", "scenes", "example.yaml")
-    if os.path.exists(scene_path):
-        from jaxgfx.cli import main as cli_main
+    from jaxgfx.cli import main as cli_main
 
-        out = os.path.join(args.out, "render", "example.exr")
-        cli_main(["render", scene_path, out, "--spp", "16", "--integrator", "path"])
+    # the example scene of issue 5, and the textured-materials example (bitmap/checkerboard)
+    for name in ("example", "textured"):
+        scene_path = os.path.join("configs", "scenes", f"{name}.yaml")
+        if os.path.exists(scene_path):
+            out = os.path.join(args.out, "render", f"{name}.exr")
+            cli_main(["render", scene_path, out, "--spp", "16", "--integrator", "path"])
     return 0
 
 
