@@ -32,6 +32,7 @@ from jaxgfx._math import (
     sincos,
     sum_last,
     take_rows,
+    vdot,
 )
 from jaxgfx.render.ray import Hit, empty_hit, merge_hits
 
@@ -64,10 +65,6 @@ def _as_points(x, name, last):
         raise ValueError(f"{name}: expected shape (N, {last}), got {x.shape}")
     check_finite(x, name)
     return x
-
-
-def _dot(a, b):
-    return sum_last(a * b)
 
 
 class Spheres(eqx.Module):
@@ -182,10 +179,10 @@ def sphere_intersect(center, radius, o, d, tmin=0.0, tmax=jnp.inf):
     origin → ``t = 4``.
     """
     f = o - center
-    b = _dot(f, d)
-    c = _dot(f, f) - radius * radius
+    b = vdot(f, d)
+    c = vdot(f, f) - radius * radius
     g = f - b[..., None] * d
-    disc = radius * radius - _dot(g, g)
+    disc = radius * radius - vdot(g, g)
     ok = disc >= 0
     h = safe_sqrt(disc)
     q = -(b + jnp.where(b >= 0, h, -h))
@@ -204,13 +201,13 @@ def rectangle_intersect(center, edge_u, edge_v, o, d, tmin=0.0, tmax=jnp.inf):
     ``(tmin, tmax)``. Edges are closed: ``s, u`` in [0, 1] count as hits.
     """
     n = jnp.cross(edge_u, edge_v)
-    denom = _dot(d, n)
-    t = safe_div(_dot(center - o, n), denom, fill=jnp.inf)
+    denom = vdot(d, n)
+    t = safe_div(vdot(center - o, n), denom, fill=jnp.inf)
     rel = o + jnp.where(jnp.isfinite(t), t, 0.0)[..., None] * d - center
     # Dual basis of (edge_u, edge_v) within the plane: s = rel.(edge_v x n)/|n|^2 + 1/2.
-    nn = _dot(n, n)
-    s = safe_div(_dot(rel, jnp.cross(edge_v, n)), nn) + 0.5
-    u = safe_div(_dot(rel, jnp.cross(n, edge_u)), nn) + 0.5
+    nn = vdot(n, n)
+    s = safe_div(vdot(rel, jnp.cross(edge_v, n)), nn) + 0.5
+    u = safe_div(vdot(rel, jnp.cross(n, edge_u)), nn) + 0.5
     ok = (denom != 0) & (t > tmin) & (t < tmax) & (s >= 0) & (s <= 1) & (u >= 0) & (u <= 1)
     return jnp.where(ok, t, jnp.inf), s, u
 
@@ -229,13 +226,13 @@ def triangle_intersect_moller_trumbore(v0, v1, v2, o, d, tmin=0.0, tmax=jnp.inf)
     e1 = v1 - v0
     e2 = v2 - v0
     P = jnp.cross(d, e2)
-    det = _dot(P, e1)
+    det = vdot(P, e1)
     T = o - v0
     Q = jnp.cross(T, e1)
     ok = det != 0
-    t = safe_div(_dot(Q, e2), det)
-    b1 = safe_div(_dot(P, T), det)
-    b2 = safe_div(_dot(Q, d), det)
+    t = safe_div(vdot(Q, e2), det)
+    b1 = safe_div(vdot(P, T), det)
+    b2 = safe_div(vdot(Q, d), det)
     hit = ok & (b1 >= 0) & (b2 >= 0) & (b1 + b2 <= 1) & (t > tmin) & (t < tmax)
     return jnp.where(hit, t, jnp.inf), b1, b2
 
@@ -251,7 +248,7 @@ def triangle_affine_matrices(v0, v1, v2) -> Float[Array, "... 3 4"]:
     e1 = v1 - v0
     e2 = v2 - v0
     n = jnp.cross(e1, e2)
-    nn = _dot(n, n)[..., None]
+    nn = vdot(n, n)[..., None]
     M = jnp.stack(
         [safe_div(jnp.cross(e2, n), nn), safe_div(jnp.cross(n, e1), nn), safe_div(n, nn)],
         axis=-2,
@@ -334,9 +331,9 @@ def primitive_hit(shape, prim_id, o, d, valid, *, shape_id=0) -> Hit:
         t = sphere_intersect(c, r, o, d, -jnp.inf, jnp.inf)
         # choose the root that the traversal found: the nearest positive one
         f = o - c
-        b = _dot(f, d)
+        b = vdot(f, d)
         g = f - b[..., None] * d
-        h = safe_sqrt(r * r - _dot(g, g))
+        h = safe_sqrt(r * r - vdot(g, g))
         t_lo, t_hi = -b - h, -b + h
         t = jnp.where(t_lo > 0, t_lo, t_hi)
         valid = valid & jnp.isfinite(t)
@@ -362,13 +359,13 @@ def primitive_hit(shape, prim_id, o, d, valid, *, shape_id=0) -> Hit:
         v0, v1, v2 = (shape.vertices[f[..., k]] for k in range(3))
         e1, e2 = v1 - v0, v2 - v0
         P = jnp.cross(d, e2)
-        det = _dot(P, e1)
+        det = vdot(P, e1)
         T = o - v0
         Q = jnp.cross(T, e1)
         valid = valid & (det != 0)
-        t = safe_div(_dot(Q, e2), det)
-        b1 = safe_div(_dot(P, T), det)
-        b2 = safe_div(_dot(Q, d), det)
+        t = safe_div(vdot(Q, e2), det)
+        b1 = safe_div(vdot(P, T), det)
+        b2 = safe_div(vdot(Q, d), det)
         b0 = 1.0 - b1 - b2
         p = b0[..., None] * v0 + b1[..., None] * v1 + b2[..., None] * v2
         ng = safe_normalize(jnp.cross(e1, e2))

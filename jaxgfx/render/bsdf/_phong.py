@@ -8,7 +8,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from jaxgfx._checks import check_nonnegative
-from jaxgfx._math import safe_div, safe_pow, sum_last
+from jaxgfx._math import safe_div, safe_pow, vdot
 from jaxgfx.render.bsdf._base import (
     BSDF,
     INV_PI,
@@ -23,10 +23,6 @@ from jaxgfx.render.frame import frame_from_normal, reflect, to_world
 from jaxgfx.render.warp import square_to_cosine_hemisphere, square_to_phong_lobe
 
 __all__ = ["Phong"]
-
-
-def _dot(a, b):
-    return sum_last(a * b)
 
 
 class Phong(BSDF):
@@ -73,7 +69,7 @@ class Phong(BSDF):
         ci = wi[..., 2]
         valid = (wo[..., 2] > 0) & (ci > 0)
         n = self.exponent
-        spec = safe_pow(_dot(reflect(wo), wi), n)
+        spec = safe_pow(vdot(reflect(wo), wi), n)
         if self.normalized:
             val = (
                 self.kd * (ci * INV_PI)[..., None]
@@ -89,7 +85,7 @@ class Phong(BSDF):
         valid = (wo[..., 2] > 0) & (ci > 0)
         n = self.exponent
         ps = self._spec_prob()
-        p_spec = (n + 1.0) / (2.0 * math.pi) * safe_pow(_dot(reflect(wo), wi), n)
+        p_spec = (n + 1.0) / (2.0 * math.pi) * safe_pow(vdot(reflect(wo), wi), n)
         return jnp.where(valid, ps * p_spec + (1.0 - ps) * ci * INV_PI, 0.0)
 
     def sample(self, wo, u1, u2):

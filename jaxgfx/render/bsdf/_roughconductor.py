@@ -5,17 +5,13 @@ from __future__ import annotations
 import equinox as eqx
 import jax.numpy as jnp
 
-from jaxgfx._math import safe_div, safe_normalize, sum_last
+from jaxgfx._math import safe_div, safe_normalize, vdot
 from jaxgfx.render.bsdf._base import BSDF, BSDFSample, mask3, prep_dirs, prep_u, rgb_param
 from jaxgfx.render.bsdf._conductor import _resolve, fresnel_factor
 from jaxgfx.render.frame import reflect
 from jaxgfx.render.microfacet import MicrofacetDistribution, reflection_pdf
 
 __all__ = ["RoughConductor"]
-
-
-def _dot(a, b):
-    return sum_last(a * b)
 
 
 class RoughConductor(BSDF):
@@ -73,7 +69,7 @@ class RoughConductor(BSDF):
         h = safe_normalize(wo + wi)
         d = self.distribution
         val = safe_div(d.eval(h) * d.G(wo, wi, h), 4.0 * co)
-        return mask3(valid, val[..., None] * self._F(_dot(wo, h)))
+        return mask3(valid, val[..., None] * self._F(vdot(wo, h)))
 
     def _pdf_m(self, wo, m):
         """Density of ``wi = reflect(wo, m)`` given the microfacet normal ``m``."""
@@ -95,7 +91,7 @@ class RoughConductor(BSDF):
         wo_up = jnp.where((co > 0)[..., None], wo, jnp.array([0.0, 0.0, 1.0], wo.dtype))
         m, _ = d.sample(wo_up, u2)
         wi = reflect(wo, m)
-        dot_om = _dot(wo, m)
+        dot_om = vdot(wo, m)
         valid = (co > 0) & (wi[..., 2] > 0) & (dot_om > 0)
         pdf = self._pdf_m(wo, m)
         valid = valid & (pdf > 0)

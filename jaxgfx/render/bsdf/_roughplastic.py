@@ -6,7 +6,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from jaxgfx._checks import check_positive
-from jaxgfx._math import safe_div, safe_normalize, sum_last
+from jaxgfx._math import safe_div, safe_normalize, vdot
 from jaxgfx.render.bsdf._base import (
     BSDF,
     INV_PI,
@@ -23,10 +23,6 @@ from jaxgfx.render.microfacet import MicrofacetDistribution, reflection_pdf
 from jaxgfx.render.warp import square_to_cosine_hemisphere
 
 __all__ = ["RoughPlastic"]
-
-
-def _dot(a, b):
-    return sum_last(a * b)
 
 
 class RoughPlastic(BSDF):
@@ -94,7 +90,7 @@ class RoughPlastic(BSDF):
         valid = (co > 0) & (ci > 0)
         h = safe_normalize(wo + wi)
         d = self.distribution
-        F = fresnel_dielectric(_dot(wo, h), self.eta).r
+        F = fresnel_dielectric(vdot(wo, h), self.eta).r
         spec = safe_div(F * d.eval(h) * d.G(wo, wi, h), 4.0 * co)
         kd = self.diffuse_reflectance
         fdr = fresnel_diffuse_reflectance(1.0 / self.eta)[..., None]
