@@ -52,7 +52,7 @@ def dispatch(scene, mat_id, fn, *, uv=None):
     Only the materials the scene defines are evaluated (a one-material scene pays for one).
     Textured materials (``jaxgfx.render.textured.Textured``) are resolved at the hit ``uv``.
     """
-    # [scenefeat] textures: only materials with an ``at`` method pay for a lookup
+    # textures: only materials with an ``at`` method pay for a lookup
     outs = [fn(m.at(uv) if hasattr(m, "at") else m) for m in scene.materials]
     if len(outs) == 1:
         return outs[0]
