@@ -10,7 +10,7 @@ import numpy as np
 
 from jaxgfx._math import max_last
 from jaxgfx.render.ray import Hit
-from jaxgfx.render.shapes import TriangleMesh, _rays, primitive_hit
+from jaxgfx.render.shapes import TriangleMesh, _rays, _small_argmin, primitive_hit
 
 # Conservative slab test: scale the exit distance by 1 + 2 gamma_3 (pbrt-v4 §6.8.2) so that
 # rounding never culls a box the ray actually crosses.
@@ -64,13 +64,7 @@ def tri_chunk(tris, idx, mask, o, d, tmin, tmax):
     b2 = (qx * dx + qy * dy + qz * dz) * inv_det
     t = (qx * e2[0] + qy * e2[1] + qz * e2[2]) * inv_det
     hit = mask & ok & (b1 >= 0) & (b2 >= 0) & (b1 + b2 <= 1) & (t > tmin) & (t < tmax)
-    t = jnp.where(hit, t, jnp.inf)
-    best, j = t[0], jnp.int32(0)
-    for k in range(1, t.shape[0]):
-        closer = t[k] < best
-        best = jnp.where(closer, t[k], best)
-        j = jnp.where(closer, k, j)
-    return best, j
+    return _small_argmin(jnp.where(hit, t, jnp.inf))
 
 
 def as_numpy_triangles(mesh: TriangleMesh):
