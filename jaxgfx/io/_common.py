@@ -15,6 +15,8 @@ def existing_file(path, name: str = "path") -> Path:
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"{name}: expected a file path (str or os.PathLike), got {type(path)}")
     p = Path(path)
+    if p.is_dir():
+        raise IsADirectoryError(21, f"{name}: is a folder, expected a file", str(p))
     if not p.is_file():
         raise FileNotFoundError(f"{name}: no such file: '{p}'")
     return p

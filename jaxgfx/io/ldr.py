@@ -198,7 +198,7 @@ def parse_exposure_time(value, where: str = "exposure time") -> float:
             raise TypeError
         else:
             t = float(value)
-    except (ValueError, TypeError, ZeroDivisionError):
+    except (ValueError, TypeError, ZeroDivisionError, OverflowError):
         raise ValueError(
             f"{where}: expected a number of seconds or a fraction like 1/250, got {value!r}"
         ) from None

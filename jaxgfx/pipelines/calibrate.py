@@ -67,12 +67,34 @@ class SyntheticConfig:
     read_sigma: float = 1.0e-3
 
     def validate(self):
-        if self.height < 8 or self.width < 8:
-            raise ValueError("synthetic.height/width: expected at least 8 pixels")
+        for name in ("height", "width"):
+            if getattr(self, name) < 8:
+                raise ValueError(
+                    f"synthetic.{name}: expected at least 8 pixels, got {getattr(self, name)}"
+                )
         if len(self.exposure_times) < 2 or any(t <= 0 for t in self.exposure_times):
             raise ValueError("synthetic.exposure_times: expected >= 2 positive times")
         if self.bits not in (8, 16):
             raise ValueError(f"synthetic.bits: expected 8 or 16, got {self.bits}")
+        if self.seed < 0:
+            raise ValueError(f"synthetic.seed: expected an integer >= 0, got {self.seed}")
+        if not (np.isfinite(self.dynamic_range) and self.dynamic_range > 1):
+            raise ValueError(
+                f"synthetic.dynamic_range: expected a finite value > 1, got {self.dynamic_range}"
+            )
+        for name in ("gain", "read_sigma"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise ValueError(f"synthetic.{name}: expected a finite value >= 0, got {v}")
+        if any(not np.isfinite(t) for t in self.exposure_times):
+            raise ValueError("synthetic.exposure_times: expected finite times")
+        from jaxgfx.hdr import SYNTHETIC_RESPONSES
+
+        if self.response not in SYNTHETIC_RESPONSES:
+            raise ValueError(
+                f"synthetic.response: expected one of {', '.join(SYNTHETIC_RESPONSES)}, "
+                f"got {self.response!r}"
+            )
 
 
 _CHOICES = {
