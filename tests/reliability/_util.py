@@ -4,6 +4,7 @@ outcome classes every case asserts (a clear error naming the argument, or a corr
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import os
 import sys
@@ -61,3 +62,17 @@ def no_partial_files(folder) -> bool:
 
 def python_exe() -> str:
     return sys.executable
+
+
+@functools.cache
+def read_only_sys() -> bool:
+    """True when ``/sys`` refuses new files (sysfs; even for root): the read-only target."""
+    import tempfile
+
+    try:
+        fd, name = tempfile.mkstemp(dir="/sys")
+    except OSError:
+        return True
+    os.close(fd)
+    os.unlink(name)
+    return False

@@ -22,13 +22,13 @@ from jaxgfx.config import load_config
 from jaxgfx.pipelines import calibrate as calibrate_mod
 from jaxgfx.pipelines.calibrate import CalibrateConfig
 
-from ._util import assert_one_line_error, no_partial_files, run_cli, snapshot
+from ._util import assert_one_line_error, no_partial_files, read_only_sys, run_cli, snapshot
 
 READ_ONLY = "/sys/jaxgfx-reliability"  # sysfs: not writable, even by root
 
 
 def _read_only_available() -> bool:
-    return os.path.isdir("/sys") and not os.access("/sys", os.W_OK)
+    return read_only_sys()
 
 
 # --------------------------------------------------------------- D1 all-clipped bracket
