@@ -114,7 +114,9 @@ def calibrate_job(args):
         from jaxgfx.config import read_yaml
 
         base = read_yaml(args.config) if args.config else {}
-        overrides["response"] = {**base.get("response", {}), "method": args.method}
+        section = base.get("response", {})
+        if isinstance(section, dict):  # else load_config reports the malformed section
+            overrides["response"] = {**section, "method": args.method}
     cfg = load_config(CalibrateConfig, args.config, **overrides)
     return CalibrateJob(
         config=cfg,
