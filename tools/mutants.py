@@ -32,4 +32,13 @@ MUTANTS = [
         "tests": ["tests/image/test_filters.py::test_gaussian_fractional_sigma_radius_rule"],
         "why": "a constant off by 5 %",
     },
+    # ------------------------------------------------------------------ hdr
+    {
+        "name": "hdr.debevec_solve.weights_not_squared",
+        "file": "jaxgfx/hdr/_debevec.py",
+        "old": "w2 = weights * weights",
+        "new": "w2 = weights",
+        "tests": ["tests/hdr/test_debevec_reference.py"],
+        "why": "a square dropped (issue 15: caught only by a 1 % margin)",
+    },
 ]
