@@ -126,8 +126,16 @@ def main(argv=None) -> int:
             finally:
                 path.write_text(orig)
             status = "killed" if rc == 1 else ("survived" if rc == 0 else f"error({rc})")
-            results.append({"name": m["name"], "file": m["file"], "status": status,
-                            "seconds": round(dt, 1), "tests": m["tests"], "why": m["why"]})
+            results.append(
+                {
+                    "name": m["name"],
+                    "file": m["file"],
+                    "status": status,
+                    "seconds": round(dt, 1),
+                    "tests": m["tests"],
+                    "why": m["why"],
+                }
+            )
             print(f"{status:10s} {dt:6.1f} s  {m['name']}", flush=True)
             if status != "killed":
                 print("    " + tail.replace("\n", "\n    "), flush=True)

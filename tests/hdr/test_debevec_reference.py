@@ -55,9 +55,12 @@ def _dense_reference(lev, w, log_t, n_levels, lam, m):
     # the solver's conditioning ridge: 1e-7 x the mean diagonal of the normal matrix of g
     # once the u_i are eliminated (the Schur complement, here computed densely)
     nm = a.T @ a
-    reduced = nm[:n_levels, :n_levels] - nm[:n_levels, n_levels:] @ np.linalg.pinv(
-        nm[n_levels:, n_levels:]
-    ) @ nm[n_levels:, :n_levels]
+    reduced = (
+        nm[:n_levels, :n_levels]
+        - nm[:n_levels, n_levels:]
+        @ np.linalg.pinv(nm[n_levels:, n_levels:])
+        @ nm[n_levels:, :n_levels]
+    )
     ridge = np.sqrt(1e-7 * np.mean(np.diag(reduced)))
     a = np.vstack([a, np.hstack([ridge * np.eye(n_levels), np.zeros((n_levels, p))])])
     b = np.concatenate([b, np.zeros(n_levels)])
