@@ -36,14 +36,20 @@ sys.path.insert(0, str(ROOT / "tools"))
 
 from mutants import MUTANTS  # noqa: E402
 
+_NOT_COPIED = (".git", ".venv", "out", ".pytest_cache", "__pycache__", ".ruff_cache")
+
 
 def _copy_tree(dst: Path) -> None:
-    out = subprocess.run(
-        ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
-        cwd=ROOT,
-        check=True,
-        capture_output=True,
-    ).stdout.decode()
+    try:
+        out = subprocess.run(
+            ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+            cwd=ROOT,
+            check=True,
+            capture_output=True,
+        ).stdout.decode()
+    except (OSError, subprocess.CalledProcessError):  # not a git checkout (e.g. a tarball)
+        shutil.copytree(ROOT, dst, dirs_exist_ok=True, ignore=shutil.ignore_patterns(*_NOT_COPIED))
+        return
     for rel in filter(None, out.split("\0")):
         src = ROOT / rel
         if not src.is_file():  # deleted in the working tree
@@ -110,6 +116,16 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="jaxgfx-mutate-") as tmp:
         tree = Path(tmp)
         _copy_tree(tree)
+        where = subprocess.run(
+            [sys.executable, "-c", "import jaxgfx; print(jaxgfx.__file__)"],
+            cwd=tree,
+            env={**os.environ, "PYTHONPATH": str(tree)},
+            capture_output=True,
+            text=True,
+        ).stdout.strip()
+        if not where.startswith(str(tree)):
+            print(f"the copy's jaxgfx is not the one imported ({where!r})", file=sys.stderr)
+            return 2
         if not args.no_baseline:
             union = list(dict.fromkeys(t for m in mutants for t in m["tests"]))
             rc, dt, tail = _pytest(tree, union, 3 * args.timeout)
