@@ -146,8 +146,9 @@ def fit(
     never leave the open interval; values outside the bounds raise ``ValueError`` before any
     tracing, values on a bound start ``margin`` inside it.
     ``tol``: stop when ``|loss_k - loss_{k-patience}| <= tol · max(|loss_k|, |loss_{k-patience}|)``
-    (relative change over ``patience`` steps; a loss that stays exactly 0 also stops). ``callback(step, params, loss)`` runs on the
-    host after each step; returning ``True`` stops the loop. ``progress`` shows a tqdm bar.
+    (relative change over ``patience`` steps; a loss that stays exactly 0 also stops).
+    ``callback(step, params, loss)`` runs on the host after each step; returning ``True`` stops
+    the loop. ``progress`` shows a tqdm bar.
 
     A non-finite loss or gradient raises ``FloatingPointError`` naming the step (the parameters
     of the last finite step are in the message). A parameter that does not influence the loss
