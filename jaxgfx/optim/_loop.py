@@ -9,6 +9,7 @@ the same pytree structure as the input.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from collections.abc import Callable
 from typing import Any
@@ -20,7 +21,7 @@ import optax
 import optimistix as optx
 
 from .._checks import check_choice
-from ._transforms import check_bounds, from_unconstrained, to_unconstrained
+from ._transforms import _map, check_bounds, from_unconstrained, to_unconstrained
 
 __all__ = ["fit", "fit_least_squares", "FitResult", "OPTIMIZERS", "LEAST_SQUARES_SOLVERS"]
 
@@ -112,6 +113,42 @@ def _call(loss, p, key, args):
     return loss(p, *a) if key is None else loss(p, key, *a)
 
 
+@functools.lru_cache(maxsize=64)
+def _named_optimizer(name, opts):
+    return optax.inject_hyperparams(OPTIMIZERS[name])(learning_rate=1e-2, **dict(opts))
+
+
+def _bound_spec(params, bounds):
+    """Hashable (treedef, per-leaf Interval tuple) for the compiled step."""
+    intervals = []
+    _map(lambda b, p: intervals.append(b), params, bounds)
+    return jax.tree_util.tree_structure(params), tuple(intervals)
+
+
+def _unconstrained_to_params(u, spec):
+    treedef, intervals = spec
+    leaves = jax.tree_util.tree_leaves(u)
+    return jax.tree_util.tree_unflatten(
+        treedef, [b.forward(x) for b, x in zip(intervals, leaves, strict=True)]
+    )
+
+
+def _value(u, k, a, *, loss, tx, spec, use_key):
+    del tx
+    p = _unconstrained_to_params(u, spec)
+    return _call(loss, p, k if use_key else None, a)
+
+
+@functools.partial(jax.jit, static_argnames=("loss", "tx", "spec", "use_key"))
+def _step(u, state, k, i, a, *, loss, tx, spec, use_key):
+    ki = jax.random.fold_in(k, i)
+    val, g = jax.value_and_grad(_value)(u, ki, a, loss=loss, tx=tx, spec=spec, use_key=use_key)
+    gsq = sum(jnp.sum(jnp.abs(x) ** 2) for x in jax.tree_util.tree_leaves(g))
+    updates, state = tx.update(g, state, u)
+    u_new = optax.apply_updates(u, updates)
+    return u_new, state, val, jnp.isfinite(gsq), _unconstrained_to_params(u_new, spec)
+
+
 def fit(
     loss: Callable,
     params,
@@ -171,7 +208,14 @@ def fit(
         raise ValueError(f"tol: expected a non-negative number or None, got {tol!r}")
     if isinstance(optimizer, str):
         check_choice(optimizer, "optimizer", (*OPTIMIZERS, *LEAST_SQUARES_SOLVERS))
-        tx = OPTIMIZERS[optimizer](learning_rate, **(optimizer_options or {}))
+        opts = tuple(sorted((optimizer_options or {}).items()))
+        try:
+            hash(opts)
+        except TypeError:
+            raise TypeError(
+                "optimizer_options: expected hashable values (numbers, strings)"
+            ) from None
+        tx = _named_optimizer(optimizer, opts)
     elif isinstance(optimizer, optax.GradientTransformation):
         tx = optimizer
     else:
@@ -184,29 +228,23 @@ def fit(
     if key is not None and not isinstance(key, jax.Array):
         raise TypeError(f"key: expected a JAX PRNG key, got {type(key).__name__}")
 
+    spec = _bound_spec(params, bounds)
     u0 = to_unconstrained(params, bounds)
     opt_state = tx.init(u0)
+    if isinstance(optimizer, str):
+        # the learning rate lives in the optimiser state (optax.inject_hyperparams), so fits that
+        # differ only in it share one compiled step
+        lr0 = opt_state.hyperparams["learning_rate"]
+        opt_state.hyperparams["learning_rate"] = jnp.asarray(learning_rate, lr0.dtype)
     step_key = jax.random.key(0) if key is None else key
+    static = dict(loss=loss, tx=tx, spec=spec, use_key=key is not None)
 
-    def value(u, k, a):
-        p = from_unconstrained(u, bounds)
-        return _call(loss, p, None if key is None else k, a)
-
-    @jax.jit
-    def step(u, state, k, i, a):
-        ki = jax.random.fold_in(k, i)
-        val, g = jax.value_and_grad(value)(u, ki, a)
-        gsq = sum(jnp.sum(jnp.abs(x) ** 2) for x in jax.tree_util.tree_leaves(g))
-        updates, state = tx.update(g, state, u)
-        u_new = optax.apply_updates(u, updates)
-        return u_new, state, val, jnp.isfinite(gsq), from_unconstrained(u_new, bounds)
-
-    out_shape = jax.eval_shape(value, u0, step_key, args)
+    out_shape = jax.eval_shape(functools.partial(_value, **static), u0, step_key, args)
     if getattr(out_shape, "shape", None) != ():
         raise ValueError(f"loss: expected a scalar, got {out_shape}")
     t0 = time.perf_counter()
     try:
-        compiled = step.lower(u0, opt_state, step_key, np.int32(0), args).compile()
+        compiled = _step.lower(u0, opt_state, step_key, np.int32(0), args, **static).compile()
     except TypeError as e:
         raise TypeError(f"loss: could not be traced with these params ({e})") from e
     compile_seconds = time.perf_counter() - t0
