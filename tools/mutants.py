@@ -188,4 +188,23 @@ MUTANTS = [
         ],
         "why": "a constant off by 5 % in a gradient (issue 15: rtol 0.05 on a 0.3 % error)",
     },
+    # ------------------------------------------------------------------ optim
+    {
+        "name": "optim.relative_l2.denominator_not_detached",
+        "file": "jaxgfx/optim/_losses.py",
+        "old": "return _reduce(d * d / (jax.lax.stop_gradient(tx) ** 2 + eps), mask)",
+        "new": "return _reduce(d * d / (tx**2 + eps), mask)",
+        "tests": [
+            "tests/optim/test_losses.py::test_relative_l2_gradient_has_the_detached_denominator"
+        ],
+        "why": "a stop_gradient removed",
+    },
+    {
+        "name": "optim.Interval.forward.sigmoid_slope",
+        "file": "jaxgfx/optim/_transforms.py",
+        "old": "return lo + (hi - lo) * jax.nn.sigmoid(u)",
+        "new": "return lo + (hi - lo) * jax.nn.sigmoid(1.05 * u)",
+        "tests": ["tests/optim/test_transforms.py::test_forward_and_derivative_closed_form"],
+        "why": "a constant off by 5 %",
+    },
 ]
