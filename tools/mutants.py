@@ -157,6 +157,14 @@ MUTANTS = [
         ],
         "why": "a constant off by 5 % (issue 15: whitted was checked only against direct/path)",
     },
+    {
+        "name": "render.aov.depth_x1.05",
+        "file": "jaxgfx/render/integrators/aov.py",
+        "old": "depth = jnp.where(hit.valid, hit.t, 0.0)[..., None]",
+        "new": "depth = jnp.where(hit.valid, 1.05 * hit.t, 0.0)[..., None]",
+        "tests": ["tests/render/test_integrator_references.py::test_aov_plane_closed_form"],
+        "why": "a constant off by 5 %",
+    },
     # ------------------------------------------------------------------ render: geometry
     {
         "name": "render.bvh.right_child_uses_left_test",
