@@ -37,10 +37,14 @@ def camera_for(variant: str, truth: dict) -> dict:
     if variant == "srgb_exposure":
         return {"response": {"model": "srgb"}, "exposure": {"init": 1.0, "fit": True}}
     if variant == "joint":
-        return {"response": {"model": "gamma", "fit": True, "init": 2.2},
-                "exposure": {"init": 1.0, "fit": True}}
-    return {"response": {"model": "gamma", "init": truth["gamma"]},
-            "exposure": {"init": truth["exposure"]}}
+        return {
+            "response": {"model": "gamma", "fit": True, "init": 2.2},
+            "exposure": {"init": 1.0, "fit": True},
+        }
+    return {
+        "response": {"model": "gamma", "init": truth["gamma"]},
+        "exposure": {"init": truth["exposure"]},
+    }
 
 
 def plot(path, summary):

@@ -6,8 +6,8 @@ import os
 import numpy as np
 import pytest
 
-from jaxgfx.pipelines.fit import FitConfig, apply_camera, prepare_fit, run_fit
 from jaxgfx.config import load_config
+from jaxgfx.pipelines.fit import FitConfig, apply_camera, prepare_fit, run_fit
 
 SCENE = os.path.join(os.path.dirname(__file__), "..", "configs", "scenes", "inverse.yaml")
 
@@ -80,11 +80,13 @@ def test_config_field_errors():
 
 def test_apply_camera_matches_closed_forms():
     x = np.array([0.0, 0.01, 0.25, 1.0, 2.0])
-    np.testing.assert_allclose(np.asarray(apply_camera(x, 2.0, 2.0, model="gamma")),
-                               np.sqrt(2.0 * x), rtol=1e-6)
+    np.testing.assert_allclose(
+        np.asarray(apply_camera(x, 2.0, 2.0, model="gamma")), np.sqrt(2.0 * x), rtol=1e-6
+    )
     srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.abs(x) ** (1 / 2.4) - 0.055)
-    np.testing.assert_allclose(np.asarray(apply_camera(x, 1.0, 0.0, model="srgb"))[:4], srgb[:4],
-                               rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(
+        np.asarray(apply_camera(x, 1.0, 0.0, model="srgb"))[:4], srgb[:4], rtol=1e-5, atol=1e-7
+    )
 
 
 @pytest.mark.slow

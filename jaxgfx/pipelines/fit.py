@@ -392,40 +392,59 @@ def _build_scene(scene, paths, scene_params):
     return scene
 
 
-def make_loss(cfg: FitConfig, paths, ldr: bool):
-    """The fit's loss ``loss(params, key, (scene, target))`` for :func:`jaxgfx.optim.fit`.
+def _camera_blend(img, exposure, gamma, weights):
+    """``Σ_m weights[m] · apply_camera(img, exposure, gamma, model=m)`` over
+    :data:`RESPONSE_MODELS` (a one-hot ``weights`` selects a model without recompiling)."""
+    out = 0.0
+    for i, m in enumerate(RESPONSE_MODELS):
+        out = out + weights[i] * apply_camera(img, exposure, gamma, model=m)
+    return out
 
-    ``params = {"scene": {path: value}, "camera": {"exposure": e, "gamma": g}}`` (camera
-    entries only when fitted; fixed camera values come from the config)."""
+
+def _freeze(x, free):
+    """``x`` with its gradient kept where ``free`` (1.0) and removed where 0.0."""
     import jax
-    import jax.numpy as jnp
+
+    return free * x + (1.0 - free) * jax.lax.stop_gradient(x)
+
+
+def make_loss(cfg: FitConfig, paths, ldr: bool):
+    """The fit's loss ``loss(params, key, (scene, target, camera_args))`` for
+    :func:`jaxgfx.optim.fit`.
+
+    ``params = {"scene": {path: value}, "camera": {"exposure": e, "gamma": g}}``; for LDR
+    targets ``camera_args = {"weights": one-hot over RESPONSE_MODELS, "free": [exposure free,
+    gamma free]}`` (arrays, so that every camera variant of a scene shares one compiled
+    program; a frozen camera parameter has a zero gradient and Adam leaves it unchanged)."""
 
     from jaxgfx.optim import censored_l2_loss, decorrelated_loss, image_loss
     from jaxgfx.render import render
 
     r = cfg.render
-    cam = cfg.camera
-    code_max = float(2 ** (cam.bits if cam else 8) - 1)
+    code_max = float(2 ** (cfg.camera.bits if cfg.camera else 8) - 1)
     paths = tuple(paths)
+    kind, space = cfg.loss.kind, cfg.loss.space
 
     def image(scene, p, key, spp):
         s = _build_scene(scene, paths, p["scene"])
         return render(s, key, spp=spp, integrator=r.integrator, max_depth=r.max_depth)
 
-    def per_image_loss(img, target, p):
+    def per_image_loss(img, target, p, cam_args):
         if not ldr:
-            return image_loss(img, target, kind=cfg.loss.kind, space=cfg.loss.space)
-        e = p["camera"].get("exposure", jnp.asarray(cam.exposure.init, img.dtype))
-        g = p["camera"].get("gamma", jnp.asarray(cam.response.init, img.dtype))
-        v = apply_camera(img, e, g, model=cam.response.model)
+            return image_loss(img, target, kind=kind, space=space)
+        e = _freeze(p["camera"]["exposure"], cam_args["free"][0])
+        g = _freeze(p["camera"]["gamma"], cam_args["free"][1])
+        v = _camera_blend(img, e, g, cam_args["weights"])
         return censored_l2_loss(v, target, code_max=code_max)
 
     def loss(p, key, args):
-        scene, target = args
+        scene, target, cam_args = args
         if r.estimator == "correlated":
-            return per_image_loss(image(scene, p, key, r.spp), target, p)
+            return per_image_loss(image(scene, p, key, r.spp), target, p, cam_args)
         return decorrelated_loss(
-            lambda k: image(scene, p, k, r.spp // 2), lambda im: per_image_loss(im, target, p), key
+            lambda k: image(scene, p, k, r.spp // 2),
+            lambda im: per_image_loss(im, target, p, cam_args),
+            key,
         )
 
     return loss
@@ -435,8 +454,9 @@ _LOSS_CACHE: dict = {}
 
 
 def _cached_loss(cfg, paths, ldr):
-    """One loss object (hence one compiled fit step) per render/camera/loss configuration."""
-    key = (cfg.render, cfg.camera, cfg.loss, tuple(paths), ldr)
+    """One loss object (hence one compiled fit step) per render / loss configuration and
+    parameter set; camera choices are arguments, not part of the program."""
+    key = (cfg.render, cfg.loss, cfg.camera.bits if cfg.camera else None, tuple(paths), ldr)
     if key not in _LOSS_CACHE:
         _LOSS_CACHE[key] = make_loss(cfg, paths, ldr)
     return _LOSS_CACHE[key]
@@ -482,8 +502,9 @@ def _plot_curves(path, res, names, truth):
                 if truth is not None and name in truth:
                     tv = np.asarray(truth[name], np.float64).reshape(-1)
                     ax.axhline(tv[min(c, tv.size - 1)], color=colors[c] or "k", ls="--", lw=0.8)
-            ax.set_ylabel(name.split(".")[-2] + "." + name.split(".")[-1] if "." in name else name,
-                          fontsize=8)
+            ax.set_ylabel(
+                name.split(".")[-2] + "." + name.split(".")[-1] if "." in name else name, fontsize=8
+            )
             ax.grid(alpha=0.3)
         axes[-1, col].set_xlabel(xl)
     fig.suptitle("fit: loss and parameters (dashed: truth)", fontsize=10)
@@ -525,13 +546,22 @@ def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir
         tscene = _build_scene(prep.scene, list(prep.truth), prep.truth)
         tkey = jax.random.key(int(t.get("seed", 1)))
         target_linear = np.asarray(
-            render(tscene, tkey, spp=int(t.get("spp", 256)), integrator=r.integrator,
-                   max_depth=r.max_depth)
+            render(
+                tscene,
+                tkey,
+                spp=int(t.get("spp", 256)),
+                integrator=r.integrator,
+                max_depth=r.max_depth,
+            )
         )
         if prep.ldr:
             tc = t["camera"]
-            v = apply_camera(target_linear, float(tc.get("exposure", 1.0)),
-                             float(tc.get("gamma", 2.2)), model=tc.get("response", "gamma"))
+            v = apply_camera(
+                target_linear,
+                float(tc.get("exposure", 1.0)),
+                float(tc.get("gamma", 2.2)),
+                model=tc.get("response", "gamma"),
+            )
             target = _quantise(v, int(tc.get("bits", 8))).astype(np.float32)
         else:
             target = target_linear
@@ -552,12 +582,27 @@ def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir
 
     params = {"scene": {p: jnp.asarray(prep.init[p]) for p in prep.paths}, "camera": {}}
     bounds = {"scene": {p: prep.bounds[p] for p in prep.paths}, "camera": {}}
-    if cam is not None and cam.exposure.fit:
-        params["camera"]["exposure"] = jnp.asarray(cam.exposure.init, jnp.float32)
-        bounds["camera"]["exposure"] = (cam.exposure.min, cam.exposure.max)
-    if cam is not None and cam.response.fit:
-        params["camera"]["gamma"] = jnp.asarray(cam.response.init, jnp.float32)
-        bounds["camera"]["gamma"] = (cam.response.min, cam.response.max)
+    cam_args = None
+    if cam is not None:
+        params["camera"] = {
+            "exposure": jnp.asarray(cam.exposure.init, jnp.float32),
+            "gamma": jnp.asarray(cam.response.init, jnp.float32),
+        }
+        bounds["camera"] = {
+            "exposure": (cam.exposure.min, cam.exposure.max),
+            "gamma": (cam.response.min, cam.response.max),
+        }
+        cam_args = {
+            "weights": jnp.asarray(
+                [float(m == cam.response.model) for m in RESPONSE_MODELS], jnp.float32
+            ),
+            "free": jnp.asarray([float(cam.exposure.fit), float(cam.response.fit)], jnp.float32),
+        }
+    fitted_camera = (
+        []
+        if cam is None
+        else [n for n, f in (("exposure", cam.exposure.fit), ("gamma", cam.response.fit)) if f]
+    )
 
     loss = _cached_loss(cfg, prep.paths, prep.ldr)
     o = cfg.optimizer
@@ -568,7 +613,7 @@ def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir
         learning_rate=o.lr,
         steps=o.steps,
         key=k_fit,
-        args=(prep.scene, jnp.asarray(target)),
+        args=(prep.scene, jnp.asarray(target), cam_args),
         bounds=bounds,
         progress=cfg.progress,
         tol=o.tol,
@@ -579,11 +624,11 @@ def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir
     if cam is not None:
         camera_out = {
             "model": cam.response.model,
-            "exposure": _plain(res.params["camera"].get("exposure", cam.exposure.init)),
-            "gamma": _plain(res.params["camera"].get("gamma", cam.response.init))
+            "exposure": _plain(res.params["camera"]["exposure"]),
+            "gamma": _plain(res.params["camera"]["gamma"])
             if cam.response.model == "gamma"
             else None,
-            "fitted": sorted(res.params["camera"]),
+            "fitted": fitted_camera,
         }
     out = {
         "params": fitted,
@@ -621,12 +666,13 @@ def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir
 
         def show(scene_params, cam_params):
             s = _build_scene(prep.scene, prep.paths, scene_params)
-            img = np.asarray(render(s, k_show, spp=show_spp, integrator=r.integrator,
-                                    max_depth=r.max_depth))
+            img = np.asarray(
+                render(s, k_show, spp=show_spp, integrator=r.integrator, max_depth=r.max_depth)
+            )
             if cam is None:
                 return img
-            e = float(cam_params.get("exposure", cam.exposure.init))
-            g = float(cam_params.get("gamma", cam.response.init))
+            e = float(cam_params["exposure"])
+            g = float(cam_params["gamma"])
             return _quantise(apply_camera(img, e, g, model=cam.response.model), 8) / 255.0
 
         before = show(params["scene"], params["camera"])
@@ -640,12 +686,10 @@ def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir
             write_png(os.path.join(out_dir, "before.png"), before)
             write_png(os.path.join(out_dir, "after.png"), after)
             write_png(os.path.join(out_dir, "target.png"), target / (2**cam.bits - 1))
-        names = [("scene", p) for p in prep.paths] + [("camera", c) for c in res.params["camera"]]
+        names = [("scene", p) for p in prep.paths] + [("camera", c) for c in fitted_camera]
         truth_named = dict(prep.truth or {})
         if prep.ldr and prep.truth is not None:
-            truth_named.update(
-                {k: out["truth_camera"][k] for k in ("exposure", "gamma")}
-            )
+            truth_named.update({k: out["truth_camera"][k] for k in ("exposure", "gamma")})
         _plot_curves(os.path.join(out_dir, "curves.png"), res, names, truth_named)
         with open(os.path.join(out_dir, "result.json"), "w", encoding="utf-8") as f:
             json.dump(out, f, indent=1)
@@ -702,6 +746,8 @@ def _cli_main(args) -> int:
         print(f"{k} = {v}{extra}")
     if out["camera"]:
         print(f"camera = {out['camera']}")
-    print(f"loss {out['loss'][0]:.4g} -> {out['loss'][-1]:.4g} in {out['n_steps']} steps, "
-          f"{out['seconds']:.1f} s (+{out['compile_seconds']:.1f} s compile); wrote {args.out}")
+    print(
+        f"loss {out['loss'][0]:.4g} -> {out['loss'][-1]:.4g} in {out['n_steps']} steps, "
+        f"{out['seconds']:.1f} s (+{out['compile_seconds']:.1f} s compile); wrote {args.out}"
+    )
     return 0

@@ -24,8 +24,8 @@ def test_decorrelated_gradient_is_unbiased_where_the_correlated_one_is_not(x64):
     g_dec, g_cor, v_dec = jax.vmap(grads)(jax.random.split(jax.random.key(0), 64))
     # standard error of the mean gradient over 64 x 4096 samples is ~1e-3
     np.testing.assert_allclose(float(jnp.mean(g_dec)), 2 * (theta - t), atol=5e-3)
-    np.testing.assert_allclose(float(jnp.mean(g_cor)), 2 * (theta * (1 + sigma**2) - t),
-                               atol=5e-3)
+    np.testing.assert_allclose(float(jnp.mean(g_cor)), 2 * (theta * (1 + sigma**2) - t), atol=5e-3)
     # the value is the plain loss of one image: E = (theta - t)^2 + theta^2 sigma^2
-    np.testing.assert_allclose(float(jnp.mean(v_dec)), (theta - t) ** 2 + (theta * sigma) ** 2,
-                               rtol=5e-3)
+    np.testing.assert_allclose(
+        float(jnp.mean(v_dec)), (theta - t) ** 2 + (theta * sigma) ** 2, rtol=5e-3
+    )
