@@ -5,7 +5,8 @@ PNG/JPEG "photo", or a synthetic target rendered here at known parameter values)
 parameter path, size and bound *before* rendering, fits with :func:`jaxgfx.optim.fit` and
 writes::
 
-    result.json   fitted params {path: value}, camera, loss per step, seconds, truth and errors
+    result.json   fitted params {path: value}, camera, loss per step, seconds, truth and errors,
+                  the parameter history per step (parameters of <= 16 values)
     curves.png    loss and each parameter against steps and against seconds
     before.png    the initial scene (through the fitted camera for LDR targets)
     after.png     the fitted scene
@@ -641,6 +642,12 @@ def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir
         "target_seconds": float(target_seconds),
         "n_steps": int(res.n_steps),
         "stop_reason": res.stop_reason,
+        "history": {
+            p: np.asarray(res.history["scene"][p], np.float64).tolist()
+            for p in prep.paths
+            if np.size(prep.init[p]) <= 16
+        },
+        "seconds_history": [float(v) for v in res.seconds],
         "config": config_to_dict(cfg),
     }
     if prep.truth is not None:
