@@ -518,22 +518,52 @@ def _plot_curves(path, res, names, truth):
 # the job
 
 
-def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir=None) -> dict:
-    """Run the fit described by ``cfg`` (a :class:`FitConfig`, a mapping or a YAML path) and
-    write the outputs (module doc) to ``out_dir`` (None: nothing written). Returns the
-    ``result.json`` dictionary."""
-    import jax
-    import jax.numpy as jnp
+OUTPUT_NAMES = ("result.json", "curves.png", "before.png", "after.png", "target.png")
 
-    from jaxgfx.optim import fit
-    from jaxgfx.render import render
+
+def run_fit(
+    cfg: FitConfig | dict | str,
+    out_dir: str | None = None,
+    *,
+    base_dir: str | None = None,
+    overwrite: bool = False,
+) -> dict:
+    """Run the fit described by ``cfg`` (a :class:`FitConfig`, a mapping or a YAML path) and
+    write the outputs (module doc) to ``out_dir`` (None: nothing written). Everything is checked
+    before rendering (:func:`prepare_fit`); an ``out_dir`` that holds a previous run's results
+    is refused unless ``overwrite`` (outputs are staged and moved into place only when the job
+    succeeded, :mod:`jaxgfx.pipelines._output`). Relative paths in the config (scene, target)
+    are looked up in the working directory, then in ``base_dir``. Returns the ``result.json``
+    dictionary (plus ``"outputs"``: ``{name: path}`` when written)."""
+    import contextlib
+
+    from jaxgfx.pipelines._output import StagedDir
 
     if isinstance(cfg, (str, os.PathLike)):
         base_dir = base_dir or os.path.dirname(os.path.abspath(cfg))
         cfg = load_config(FitConfig, cfg)
     elif not isinstance(cfg, FitConfig):
         cfg = load_config(FitConfig, cfg)
+    stage = (
+        StagedDir(out_dir, OUTPUT_NAMES, overwrite=overwrite)
+        if out_dir is not None
+        else contextlib.nullcontext()
+    )
     prep = prepare_fit(cfg, base_dir=base_dir)
+    with stage:
+        out = _fit_and_write(cfg, prep, None if out_dir is None else stage.path)
+    if out_dir is not None:
+        out["outputs"] = {n: os.path.join(os.fspath(out_dir), n) for n in OUTPUT_NAMES}
+    return out
+
+
+def _fit_and_write(cfg: FitConfig, prep: _Prepared, out_dir: str | None) -> dict:
+    import jax
+    import jax.numpy as jnp
+
+    from jaxgfx.optim import fit
+    from jaxgfx.render import render
+
     cam = cfg.camera
     r = cfg.render
     key = jax.random.key(cfg.seed)
@@ -666,7 +696,6 @@ def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir
             }
 
     if out_dir is not None:
-        os.makedirs(out_dir, exist_ok=True)
         from jaxgfx.io import write_png
 
         show_spp = max(r.spp, 64)
