@@ -41,6 +41,15 @@ def _fix_index(i, n, path, lineno):
     return j
 
 
+def _check_finite_vertices(path, v: np.ndarray) -> None:
+    bad = np.flatnonzero(~np.all(np.isfinite(v), axis=-1))
+    if bad.size:
+        raise ValueError(
+            f"{path}: {bad.size} vertices have NaN/Inf coordinates (first: vertex {bad[0]} "
+            f"= {v[bad[0]].tolist()}, 0-based)"
+        )
+
+
 def load_obj(path) -> TriangleMesh:
     """Read a Wavefront OBJ file: ``v``, ``vt``, ``vn`` and ``f`` records.
 
@@ -112,6 +121,7 @@ def load_obj(path) -> TriangleMesh:
     if not faces:
         raise ValueError(f"{path}: no faces found")
     V = np.asarray(vs, np.float64)[out_v]
+    _check_finite_vertices(path, np.asarray(vs, np.float64))
     out_t, out_n = np.asarray(out_t), np.asarray(out_n)
     uv = np.asarray(vts)[out_t] if vts and np.all(out_t >= 0) else None
     nn = np.asarray(vns)[out_n] if vns and np.all(out_n >= 0) else None
@@ -237,6 +247,7 @@ def load_ply(path) -> TriangleMesh:
         for k in range(1, len(poly) - 1):
             faces.append([poly[0], poly[k], poly[k + 1]])
     faces = np.asarray(faces, np.int64)
+    _check_finite_vertices(path, np.asarray(V, np.float64))
     if faces.min() < 0 or faces.max() >= len(V):
         raise ValueError(f"{path}: PLY face index out of range [0, {len(V) - 1}]")
     nn = np.stack([np.asarray(vert[c]) for c in ("nx", "ny", "nz")], -1) if "nx" in vert else None

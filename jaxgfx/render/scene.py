@@ -294,14 +294,14 @@ def _mesh(d, where, base_dir):
         if not os.path.isabs(path) and base_dir:
             path = os.path.join(base_dir, path)
         ext = os.path.splitext(path)[1].lower()
-        if ext == ".obj":
-            m = mesh_io.load_obj(path)
-        elif ext == ".ply":
-            m = mesh_io.load_ply(path)
-        else:
+        if ext not in (".obj", ".ply"):
             raise ValueError(f"{where}.file: expected an .obj or .ply file, got {path!r}")
+        try:
+            m = (mesh_io.load_obj if ext == ".obj" else mesh_io.load_ply)(path)
+        except ValueError as e:  # name the shape as well as the file
+            raise ValueError(f"{where}.file: {e}") from None
     elif "vertices" in d and "faces" in d:
-        v = as_float_array(d["vertices"], f"{where}.vertices")
+        v = check_finite(as_float_array(d["vertices"], f"{where}.vertices"), f"{where}.vertices")
         f = np.asarray(d["faces"])
         if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
             raise ValueError(f"{where}: expected vertices (V, 3) and faces (F, 3)")
