@@ -34,13 +34,30 @@ def pyramid_down(x):
     return y[..., ::2, ::2]
 
 
+def _up1(s, axis):
+    """Upsample by 2 along ``axis`` as zero insertion + ``[1, 4, 6, 4, 1] / 8`` filter with
+    BORDER_REFLECT_101, computed polyphase (no scatter): even outputs
+    ``(s[i-1] + 6 s[i] + s[i+1]) / 8``, odd outputs ``(s[i] + s[i+1]) / 2``."""
+    n = s.shape[axis]
+    first = jax.lax.slice_in_dim(s, 1 if n > 1 else 0, 2 if n > 1 else 1, axis=axis)
+    last = jax.lax.slice_in_dim(s, n - 1, n, axis=axis)
+    sp = jnp.concatenate([first, s, last], axis=axis)
+
+    def sl(a, b):
+        return jax.lax.slice_in_dim(sp, a, a + n, axis=axis)
+
+    even = (sl(0, n) + 6.0 * sl(1, n) + sl(2, n)) / 8.0
+    odd = (sl(1, n) + sl(2, n)) / 2.0
+    both = jnp.stack([even, odd], axis=axis + 1)
+    shape = list(s.shape)
+    shape[axis] = 2 * n
+    return both.reshape(shape)
+
+
 def pyramid_up(x, shape):
-    """OpenCV-style ``pyrUp`` of ``(..., h, w)`` to ``shape = (H, W)`` (``H <= 2h``): insert
-    zeros, filter with ``[1, 4, 6, 4, 1] / 8`` per axis (reflect-101), crop."""
-    h, w = x.shape[-2:]
-    up = jnp.zeros(x.shape[:-2] + (2 * h, 2 * w), x.dtype).at[..., ::2, ::2].set(x)
-    k = tuple(t / 8.0 for t in _BINOMIAL)
-    y = _conv5(_conv5(up, -2, k), -1, k)
+    """OpenCV ``pyrUp`` of ``(..., h, w)`` to ``shape = (H, W)`` (``H <= 2h``): zero insertion,
+    ``[1, 4, 6, 4, 1] / 8`` per axis (reflect-101), crop; computed polyphase."""
+    y = _up1(_up1(x, x.ndim - 1), x.ndim - 2)
     return y[..., : shape[0], : shape[1]]
 
 
