@@ -131,7 +131,9 @@ def bench(H, W, repeats):
     have_pfs = shutil.which("pfstmo_drago03") is not None
     rows = {}
     for name, (fn, kw) in JAX_CASES.items():
-        compile_s, jax_s = time_jax(lambda a, fn=fn, kw=kw: fn(a, **kw), x, repeats=repeats)
+        compile_s, jax_s = time_jax(
+            lambda a, fn=fn, kw=kw: fn(a, encode="linear", **kw), x, repeats=repeats
+        )
         row = {"compile_s": compile_s, "jax_s": jax_s}
         if name in CV_CASES:
             f = CV_CASES[name]
@@ -186,6 +188,50 @@ def figure(img, path):
     fig.tight_layout()
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     fig.savefig(path, dpi=80)
+    plt.close(fig)
+    base = os.path.splitext(path)[0]
+    # the global curves: display luminance vs world luminance / log-average
+    Lw = np.logspace(-3, 3, 400).astype(np.float32)
+    row = np.concatenate([Lw, [1e3]])[None]  # the maximum (1e3) sets Drago / Reinhard's white
+    fig, ax = plt.subplots(figsize=(6.5, 4))
+    stats = tm.AdaptationStats(np.float32(1.0), np.float32(1e3))
+    curves = [
+        ("drago b=0.65", tm.tonemap_Drago2003, {"bias": 0.65}),
+        ("drago b=0.85", tm.tonemap_Drago2003, {"bias": 0.85}),
+        ("drago b=0.95", tm.tonemap_Drago2003, {"bias": 0.95}),
+        ("reinhard a=0.18", tm.tonemap_Reinhard2002, {}),
+        ("ACES (Narkowicz)", tm.tonemap_ACES_Narkowicz2015, {}),
+        ("Hable", tm.tonemap_Hable2010, {}),
+        ("exposure 0 (clip)", tm.tonemap_exposure, {}),
+    ]
+    for label, fn, kw in curves:
+        if fn is not tm.tonemap_exposure:
+            kw = {**kw, "adaptation": stats}
+        y = np.asarray(fn(row, encode="linear", **kw))[0, :-1]
+        ax.semilogx(Lw, y, label=label)
+    ax.set_xlabel("world luminance / log-average")
+    ax.set_ylabel("display luminance (linear)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(base + "_curves.png", dpi=90)
+    plt.close(fig)
+    # video: a blinking light makes per-frame adaptation pump; smoothing removes it
+    T = 48
+    frames = np.repeat(hdr_scene(60, 80)[None], T, 0)
+    on = (np.arange(T) // 6) % 2 == 1
+    frames[on, 5:15, 5:15] = 2e5
+    per = np.asarray(tm.tonemap_Reinhard2002(frames, encode="linear"))
+    smo = np.asarray(tm.smooth_adaptation(frames, method="reinhard", rate=0.1, encode="linear"))
+    m = lambda v: (v[:, 20:, 20:] @ np.array([0.2126, 0.7152, 0.0722])).mean(axis=(1, 2))
+    fig, ax = plt.subplots(figsize=(6.5, 3.2))
+    ax.plot(m(per), label="per-frame statistics")
+    ax.plot(m(smo), label="smooth_adaptation (rate 0.1)")
+    ax.set_xlabel("frame")
+    ax.set_ylabel("mean display luminance\n(away from the light)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(base + "_flicker.png", dpi=90)
     plt.close(fig)
 
 

@@ -40,7 +40,9 @@ class TonemapFitConfig:
     def validate(self):
         for name in (self.operator, self.target_op):
             if name not in tm.TONEMAP_METHODS:
-                raise ValueError(f"operator: expected one of {list(tm.TONEMAP_METHODS)}, got {name!r}")
+                raise ValueError(
+                    f"operator: expected one of {list(tm.TONEMAP_METHODS)}, got {name!r}"
+                )
         if len(self.size) != 2 or min(self.size) < 8:
             raise ValueError(f"size: expected [H, W] >= 8, got {self.size!r}")
 

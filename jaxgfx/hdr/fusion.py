@@ -23,7 +23,9 @@ def _conv5(x, axis, taps):
     pad = [(0, 0)] * x.ndim
     pad[axis] = (2, 2)
     xp = jnp.pad(x, pad, mode="reflect" if n > 1 else "edge")
-    return sum(t * jax.lax.slice_in_dim(xp, i, i + n, axis=axis % x.ndim) for i, t in enumerate(taps))
+    return sum(
+        t * jax.lax.slice_in_dim(xp, i, i + n, axis=axis % x.ndim) for i, t in enumerate(taps)
+    )
 
 
 def pyramid_down(x):

@@ -101,7 +101,18 @@ def recolor(x, L, Ld, saturation, kind: str):
     if kind == "single":
         return Ld[..., None]
     ratio = safe_div(x, L[..., None], fill=1.0)
+    if saturation is None:  # s = 1 given as a Python number: skip the power
+        return ratio * Ld[..., None]
     return safe_pow(ratio, saturation) * Ld[..., None]
+
+
+def static_saturation(saturation):
+    """``None`` for a concrete Python ``1`` / ``1.0`` (the fast path of :func:`recolor`),
+    else the (possibly traced) value."""
+    if isinstance(saturation, (int, float)) and not isinstance(saturation, bool):
+        if float(saturation) == 1.0:
+            return None
+    return saturation
 
 
 def encode_display(y, encode: str):

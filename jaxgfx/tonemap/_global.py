@@ -23,6 +23,7 @@ from ._common import (
     encode_display,
     recolor,
     split_luminance,
+    static_saturation,
     stats_or_default,
 )
 
@@ -131,6 +132,7 @@ def tonemap_exposure(
         Array([[0.5]], dtype=float32)
     """
     x = _prepare(hdr, saturation, encode, weights)
+    saturation = static_saturation(saturation)
     check_scalar(exposure, "exposure")
     check_scalar(gamma, "gamma", lo=0.0)
     params = {"exposure": exposure, "gamma": gamma}
@@ -181,6 +183,7 @@ def tonemap_Drago2003(
         1.0
     """
     x = _prepare(hdr, saturation, encode, weights)
+    saturation = static_saturation(saturation)
     check_scalar(bias, "bias", lo=0.0, hi=1.0)
     check_scalar(ld_max, "ld_max", lo=0.0)
     params = {"bias": bias, "ld_max": ld_max}
@@ -217,6 +220,7 @@ def tonemap_Reinhard2002(
         1.0
     """
     x = _prepare(hdr, saturation, encode, weights)
+    saturation = static_saturation(saturation)
     check_scalar(key, "key", lo=0.0)
     if white is not None:
         check_scalar(white, "white", lo=0.0)
@@ -240,6 +244,7 @@ def tonemap_ACES_Narkowicz2015(
         0.2672...
     """
     x = _prepare(hdr, saturation, encode, weights)
+    saturation = static_saturation(saturation)
     check_scalar(exposure, "exposure")
     return _apply_curve(
         x,
@@ -279,6 +284,7 @@ def tonemap_Hable2010(
         0.1880...
     """
     x = _prepare(hdr, saturation, encode, weights)
+    saturation = static_saturation(saturation)
     check_scalar(exposure, "exposure")
     for name, v in (("shoulder", shoulder), ("linear", linear), ("toe", toe)):
         check_scalar(v, name, lo=0.0)

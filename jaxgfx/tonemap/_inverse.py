@@ -144,4 +144,3 @@ def inverse_tonemap(
         encode=encode,
         weights=weights,
     )
-

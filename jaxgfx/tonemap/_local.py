@@ -23,6 +23,7 @@ from ._common import (
     log_average,
     recolor,
     split_luminance,
+    static_saturation,
     stats_or_default,
 )
 from ._poisson import divergence, forward_gradients, solve_poisson_neumann
@@ -133,6 +134,7 @@ def tonemap_Reinhard2002_local(
         0.15254
     """
     x = _prepare(hdr, saturation, encode, weights)
+    saturation = static_saturation(saturation)
     check_scalar(key, "key", lo=0.0)
     check_scalar(phi, "phi")
     check_scalar(epsilon, "epsilon", lo=0.0)
@@ -184,6 +186,7 @@ def tonemap_contrast_inversion(
         0.5
     """
     x = _prepare(hdr, saturation, encode, weights)
+    saturation = static_saturation(saturation)
     check_scalar(k, "k", lo=0.0)
     check_scalar(sigma, "sigma", lo=0.0)
     if radius is None:
@@ -280,6 +283,7 @@ def tonemap_Durand2002(
         1.0
     """
     x = _prepare(hdr, saturation, encode, weights)
+    saturation = static_saturation(saturation)
     check_scalar(contrast, "contrast", lo=1.0)
     check_scalar(sigma_range, "sigma_range", lo=0.0)
     if method not in ("grid", "brute"):
@@ -401,6 +405,7 @@ def tonemap_Fattal2002(
         1.0
     """
     x = _prepare(hdr, saturation, encode, weights)
+    saturation = static_saturation(saturation)
     check_scalar(alpha, "alpha", lo=0.0)
     check_scalar(beta, "beta", lo=0.0)
     check_scalar(gamma, "gamma", lo=0.0)

@@ -90,4 +90,3 @@ def flicker(frames, *, mask=None):
     if mask.shape != L.shape[-2:]:
         raise ValueError(f"mask: expected shape {L.shape[-2:]}, got {mask.shape}")
     return _flicker(x, mask)
-

@@ -42,7 +42,9 @@ def mean_delta_e2000(a_srgb, b_srgb):
     def lab(v):
         lin = colour.models.eotf_sRGB(np.clip(np.asarray(v, np.float64), 0, 1))
         xyz = colour.RGB_to_XYZ(lin, colour.RGB_COLOURSPACES["sRGB"])
-        return colour.XYZ_to_Lab(xyz, colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"])
+        return colour.XYZ_to_Lab(
+            xyz, colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"]
+        )
 
     return float(np.mean(colour.delta_E(lab(a_srgb), lab(b_srgb), method="CIE 2000")))
 

@@ -18,7 +18,10 @@ def bracket():
         [0.6 + 0.4 * np.sin(7 * yy), 0.5 + 0.3 * np.cos(5 * xx), 0.4 + 0.2 * np.sin(3 * (xx + yy))],
         -1,
     )
-    f8 = [np.round(np.clip(rad * t, 0, 1) ** (1 / 2.2) * 255).astype(np.uint8) for t in (0.05, 0.4, 3.2)]
+    f8 = [
+        np.round(np.clip(rad * t, 0, 1) ** (1 / 2.2) * 255).astype(np.uint8)
+        for t in (0.05, 0.4, 3.2)
+    ]
     return f8
 
 

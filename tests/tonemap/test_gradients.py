@@ -34,7 +34,7 @@ def _loss_fn(method, img):
     extra = STATIC.get(method, {})
 
     def f(p):
-        y = op(img, encode="linear", **extra, **dict(zip(names, p)))
+        y = op(img, encode="linear", **extra, **dict(zip(names, p, strict=True)))
         return jnp.sum(w * y)
 
     return f, jnp.asarray([point[n] for n in names], img.dtype)
@@ -42,8 +42,7 @@ def _loss_fn(method, img):
 
 LOCAL = ("contrast_inversion", "durand", "fattal", "reinhard_local")
 FD_CASES = [
-    pytest.param(m, marks=pytest.mark.slow) if m in LOCAL else m
-    for m in sorted(tm.TONEMAP_METHODS)
+    pytest.param(m, marks=pytest.mark.slow) if m in LOCAL else m for m in sorted(tm.TONEMAP_METHODS)
 ]
 
 
@@ -68,7 +67,7 @@ def test_gradients_finite_on_zeros_and_spike(method):
     extra = STATIC.get(method, {})
 
     def f(p, im):
-        return jnp.sum(op(im, **extra, **dict(zip(names, p))))
+        return jnp.sum(op(im, **extra, **dict(zip(names, p, strict=True))))
 
     gp, gi = jax.grad(f, argnums=(0, 1))(p0, jnp.asarray(img))
     assert np.all(np.isfinite(gp)) and np.all(np.isfinite(gi)), method

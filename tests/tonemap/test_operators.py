@@ -45,13 +45,7 @@ def _drago_np(x, bias=0.85, ld_max=100.0):
     la = np.exp(np.mean(np.log(L + delta)))
     Lw, Lwmax = L / la, L.max() / la
     p = math.log(bias) / math.log(0.5)
-    Ld = (
-        ld_max
-        * 0.01
-        / np.log10(Lwmax + 1)
-        * np.log(Lw + 1)
-        / np.log(2 + 8 * (Lw / Lwmax) ** p)
-    )
+    Ld = ld_max * 0.01 / np.log10(Lwmax + 1) * np.log(Lw + 1) / np.log(2 + 8 * (Lw / Lwmax) ** p)
     return np.clip(x / L[..., None] * Ld[..., None], 0, 1)
 
 
@@ -145,7 +139,8 @@ def test_poisson_solver_matches_dense_neumann_solve(x64):
     _, vjp = jax.vjp(tm.solve_poisson_neumann, jnp.asarray(b.reshape(H, W)))
     P = np.eye(n) - 1.0 / n
     np.testing.assert_allclose(
-        np.asarray(vjp(jnp.asarray(ct))[0]).ravel(), P @ np.linalg.pinv(A).T @ ct.ravel(),
+        np.asarray(vjp(jnp.asarray(ct))[0]).ravel(),
+        P @ np.linalg.pinv(A).T @ ct.ravel(),
         atol=1e-10,
     )
 

@@ -97,23 +97,39 @@ def test_fit_recovers_drago_from_two_starts():
 
 
 RECOVER = {  # operator: (true params, two starts), tolerance 2 % relative
-    "exposure": ({"exposure": -1.5, "gamma": 1.4}, ({"exposure": 0.0, "gamma": 1.0},
-                 {"exposure": -3.0, "gamma": 2.0})),
-    "reinhard": ({"key": 0.3, "white": 3.0}, ({"key": 0.18, "white": 4.0},
-                 {"key": 0.5, "white": 10.0})),
-    "filmic": ({"exposure": 0.7, "saturation": 0.7}, ({"exposure": 0.0, "saturation": 1.0},
-               {"exposure": 1.5, "saturation": 1.2})),
-    "hable": ({"exposure": 0.5, "shoulder": 0.25}, ({"exposure": 0.0, "shoulder": 0.15},
-              {"exposure": 1.0, "shoulder": 0.4})),
+    "exposure": (
+        {"exposure": -1.5, "gamma": 1.4},
+        ({"exposure": 0.0, "gamma": 1.0}, {"exposure": -3.0, "gamma": 2.0}),
+    ),
+    "reinhard": (
+        {"key": 0.3, "white": 3.0},
+        ({"key": 0.18, "white": 4.0}, {"key": 0.5, "white": 10.0}),
+    ),
+    "filmic": (
+        {"exposure": 0.7, "saturation": 0.7},
+        ({"exposure": 0.0, "saturation": 1.0}, {"exposure": 1.5, "saturation": 1.2}),
+    ),
+    "hable": (
+        {"exposure": 0.5, "shoulder": 0.25},
+        ({"exposure": 0.0, "shoulder": 0.15}, {"exposure": 1.0, "shoulder": 0.4}),
+    ),
     "reinhard_local": ({"key": 0.3}, ({"key": 0.18}, {"key": 0.5})),
-    "contrast_inversion": ({"k": 2.5, "sigma": 3.0}, ({"k": 2.0, "sigma": 4.0},
-                           {"k": 3.5, "sigma": 2.0})),
-    "durand": ({"contrast": 8.0, "sigma_range": 0.5}, ({"contrast": 5.0, "sigma_range": 0.4},
-               {"contrast": 15.0, "sigma_range": 0.7})),
-    "fattal": ({"beta": 0.8, "gamma": 0.9}, ({"beta": 0.85, "gamma": 0.8},
-               {"beta": 0.95, "gamma": 0.7})),
-    "reinhard_devlin": ({"intensity": 0.8, "light_adapt": 0.7}, ({"intensity": 0.0,
-                        "light_adapt": 0.9}, {"intensity": 1.5, "light_adapt": 0.5})),
+    "contrast_inversion": (
+        {"k": 2.5, "sigma": 3.0},
+        ({"k": 2.0, "sigma": 4.0}, {"k": 3.5, "sigma": 2.0}),
+    ),
+    "durand": (
+        {"contrast": 8.0, "sigma_range": 0.5},
+        ({"contrast": 5.0, "sigma_range": 0.4}, {"contrast": 15.0, "sigma_range": 0.7}),
+    ),
+    "fattal": (
+        {"beta": 0.8, "gamma": 0.9},
+        ({"beta": 0.85, "gamma": 0.8}, {"beta": 0.95, "gamma": 0.7}),
+    ),
+    "reinhard_devlin": (
+        {"intensity": 0.8, "light_adapt": 0.7},
+        ({"intensity": 0.0, "light_adapt": 0.9}, {"intensity": 1.5, "light_adapt": 0.5}),
+    ),
 }
 
 
@@ -137,7 +153,12 @@ def test_fit_adam_history_decreases():
     hdr = synthetic_hdr(16, 16)
     target = tm.tonemap_Reinhard2002(hdr, key=0.3, white=3.0)
     fit = tm.fit_tonemap(
-        "reinhard", hdr, target, fit=("key",), fixed={"white": 3.0}, steps=150,
+        "reinhard",
+        hdr,
+        target,
+        fit=("key",),
+        fixed={"white": 3.0},
+        steps=150,
         learning_rate=0.05,
     )
     assert fit.loss_history.shape == (151,)
