@@ -91,3 +91,8 @@ __all__ += [
     "estimate_white_level",
     "linearity_check",
 ]
+
+# --- exposure fusion (docs/tonemap.md; owner: tonemap)
+from .fusion import exposure_fusion as exposure_fusion  # noqa: E402
+
+__all__ += ["exposure_fusion"]
