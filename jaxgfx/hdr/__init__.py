@@ -12,7 +12,9 @@ from .response import recover_response as recover_response
 from .synthetic import SYNTHETIC_RESPONSES as SYNTHETIC_RESPONSES
 from .synthetic import BracketedStack as BracketedStack
 from .synthetic import NoiseParams as NoiseParams
+from .synthetic import jpeg_roundtrip as jpeg_roundtrip
 from .synthetic import make_bracketed_stack as make_bracketed_stack
+from .synthetic import make_jpeg_stack as make_jpeg_stack
 from .synthetic import synthetic_radiance as synthetic_radiance
 from .synthetic import synthetic_response as synthetic_response
 from .weighting import WEIGHTINGS as WEIGHTINGS
@@ -34,6 +36,8 @@ __all__ = [
     "synthetic_radiance",
     "synthetic_response",
     "make_bracketed_stack",
+    "make_jpeg_stack",
+    "jpeg_roundtrip",
     "weight_hat",
     "weight_gaussian",
     "weight_linear",
@@ -87,3 +91,10 @@ __all__ += [
     "estimate_white_level",
     "linearity_check",
 ]
+
+# --- leave-one-out self-check (docs/hdr.md)
+from .selfcheck import LOO_BANDS as LOO_BANDS
+from .selfcheck import LeaveOneOut as LeaveOneOut
+from .selfcheck import leave_one_out as leave_one_out
+
+__all__ += ["LOO_BANDS", "LeaveOneOut", "leave_one_out"]

@@ -16,7 +16,9 @@ def _stride_for(h, w, max_candidates):
     return s
 
 
-def select_samples(key, z, *, n_samples=2048, n_bins=32, max_candidates=1 << 16, border=2):
+def select_samples(
+    key, z, *, n_samples=2048, n_bins=32, max_candidates=1 << 16, border=2, flat_weight=1.0, flat_reach=0
+):
     """Pick ``P = n_bins * (n_samples // n_bins)`` pixels per channel for calibration.
 
     ``z``: ``(N, H, W, C)`` normalised stack. Pixels are stratified by the stack sum
@@ -43,20 +45,37 @@ def select_samples(key, z, *, n_samples=2048, n_bins=32, max_candidates=1 << 16,
         return jnp.sum(z[:, yy[:, None], xx[None, :], :], axis=0)
 
     s_c = at(0, 0)  # (h', w', C)
-    g_c = (
-        jnp.max(
-            jnp.stack([jnp.abs(at(dy, dx) - s_c) for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0))]),
-            axis=0,
+    if flat_reach == 0:
+        g_c = (
+            jnp.max(
+                jnp.stack(
+                    [jnp.abs(at(dy, dx) - s_c) for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0))]
+                ),
+                axis=0,
+            )
+            / n
         )
-        / n
-    )
+    else:  # central differences that skip the pixel itself: no selection on its own noise
+        d = flat_reach
+        g_c = (
+            jnp.max(
+                jnp.stack(
+                    [
+                        jnp.abs(at(dy, dx) - at(-dy, -dx))
+                        for dy, dx in ((0, d), (d, 0), (d, d), (d, -d))
+                    ]
+                ),
+                axis=0,
+            )
+            / n
+        )
     b = min(border, (h - 1) // 2, (w - 1) // 2)
     inner = ((ys >= b) & (ys < h - b))[:, None] & ((xs >= b) & (xs < w - b))[None, :]
     in_c = jnp.broadcast_to(jnp.asarray(inner)[..., None], s_c.shape)
     zc = z[:, ys[:, None], xs[None, :], :]  # (N, h', w', C)
     m = s_c.shape[0] * s_c.shape[1]
     jitter = jax.random.uniform(key, (m, c), dtype=z.dtype)
-    score = g_c.reshape(m, c) + 1e-3 * jitter + jnp.where(in_c.reshape(m, c), 0.0, 10.0)
+    score = flat_weight * g_c.reshape(m, c) + 1e-3 * jitter + jnp.where(in_c.reshape(m, c), 0.0, 10.0)
     bins = jnp.clip(jnp.floor(s_c.reshape(m, c) / n * n_bins), 0, n_bins - 1).astype(jnp.int32)
     per_bin = max(n_samples // n_bins, 1)
 
