@@ -66,6 +66,9 @@ from .raw_calibration import estimate_black_level as estimate_black_level
 from .raw_calibration import estimate_exposure_ratios as estimate_exposure_ratios
 from .raw_calibration import estimate_white_level as estimate_white_level
 from .raw_calibration import linearity_check as linearity_check
+from .selfcheck import LOO_BANDS as LOO_BANDS
+from .selfcheck import LeaveOneOut as LeaveOneOut
+from .selfcheck import leave_one_out as leave_one_out
 
 __all__ += [
     "ALIGN_METHODS",
@@ -91,10 +94,5 @@ __all__ += [
     "estimate_white_level",
     "linearity_check",
 ]
-
-# --- leave-one-out self-check (docs/hdr.md)
-from .selfcheck import LOO_BANDS as LOO_BANDS
-from .selfcheck import LeaveOneOut as LeaveOneOut
-from .selfcheck import leave_one_out as leave_one_out
 
 __all__ += ["LOO_BANDS", "LeaveOneOut", "leave_one_out"]

@@ -17,7 +17,15 @@ def _stride_for(h, w, max_candidates):
 
 
 def select_samples(
-    key, z, *, n_samples=2048, n_bins=32, max_candidates=1 << 16, border=2, flat_weight=1.0, flat_reach=0
+    key,
+    z,
+    *,
+    n_samples=2048,
+    n_bins=32,
+    max_candidates=1 << 16,
+    border=2,
+    flat_weight=1.0,
+    flat_reach=0,
 ):
     """Pick ``P = n_bins * (n_samples // n_bins)`` pixels per channel for calibration.
 
@@ -26,7 +34,10 @@ def select_samples(
     equal-width bins over ``[0, N]``; within each bin the pixels with the smallest local
     gradient of ``s`` (max abs difference to the 4 neighbours, so edges and misregistered
     pixels are avoided) are taken, ties broken by a small uniform jitter from ``key``;
-    ``border`` pixels at the image edge are never taken. Candidates are a regular sub-grid
+    ``border`` pixels at the image edge are never taken. ``flat_reach > 0`` measures the
+    gradient by central differences ``s(p + d) − s(p − d)`` at that distance, which skip the
+    pixel itself (so the choice does not favour pixels by their own noise); ``flat_weight``
+    scales the gradient against the jitter (0: random within the bin). Candidates are a regular sub-grid
     with at most ``max_candidates`` pixels (cheap on large images).
 
     Returns ``(samples, valid)``: ``samples`` ``(C, P, N)`` levels and ``valid`` ``(C, P)``
@@ -75,7 +86,8 @@ def select_samples(
     zc = z[:, ys[:, None], xs[None, :], :]  # (N, h', w', C)
     m = s_c.shape[0] * s_c.shape[1]
     jitter = jax.random.uniform(key, (m, c), dtype=z.dtype)
-    score = flat_weight * g_c.reshape(m, c) + 1e-3 * jitter + jnp.where(in_c.reshape(m, c), 0.0, 10.0)
+    score = flat_weight * g_c.reshape(m, c) + 1e-3 * jitter
+    score = score + jnp.where(in_c.reshape(m, c), 0.0, 10.0)
     bins = jnp.clip(jnp.floor(s_c.reshape(m, c) / n * n_bins), 0, n_bins - 1).astype(jnp.int32)
     per_bin = max(n_samples // n_bins, 1)
 

@@ -116,17 +116,14 @@ def merge_radiance(
     return out
 
 
-@functools.partial(
-    jax.jit, static_argnames=("weighting", "domain", "code_max", "return_variance", "time_power")
-)
-def _merge(z, t, response, noise, *, weighting, domain, code_max, return_variance, time_power=2.0):
-    """``z``: normalised float levels, or integer codes (then every per-level quantity is
-    computed once on the ``code_max + 1`` levels and gathered: a lookup table)."""
+def _frame_terms(z, t, response, noise, *, weighting, code_max, need_var, time_power):
+    """Per-frame ``x_j`` (to_linear), weights ``w_j``, ``Var x_j`` (or None) and the
+    "bright" flag ``z_j >= 1/2`` used by the fallback, all ``(N, H, W, C)``."""
     c = z.shape[-1]
     dt = t.dtype
     tb = t[:, None, None, None]
     step = 1.0 / code_max if code_max > 1.0 else 1.0 / 255.0
-    need_deriv = weighting == "noise" or return_variance
+    need_deriv = weighting == "noise" or need_var
     x1 = response.to_linear_normalized(jnp.ones((c,), dt))
 
     def per_level(zz):
@@ -167,12 +164,33 @@ def _merge(z, t, response, noise, *, weighting, domain, code_max, return_varianc
         w = q["w"]
         if time_power != 0.0:
             w = w * (tb / jnp.max(t)) ** time_power
+    if z_lo is None:
+        bright = z.astype(jnp.int32) * 2 >= int(code_max)
+    else:
+        bright = z >= 0.5
+    return x, w, var_x, bright
+
+
+@functools.partial(
+    jax.jit, static_argnames=("weighting", "domain", "code_max", "return_variance", "time_power")
+)
+def _merge(z, t, response, noise, *, weighting, domain, code_max, return_variance, time_power=2.0):
+    """``z``: normalised float levels, or integer codes (then every per-level quantity is
+    computed once on the ``code_max + 1`` levels and gathered: a lookup table)."""
+    tb = t[:, None, None, None]
+    x, w, var_x, use_short = _frame_terms(
+        z,
+        t,
+        response,
+        noise,
+        weighting=weighting,
+        code_max=code_max,
+        need_var=return_variance,
+        time_power=time_power,
+    )
     i_short = jnp.argmin(t)
     i_long = jnp.argmax(t)
-    if z_lo is None:
-        use_short = z[i_short].astype(jnp.int32) * 2 >= int(code_max)
-    else:
-        use_short = z[i_short] >= 0.5
+    use_short = use_short[i_short]
     e_j = x / tb
     wsum = jnp.sum(w, axis=0)
     ok = wsum > 0

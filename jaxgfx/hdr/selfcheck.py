@@ -18,7 +18,7 @@ import numpy as np
 from .._checks import check_choice
 from ._model import CameraResponse
 from ._stack import prepare_stack
-from .merge import MERGE_WEIGHTINGS, _merge, _noise_arrays
+from .merge import MERGE_WEIGHTINGS, _frame_terms, _noise_arrays
 
 __all__ = ["leave_one_out", "LeaveOneOut", "LOO_BANDS"]
 
@@ -153,25 +153,38 @@ def _norm(z, code_max, dt):
 
 @functools.partial(jax.jit, static_argnames=("weighting", "code_max", "edges", "time_power"))
 def _loo_jit(z, t, response, noise, *, weighting, code_max, edges, time_power):
+    """Per-frame terms once (one lookup), then for each held frame ``k`` the weighted mean
+    over the others (the same as :func:`merge_radiance` on the other frames, fallback
+    included)."""
     order = jnp.argsort(t)
     z, t = z[order], t[order]
     n = z.shape[0]
-    preds = []
-    for k in range(n):
-        keep = np.asarray([j for j in range(n) if j != k])
-        e = _merge(
-            z[keep],
-            t[keep],
-            response,
-            noise,
-            weighting=weighting,
-            domain="linear",
-            code_max=code_max,
-            return_variance=False,
-            time_power=time_power,
-        )
-        preds.append(response.from_linear_normalized(e * t[k]))
-    return _score(jnp.stack(preds), _norm(z, code_max, t.dtype), t, edges)
+    x, w, _, bright = _frame_terms(
+        z,
+        t,
+        response,
+        noise,
+        weighting=weighting,
+        code_max=code_max,
+        need_var=False,
+        time_power=time_power,
+    )
+    e_j = x / t[:, None, None, None]
+    we = w * e_j
+
+    def held(k):
+        keep = (jnp.arange(n) != k)[:, None, None, None]
+        sk = jnp.sum(jnp.where(keep, we, 0.0), axis=0)
+        wk = jnp.sum(jnp.where(keep, w, 0.0), axis=0)
+        ok = wk > 0
+        shortest = jnp.where(k == 0, 1, 0)
+        longest = jnp.where(k == n - 1, n - 2, n - 1)
+        fb = jnp.where(bright[shortest], e_j[shortest], e_j[longest])
+        e = jnp.where(ok, sk / jnp.where(ok, wk, 1.0), fb)
+        return response.from_linear_normalized(e * t[k])
+
+    preds = jax.lax.map(held, jnp.arange(n))
+    return _score(preds, _norm(z, code_max, t.dtype), t, edges)
 
 
 def _score(pred, actual, t, edges):
@@ -181,7 +194,8 @@ def _score(pred, actual, t, edges):
     a = actual * 255.0
     d = p - a
     ed = jnp.asarray(edges, dt)
-    inr = (a >= ed[0]) & (a <= ed[-1])
+    eps = 1e-3  # levels are k / code_max * 255 in float: make the edges inclusive robustly
+    inr = (a >= ed[0] - eps) & (a <= ed[-1] + eps)
     ax = tuple(range(1, d.ndim))
 
     def mean(v, m, axis=None):
@@ -193,7 +207,7 @@ def _score(pred, actual, t, edges):
     pf, _ = mean(jnp.abs(d), inr, ax)
     pfb, _ = mean(d, inr, ax)
     nb = len(edges) - 1
-    band = jnp.clip(jnp.searchsorted(ed, a, side="right") - 1, 0, nb - 1)
+    band = jnp.clip(jnp.searchsorted(ed, a + eps, side="right") - 1, 0, nb - 1)
     pb, pbb, pbc = [], [], []
     for b in range(nb):
         m = inr & (band == b)
