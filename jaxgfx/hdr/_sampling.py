@@ -37,8 +37,8 @@ def select_samples(
     ``border`` pixels at the image edge are never taken. ``flat_reach > 0`` measures the
     gradient by central differences ``s(p + d) − s(p − d)`` at that distance, which skip the
     pixel itself (so the choice does not favour pixels by their own noise); ``flat_weight``
-    scales the gradient against the jitter (0: random within the bin). Candidates are a regular sub-grid
-    with at most ``max_candidates`` pixels (cheap on large images).
+    scales the gradient against the jitter (0: random within the bin). Candidates are a
+    regular sub-grid with at most ``max_candidates`` pixels (cheap on large images).
 
     Returns ``(samples, valid)``: ``samples`` ``(C, P, N)`` levels and ``valid`` ``(C, P)``
     bool (False where a bin had fewer pixels than its quota).

@@ -216,6 +216,4 @@ def _score(pred, actual, t, edges):
         pb.append(v)
         pbb.append(vb)
         pbc.append(cnt)
-    return LeaveOneOut(
-        total, pf, pfb, jnp.stack(pb), jnp.stack(pbb), jnp.stack(pbc), ed, t
-    )
+    return LeaveOneOut(total, pf, pfb, jnp.stack(pb), jnp.stack(pbb), jnp.stack(pbc), ed, t)
