@@ -13,6 +13,7 @@ writes::
     confidence.png      per-pixel confidence (relative standard error mapped to [0, 1])
     response.png        fitted response curves (and the ground truth for synthetic stacks)
     preview.png         exposure-normalised sRGB preview of the radiance map
+    tonemap_<op>.png    one display image per operator of ``config.tonemap`` (jaxgfx.tonemap)
     report.json         fitted parameters, uncertainties, residuals, errors, timings
 
 Only when the whole run succeeded do they appear in ``out`` (staged next to it, then moved
@@ -157,9 +158,17 @@ class CalibrateConfig:
     align: AlignConfig = AlignConfig()
     demosaic: str = "malvar"
     preview_key: float = 0.18
+    tonemap: tuple[str, ...] = ()
 
     def validate(self):
         _check_choice(self.demosaic, "demosaic")
+        from jaxgfx.tonemap import TONEMAP_METHODS
+
+        for i, op in enumerate(self.tonemap):
+            if op not in TONEMAP_METHODS:
+                raise ValueError(
+                    f"tonemap[{i}]: expected one of {', '.join(TONEMAP_METHODS)}, got {op!r}"
+                )
         if not (np.isfinite(self.preview_key) and self.preview_key > 0):
             raise ValueError(
                 f"preview_key: expected a finite value > 0 (log-average maps to it), "
@@ -184,6 +193,12 @@ OUTPUT_NAMES = (
     "preview.png",
     "response.png",
     "report.json",
+) + tuple(
+    f"tonemap_{op}.png"
+    for op in (
+        "exposure drago reinhard reinhard_devlin filmic hable reinhard_local "
+        "contrast_inversion durand fattal"
+    ).split()
 )
 """Every file a calibration run may write into ``out`` (a RAW run writes no response.png)."""
 
@@ -320,13 +335,10 @@ def _response_summary(resp) -> dict:
 
 
 def _preview(radiance: np.ndarray, key: float) -> np.ndarray:
-    from jaxgfx import color
+    """Global Reinhard (2002) with key ``key``, L_white = the maximum (jaxgfx.tonemap)."""
+    from jaxgfx.pipelines.tonemap import tonemap_image
 
-    lum = np.asarray(color.luminance(np.maximum(radiance, 0)))
-    logavg = float(np.exp(np.mean(np.log(lum[lum > 0] + 1e-9)))) if np.any(lum > 0) else 1.0
-    scaled = radiance * (key / max(logavg, 1e-12))
-    mapped = scaled / (1.0 + scaled)  # global Reinhard curve for the preview only
-    return np.asarray(color.linear_to_srgb(np.clip(mapped, 0.0, 1.0)))
+    return tonemap_image(radiance, "reinhard", key=key)
 
 
 def _to_float01(images: np.ndarray) -> np.ndarray:
@@ -379,6 +391,12 @@ def _write_outputs(folder, result: CalibrateResult, cfg: CalibrateConfig) -> lis
     io.write_png(os.path.join(folder, "confidence.png"), conf.astype(np.float32))
     io.write_png(os.path.join(folder, "preview.png"), _preview(radiance, cfg.preview_key))
     names = ["radiance.exr", "variance.exr", "confidence.png", "preview.png"]
+    if cfg.tonemap:
+        from jaxgfx.pipelines.tonemap import tonemap_image
+
+        for op in dict.fromkeys(cfg.tonemap):
+            io.write_png(os.path.join(folder, f"tonemap_{op}.png"), tonemap_image(radiance, op))
+            names.append(f"tonemap_{op}.png")
     if result.curves:
         _plot_response(
             os.path.join(folder, "response.png"),
@@ -396,6 +414,7 @@ _OUTPUT_KEYS = {
     "preview.png": "preview",
     "response.png": "response_plot",
     "report.json": "report",
+    **{n: n[: -len(".png")] for n in OUTPUT_NAMES if n.startswith("tonemap_")},
 }
 
 
