@@ -149,7 +149,7 @@ def _mesh_plane_scene(albedo=0.5):
     )
     mesh = scene.shapes[0]
     normals = jnp.asarray(n, mesh.vertices.dtype)
-    from jaxgfx.render.shapes import TriangleMesh
+    from jaxgfx.render.geometry import TriangleMesh
 
     mesh = TriangleMesh(mesh.vertices, mesh.faces, normals)
     return eqx.tree_at(lambda s: s.shapes[0], scene, mesh)

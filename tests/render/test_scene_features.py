@@ -18,13 +18,13 @@ from jax.test_util import check_grads
 from PIL import Image
 
 from jaxgfx.render.bsdf import Diffuse, RoughConductor
+from jaxgfx.render.bsdf.texture import Texture
+from jaxgfx.render.bsdf.textured import Checkerboard, Textured, texture_eval, texture_from_dict
+from jaxgfx.render.geometry import Spheres, intersect
+from jaxgfx.render.geometry.sdf import SDFSphere
+from jaxgfx.render.geometry.sphere_tracing import SDFShape
 from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
-from jaxgfx.render.sdf import SDFSphere
-from jaxgfx.render.sdf_shape import SDFShape
-from jaxgfx.render.shapes import Spheres, intersect
-from jaxgfx.render.texture import Texture
-from jaxgfx.render.textured import Checkerboard, Textured, texture_eval, texture_from_dict
 
 KEY = jax.random.key(3)
 
