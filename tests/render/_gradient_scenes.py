@@ -82,6 +82,114 @@ GLOSSY_PARAMS = [
 ]
 
 
+def materials_scene(w=8):
+    """Direct lighting of every non-delta BSDF: rough plastic and (modified) Phong spheres on an
+    anisotropic rough-conductor floor with a complex IOR, lit by an area light, a point light
+    and a constant environment."""
+    return {
+        "camera": _camera(w, origin=(0, 1.6, 4.0), target=(0, 0.5, 0), fov=50),
+        "shapes": [
+            {"type": "sphere", "center": [-0.7, 0.6, 0], "radius": 0.6, "material": "plastic"},
+            {"type": "sphere", "center": [0.7, 0.6, 0], "radius": 0.6, "material": "phong"},
+            _floor("metal"),
+        ],
+        "materials": {
+            "plastic": {
+                "type": "roughplastic",
+                "alpha": 0.2,
+                "diffuse_reflectance": [0.6, 0.3, 0.2],
+                "specular_reflectance": 0.8,
+                "eta": 1.5,
+            },
+            "phong": {"type": "phong", "kd": [0.3, 0.5, 0.4], "ks": 0.4, "exponent": 20.0},
+            "metal": {
+                "type": "roughconductor",
+                "alpha": 0.15,
+                "alpha_v": 0.35,
+                "eta": [0.2, 0.9, 1.1],
+                "k": [3.9, 2.4, 2.2],
+            },
+        },
+        "emitters": [
+            _light(radiance=6.0, center=(0.5, 2.8, 1.5), normal=(0, -1, -0.4)),
+            {"type": "point", "position": [-1.5, 2.0, 1.5], "intensity": 4.0},
+            ENV,
+        ],
+    }
+
+
+MATERIALS_PARAMS = [
+    ("materials.plastic.alpha", 0.2),
+    ("materials.plastic.diffuse_reflectance", np.array([0.6, 0.3, 0.2])),
+    ("materials.plastic.specular_reflectance", np.array([0.8, 0.8, 0.8])),
+    ("materials.plastic.eta", 1.5),
+    ("materials.phong.kd", np.array([0.3, 0.5, 0.4])),
+    ("materials.phong.ks", np.array([0.4, 0.4, 0.4])),
+    ("materials.phong.exponent", 20.0),
+    ("materials.metal.alpha_u", 0.15),
+    ("materials.metal.alpha_v", 0.35),
+    ("materials.metal.eta", np.array([0.2, 0.9, 1.1])),
+    ("materials.metal.k", np.array([3.9, 2.4, 2.2])),
+    ("emitters.point.intensities", None),
+    ("emitters.area.0.radiance", np.array([6.0, 6.0, 6.0])),
+]
+
+
+def glass_scene(w=8):
+    """Delta BSDFs: a glass sphere and a coloured mirror (complex-IOR conductor) over a diffuse
+    floor, area light and constant environment."""
+    return {
+        "camera": _camera(w, origin=(0, 1.4, 4.0), target=(0, 0.5, 0), fov=50),
+        "shapes": [
+            {"type": "sphere", "center": [-0.65, 0.6, 0.3], "radius": 0.6, "material": "glass"},
+            {"type": "sphere", "center": [0.75, 0.6, -0.3], "radius": 0.6, "material": "mirror"},
+            _floor(),
+        ],
+        "materials": {
+            "glass": {"type": "dielectric", "eta": 1.5},
+            "mirror": {"type": "conductor", "eta": [0.2, 0.9, 1.1], "k": [3.9, 2.4, 2.2]},
+            "floor": {"type": "diffuse", "reflectance": [0.6, 0.5, 0.4]},
+        },
+        "emitters": [_light(radiance=6.0), ENV],
+    }
+
+
+GLASS_PARAMS = [
+    ("materials.glass.eta", 1.5),
+    ("materials.mirror.eta", np.array([0.2, 0.9, 1.1])),
+    ("materials.mirror.k", np.array([3.9, 2.4, 2.2])),
+    ("materials.floor.reflectance", np.array([0.6, 0.5, 0.4])),
+    ("emitters.area.0.radiance", np.array([6.0, 6.0, 6.0])),
+    ("emitters.environment.radiance", np.array([0.3, 0.3, 0.3])),
+]
+
+
+def envmap_scene(w=8):
+    """An importance-sampled environment map (its texels set the light-sampling density) over
+    a rough-conductor sphere and a diffuse floor, plus an area light."""
+    rng = np.random.default_rng(5)
+    env = (0.2 + rng.random((4, 8, 3)) * np.array([1.0, 0.8, 0.6])).tolist()
+    return {
+        "camera": _camera(w),
+        "shapes": [
+            {"type": "sphere", "center": [0, 0.8, 0], "radius": 0.8, "material": "metal"},
+            _floor(),
+        ],
+        "materials": {
+            "metal": {"type": "roughconductor", "alpha": 0.3, "reflectance": 0.9},
+            "floor": {"type": "diffuse", "reflectance": 0.5},
+        },
+        "emitters": [_light(radiance=4.0), {"type": "envmap", "image": env}],
+    }
+
+
+ENVMAP_PARAMS = [
+    ("emitters.environment.image", None),
+    ("materials.metal.alpha", 0.3),
+    ("materials.floor.reflectance", np.array([0.5, 0.5, 0.5])),
+]
+
+
 def make_scene(desc):
     return load_scene(desc)
 
@@ -102,7 +210,9 @@ def apply(scene, params, x):
 
 
 @eqx.filter_jit
-def ad_fd(scene, bases, keys, h, *, spp, integrator, max_depth, strategy="mis"):
+def ad_fd(
+    scene, bases, keys, h, *, spp, integrator, max_depth, strategy="mis", sampling="detached"
+):
     """Per key: image mean, AD gradient (reverse mode) and central FD w.r.t. each scale.
 
     Returns ``(values (K,), ad (K, P), fd (K, P))``. ``bases``: list of ``(path, base)``; the
@@ -113,7 +223,13 @@ def ad_fd(scene, bases, keys, h, *, spp, integrator, max_depth, strategy="mis"):
     def loss(x, key):
         s = apply(scene, bases, x)
         img = render(
-            s, key, spp=spp, integrator=integrator, max_depth=max_depth, strategy=strategy
+            s,
+            key,
+            spp=spp,
+            integrator=integrator,
+            max_depth=max_depth,
+            strategy=strategy,
+            sampling=sampling,
         )
         return jnp.mean(img)
 

@@ -71,14 +71,35 @@ def test_grad_stats_rejects(bad):
 def _lit_plane():
     return load_scene(
         {
-            "camera": {"origin": [0, 2, 2], "target": [0, 0, 0], "fov": 40, "width": 1,
-                       "height": 1},
-            "shapes": [{"type": "rectangle", "center": [0, 0, 0], "normal": [0, 1, 0],
-                        "size": [4, 4], "material": "m"}],
+            "camera": {
+                "origin": [0, 2, 2],
+                "target": [0, 0, 0],
+                "fov": 40,
+                "width": 1,
+                "height": 1,
+            },
+            "shapes": [
+                {
+                    "type": "rectangle",
+                    "center": [0, 0, 0],
+                    "normal": [0, 1, 0],
+                    "size": [4, 4],
+                    "material": "m",
+                }
+            ],
             "materials": {"m": {"type": "diffuse", "reflectance": 0.8}},
-            "emitters": [{"type": "area", "radiance": 2.0,
-                          "shape": {"type": "rectangle", "center": [0.3, 1.0, 0],
-                                    "normal": [0, -1, 0], "size": [0.5, 0.5]}}],
+            "emitters": [
+                {
+                    "type": "area",
+                    "radiance": 2.0,
+                    "shape": {
+                        "type": "rectangle",
+                        "center": [0.3, 1.0, 0],
+                        "normal": [0, -1, 0],
+                        "size": [0.5, 0.5],
+                    },
+                }
+            ],
         }
     )
 

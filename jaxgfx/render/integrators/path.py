@@ -84,8 +84,7 @@ def path_radiance(
         hit = C.intersect(scene, o, d)
         L = L + jnp.where(
             alive[..., None],
-            beta
-            * _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy, detach),
+            beta * _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy, detach),
             0,
         )
         alive = alive & hit.valid

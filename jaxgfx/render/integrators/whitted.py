@@ -131,6 +131,4 @@ class WhittedIntegrator(Integrator):
         return (self.max_depth, N_RANDOM)
 
     def __call__(self, scene, o, d, u):
-        return whitted_radiance(
-            scene, o, d, u, max_depth=self.max_depth, sampling=self.sampling
-        )
+        return whitted_radiance(scene, o, d, u, max_depth=self.max_depth, sampling=self.sampling)
