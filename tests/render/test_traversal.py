@@ -197,8 +197,8 @@ def test_backend_gradients_equal_reference(grad_case, name):
 def test_backend_vmap_and_batch_shapes(case, name):
     mesh, (o, d, _, _), _, ts = case
     acc = T.build_traversal(mesh, name)
-    t_ref = np.min(np.asarray(_all_t(mesh.triangles, o[:64], d[:64],
-                                     np.zeros(64, np.float32), np.full(64, np.inf, np.float32))), 1)  # fmt: skip
+    lim = np.zeros(64, np.float32), np.full(64, np.inf, np.float32)
+    t_ref = np.min(np.asarray(_all_t(mesh.triangles, o[:64], d[:64], *lim)), 1)
     o4, d4 = o[:64].reshape(4, 4, 4, 3), d[:64].reshape(4, 4, 4, 3)
     t_b = jax.jit(lambda a, o, d: a.closest_t(o, d)[0])(acc, o4, d4)
     t_v = jax.jit(jax.vmap(lambda o, d: acc.closest_t(o, d)[0]))(o4, d4)

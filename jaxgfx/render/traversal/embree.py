@@ -1,3 +1,4 @@
+# ruff: noqa: F722  (jaxtyping shape strings)
 """Embree 4 traversal backend (CPU) through ``embreex`` (optional: ``pip install jaxgfx[embree]``).
 
 The Embree scene is built and committed once per mesh on the host (:func:`build_embree`) and

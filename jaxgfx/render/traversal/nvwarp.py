@@ -1,3 +1,4 @@
+# ruff: noqa: F722  (jaxtyping shape strings)
 """NVIDIA Warp traversal backend (``wp.Mesh`` + ``wp.mesh_query_ray``; optional:
 ``pip install jaxgfx[warp]``).
 
@@ -93,7 +94,7 @@ class WarpMesh(HostTraversal):
     """
 
     mesh: TriangleMesh
-    mesh_id: UInt32[Array, "2"]
+    mesh_id: UInt32[Array, " 2"]
     keep: KeepAlive = eqx.field(static=True)
 
     def _query(self, o, d, tmin, tmax, any_hit):
@@ -132,6 +133,3 @@ def build_warp(mesh: TriangleMesh, *, device: str | None = None) -> WarpMesh:
     mid = int(host.mesh.id)
     words = np.array([mid & 0xFFFFFFFF, mid >> 32], np.uint32)
     return WarpMesh(mesh, jnp.asarray(words), KeepAlive(host))
-
-
-
