@@ -39,7 +39,8 @@ def warp_available() -> bool:
 def _kernels():
     import warp as wp
 
-    wp.config.quiet = True
+    if wp.config.log_level == wp.LOG_INFO:  # the default: no init/module-load banners
+        wp.config.log_level = wp.LOG_WARNING
     wp.init()
 
     @wp.kernel
