@@ -20,6 +20,9 @@ docs/performance.md): CPU: embree, warp, jax; GPU: warp, jax.
 
 from __future__ import annotations
 
+import weakref
+
+import equinox as eqx
 import jax
 
 from jaxgfx.render.traversal._base import HostTraversal as HostTraversal
@@ -35,12 +38,14 @@ __all__ = [
     "EmbreeMesh",
     "HostTraversal",
     "WarpMesh",
+    "accel_of",
     "available_backends",
     "build_embree",
     "build_traversal",
     "build_warp",
     "embree_available",
     "resolve_backend",
+    "scene_with_accel",
     "warp_available",
 ]
 
@@ -84,3 +89,56 @@ def resolve_backend(accel: str = "auto") -> str:
 def build_traversal(mesh, accel: str = "auto"):
     """Traversal object for ``mesh`` from backend ``accel`` (see :data:`ACCEL_BACKENDS`)."""
     return ACCEL_BACKENDS[resolve_backend(accel)](mesh)
+
+
+def accel_of(shape) -> str | None:
+    """Backend name of a traversal object (``None`` for anything else)."""
+    from jaxgfx.render.accel.bvh import BVH
+
+    if isinstance(shape, EmbreeMesh):
+        return "embree"
+    if isinstance(shape, WarpMesh):
+        return "warp"
+    if isinstance(shape, BVH):
+        return "jax"
+    return None
+
+
+# (id(vertices), id(faces), backend) -> (weakref(vertices), weakref(faces), traversal object
+# holding a placeholder mesh: the cache must not keep the mesh arrays alive)
+_BUILT: dict = {}
+
+
+def _cached_build(mesh, name):
+    from jaxgfx.render.shapes import TriangleMesh
+
+    key = (id(mesh.vertices), id(mesh.faces), name)
+    hit = _BUILT.get(key)
+    if hit is not None and hit[0]() is mesh.vertices and hit[1]() is mesh.faces:
+        return eqx.tree_at(lambda b: b.mesh, hit[2], mesh)
+    for k in [k for k, v in _BUILT.items() if v[0]() is None or v[1]() is None]:
+        del _BUILT[k]
+    built = ACCEL_BACKENDS[name](mesh)
+    placeholder = TriangleMesh([[0.0, 0.0, 0.0]] * 3, [[0, 1, 2]])
+    _BUILT[key] = (
+        weakref.ref(mesh.vertices),
+        weakref.ref(mesh.faces),
+        eqx.tree_at(lambda b: b.mesh, built, placeholder),
+    )
+    return built
+
+
+def scene_with_accel(scene, accel: str = "auto"):
+    """Copy of ``scene`` whose triangle meshes are traced by backend ``accel``.
+
+    Every shape that is a traversal object (JAX BVH, Embree, Warp) is rebuilt over its
+    ``mesh`` with the chosen backend; other shapes (analytic shapes, small brute-force meshes,
+    SDFs) are kept. Builds are cached per mesh arrays, so calling this (or
+    ``render(..., accel=...)``) again with the same scene costs no rebuild.
+    """
+    name = resolve_backend(accel)
+    shapes = []
+    for s in scene.shapes:
+        cur = accel_of(s)
+        shapes.append(s if cur is None or cur == name else _cached_build(s.mesh, name))
+    return eqx.tree_at(lambda sc: sc.shapes, scene, tuple(shapes))
