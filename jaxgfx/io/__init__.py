@@ -20,6 +20,7 @@ from .ldr import read_ldr_stack as read_ldr_stack
 from .ldr import write_png as write_png
 from .raw import RawImage as RawImage
 from .raw import read_raw as read_raw
+from .raw import read_raw_exif as read_raw_exif
 from .raw import read_raw_linear_rgb as read_raw_linear_rgb
 
 __all__ = [
@@ -32,6 +33,7 @@ __all__ = [
     "RawImage",
     "read_raw",
     "read_raw_linear_rgb",
+    "read_raw_exif",
     "write_dng",
     "read_image",
     "write_png",
