@@ -20,13 +20,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-<<<<<<< HEAD
-from .._checks import check_choice
-from ._debevec import DEBEVEC_MAX_CANDIDATES, recover_debevec
-=======
 from .._checks import check_choice, is_concrete
-from ._debevec import recover_debevec
->>>>>>> main
+from ._debevec import DEBEVEC_MAX_CANDIDATES, recover_debevec
 from ._model import CameraResponse, resolve_anchor
 from ._parametric import recover_gamma, recover_polynomial, recover_spline
 from ._robertson import recover_robertson

@@ -226,10 +226,6 @@ def read_raw_linear_rgb(path) -> np.ndarray:
     """
     p = existing_file(path)
     meta = _tiff_metadata(p)
-    if any(meta.get(k) is None for k in ("exposure_time", "iso", "f_number")):
-        # NEF / CR2 / ARW sub-IFDs that tifffile did not reach, and CR3 (not TIFF)
-        for k, v in read_raw_exif(p).items():
-            meta.setdefault(k, v)
     if meta.get("truncated"):
         raise ValueError(f"'{p}': truncated RAW file (image data extends past end of file)")
     raw = _open_raw(p)
