@@ -361,6 +361,9 @@ def main(argv=None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    from jaxgfx._jaxcache import enable_compilation_cache  # persistent compile cache (calib)
+
+    enable_compilation_cache()
     return run_command(args)
 
 
