@@ -142,6 +142,20 @@ class OptimizerConfig:
     lr: float = 0.02
     steps: int = 200
     tol: float | None = None
+    lr_final: float | None = None  # exponential decay from lr to lr_final over the steps
+
+    def validate(self):
+        if not self.lr > 0 or (self.lr_final is not None and not self.lr_final > 0):
+            raise ValueError("optimizer.lr / lr_final: expected positive numbers")
+        if self.steps < 1:
+            raise ValueError(f"optimizer.steps: expected >= 1, got {self.steps}")
+
+    def schedule(self):
+        """The learning rate: a number, or ``k -> lr · (lr_final / lr)^(k / (steps - 1))``."""
+        if self.lr_final is None:
+            return self.lr
+        lr, ratio, n = self.lr, self.lr_final / self.lr, max(self.steps - 1, 1)
+        return lambda k: lr * ratio ** (min(k, n) / n)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -641,7 +655,7 @@ def _fit_and_write(cfg: FitConfig, prep: _Prepared, out_dir: str | None) -> dict
         loss,
         params,
         optimizer=o.name,
-        learning_rate=o.lr,
+        learning_rate=o.schedule(),
         steps=o.steps,
         key=k_fit,
         args=(prep.scene, jnp.asarray(target), cam_args),
