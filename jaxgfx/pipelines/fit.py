@@ -56,6 +56,7 @@ import numpy as np
 from jaxgfx.config import config_to_dict, load_config, read_yaml
 
 __all__ = [
+    "FitJob",
     "FitConfig",
     "ParamSpec",
     "CameraConfig",
@@ -535,14 +536,26 @@ def _plot_curves(path, res, names, truth):
 OUTPUT_NAMES = ("result.json", "curves.png", "before.png", "after.png", "target.png")
 
 
+@dataclasses.dataclass(frozen=True)
+class FitJob:
+    """A fit job: the config, the output folder (None: write nothing), ``overwrite`` and the
+    folder relative config paths are also looked up in (``base_dir``, e.g. the config's)."""
+
+    config: FitConfig
+    out: str | None = "out/fit"
+    overwrite: bool = False
+    base_dir: str | None = None
+
+
 def run_fit(
-    cfg: FitConfig | dict | str,
+    cfg: FitJob | FitConfig | dict | str,
     out_dir: str | None = None,
     *,
     base_dir: str | None = None,
     overwrite: bool = False,
 ) -> dict:
-    """Run the fit described by ``cfg`` (a :class:`FitConfig`, a mapping or a YAML path) and
+    """Run the fit described by ``cfg`` (a :class:`FitJob`, or a :class:`FitConfig`, a mapping
+    or a YAML path with ``out_dir``, ``base_dir``, ``overwrite``) and
     write the outputs (module doc) to ``out_dir`` (None: nothing written). Everything is checked
     before rendering (:func:`prepare_fit`); an ``out_dir`` that holds a previous run's results
     is refused unless ``overwrite`` (outputs are staged and moved into place only when the job
@@ -553,6 +566,8 @@ def run_fit(
 
     from jaxgfx.pipelines._output import StagedDir
 
+    if isinstance(cfg, FitJob):
+        cfg, out_dir, overwrite, base_dir = cfg.config, cfg.out, cfg.overwrite, cfg.base_dir
     if isinstance(cfg, (str, os.PathLike)):
         base_dir = base_dir or os.path.dirname(os.path.abspath(cfg))
         cfg = load_config(FitConfig, cfg)
