@@ -38,6 +38,7 @@ from jaxgfx.render.integrators import Integrator as Integrator
 from jaxgfx.render.integrators import PathIntegrator as PathIntegrator
 from jaxgfx.render.integrators import WhittedIntegrator as WhittedIntegrator
 from jaxgfx.render.render import render as render
+from jaxgfx.render.distributed import render_sharded as render_sharded
 from jaxgfx.render.scene import Scene as Scene
 from jaxgfx.render.scene import load_scene as load_scene
 
@@ -45,6 +46,7 @@ __all__ = [
     "accel",
     "bsdf",
     "render",
+    "render_sharded",
     "load_scene",
     "Scene",
     "INTEGRATORS",
