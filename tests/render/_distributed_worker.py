@@ -22,21 +22,38 @@ import numpy as np  # noqa: E402
 from jaxgfx.render import load_scene, render, render_sharded  # noqa: E402
 
 SCENE = {
-    "camera": {"origin": [0, 1.0, 4.0], "target": [0, 0.6, 0], "fov": 40, "width": 16,
-               "height": 14},  # 14 rows: not divisible by 4 devices (padding rows)
+    "camera": {
+        "origin": [0, 1.0, 4.0],
+        "target": [0, 0.6, 0],
+        "fov": 40,
+        "width": 16,
+        "height": 14,
+    },  # 14 rows: not divisible by 4 devices (padding rows)
     "shapes": [
         {"type": "sphere", "center": [0, 0.8, 0], "radius": 0.8, "material": "ball"},
-        {"type": "rectangle", "center": [0, 0, 0], "normal": [0, 1, 0], "size": [6, 6],
-         "material": "floor"},
+        {
+            "type": "rectangle",
+            "center": [0, 0, 0],
+            "normal": [0, 1, 0],
+            "size": [6, 6],
+            "material": "floor",
+        },
     ],
     "materials": {
         "ball": {"type": "diffuse", "reflectance": [0.8, 0.5, 0.3]},
         "floor": {"type": "diffuse", "reflectance": 0.5},
     },
     "emitters": [
-        {"type": "area", "shape": {"type": "rectangle", "center": [0, 3, 1],
-                                   "normal": [0, -1, -0.3], "size": [1.2, 1.2]},
-         "radiance": 8.0},
+        {
+            "type": "area",
+            "shape": {
+                "type": "rectangle",
+                "center": [0, 3, 1],
+                "normal": [0, -1, -0.3],
+                "size": [1.2, 1.2],
+            },
+            "radiance": 8.0,
+        },
         {"type": "constant", "radiance": 0.3},
     ],
 }
@@ -50,15 +67,13 @@ def main(mode):
     variants = {
         "single": lambda s: render(s, key, spp=SPP, integrator="direct"),
         "rows": lambda s: render_sharded(s, key, spp=SPP, integrator="direct", shard="rows"),
-        "samples": lambda s: render_sharded(
-            s, key, spp=SPP, integrator="direct", shard="samples"
-        ),
+        "samples": lambda s: render_sharded(s, key, spp=SPP, integrator="direct", shard="samples"),
     }
+    tangent = jnp.array([1.0, 0.0, 0.0], jnp.float32)
     out = {"n_devices": jax.device_count()}
     for name, f in variants.items():
         img_of = lambda r, f=f: f(scene.replace("materials.ball.reflectance", r))
         if mode == "jvp":
-            tangent = jnp.array([1.0, 0.0, 0.0], jnp.float32)
             img, dimg = jax.jit(lambda r, img_of=img_of: jax.jvp(img_of, (r,), (tangent,)))(r0)
         else:
 

@@ -88,10 +88,15 @@ def test_sharded_reverse_mode_gradient_equals_single_device():
 
 
 PLANE = {
-    "camera": {"origin": [0, 1, 3], "target": [0, 0, 0], "fov": 40, "width": 5, "height": 3},
+    "camera": {"origin": [0, 3, 0.5], "target": [0, 0, 0], "fov": 30, "width": 5, "height": 3},
     "shapes": [
-        {"type": "rectangle", "center": [0, 0, 0], "normal": [0, 1, 0], "size": [4, 4],
-         "material": "m"},
+        {
+            "type": "rectangle",
+            "center": [0, 0, 0],
+            "normal": [0, 1, 0],
+            "size": [4, 4],
+            "material": "m",
+        },
     ],
     "materials": {"m": {"type": "diffuse", "reflectance": 0.5}},
     "emitters": [{"type": "constant", "radiance": 1.0}],
@@ -104,11 +109,9 @@ def test_one_device_mesh_matches_render():
     key = jax.random.key(3)
     ref = np.asarray(render(scene, key, spp=2, integrator="aov"))
     mesh = Mesh(np.asarray(jax.devices()[:1]), ("x",))
-    img = jax.jit(lambda s, k: render_sharded(s, k, spp=2, integrator="aov", mesh=mesh))(
-        scene, key
-    )
+    img = jax.jit(lambda s, k: render_sharded(s, k, spp=2, integrator="aov", mesh=mesh))(scene, key)
     np.testing.assert_allclose(np.asarray(img), ref, rtol=1e-6, atol=1e-6)
-    # closed form: albedo 0.5 everywhere, normal +y
+    # closed form: every sample hits the plane: albedo 0.5, normal +y
     np.testing.assert_allclose(np.asarray(img)[..., :3], 0.5, atol=1e-6)
     np.testing.assert_allclose(np.asarray(img)[..., 4], 1.0, atol=1e-6)
 
