@@ -78,6 +78,7 @@ def test_inverse_of_8bit_jpeg_like_image_error_bound():
     assert np.median(rel) < 0.02
 
 
+@pytest.mark.slow
 def test_fit_recovers_drago_from_two_starts():
     hdr = synthetic_hdr(16, 16)
     target = tm.tonemap_Drago2003(hdr, bias=0.72, saturation=0.8)
