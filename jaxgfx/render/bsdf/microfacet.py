@@ -13,6 +13,7 @@ BRDFs", JCGT 3(2), 2014; Heitz, "Sampling the GGX Distribution of Visible Normal
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -26,6 +27,7 @@ __all__ = ["MicrofacetDistribution", "MICROFACET_TYPES"]
 
 MICROFACET_TYPES = ("ggx", "beckmann")
 _INV_SQRT_PI = 1.0 / math.sqrt(math.pi)
+ALPHA_MIN = 1e-4  # smallest roughness used (Mitsuba 3 clamps alpha the same way)
 
 
 class MicrofacetDistribution(eqx.Module):
@@ -48,20 +50,35 @@ class MicrofacetDistribution(eqx.Module):
     type: str = eqx.field(static=True, default="ggx")
     sample_visible: bool = eqx.field(static=True, default=True)
 
+    PARAMETER_ALIASES: ClassVar[dict[str, tuple[str, ...]]] = {"alpha": ("alpha_u", "alpha_v")}
+
     def __init__(self, type="ggx", alpha=0.1, alpha_v=None, *, sample_visible=True):
         check_choice(type, "type", MICROFACET_TYPES)
         self.type = type
         self.sample_visible = bool(sample_visible)
-        self.alpha_u = as_float_array(check_positive(alpha, "alpha"), "alpha")
-        if alpha_v is None:
-            self.alpha_v = self.alpha_u
-        else:
-            self.alpha_v = as_float_array(check_positive(alpha_v, "alpha_v"), "alpha_v")
+        self.alpha_u = as_float_array(alpha, "alpha")
+        self.alpha_v = self.alpha_u if alpha_v is None else as_float_array(alpha_v, "alpha_v")
+
+    def __check_init__(self):
+        check_choice(self.type, "type", MICROFACET_TYPES)
+        check_positive(self.alpha_u, "alpha")
+        check_positive(self.alpha_v, "alpha_v")
+
+    # The roughness used is max(alpha, ALPHA_MIN), as Mitsuba 3 (microfacet.h ``configure``):
+    # below 1e-4 the lobe is a mirror at any image resolution, and the derivative of the image
+    # w.r.t. alpha there is 0 (finite differences agree) instead of growing like 1/alpha.
+    @property
+    def _au(self):
+        return jnp.where(self.alpha_u >= ALPHA_MIN, self.alpha_u, ALPHA_MIN)
+
+    @property
+    def _av(self):
+        return jnp.where(self.alpha_v >= ALPHA_MIN, self.alpha_v, ALPHA_MIN)
 
     # ------------------------------------------------------------------ D
     def eval(self, m):
         """Normal distribution ``D(m)`` (sr⁻¹), normalised so that ``∫ D(m) cos θ_m dω_m = 1``."""
-        au, av = self.alpha_u, self.alpha_v
+        au, av = self._au, self._av
         cz = m[..., 2]
         up = cz > 0
         cz_s = jnp.where(up, cz, 1.0)
@@ -86,7 +103,7 @@ class MicrofacetDistribution(eqx.Module):
     # ------------------------------------------------------------------ masking
     def smith_lambda(self, v):
         """Smith's auxiliary function ``Λ(v)`` (Heitz 2014, eqs. 72 and 86); 0 at the pole."""
-        xy = (self.alpha_u * v[..., 0]) ** 2 + (self.alpha_v * v[..., 1]) ** 2
+        xy = (self._au * v[..., 0]) ** 2 + (self._av * v[..., 1]) ** 2
         cz2 = v[..., 2] * v[..., 2]
         # tan²θ_α = xy / cos²θ  (α-scaled tangent); infinite at grazing -> guard
         if self.type == "ggx":
@@ -152,7 +169,7 @@ class MicrofacetDistribution(eqx.Module):
     def _sample_ggx_vndf(self, wi, u):
         # Heitz 2018, written per component: XLA fuses it into one loop (the vector form with
         # stack/cross was split into several kernels that each recomputed the shared terms).
-        au, av = self.alpha_u, self.alpha_v
+        au, av = self._au, self._av
         hx, hy, hz = au * wi[..., 0], av * wi[..., 1], wi[..., 2]
         n = safe_sqrt(hx * hx + hy * hy + hz * hz)
         inv_n = safe_div(1.0, n)
@@ -185,8 +202,8 @@ class MicrofacetDistribution(eqx.Module):
         phi = 2.0 * math.pi * u[..., 1]
         t = safe_sqrt(u[..., 0] / jnp.maximum(1.0 - u[..., 0], 1e-12))
         sp, cp = sincos(phi)
-        sx = self.alpha_u * t * cp
-        sy = self.alpha_v * t * sp
+        sx = self._au * t * cp
+        sy = self._av * t * sp
         return safe_normalize(jnp.stack([-sx, -sy, jnp.ones_like(sx)], axis=-1))
 
     def _sample_beckmann_full(self, u):
@@ -194,8 +211,8 @@ class MicrofacetDistribution(eqx.Module):
         phi = 2.0 * math.pi * u[..., 1]
         t = safe_sqrt(-jnp.log(jnp.maximum(1.0 - u[..., 0], 1e-30)))
         sp, cp = sincos(phi)
-        sx = self.alpha_u * t * cp
-        sy = self.alpha_v * t * sp
+        sx = self._au * t * cp
+        sy = self._av * t * sp
         return safe_normalize(jnp.stack([-sx, -sy, jnp.ones_like(sx)], axis=-1))
 
 

@@ -1,7 +1,7 @@
 """Host-side mesh I/O (Wavefront OBJ, PLY) and procedural meshes for tests and benchmarks.
 
 Everything here runs in NumPy on the host and returns a
-:class:`jaxgfx.render.shapes.TriangleMesh`. Malformed files raise ``ValueError`` naming the
+:class:`jaxgfx.render.geometry.TriangleMesh`. Malformed files raise ``ValueError`` naming the
 file and line.
 """
 
@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 
-from jaxgfx.render.shapes import TriangleMesh
+from jaxgfx.render.geometry.mesh import TriangleMesh
 
 __all__ = [
     "load_obj",
