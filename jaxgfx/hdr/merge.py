@@ -177,6 +177,8 @@ def _frame_terms(z, t, response, noise, *, weighting, code_max, need_var, time_p
 def _merge(z, t, response, noise, *, weighting, domain, code_max, return_variance, time_power=2.0):
     """``z``: normalised float levels, or integer codes (then every per-level quantity is
     computed once on the ``code_max + 1`` levels and gathered: a lookup table)."""
+    if not jnp.issubdtype(z.dtype, jnp.floating) and not return_variance and domain == "linear":
+        return _merge_codes(z, t, response, noise, weighting, code_max, time_power)
     tb = t[:, None, None, None]
     x, w, var_x, use_short = _frame_terms(
         z,
@@ -212,3 +214,53 @@ def _merge(z, t, response, noise, *, weighting, domain, code_max, return_varianc
         var = jnp.sum(w * w * rel, axis=0) / (den * den) * e * e
     var = jnp.where(ok, var, fallback * fallback)
     return e, var
+
+
+def _merge_codes(z, t, response, noise, weighting, code_max, time_power):
+    """Integer codes, linear domain, no variance: per frame ``j`` two tables over the levels,
+    ``a_j = w_j x / t_j`` and ``b_j = w_j`` (``(N, L, C)``, tiny), gathered with one flat
+    index per pixel and summed over frames in the same pass: ``E = Σ a / Σ b``. The same
+    numbers as the general path with 2 lookups per pixel and frame and no per-pixel weight
+    arithmetic, one frame at a time (the merge was 3x slower than OpenCV's ``MergeDebevec``
+    before)."""
+    n, c = z.shape[0], z.shape[-1]
+    dt = t.dtype
+    nl = int(code_max) + 1
+    levels = jnp.broadcast_to(jnp.linspace(0.0, 1.0, nl, dtype=dt)[:, None], (nl, c))
+    x = response.to_linear_normalized(levels)  # (L, C)
+    tcol = t[:, None, None]
+    if weighting == "noise":
+        step = 1.0 / code_max
+        dxdz = response.derivative_normalized(levels)
+        var_x = dxdz * dxdz * (step * step / 12.0)
+        gain, read = noise
+        x1 = response.to_linear_normalized(jnp.ones((c,), dt))
+        var_x = var_x + (gain * jnp.maximum(x / x1, 0.0) + read) * x1 * x1
+        valid = (levels > 0.5 * step) & (levels < 1.0 - 0.5 * step) & (var_x > 0)
+        b = jnp.where(valid, 1.0 / jnp.where(valid, var_x, 1.0), 0.0)[None] * tcol * tcol
+    else:
+        b = WEIGHTINGS[weighting](levels)[None] * jnp.ones_like(tcol)
+        if time_power != 0.0:
+            b = b * (tcol / jnp.max(t)) ** time_power
+    a = b * x[None] / tcol  # (N, L, C)
+    e_all = x[None] / tcol
+    ch = jnp.arange(c, dtype=jnp.int32)
+    shape = z.shape[1:]
+    # one frame at a time, flat 1-d lookups into that frame's (L*C,) table: XLA's CPU
+    # reduction over a leading frame axis and its n-d gathers were 15x slower than this
+    num = den = None
+    for j in range(n):
+        idx = (z[j].astype(jnp.int32) * c + ch).reshape(-1)
+        aj = a[j].reshape(-1).at[idx].get(mode="promise_in_bounds").reshape(shape)
+        bj = b[j].reshape(-1).at[idx].get(mode="promise_in_bounds").reshape(shape)
+        num = aj if num is None else num + aj
+        den = bj if den is None else den + bj
+    i_short = jnp.argmin(t)
+    i_long = jnp.argmax(t)
+    cs = z[i_short].astype(jnp.int32)
+    cl = z[i_long].astype(jnp.int32)
+    e_s = e_all[i_short].reshape(-1).at[(cs * c + ch).reshape(-1)].get(mode="promise_in_bounds")
+    e_l = e_all[i_long].reshape(-1).at[(cl * c + ch).reshape(-1)].get(mode="promise_in_bounds")
+    fallback = jnp.where(cs * 2 >= int(code_max), e_s.reshape(shape), e_l.reshape(shape))
+    ok = den > 0
+    return jnp.where(ok, num / jnp.where(ok, den, 1.0), fallback)

@@ -56,6 +56,7 @@ import numpy as np
 from jaxgfx.config import config_to_dict, load_config, read_yaml
 
 __all__ = [
+    "FitJob",
     "FitConfig",
     "ParamSpec",
     "CameraConfig",
@@ -142,6 +143,20 @@ class OptimizerConfig:
     lr: float = 0.02
     steps: int = 200
     tol: float | None = None
+    lr_final: float | None = None  # exponential decay from lr to lr_final over the steps
+
+    def validate(self):
+        if not self.lr > 0 or (self.lr_final is not None and not self.lr_final > 0):
+            raise ValueError("optimizer.lr / lr_final: expected positive numbers")
+        if self.steps < 1:
+            raise ValueError(f"optimizer.steps: expected >= 1, got {self.steps}")
+
+    def schedule(self):
+        """The learning rate: a number, or ``k -> lr · (lr_final / lr)^(k / (steps - 1))``."""
+        if self.lr_final is None:
+            return self.lr
+        lr, ratio, n = self.lr, self.lr_final / self.lr, max(self.steps - 1, 1)
+        return lambda k: lr * ratio ** (min(k, n) / n)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -521,14 +536,26 @@ def _plot_curves(path, res, names, truth):
 OUTPUT_NAMES = ("result.json", "curves.png", "before.png", "after.png", "target.png")
 
 
+@dataclasses.dataclass(frozen=True)
+class FitJob:
+    """A fit job: the config, the output folder (None: write nothing), ``overwrite`` and the
+    folder relative config paths are also looked up in (``base_dir``, e.g. the config's)."""
+
+    config: FitConfig
+    out: str | None = "out/fit"
+    overwrite: bool = False
+    base_dir: str | None = None
+
+
 def run_fit(
-    cfg: FitConfig | dict | str,
+    cfg: FitJob | FitConfig | dict | str,
     out_dir: str | None = None,
     *,
     base_dir: str | None = None,
     overwrite: bool = False,
 ) -> dict:
-    """Run the fit described by ``cfg`` (a :class:`FitConfig`, a mapping or a YAML path) and
+    """Run the fit described by ``cfg`` (a :class:`FitJob`, or a :class:`FitConfig`, a mapping
+    or a YAML path with ``out_dir``, ``base_dir``, ``overwrite``) and
     write the outputs (module doc) to ``out_dir`` (None: nothing written). Everything is checked
     before rendering (:func:`prepare_fit`); an ``out_dir`` that holds a previous run's results
     is refused unless ``overwrite`` (outputs are staged and moved into place only when the job
@@ -539,6 +566,8 @@ def run_fit(
 
     from jaxgfx.pipelines._output import StagedDir
 
+    if isinstance(cfg, FitJob):
+        cfg, out_dir, overwrite, base_dir = cfg.config, cfg.out, cfg.overwrite, cfg.base_dir
     if isinstance(cfg, (str, os.PathLike)):
         base_dir = base_dir or os.path.dirname(os.path.abspath(cfg))
         cfg = load_config(FitConfig, cfg)
@@ -641,7 +670,7 @@ def _fit_and_write(cfg: FitConfig, prep: _Prepared, out_dir: str | None) -> dict
         loss,
         params,
         optimizer=o.name,
-        learning_rate=o.lr,
+        learning_rate=o.schedule(),
         steps=o.steps,
         key=k_fit,
         args=(prep.scene, jnp.asarray(target), cam_args),
