@@ -137,8 +137,8 @@ MUTANTS = [
     {
         "name": "render.path.throughput_x1.05",
         "file": "jaxgfx/render/integrators/path.py",
-        "old": "beta = beta * s.weight",
-        "new": "beta = beta * s.weight * 1.05",
+        "old": "beta = beta * weight",
+        "new": "beta = beta * weight * 1.05",
         "tests": [
             "tests/render/test_integrator_references.py::"
             "test_path_integrating_sphere_three_bounces_value_and_gradient"
@@ -148,10 +148,18 @@ MUTANTS = [
     {
         "name": "render.path.mis_weights_swapped",
         "file": "jaxgfx/render/integrators/path.py",
-        "old": "w = jnp.where(l_delta, 1.0, C.mis_power(lpdf, bpdf))",
-        "new": "w = jnp.where(l_delta, 1.0, C.mis_power(bpdf, lpdf))",
+        "old": "w = jnp.where(l_delta, 1.0, C.mis_power(detach(lpdf), detach(bpdf)))",
+        "new": "w = jnp.where(l_delta, 1.0, C.mis_power(detach(bpdf), detach(lpdf)))",
         "tests": ["tests/render/test_integrators.py::test_rectangular_area_light_irradiance"],
         "why": "two arguments swapped (MIS weights no longer sum to one)",
+    },
+    {
+        "name": "render.path.bsdf_pdf_not_detached",
+        "file": "jaxgfx/render/integrators/_common.py",
+        "old": "y = safe_div(f, sg(s.pdf)[..., None])",
+        "new": "y = safe_div(f, s.pdf[..., None])",
+        "tests": ["tests/render/test_gradients_fd.py::test_glossy_scene_ad_matches_fd"],
+        "why": "a stop_gradient removed: AD through the sampling density (biased gradients)",
     },
     {
         "name": "render.whitted.direct_x1.05",
