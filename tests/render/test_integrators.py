@@ -122,6 +122,8 @@ def test_light_bsdf_and_mis_strategies_agree_with_polygon_formula():
 
 
 def test_whitted_direct_path_agree_on_direct_light():
+    # a noise-consistency test (the integrators against each other); each integrator's
+    # independent closed forms are in this file and in test_integrator_references.py
     desc = plane_scene([{"type": "point", "position": [0.3, 1.5, -0.2], "intensity": 5.0}])
     scene = load_scene(desc)
     a = np.asarray(render(scene, KEY, spp=4, integrator="whitted", max_depth=1))
