@@ -18,13 +18,13 @@ from jax.test_util import check_grads
 from PIL import Image
 
 from jaxgfx.render.bsdf import Diffuse, RoughConductor
+from jaxgfx.render.bsdf.texture import Texture
+from jaxgfx.render.bsdf.textured import Checkerboard, Textured, texture_eval, texture_from_dict
+from jaxgfx.render.geometry import Spheres, intersect
+from jaxgfx.render.geometry.sdf import SDFSphere
+from jaxgfx.render.geometry.sphere_tracing import SDFShape
 from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
-from jaxgfx.render.sdf import SDFSphere
-from jaxgfx.render.sdf_shape import SDFShape
-from jaxgfx.render.shapes import Spheres, intersect
-from jaxgfx.render.texture import Texture
-from jaxgfx.render.textured import Checkerboard, Textured, texture_eval, texture_from_dict
 
 KEY = jax.random.key(3)
 
@@ -282,7 +282,9 @@ def test_sdf_radius_gradient_matches_finite_differences():
     """Implicit differentiation of the sphere-traced hit vs central differences (same key)."""
     g, fd = _radius_grad_fd("sdf")
     assert np.isfinite(g) and abs(g) > 1e-2
-    np.testing.assert_allclose(g, fd, rtol=0.05)
+    # measured |g / fd - 1| = 0.30 % at h = 0.01 and 0.06 % at h = 0.005: the central
+    # difference's O(h^2) error, so AD is right; rtol 1 % is 3x the measured error
+    np.testing.assert_allclose(g, fd, rtol=0.01)
 
 
 @pytest.mark.slow

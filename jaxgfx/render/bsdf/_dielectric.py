@@ -2,19 +2,22 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
-from jaxgfx._checks import check_positive
+from jaxgfx._math import safe_div
 from jaxgfx.render.bsdf._base import (
     BSDF,
     BSDFSample,
+    check_rgb,
+    check_scalar,
+    float_field,
     mask3,
     prep_dirs,
-    prep_u,
-    rgb_param,
-    scalar_param,
+    rgb_field,
+    sample_setup,
 )
-from jaxgfx.render.fresnel import fresnel_dielectric
+from jaxgfx.render.bsdf.fresnel import fresnel_dielectric
 
 __all__ = ["SmoothDielectric"]
 
@@ -35,17 +38,17 @@ class SmoothDielectric(BSDF):
     ``1/2.25 ≈ 0.444``.
     """
 
-    eta: jnp.ndarray
-    specular_reflectance: jnp.ndarray
-    specular_transmittance: jnp.ndarray
+    eta: jnp.ndarray = float_field(1.5046, "eta")
+    specular_reflectance: jnp.ndarray = rgb_field(1.0, "specular_reflectance", kw_only=True)
+    specular_transmittance: jnp.ndarray = rgb_field(1.0, "specular_transmittance", kw_only=True)
 
     has_delta = True
     is_transmissive = True
 
-    def __init__(self, eta=1.5046, *, specular_reflectance=1.0, specular_transmittance=1.0):
-        self.eta = scalar_param(check_positive(eta, "eta"), "eta")
-        self.specular_reflectance = rgb_param(specular_reflectance, "specular_reflectance")
-        self.specular_transmittance = rgb_param(specular_transmittance, "specular_transmittance")
+    def __check_init__(self):
+        check_scalar(self.eta, "eta", positive=True)
+        check_rgb(self.specular_reflectance, "specular_reflectance")
+        check_rgb(self.specular_transmittance, "specular_transmittance")
 
     @property
     def albedo(self):
@@ -61,10 +64,7 @@ class SmoothDielectric(BSDF):
         return jnp.zeros(jnp.broadcast_shapes(wo.shape, wi.shape)[:-1], jnp.result_type(wo, wi))
 
     def sample(self, wo, u1, u2):
-        wo = prep_dirs(wo)
-        u1, u2 = prep_u(u1, u2)
-        shape = jnp.broadcast_shapes(wo.shape[:-1], u1.shape, u2.shape[:-1])
-        wo = jnp.broadcast_to(wo, shape + (3,))
+        wo, u1, u2, shape = sample_setup(wo, u1, u2)
         co = wo[..., 2]
         fr = fresnel_dielectric(co, self.eta)
         r = fr.r
@@ -76,7 +76,11 @@ class SmoothDielectric(BSDF):
         wi = jnp.where(refl[..., None], wi_r, wi_t)
         pdf = jnp.where(refl, r, 1.0 - r)
         w_t = self.specular_transmittance * (fr.eta_ti * fr.eta_ti)[..., None]
-        weight = jnp.where(refl[..., None], self.specular_reflectance, w_t)
+        # the lobe is chosen with probability R: the weight's value is ks (kt/η²) but its
+        # derivative is that of ks R / stop_gradient(R) (resp. T), the discrete choice's
+        # contribution to d/dη (Mitsuba 3 dielectric.cpp does the same in AD variants)
+        w_sel = safe_div(pdf, jax.lax.stop_gradient(pdf), fill=1.0)  # p / p = 1 exactly
+        weight = jnp.where(refl[..., None], self.specular_reflectance, w_t) * w_sel[..., None]
         valid = (co != 0) & (pdf > 0)
         return BSDFSample(
             wi=wi,

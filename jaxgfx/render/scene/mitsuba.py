@@ -1,0 +1,564 @@
+"""Export jaxgfx scene descriptions to Mitsuba 3 (``mi.load_dict``) for comparison renders.
+
+Mitsuba 3 is *not* a dependency of jaxgfx: :func:`to_mitsuba_dict` and
+:func:`mitsuba_integrator` build plain Python dictionaries without importing it; only
+:func:`render_mitsuba` imports ``mitsuba`` (lazily). Install with ``pip install mitsuba``
+(3.5 or newer; tested with 3.9.1). The ``llvm_ad_rgb`` variant needs an LLVM Dr.Jit accepts
+(e.g. Debian ``libllvm19`` with ``DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1``
+set before ``import mitsuba``); ``scalar_rgb`` runs anywhere.
+
+Mapping of conventions (jaxgfx -> Mitsuba 3), each checked by ``tests/render/test_mitsuba.py``:
+
+* camera: ``perspective`` with ``to_world = look_at(origin, target, up)``, same ``fov`` and
+  ``fov_axis``; film ``hdrfilm`` (RGB, float32); ``box`` filter (radius 0.5 only) or
+  ``gaussian`` (``stddev``; Mitsuba truncates at 4 stddev, so ``radius`` must be ``4 stddev``),
+  ``sample_border`` on for the Gaussian (jaxgfx's filter importance sampling also draws samples
+  outside the image).
+* rectangle ``{center, normal, size: [w, h]}`` -> Mitsuba ``rectangle`` (``[-1, 1]^2`` in its
+  local xy plane, normal +z) with ``to_world`` columns ``(s w/2, t h/2, n, center)`` where
+  ``(s, t, n)`` is the same Duff et al. 2017 frame jaxgfx builds, so uv and normal agree.
+* reflection-only materials are shaded on both sides in jaxgfx; Mitsuba's ``diffuse``,
+  ``conductor``, ``roughconductor`` and ``roughplastic`` are one-sided (black from behind), so they
+  are wrapped in ``twosided``. ``dielectric`` is not wrapped. Emitter shapes without a material
+  get a black ``diffuse`` (jaxgfx's default) instead of Mitsuba's grey default.
+* anisotropic roughness (``alpha_v``) is exported on rectangles only: jaxgfx's tangent is the
+  Duff et al. frame around the normal everywhere, Mitsuba's is ``dp/du`` (longitude on spheres,
+  the uv map on meshes), so highlights would be rotated (``NotImplementedError``).
+* ``eta`` (interior / exterior IOR) -> ``int_ior = eta``, ``ext_ior = 1``. Conductors with
+  ``fresnel: none`` (F = 1) -> Mitsuba ``material: none`` (eta 0, k 1: |F| = 1) times
+  ``specular_reflectance``; ``fresnel: conductor`` -> ``eta``, ``k``, ``specular_reflectance``;
+  ``fresnel: schlick`` and ``phong`` have no Mitsuba 3 counterpart (``NotImplementedError``).
+* area lights emit from the front side in both (Mitsuba ``area`` is one-sided); ``point``
+  intensity (W/sr), ``constant`` radiance map directly.
+* ``envmap``: both map a direction to ``u = atan2(d_x, -d_z) / 2 pi``, ``v = acos(d_y) / pi``
+  (y up). Interpolation differs: jaxgfx places texel centres at ``((i + .5) / W, (j + .5) / H)``
+  and clamps v, Mitsuba 3 at ``((i + .5) / W, j / (H - 1))`` (rows at the poles). The map is
+  therefore re-gridded (:func:`envmap_for_mitsuba`: ``2H + 1`` rows = the jaxgfx texel rows and
+  the midpoints between them, plus the clamped pole rows) so that Mitsuba's bilinear lookup
+  equals jaxgfx's exactly, and written as an EXR into ``work_dir``.
+* meshes: ``.obj`` / ``.ply`` files go to Mitsuba's ``obj`` / ``ply`` plugins (``face_normals``
+  when the file has no vertex normals: jaxgfx then shades flat, Mitsuba would smooth);
+  inline ``vertices`` / ``faces`` are written as a PLY into ``work_dir``; ``translate`` /
+  ``scale`` become ``to_world``.
+* integrators: jaxgfx ``path`` -> Mitsuba ``path`` with the same ``max_depth`` / ``rr_depth``
+  convention; ``direct`` -> Mitsuba ``path`` with ``max_depth = 2`` (Mitsuba's ``direct``
+  integrator samples differently; both estimators are unbiased for the same image).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+from collections.abc import Mapping
+
+import numpy as np
+
+from jaxgfx.render.parameters import get_path
+
+__all__ = [
+    "to_mitsuba_dict",
+    "mitsuba_integrator",
+    "render_mitsuba",
+    "envmap_for_mitsuba",
+    "MITSUBA_INSTALL_HINT",
+]
+
+MITSUBA_INSTALL_HINT = (
+    "Mitsuba 3 is required for this (not a jaxgfx dependency): `pip install mitsuba` "
+    "(>= 3.5). For the llvm_ad_rgb variant also install an LLVM Dr.Jit supports, e.g. "
+    "`apt-get install libllvm19` and set "
+    "DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1 before importing mitsuba."
+)
+
+
+# -------------------------------------------------------------------------------------------
+# small helpers
+
+
+def _rgb(x) -> dict:
+    a = np.broadcast_to(np.asarray(x, np.float64), (3,))
+    return {"type": "rgb", "value": [float(v) for v in a]}
+
+
+def _float(x) -> float:
+    a = np.asarray(x, np.float64)
+    if a.size != 1:
+        raise ValueError(f"expected a scalar, got shape {a.shape}")
+    return float(a.reshape(()))
+
+
+def _transform(m, mi):
+    m = np.asarray(m, np.float64)
+    if mi is None:
+        return m.tolist()
+    return mi.ScalarTransform4f(m.tolist())
+
+
+def _look_at_matrix(origin, target, up):
+    """Mitsuba's ``Transform4f.look_at``: columns (left, up', dir, origin)."""
+    o, t, u = (np.asarray(v, np.float64) for v in (origin, target, up))
+    d = (t - o) / np.linalg.norm(t - o)
+    left = np.cross(u, d)
+    left /= np.linalg.norm(left)
+    new_up = np.cross(d, left)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, new_up, d, o
+    return m
+
+
+def _frame_from_normal(n):
+    """The (s, t) tangents jaxgfx builds for a rectangle's unit normal (Duff et al. 2017)."""
+    from jaxgfx.render.geometry.frame import frame_from_normal
+
+    fr = frame_from_normal(np.asarray(n, np.float64))
+    return np.asarray(fr.s, np.float64), np.asarray(fr.t, np.float64)
+
+
+def envmap_for_mitsuba(image) -> np.ndarray:
+    """Re-grid a jaxgfx lat-long map ``(H, W, 3)`` so Mitsuba 3's lookup reproduces jaxgfx's.
+
+    jaxgfx interpolates bilinearly between texel centres ``v_j = (j + 0.5) / H`` and clamps
+    beyond the first/last centre; Mitsuba 3 interpolates between rows at ``v_j = j / (H' - 1)``.
+    The returned ``(2H + 1, W, 3)`` map holds, at ``v = k / 2H``: the clamped first row
+    (``k = 0``), the texel rows (odd ``k``), the averages of neighbouring rows (even ``k``) and
+    the clamped last row (``k = 2H``). jaxgfx's lookup is linear in v between these knots, so
+    Mitsuba's piecewise-linear interpolation equals it exactly. Columns (u) already agree.
+    Negative values are clamped to 0 as in :class:`jaxgfx.render.emitters.EnvironmentMap`.
+
+    Example: a 2-row map with rows 0 and 1 becomes rows ``[0, 0, 0.5, 1, 1]``.
+    """
+    img = np.asarray(image, np.float32)
+    if img.ndim != 3 or img.shape[-1] < 3 or min(img.shape[:2]) < 2:
+        raise ValueError(f"envmap.image: expected (H>=2, W>=2, 3), got shape {img.shape}")
+    img = np.maximum(img[..., :3], 0.0)
+    h, w = img.shape[:2]
+    out = np.empty((2 * h + 1, w, 3), np.float32)
+    out[0] = img[0]
+    out[1::2] = img
+    out[2:-1:2] = 0.5 * (img[:-1] + img[1:])
+    out[-1] = img[-1]
+    return out
+
+
+# -------------------------------------------------------------------------------------------
+# materials
+
+
+def _twosided(bsdf: dict) -> dict:
+    return {"type": "twosided", "bsdf": bsdf}
+
+
+def _conductor_fresnel(m, where) -> dict:
+    if m.fresnel == "schlick":
+        raise NotImplementedError(
+            f"{where}.fresnel: 'schlick' has no Mitsuba 3 counterpart (use 'none' or 'conductor')"
+        )
+    out = {"specular_reflectance": _rgb(m.reflectance)}
+    if m.fresnel == "none":
+        out["material"] = "none"
+    else:
+        out["eta"] = _rgb(m.eta)
+        out["k"] = _rgb(m.k)
+    return out
+
+
+def _distribution(m, where) -> dict:
+    """Mitsuba's distribution and roughness keys of a microfacet BSDF ``m``, read through its
+    ``PARAMETER_ALIASES`` (whose names are Mitsuba's): the isotropic alias (``alpha``, which
+    sets several fields) when those fields are equal, else the per-axis ones."""
+    dist = m.distribution
+    out = {"distribution": dist.type, "sample_visible": bool(dist.sample_visible)}
+    values = {}
+    for name, paths in type(m).PARAMETER_ALIASES.items():
+        vs = [np.asarray(get_path(m, p.split("."))) for p in paths]
+        if any(v.size != 1 for v in vs):
+            raise ValueError(f"{where}.{name}: expected a scalar roughness")
+        values[name] = [_float(v) for v in vs]
+    shared = {n: v for n, v in values.items() if len(v) > 1}
+    if shared and all(len(set(v)) == 1 for v in shared.values()):
+        out.update({n: v[0] for n, v in shared.items()})
+    else:
+        out.update({n: v[0] for n, v in values.items() if len(v) == 1})
+    return out
+
+
+def _material(md, where) -> dict:
+    """Mitsuba BSDF dict of one jaxgfx material description (validated by ``make_bsdf``)."""
+    from jaxgfx.render import bsdf as B
+
+    if not isinstance(md, Mapping):
+        raise ValueError(f"{where}: expected a mapping with a 'type' key")
+    if md.get("type") == "phong":
+        raise NotImplementedError(f"{where}.type: 'phong' has no Mitsuba 3 counterpart")
+    from jaxgfx.render.bsdf.textured import is_texture_desc
+
+    for k, v in md.items():
+        if is_texture_desc(v):
+            raise NotImplementedError(
+                f"{where}.{k}: textured parameters are not exported to Mitsuba (yet)"
+            )
+    try:
+        m = B.make_bsdf(dict(md))
+    except (ValueError, TypeError) as e:
+        raise ValueError(f"{where}: {e}") from None
+    if isinstance(m, B.Diffuse):
+        return _twosided({"type": "diffuse", "reflectance": _rgb(m.reflectance)})
+    if isinstance(m, B.Mirror):
+        return _twosided({"type": "conductor", **_conductor_fresnel(m, where)})
+    if isinstance(m, B.RoughConductor):
+        return _twosided(
+            {
+                "type": "roughconductor",
+                **_distribution(m, where),
+                **_conductor_fresnel(m, where),
+            }
+        )
+    if isinstance(m, B.SmoothDielectric):
+        return {
+            "type": "dielectric",
+            "int_ior": _float(m.eta),
+            "ext_ior": 1.0,
+            "specular_reflectance": _rgb(m.specular_reflectance),
+            "specular_transmittance": _rgb(m.specular_transmittance),
+        }
+    if isinstance(m, B.RoughPlastic):
+        dist = _distribution(m, where)
+        if "alpha_u" in dist:
+            raise NotImplementedError(f"{where}.alpha: Mitsuba's roughplastic is isotropic")
+        return _twosided(
+            {
+                "type": "roughplastic",
+                **dist,
+                "int_ior": _float(m.eta),
+                "ext_ior": 1.0,
+                "diffuse_reflectance": _rgb(m.diffuse_reflectance),
+                "specular_reflectance": _rgb(m.specular_reflectance),
+                "nonlinear": bool(m.nonlinear),
+            }
+        )
+    raise NotImplementedError(f"{where}.type: {md.get('type')!r} has no Mitsuba 3 mapping")
+
+
+# -------------------------------------------------------------------------------------------
+# shapes
+
+
+def _shape(d, where, base_dir, work_dir, mi) -> dict:
+    from jaxgfx.render.scene import schema as S
+
+    if not isinstance(d, Mapping) or "type" not in d:
+        raise ValueError(f"{where}: expected a mapping with a 'type' key")
+    kind = d["type"]
+    common = ("type", "material")
+    if kind == "sdf":
+        raise NotImplementedError(f"{where}.type: SDF shapes have no Mitsuba 3 counterpart")
+    if kind == "sphere":
+        S.expect_keys(d, where, ("type", "center", "radius"), common)
+        c = np.asarray(S.vec(d["center"], f"{where}.center"), np.float64)
+        r = float(S.num(d["radius"], f"{where}.radius", positive=True))
+        return {"type": "sphere", "center": c.tolist(), "radius": r}
+    if kind == "rectangle":
+        S.expect_keys(d, where, ("type", "center", "normal"), (*common, "size"))
+        c = np.asarray(S.vec(d["center"], f"{where}.center"), np.float64)
+        n = np.asarray(S.vec(d["normal"], f"{where}.normal"), np.float64)
+        if np.linalg.norm(n) == 0:
+            raise ValueError(f"{where}.normal: expected a non-zero vector")
+        n = n / np.linalg.norm(n)
+        size = np.asarray(d.get("size", [2.0, 2.0]), np.float64)
+        if size.shape != (2,) or np.any(~(size > 0)):
+            raise ValueError(f"{where}.size: expected two positive numbers")
+        s, t = _frame_from_normal(n)
+        m = np.eye(4)
+        m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = s * size[0] / 2, t * size[1] / 2, n, c
+        return {"type": "rectangle", "to_world": _transform(m, mi)}
+    if kind == "mesh":
+        S.expect_keys(
+            d, where, ("type",), (*common, "file", "vertices", "faces", "translate", "scale")
+        )
+        from jaxgfx.render.geometry import mesh_io
+
+        if "file" in d:
+            path = os.fspath(d["file"])
+            if not os.path.isabs(path) and base_dir:
+                path = os.path.join(base_dir, path)
+            ext = os.path.splitext(path)[1].lower()
+            if ext not in (".obj", ".ply"):
+                raise ValueError(f"{where}.file: expected an .obj or .ply file, got {path!r}")
+            if not os.path.isfile(path):
+                raise ValueError(f"{where}.file: no such file {path!r}")
+            m = (mesh_io.load_obj if ext == ".obj" else mesh_io.load_ply)(path)
+            out = {"type": ext[1:], "filename": os.path.abspath(path)}
+        elif "vertices" in d and "faces" in d:
+            # validated exactly as load_scene does, then written as a PLY for Mitsuba
+            m = S.mesh_from_desc({k: d[k] for k in ("vertices", "faces")}, where, base_dir)
+            name = re.sub(r"[^A-Za-z0-9]+", "_", where).strip("_")
+            path = os.path.join(work_dir(), f"{name}.ply")
+            mesh_io.save_ply(path, m)
+            out = {"type": "ply", "filename": path}
+        else:
+            raise ValueError(f"{where}: expected 'file' or 'vertices' + 'faces'")
+        out["face_normals"] = m.normals is None
+        if "translate" in d or "scale" in d:
+            sc = np.broadcast_to(np.asarray(d.get("scale", 1.0), np.float64), (3,))
+            tr = np.asarray(S.vec(d.get("translate", [0.0, 0.0, 0.0]), f"{where}.translate"))
+            mat = np.diag([*sc, 1.0])
+            mat[:3, 3] = tr
+            out["to_world"] = _transform(mat, mi)
+        return out
+    raise ValueError(f"{where}.type: expected one of {S.SHAPE_TYPES}, got {kind!r}")
+
+
+class _WorkDir:
+    """The folder for generated files, created on first use (a temp folder when None)."""
+
+    def __init__(self, path):
+        self.path = None if path is None else os.fspath(path)
+
+    def __call__(self) -> str:
+        if self.path is None:
+            self.path = tempfile.mkdtemp(prefix="jaxgfx_mitsuba_")
+        os.makedirs(self.path, exist_ok=True)
+        return self.path
+
+
+# -------------------------------------------------------------------------------------------
+# public API
+
+
+def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
+    """Convert a jaxgfx scene description into a Mitsuba 3 ``load_dict`` dictionary.
+
+    ``desc``: the mapping or YAML path :func:`jaxgfx.render.scene.load_scene` accepts (relative
+    mesh / envmap files are resolved against ``base_dir``, default the YAML's folder).
+    ``work_dir``: folder for files Mitsuba needs that the description does not provide (the
+    re-gridded environment map, PLYs of inline meshes); a fresh temporary folder by default.
+    ``mi``: the imported ``mitsuba`` module (with a variant set) to wrap 4x4 transforms in
+    ``mi.ScalarTransform4f``; without it transforms are nested lists (row-major, column vectors)
+    and this function imports nothing from Mitsuba.
+
+    Returns ``{"type": "scene", "sensor": ..., "<shape or emitter id>": ...}`` without an
+    integrator (see :func:`mitsuba_integrator`). The sensor's sampler has ``sample_count`` 16;
+    :func:`render_mitsuba` passes ``spp`` explicitly. Conventions mapped: see the module
+    docstring. Unknown keys raise ``ValueError`` naming the field; features Mitsuba 3 lacks
+    (``phong``, Schlick Fresnel, matrix cameras, box filters with radius != 0.5, Gaussian
+    filters not truncated at 4 stddev) raise ``NotImplementedError`` naming the field.
+
+    Example: ``to_mitsuba_dict(desc)["sensor"]["fov"] == desc["camera"]["fov"]``.
+    """
+    from jaxgfx.render.scene import schema as S
+
+    if isinstance(desc, (str, os.PathLike)):
+        from jaxgfx.config import read_yaml
+
+        base_dir = base_dir or os.path.dirname(os.path.abspath(os.fspath(desc)))
+        desc = read_yaml(desc)
+    S.expect_keys(desc, "scene", ("camera", "shapes"), ("materials", "emitters", "film"))
+    work_dir = _WorkDir(work_dir)
+
+    # -- sensor
+    cam = desc["camera"]
+    if isinstance(cam, Mapping) and "view_proj_inverse" in cam:
+        raise NotImplementedError(
+            "camera.view_proj_inverse: only look-at cameras are exported to Mitsuba"
+        )
+    S.expect_keys(cam, "camera", ("origin", "target", "fov", "width", "height"), ("up", "fov_axis"))
+    # validate exactly as load_scene does (fov range, resolution, degenerate look-at)
+    S.build_camera(cam)
+    film_d = desc.get("film", {}) or {}
+    S.expect_keys(film_d, "film", (), ("filter", "stddev", "radius"))
+    fname = film_d.get("filter", "box")
+    from jaxgfx.render.film import make_filter
+
+    rf = make_filter(fname, **{k: v for k, v in film_d.items() if k != "filter"})
+    film = {
+        "type": "hdrfilm",
+        "width": int(cam["width"]),
+        "height": int(cam["height"]),
+        "pixel_format": "rgb",
+        "component_format": "float32",
+    }
+    if fname == "box":
+        if float(rf.radius) != 0.5:
+            raise NotImplementedError("film.radius: Mitsuba's box filter has radius 0.5 only")
+        film["rfilter"] = {"type": "box"}
+    else:
+        if abs(float(rf.radius) - 4.0 * float(rf.stddev)) > 1e-6 * float(rf.radius):
+            raise NotImplementedError(
+                "film.radius: Mitsuba's gaussian filter is truncated at 4 stddev; "
+                f"got radius {rf.radius} with stddev {rf.stddev}"
+            )
+        film["rfilter"] = {"type": "gaussian", "stddev": float(rf.stddev)}
+        film["sample_border"] = True
+    sensor = {
+        "type": "perspective",
+        "fov": float(cam["fov"]),
+        "fov_axis": str(cam.get("fov_axis", "x")),
+        "to_world": _transform(
+            _look_at_matrix(cam["origin"], cam["target"], cam.get("up", [0.0, 1.0, 0.0])), mi
+        ),
+        "film": film,
+        "sampler": {"type": "independent", "sample_count": 16},
+    }
+    out: dict = {"type": "scene", "sensor": sensor}
+
+    # -- materials
+    mats_desc = desc.get("materials", {}) or {}
+    if not isinstance(mats_desc, Mapping):
+        raise ValueError("materials: expected a mapping from names to material descriptions")
+    mats = {str(k): _material(v, f"materials.{k}") for k, v in mats_desc.items()}
+    default = _twosided({"type": "diffuse", "reflectance": _rgb(0.5)})
+    black = {"type": "diffuse", "reflectance": _rgb(0.0)}
+
+    def material_of(d, where, fallback, shape_type=None):
+        name = d.get("material")
+        if not name:
+            return fallback
+        if name not in mats:
+            raise ValueError(f"{where}.material: unknown material {name!r}; have {list(mats)}")
+        inner = mats[name].get("bsdf", mats[name])
+        if "alpha_u" in inner and shape_type in ("sphere", "mesh"):
+            # jaxgfx's tangent is the Duff et al. frame around the normal; Mitsuba's is dp/du
+            # (longitude on spheres, the uv parametrisation on meshes): rotated highlights.
+            raise NotImplementedError(
+                f"{where}.material: anisotropic {name!r} on a {shape_type}: the tangent frames "
+                "of jaxgfx and Mitsuba differ there (rectangles only)"
+            )
+        return mats[name]
+
+    # -- shapes
+    shapes = desc["shapes"]
+    if not isinstance(shapes, (list, tuple)):
+        raise ValueError("shapes: expected a list")
+    if not shapes:
+        raise ValueError("shapes: the scene has no geometry")
+    for i, sd in enumerate(shapes):
+        where = f"shapes[{i}]"
+        sh = _shape(sd, where, base_dir, work_dir, mi)
+        sh["bsdf"] = material_of(sd, where, default, sd["type"])
+        out[f"shape_{i}"] = sh
+
+    # -- emitters
+    em = desc.get("emitters", []) or []
+    if not isinstance(em, (list, tuple)):
+        raise ValueError("emitters: expected a list")
+    n_env = 0
+    for i, ed in enumerate(em):
+        where = f"emitters[{i}]"
+        if not isinstance(ed, Mapping) or "type" not in ed:
+            raise ValueError(f"{where}: expected a mapping with a 'type' key")
+        kind = ed["type"]
+        if kind == "area":
+            S.expect_keys(ed, where, ("type", "shape", "radiance"), ("material",))
+            if isinstance(ed["shape"], Mapping) and "material" in ed["shape"]:
+                raise ValueError(f"{where}.shape.material: put 'material' on the emitter")
+            sh = _shape(ed["shape"], f"{where}.shape", base_dir, work_dir, mi)
+            sh["bsdf"] = material_of(ed, where, black, ed["shape"]["type"])
+            sh["emitter"] = {"type": "area", "radiance": _rgb(S.rgb(ed["radiance"], where))}
+            out[f"emitter_{i}"] = sh
+        elif kind == "point":
+            S.expect_keys(ed, where, ("type", "position", "intensity"))
+            out[f"emitter_{i}"] = {
+                "type": "point",
+                "position": np.asarray(S.vec(ed["position"], f"{where}.position")).tolist(),
+                "intensity": _rgb(S.rgb(ed["intensity"], f"{where}.intensity")),
+            }
+        elif kind in ("constant", "envmap"):
+            n_env += 1
+            if n_env > 1:
+                raise ValueError(f"{where}: only one environment emitter is supported")
+            if kind == "constant":
+                S.expect_keys(ed, where, ("type", "radiance"))
+                out[f"emitter_{i}"] = {
+                    "type": "constant",
+                    "radiance": _rgb(S.rgb(ed["radiance"], f"{where}.radiance")),
+                }
+            else:
+                img = S.envmap_image(ed, where, base_dir)
+                from jaxgfx.io import write_exr
+
+                path = os.path.join(work_dir(), f"envmap_{i}.exr")
+                write_exr(path, envmap_for_mitsuba(img))
+                scale = S.num(ed.get("scale", 1.0), f"{where}.scale")
+                out[f"emitter_{i}"] = {"type": "envmap", "filename": path, "scale": float(scale)}
+        else:
+            raise ValueError(f"{where}.type: expected one of {S.EMITTER_TYPES}, got {kind!r}")
+    return out
+
+
+def mitsuba_integrator(name: str = "path", *, max_depth: int = 3, rr_depth: int = 5) -> dict:
+    """Mitsuba 3 integrator dict for a jaxgfx integrator name.
+
+    ``"path"`` -> ``{"type": "path", "max_depth": max_depth, "rr_depth": rr_depth}`` (same
+    depth convention: 1 emitters only, 2 direct light, 3 one indirect bounce); ``"direct"`` ->
+    the same with ``max_depth = 2`` (as jaxgfx's ``direct``). ``whitted`` and ``aov`` have no
+    Mitsuba counterpart (``NotImplementedError``); other names raise ``ValueError``.
+
+    Example: ``mitsuba_integrator("direct")["max_depth"] == 2``.
+    """
+    for arg, v in (("max_depth", max_depth), ("rr_depth", rr_depth)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise ValueError(f"{arg}: expected a positive integer, got {v!r}")
+    if name == "direct":
+        max_depth = 2
+    elif name in ("whitted", "aov"):
+        raise NotImplementedError(f"integrator: {name!r} has no Mitsuba 3 counterpart")
+    elif name != "path":
+        raise ValueError(f"integrator: expected 'path' or 'direct', got {name!r}")
+    return {"type": "path", "max_depth": int(max_depth), "rr_depth": int(rr_depth)}
+
+
+def import_mitsuba(variant: str = "scalar_rgb"):
+    """Import ``mitsuba`` and set ``variant``; ``ImportError`` with install hints otherwise."""
+    try:
+        import mitsuba as mi
+    except ImportError as e:
+        raise ImportError(MITSUBA_INSTALL_HINT) from e
+    if variant not in mi.variants():
+        raise ImportError(f"variant: {variant!r} is not available; have {mi.variants()}")
+    try:
+        mi.set_variant(variant)
+    except Exception as e:  # Dr.Jit raises plain exceptions when its LLVM backend is missing
+        raise ImportError(f"variant: could not set {variant!r}: {e}. {MITSUBA_INSTALL_HINT}") from e
+    return mi
+
+
+def render_mitsuba(
+    desc,
+    *,
+    spp: int,
+    integrator: str = "path",
+    max_depth: int = 3,
+    rr_depth: int = 5,
+    variant: str = "scalar_rgb",
+    seed: int = 0,
+    base_dir=None,
+    work_dir=None,
+) -> np.ndarray:
+    """Render a jaxgfx scene description with Mitsuba 3: ``(H, W, 3)`` float32 radiance.
+
+    Host function (not traced). Imports ``mitsuba`` lazily and sets ``variant`` (``ImportError``
+    with install instructions when missing). ``integrator`` / ``max_depth`` / ``rr_depth``
+    follow :func:`jaxgfx.render.render.render` (see :func:`mitsuba_integrator`); ``seed`` selects
+    Mitsuba's sampler stream (different seeds give independent images).
+    """
+    if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)) or spp < 1:
+        raise ValueError(f"spp: expected a positive integer, got {spp!r}")
+    integ = mitsuba_integrator(integrator, max_depth=max_depth, rr_depth=rr_depth)
+    mi = import_mitsuba(variant)
+    # generated files (envmap, inline meshes) are read by load_dict; a temp folder is removed
+    tmp = tempfile.TemporaryDirectory(prefix="jaxgfx_mitsuba_") if work_dir is None else None
+    try:
+        wd = tmp.name if tmp is not None else work_dir
+        d = to_mitsuba_dict(desc, base_dir=base_dir, work_dir=wd, mi=mi)
+        d["integrator"] = integ
+        d["sensor"]["sampler"]["sample_count"] = int(spp)
+        scene = mi.load_dict(d)
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+    img = mi.render(scene, spp=int(spp), seed=int(seed))
+    return np.array(img, dtype=np.float32)[..., :3]
+
+
+__all__ += ["import_mitsuba"]
