@@ -818,19 +818,6 @@ def _fit_and_write(cfg: FitConfig, prep: _Prepared, out_dir: str | None) -> dict
     return out
 
 
-def run_fit_cli(argv=None, prog="jaxgfx fit") -> int:
-    """``CONFIG [--out DIR] [--steps N] [--quiet]`` → run :func:`run_fit` and print a summary."""
-    import argparse
-
-    p = argparse.ArgumentParser(prog=prog, description="Fit scene parameters to a target image.")
-    p.add_argument("config", help="YAML config (see configs/inverse_material.yaml)")
-    p.add_argument("--out", default="out/fit", help="output directory")
-    p.add_argument("--steps", type=int, default=None, help="override optimizer.steps")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    args = p.parse_args(argv)
-    return _cli_main(args)
-
-
 def enable_compilation_cache() -> str | None:
     """Turn on JAX's persistent compilation cache for command-line runs (the fit step of a
     render takes minutes to compile on a small CPU; later runs of the same configuration load
@@ -844,32 +831,3 @@ def enable_compilation_cache() -> str | None:
     os.makedirs(path, exist_ok=True)
     jax.config.update("jax_compilation_cache_dir", path)
     return path
-
-
-def _cli_main(args) -> int:
-    import sys
-
-    enable_compilation_cache()
-    data = read_yaml(args.config)
-    if args.steps is not None:
-        data.setdefault("optimizer", {})
-        data["optimizer"] = {**data["optimizer"], "steps": args.steps}
-    if args.quiet:
-        data["progress"] = False
-    try:
-        cfg = load_config(FitConfig, data)
-        out = run_fit(cfg, args.out, base_dir=os.path.dirname(os.path.abspath(args.config)))
-    except (ValueError, FileNotFoundError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    for k, v in out["params"].items():
-        err = out.get("errors", {}).get(k)
-        extra = f"  (truth {out['truth'][k]}, max error {err:.4g})" if err is not None else ""
-        print(f"{k} = {v}{extra}")
-    if out["camera"]:
-        print(f"camera = {out['camera']}")
-    print(
-        f"loss {out['loss'][0]:.4g} -> {out['loss'][-1]:.4g} in {out['n_steps']} steps, "
-        f"{out['seconds']:.1f} s (+{out['compile_seconds']:.1f} s compile); wrote {args.out}"
-    )
-    return 0
