@@ -85,7 +85,9 @@ def main(argv=None):
         env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
         cmd = [sys.executable, "-m", "benchmarks.distributed", "--child", "--size", str(a.size)]
         cmd += ["--spp", str(a.spp), "--repeat", str(a.repeat)]
-        proc = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True, check=True)
+        proc = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True)
+        if proc.returncode != 0:
+            sys.exit(f"{n} devices: child failed:\n{proc.stderr[-4000:]}")
         r = json.loads(proc.stdout.strip().splitlines()[-1])
         for name in ("rows", "samples"):
             r[name]["speedup_vs_render"] = r["render"]["median_s"] / r[name]["median_s"]
