@@ -1,8 +1,8 @@
 """Run by tests/render/test_distributed.py in a subprocess with 4 host CPU devices (the XLA flag
-must be set before jax is imported). Prints one JSON line: for the single-device
-``render`` and for ``render_sharded`` (rows, samples), the image and its derivative w.r.t. the
-sphere's diffuse reflectance (forward mode: the full tangent image; reverse mode: the gradient
-of the image mean), all under ``jax.jit``.
+must be set before jax is imported). Prints one JSON line: for the single-device ``render`` and
+for ``render_sharded`` (rows, samples), under ``jax.jit``, the image and its derivative w.r.t.
+the sphere's diffuse reflectance: forward mode gives the full tangent image (along the red
+channel), reverse mode the gradient of the image mean.
 
 Usage: python tests/render/_distributed_worker.py {jvp|grad}
 """
