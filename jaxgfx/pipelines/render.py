@@ -88,9 +88,9 @@ def render_output_paths(job: RenderJob) -> dict[str, str]:
 def _display(img: np.ndarray) -> np.ndarray:
     from jaxgfx.pipelines.tonemap import tonemap_image
 
-    # AOV images: the display image shows the albedo channels. Exposure 0 + clip + sRGB
-    # (jaxgfx.tonemap.tonemap_exposure: hue-preserving clip of the luminance)
-    return tonemap_image(img[..., :3], "exposure")
+    # AOV images: the display image shows the albedo channels. Exposure 0, per-channel clip,
+    # sRGB (jaxgfx.tonemap.tonemap_exposure)
+    return tonemap_image(img[..., :3], "exposure", per_channel=True)
 
 
 def run_render(job: RenderJob) -> dict:

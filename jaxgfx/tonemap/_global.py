@@ -43,7 +43,13 @@ _LOG_HALF = math.log(0.5)
 
 
 def exposure_curve(L, la, mx, *, exposure, gamma):
-    return safe_pow(L * jnp.exp2(exposure), 1.0 / gamma)
+    y = L * jnp.exp2(exposure)
+    return y if gamma is None else safe_pow(y, 1.0 / gamma)
+
+
+@functools.partial(jax.jit, static_argnames=("encode",))
+def _exposure_per_channel(x, exposure, gamma, *, encode):
+    return encode_display(exposure_curve(x, None, None, exposure=exposure, gamma=gamma), encode)
 
 
 def drago_curve(L, la, mx, *, bias, ld_max):
@@ -108,7 +114,14 @@ def _prepare(hdr, saturation, encode, weights):
 
 
 def tonemap_exposure(
-    hdr, *, exposure=0.0, gamma=1.0, saturation=1.0, encode="srgb", weights="rec709"
+    hdr,
+    *,
+    exposure=0.0,
+    gamma=1.0,
+    saturation=1.0,
+    encode="srgb",
+    weights="rec709",
+    per_channel=False,
 ):
     """Exposure, gamma and clip: ``L_d = min(1, (2^exposure L)^(1/gamma))``.
 
@@ -123,6 +136,9 @@ def tonemap_exposure(
         saturation: colour exponent ``s`` of ``(C/L)^s L_d`` (1 keeps the hue and saturation).
         encode: ``"srgb"`` (default) or ``"linear"`` output in [0, 1].
         weights: luminance weights, ``"rec709"`` or ``"rec601"``.
+        per_channel: static; apply the curve to R, G, B separately (the classic per-channel
+            clip: bright colours desaturate towards white) instead of to the luminance
+            (hue kept); ``saturation`` is then unused.
 
     Returns:
         Display image of the input's shape, values in [0, 1].
@@ -135,6 +151,10 @@ def tonemap_exposure(
     saturation = static_saturation(saturation)
     check_scalar(exposure, "exposure")
     check_scalar(gamma, "gamma", lo=0.0)
+    if isinstance(gamma, (int, float)) and not isinstance(gamma, bool) and float(gamma) == 1.0:
+        gamma = None  # static fast path: no power
+    if per_channel:
+        return _exposure_per_channel(x, exposure, gamma, encode=encode)
     params = {"exposure": exposure, "gamma": gamma}
     return _apply_curve(
         x, params, saturation, None, curve=exposure_curve, encode=encode, weights=weights

@@ -41,7 +41,7 @@ def _solve(b):
     return idctn(X, type=2, axes=(-2, -1), norm="ortho")
 
 
-@jax.custom_vjp
+@jax.custom_jvp
 def solve_poisson_neumann(b):
     """Zero-mean solution ``I`` of ``Laplacian(I) = b - mean(b)`` with Neumann boundaries.
 
@@ -51,9 +51,10 @@ def solve_poisson_neumann(b):
     ``O(HW log HW)``, exact up to rounding. The constant mode (eigenvalue 0) is dropped, so
     the solution has zero mean and ``b``'s mean is ignored (it is not in the operator's range).
 
-    Gradients use implicit differentiation: the solution operator ``S = A^+`` is symmetric,
-    so the VJP of ``b -> S b`` is ``S`` applied to the cotangent (one more solve; nothing is
-    unrolled).
+    Derivatives by implicit differentiation, not by differentiating the transform's internals:
+    the solution operator ``S = A^+`` is linear, so the JVP is ``S`` applied to the tangent
+    (one more solve; forward mode works, e.g. for Levenberg-Marquardt Jacobians) and reverse
+    mode transposes it (``S`` is symmetric: the VJP is one solve of the cotangent).
 
     Args:
         b: ``(..., H, W)`` right-hand side.
@@ -64,12 +65,7 @@ def solve_poisson_neumann(b):
     return _solve(b)
 
 
-def _fwd(b):
-    return _solve(b), None
-
-
-def _bwd(_, ct):
-    return (_solve(ct),)
-
-
-solve_poisson_neumann.defvjp(_fwd, _bwd)
+@solve_poisson_neumann.defjvp
+def _jvp(primals, tangents):
+    (b,), (t,) = primals, tangents
+    return _solve(b), _solve(t)

@@ -40,3 +40,25 @@ def test_job_rejects_bad_arguments(tmp_path):
     with pytest.raises(FileNotFoundError):
         run_tonemap(TonemapJob(str(tmp_path / "missing.exr"), str(tmp_path / "o.png")))
     assert not (tmp_path / "o.png").exists()
+
+
+def test_calibrate_config_checks_tonemap_names():
+    from jaxgfx.config import load_config
+    from jaxgfx.pipelines.calibrate import CalibrateConfig
+
+    cfg = load_config(CalibrateConfig, {"tonemap": ["drago", "fattal"]})
+    assert cfg.tonemap == ("drago", "fattal")
+    with pytest.raises(ValueError, match=r"tonemap\[1\]"):
+        load_config(CalibrateConfig, {"tonemap": ["drago", "nope"]})
+
+
+@pytest.mark.slow
+def test_calibrate_writes_one_png_per_operator(tmp_path):
+    out = tmp_path / "cal"
+    code = main(["calibrate", "--out", str(out), "--tonemap", "drago,reinhard_local", "--quiet"])
+    assert code == 0
+    radiance = io.read_exr(out / "radiance.exr")
+    got = io.read_image(out / "tonemap_drago.png", as_float=True)
+    ref = np.asarray(tm.tonemap_Drago2003(np.maximum(radiance, 0)))
+    assert np.abs(got - ref).max() <= 1 / 255 + 1e-6
+    assert (out / "tonemap_reinhard_local.png").exists()
