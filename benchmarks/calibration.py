@@ -46,7 +46,7 @@ def _cv_resp(crv):
     return hdr.CameraResponse(jnp.asarray(tab), "table", "opencv", 255.0, 0.5)
 
 
-def run(h, w, repeat):
+def run(h, w, repeat, robertson=True):
     times = jnp.asarray([1.0, 4.0, 16.0, 64.0, 256.0])
     rad = hdr.synthetic_radiance(jax.random.key(1), h, w, dynamic_range=1e4)
     st = hdr.make_bracketed_stack(jax.random.key(2), rad, times, hdr.synthetic_response("srgb"))
@@ -76,10 +76,10 @@ def run(h, w, repeat):
         },
     }
     bgr = [np.ascontiguousarray(im[..., ::-1]) for im in imgs_np]
-    for name, cal, mer in (
-        ("opencv_debevec", cv2.createCalibrateDebevec, cv2.createMergeDebevec),
-        ("opencv_robertson", cv2.createCalibrateRobertson, cv2.createMergeRobertson),
-    ):
+    peers = [("opencv_debevec", cv2.createCalibrateDebevec, cv2.createMergeDebevec)]
+    if robertson:
+        peers.append(("opencv_robertson", cv2.createCalibrateRobertson, cv2.createMergeRobertson))
+    for name, cal, mer in peers:
 
         def peer(cal=cal, mer=mer):
             crv = cal().process(bgr, t_np)
@@ -150,6 +150,7 @@ def main(argv=None):
     ap.add_argument("--sizes", nargs="*", default=["1024x1024", "3000x2000"])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--cold", action="store_true", help="cold vs cached-process times")
+    ap.add_argument("--no-robertson", action="store_true", help="skip OpenCV Robertson (slow)")
     a = ap.parse_args(argv)
     sizes = ["256x256"] if a.quick else a.sizes
     repeat = 1 if a.quick else a.repeat
@@ -168,9 +169,10 @@ def main(argv=None):
     }
     for k, s in enumerate(sizes):
         w, h = (int(v) for v in s.split("x"))
-        out["runs"].append(run(h, w, repeat))
+        out["runs"].append(run(h, w, repeat, robertson=not a.no_robertson))
         if a.cold and k == 0:
             out["runs"][-1]["jaxgfx_process"] = cold_warm(h, w)
+        print(json.dumps(out["runs"][-1]), file=sys.stderr, flush=True)  # partial results
     print(json.dumps(out, indent=1))
 
 
