@@ -565,7 +565,6 @@ def _fit_ldr(cfg: CalibrateConfig, images, times, truth, steps, result_kw) -> Ca
 
 def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
     from jaxgfx import hdr, image, io
-    from jaxgfx.hdr.raw_calibration import calibrate_raw_stack
 
     steps.start("read raw")
     raws, times = io.read_raw_stack(files, exposure_times=cfg.exposure_times)
@@ -574,7 +573,7 @@ def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
     black = np.asarray(raws[0].black_level, np.float32)
     white = float(raws[0].white_level)
     steps.start("raw calibration")
-    cal = calibrate_raw_stack(mosaics, times, cfa_pattern=pattern, black=black, white=white)
+    cal = hdr.calibrate_raw_stack(mosaics, times, cfa_pattern=pattern, black=black, white=white)
     steps.start("merge")
     norm = np.stack([r.normalized() for r in raws])[..., None]
     ratios = np.asarray(cal.ratios.ratios, np.float64)
