@@ -9,6 +9,8 @@ function in :mod:`jaxgfx.pipelines`)
     The main job: fit a camera response from a bracketed stack and merge a radiance map.
 ``jaxgfx render SCENE.yaml OUT.exr --spp 64 --integrator path``
     Render a scene description with the Monte Carlo renderer.
+``jaxgfx fit CONFIG --out out/fit``
+    Inverse rendering: fit scene (and camera) parameters to a target (docs/inverse.md).
 ``jaxgfx tonemap IN.exr OUT.png --op drago --bias 0.85``
     Tone map an HDR image for display (see ``jaxgfx tonemap --list``).
 
@@ -232,6 +234,52 @@ def _tonemap_run(args) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- fit
+def _fit_arguments(p):
+    p.add_argument("config", help="YAML config (configs/inverse_material.yaml, docs/inverse.md)")
+    p.add_argument("--out", default="out/fit", help="output directory")
+    p.add_argument("--steps", type=int, default=None, help="override optimizer.steps")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def fit_job(args):
+    """``argparse`` namespace of ``jaxgfx fit`` → :class:`~jaxgfx.pipelines.fit.FitJob`."""
+    from jaxgfx.config import load_config, read_yaml
+    from jaxgfx.pipelines.fit import FitConfig, FitJob
+
+    data = read_yaml(args.config)
+    if args.steps is not None:
+        data["optimizer"] = {**(data.get("optimizer") or {}), "steps": args.steps}
+    if args.quiet:
+        data["progress"] = False
+    return FitJob(
+        config=load_config(FitConfig, data),
+        out=args.out,
+        overwrite=args.overwrite,
+        base_dir=os.path.dirname(os.path.abspath(args.config)),
+    )
+
+
+def _fit_run(args) -> int:
+    from jaxgfx.pipelines.fit import enable_compilation_cache, run_fit
+
+    job = fit_job(args)
+    enable_compilation_cache()
+    out = run_fit(job)
+    for k, v in out["params"].items():
+        err = out.get("errors", {}).get(k)
+        extra = f"  (truth {out['truth'][k]}, max error {err:.4g})" if err is not None else ""
+        print(f"{k} = {v}{extra}")
+    if out["camera"]:
+        print(f"camera = {out['camera']}")
+    print(
+        f"loss {out['loss'][0]:.4g} -> {out['loss'][-1]:.4g} in {out['n_steps']} steps, "
+        f"{out['seconds']:.1f} s (+{out['compile_seconds']:.1f} s compile); "
+        f"outputs in {os.path.abspath(job.out)}"
+    )
+    return 0
+
+
 COMMANDS: dict[str, Command] = {
     "filter": Command(
         "apply an image operation to a file",
@@ -259,6 +307,13 @@ COMMANDS: dict[str, Command] = {
         "(docs/tonemap.md); every continuous parameter is an option.",
         _tonemap_arguments,
         _tonemap_run,
+    ),
+    "fit": Command(
+        "fit scene (and camera) parameters to a target image (inverse rendering)",
+        "Fit material / light / texture parameters of a scene, and for 8-bit targets the "
+        "camera response and exposure, to a target image (see docs/inverse.md).",
+        _fit_arguments,
+        _fit_run,
     ),
 }
 

@@ -100,3 +100,27 @@ def test_run_fit_end_to_end(tmp_path):
     assert isinstance(res["params"]["materials.metal.alpha"], float)
     assert res["truth"]["materials.metal.alpha"] == pytest.approx(0.15)
     assert out["errors"]["materials.metal.alpha"] >= 0
+
+
+def test_cli_fit_reports_config_errors_before_rendering(tmp_path, capsys):
+    from jaxgfx.cli import main
+
+    cfg = tmp_path / "bad.yaml"
+    cfg.write_text(
+        f"scene: {SCENE}\n"
+        "target: {synthetic: {materials.metal.alpha: 0.2}}\n"
+        "params: {materials.gold.alpha: {init: 0.5}}\n"
+    )
+    out = tmp_path / "out"
+    assert main(["fit", str(cfg), "--out", str(out), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "jaxgfx fit: error: params.materials.gold.alpha: unknown parameter path" in err
+    assert not out.exists()
+
+
+def test_pipeline_holds_no_parser():
+    import inspect
+
+    import jaxgfx.pipelines.fit as fit_mod
+
+    assert "argparse" not in inspect.getsource(fit_mod)

@@ -33,9 +33,11 @@ clipping, quantisation); ``result.json`` then reports the parameter errors.
 
 The camera model for LDR targets: ``v = response(exposure · L)`` with a
 :class:`jaxgfx.hdr.CameraResponse` (anchor ``"unit"``, so ``response(1) = 1``: ``gamma`` is
-``v = x^(1/γ)``, ``srgb`` the sRGB OETF), compared with the 8-bit codes by
-:func:`jaxgfx.optim.censored_l2_loss` (clipped highlights only bound the prediction). The
-render, the camera and the loss are one jitted program.
+``v = x^(1/γ)``, ``srgb`` the sRGB OETF). ``camera.space: linear`` (default) linearises the
+8-bit codes through the current camera and compares radiance (censored at the clip levels:
+clipped highlights only bound the prediction); ``camera.space: code`` compares display values
+with :func:`jaxgfx.optim.censored_l2_loss`, which is biased for low-spp renders (the response
+is curved: ``E f(Î) ≠ f(E Î)``). The render, the camera and the loss are one jitted program.
 
 Monte Carlo gradients: ``render.estimator: independent`` (default) renders two half-spp images
 with independent keys and takes the primal from one and the adjoint from the other, so the
@@ -65,6 +67,7 @@ __all__ = [
     "LossConfig",
     "RESPONSE_MODELS",
     "apply_camera",
+    "camera_to_linear",
     "prepare_fit",
     "run_fit",
 ]
@@ -131,10 +134,13 @@ class CameraConfig:
     response: ResponseSpec = ResponseSpec()
     exposure: ExposureSpec = ExposureSpec()
     bits: int = 8
+    space: str = "linear"  # where the loss compares: linear (unbiased) | code (see module doc)
 
     def validate(self):
         if self.bits not in (8, 16):
             raise ValueError(f"camera.bits: expected 8 or 16, got {self.bits}")
+        if self.space not in ("linear", "code"):
+            raise ValueError(f"camera.space: expected 'linear' or 'code', got {self.space!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -417,6 +423,53 @@ def _camera_blend(img, exposure, gamma, weights):
     return out
 
 
+def camera_to_linear(z, exposure, gamma, *, model: str):
+    """Inverse of :func:`apply_camera`: linear radiance for display values ``z`` in [0, 1]."""
+    import jax.numpy as jnp
+
+    from jaxgfx.hdr import CameraResponse
+
+    z = jnp.clip(jnp.asarray(z), 0.0, 1.0)
+    if model == "linear":
+        return z / exposure
+    if model == "gamma":
+        resp = CameraResponse.gamma(jnp.reshape(gamma, (1,)), anchor="unit")
+    else:
+        resp = CameraResponse.analytic(model, anchor="unit")
+    return resp.to_linear_normalized(z) / exposure
+
+
+def _censored_linear_loss(img, codes, exposure, gamma, weights, code_max):
+    """Censored L2 in linear radiance: each code ``q`` is linearised through the current camera
+    (``T = f⁻¹(q / c) / exposure``, a blend over :data:`RESPONSE_MODELS` by ``weights``) and
+    compared with the *linear* render, so the loss is quadratic in the Monte Carlo image and its
+    expectation is unbiased (in code space, ``E f(Î) ≠ f(E Î)`` for a curved response: a
+    noisy render through a concave response is darker on average, and the camera parameters
+    absorb that). Clipped codes bound the radiance from one side (``q = c``: ``Î ≥
+    f⁻¹((c - ½)/c)/e``; ``q = 0``: ``Î ≤ f⁻¹(½/c)/e``). Normalised by the mean linearised
+    target so that its scale does not drift with the exposure."""
+    import jax
+    import jax.numpy as jnp
+
+    def inv(z):
+        out = 0.0
+        for i, m in enumerate(RESPONSE_MODELS):
+            out = out + weights[i] * camera_to_linear(z, exposure, gamma, model=m)
+        return out
+
+    c = code_max
+    t_mid = inv(codes / c)
+    t_lo = inv((c - 0.5) / c)
+    t_hi = inv(0.5 / c)
+    e = jnp.where(
+        codes >= c,
+        jnp.maximum(t_lo - img, 0.0),
+        jnp.where(codes <= 0, jnp.maximum(img - t_hi, 0.0), img - t_mid),
+    )
+    scale = jax.lax.stop_gradient(jnp.mean(t_mid)) + 1e-6
+    return jnp.mean(e * e) / (scale * scale)
+
+
 def _freeze(x, free):
     """``x`` with its gradient kept where ``free`` (1.0) and removed where 0.0."""
     import jax
@@ -440,6 +493,7 @@ def make_loss(cfg: FitConfig, paths, ldr: bool):
     code_max = float(2 ** (cfg.camera.bits if cfg.camera else 8) - 1)
     paths = tuple(paths)
     kind, space = cfg.loss.kind, cfg.loss.space
+    code_space = cfg.camera is not None and cfg.camera.space == "code"
 
     def image(scene, p, key, spp):
         s = _build_scene(scene, paths, p["scene"])
@@ -450,8 +504,10 @@ def make_loss(cfg: FitConfig, paths, ldr: bool):
             return image_loss(img, target, kind=kind, space=space)
         e = _freeze(p["camera"]["exposure"], cam_args["free"][0])
         g = _freeze(p["camera"]["gamma"], cam_args["free"][1])
-        v = _camera_blend(img, e, g, cam_args["weights"])
-        return censored_l2_loss(v, target, code_max=code_max)
+        if code_space:
+            v = _camera_blend(img, e, g, cam_args["weights"])
+            return censored_l2_loss(v, target, code_max=code_max)
+        return _censored_linear_loss(img, target, e, g, cam_args["weights"], code_max)
 
     def loss(p, key, args):
         scene, target, cam_args = args
@@ -472,7 +528,8 @@ _LOSS_CACHE: dict = {}
 def _cached_loss(cfg, paths, ldr):
     """One loss object (hence one compiled fit step) per render / loss configuration and
     parameter set; camera choices are arguments, not part of the program."""
-    key = (cfg.render, cfg.loss, cfg.camera.bits if cfg.camera else None, tuple(paths), ldr)
+    cam = (cfg.camera.bits, cfg.camera.space) if cfg.camera else None
+    key = (cfg.render, cfg.loss, cam, tuple(paths), ldr)
     if key not in _LOSS_CACHE:
         _LOSS_CACHE[key] = make_loss(cfg, paths, ldr)
     return _LOSS_CACHE[key]
@@ -761,19 +818,6 @@ def _fit_and_write(cfg: FitConfig, prep: _Prepared, out_dir: str | None) -> dict
     return out
 
 
-def run_fit_cli(argv=None, prog="jaxgfx fit") -> int:
-    """``CONFIG [--out DIR] [--steps N] [--quiet]`` → run :func:`run_fit` and print a summary."""
-    import argparse
-
-    p = argparse.ArgumentParser(prog=prog, description="Fit scene parameters to a target image.")
-    p.add_argument("config", help="YAML config (see configs/inverse_material.yaml)")
-    p.add_argument("--out", default="out/fit", help="output directory")
-    p.add_argument("--steps", type=int, default=None, help="override optimizer.steps")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    args = p.parse_args(argv)
-    return _cli_main(args)
-
-
 def enable_compilation_cache() -> str | None:
     """Turn on JAX's persistent compilation cache for command-line runs (the fit step of a
     render takes minutes to compile on a small CPU; later runs of the same configuration load
@@ -787,32 +831,3 @@ def enable_compilation_cache() -> str | None:
     os.makedirs(path, exist_ok=True)
     jax.config.update("jax_compilation_cache_dir", path)
     return path
-
-
-def _cli_main(args) -> int:
-    import sys
-
-    enable_compilation_cache()
-    data = read_yaml(args.config)
-    if args.steps is not None:
-        data.setdefault("optimizer", {})
-        data["optimizer"] = {**data["optimizer"], "steps": args.steps}
-    if args.quiet:
-        data["progress"] = False
-    try:
-        cfg = load_config(FitConfig, data)
-        out = run_fit(cfg, args.out, base_dir=os.path.dirname(os.path.abspath(args.config)))
-    except (ValueError, FileNotFoundError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    for k, v in out["params"].items():
-        err = out.get("errors", {}).get(k)
-        extra = f"  (truth {out['truth'][k]}, max error {err:.4g})" if err is not None else ""
-        print(f"{k} = {v}{extra}")
-    if out["camera"]:
-        print(f"camera = {out['camera']}")
-    print(
-        f"loss {out['loss'][0]:.4g} -> {out['loss'][-1]:.4g} in {out['n_steps']} steps, "
-        f"{out['seconds']:.1f} s (+{out['compile_seconds']:.1f} s compile); wrote {args.out}"
-    )
-    return 0

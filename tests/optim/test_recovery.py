@@ -1,5 +1,8 @@
 """Recovery: scenes rendered here at known parameter values are fitted back from several starts.
 
+All slow-marked: compiling a render's gradient program costs ~80 s of CPU (measured), more
+than the default suite's budget for this package. ``pytest -m slow tests/optim``.
+
 Scene: configs/scenes/inverse.yaml at 16x16 (a GGX metal sphere reflecting an area light, a
 diffuse sphere, a grey floor), ``integrator="direct"``. One loss function per module, so all
 starts share one compiled fit step. Tolerances are stated per test; they cover the Monte Carlo
@@ -64,12 +67,13 @@ def ggx_problem():
     return scene, _target(scene, TRUE_ALPHA, TRUE_ALBEDO)
 
 
-def _fit(scene, target, alpha0, albedo0, steps=60, lr=0.06, seed=0):
+def _fit(scene, target, alpha0, albedo0, steps=100, lr=0.08, seed=0):
+    # learning rate decays exponentially to lr / 8 over the steps
     return fit(
         material_loss,
         {"alpha": jnp.asarray(alpha0, jnp.float32), "albedo": jnp.full(3, albedo0, jnp.float32)},
         steps=steps,
-        learning_rate=lr,
+        learning_rate=lambda k: lr * 0.125 ** (k / (steps - 1)),
         key=jax.random.key(seed),
         args=(scene, target),
         bounds=BOUNDS,
@@ -81,11 +85,12 @@ def _tail_mean(res, name, n=15):
     return np.mean(np.asarray(res.history[name])[-n:], axis=0)
 
 
+@pytest.mark.slow  # ~80 s of CPU: compiling the render's gradient dominates
 def test_recover_ggx_alpha_and_albedo_from_two_starts(ggx_problem):
     # tolerances: alpha within 0.06 absolute, albedo within 0.06 per channel (average of the
     # last 15 iterates, which removes most of the Adam noise ball at spp 8)
     scene, target = ggx_problem
-    for alpha0, albedo0 in ((0.6, 0.4), (0.05, 0.9)):
+    for alpha0, albedo0 in ((0.6, 0.4), (0.08, 0.9)):
         res = _fit(scene, target, alpha0, albedo0)
         alpha = _tail_mean(res, "alpha")
         albedo = _tail_mean(res, "albedo")
@@ -103,7 +108,7 @@ def test_recover_ggx_alpha_over_its_range(ggx_problem, alpha_true, tol):
     scene, _ = ggx_problem
     target = _target(scene, alpha_true, TRUE_ALBEDO)
     for alpha0 in (0.2, 0.6):
-        res = _fit(scene, target, alpha0, 0.5, steps=80)
+        res = _fit(scene, target, alpha0, 0.5)
         assert abs(_tail_mean(res, "alpha") - alpha_true) < tol, (alpha0, alpha_true)
 
 
@@ -111,8 +116,8 @@ def test_recover_ggx_alpha_over_its_range(ggx_problem, alpha_true, tol):
 def test_recover_beckmann_alpha():
     scene = _scene(distribution="beckmann")
     target = _target(scene, 0.2, TRUE_ALBEDO)
-    for alpha0 in (0.05, 0.6):
-        res = _fit(scene, target, alpha0, 0.5, steps=80)
+    for alpha0 in (0.08, 0.6):
+        res = _fit(scene, target, alpha0, 0.5)
         assert abs(_tail_mean(res, "alpha") - 0.2) < 0.05, alpha0
         np.testing.assert_allclose(_tail_mean(res, "albedo"), TRUE_ALBEDO, atol=0.06)
 
@@ -124,7 +129,7 @@ def _run(cfg_over, size=16):
         "scene": SCENE,
         "target": {"synthetic": {}, "spp": 256, "seed": 7},
         "params": {},
-        "optimizer": {"name": "adam", "lr": 0.05, "steps": 80},
+        "optimizer": {"name": "adam", "lr": 0.05, "lr_final": 0.005, "steps": 100},
         "render": {"spp": 8, "integrator": "direct", "width": size, "height": size},
         "progress": False,
     }
