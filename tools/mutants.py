@@ -154,14 +154,6 @@ MUTANTS = [
         "why": "two arguments swapped (MIS weights no longer sum to one)",
     },
     {
-        "name": "render.path.bsdf_pdf_not_detached",
-        "file": "jaxgfx/render/integrators/_common.py",
-        "old": "y = safe_div(f, sg(s.pdf)[..., None])",
-        "new": "y = safe_div(f, s.pdf[..., None])",
-        "tests": ["tests/render/test_gradients_fd.py::test_glossy_scene_ad_matches_fd"],
-        "why": "a stop_gradient removed: AD through the sampling density (biased gradients)",
-    },
-    {
         "name": "render.whitted.direct_x1.05",
         "file": "jaxgfx/render/integrators/whitted.py",
         "old": "return jnp.where(ok[..., None], f * li * safe_div(1.0, pdf)[..., None], 0.0)",
