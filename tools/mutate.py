@@ -83,6 +83,9 @@ def _check_list(mutants) -> list[str]:
         if name in names:
             errors.append(f"{name}: duplicate name")
         names.add(name)
+        if not (ROOT / m["file"]).is_file():
+            errors.append(f"{name}: no file {m['file']}")
+            continue
         text = (ROOT / m["file"]).read_text()
         n = text.count(m["old"])
         if n != 1:

@@ -30,6 +30,9 @@ from jaxgfx.render.geometry import intersect_scene as intersect_scene
 from jaxgfx.render.geometry import spawn_ray as spawn_ray
 from jaxgfx.render.geometry.mesh_io import load_obj as load_obj
 from jaxgfx.render.geometry.mesh_io import load_ply as load_ply
+from jaxgfx.render.gradients import GradStats as GradStats
+from jaxgfx.render.gradients import decorrelated as decorrelated
+from jaxgfx.render.gradients import grad_stats as grad_stats
 from jaxgfx.render.integrators import AOV_CHANNELS as AOV_CHANNELS
 from jaxgfx.render.integrators import INTEGRATORS as INTEGRATORS
 from jaxgfx.render.integrators import AOVIntegrator as AOVIntegrator
@@ -45,6 +48,9 @@ __all__ = [
     "accel",
     "bsdf",
     "render",
+    "grad_stats",
+    "GradStats",
+    "decorrelated",
     "load_scene",
     "Scene",
     "INTEGRATORS",

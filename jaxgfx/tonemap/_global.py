@@ -241,7 +241,7 @@ def tonemap_ACES_Narkowicz2015(
 
     Example:
         >>> float(tonemap_ACES_Narkowicz2015(jnp.ones((1, 1)), encode="linear")[0, 0])  # f(0.18)
-        0.2672...
+        0.2668...
     """
     x = _prepare(hdr, saturation, encode, weights)
     saturation = static_saturation(saturation)
@@ -281,7 +281,7 @@ def tonemap_Hable2010(
 
     Example:
         >>> float(tonemap_Hable2010(jnp.ones((1, 1)), encode="linear")[0, 0])
-        0.1880...
+        0.1283...
     """
     x = _prepare(hdr, saturation, encode, weights)
     saturation = static_saturation(saturation)
