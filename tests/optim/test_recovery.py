@@ -1,6 +1,6 @@
 """Recovery: scenes rendered here at known parameter values are fitted back from several starts.
 
-All slow-marked: compiling a render's gradient program costs ~80 s of CPU (measured), more
+All slow-marked: compiling a render's gradient program costs 80-90 s of CPU (measured), more
 than the default suite's budget for this package. ``pytest -m slow tests/optim``.
 
 Scene: configs/scenes/inverse.yaml at 16x16 (a GGX metal sphere reflecting an area light, a
@@ -86,7 +86,7 @@ def _tail_mean(res, name, n=15):
     return np.mean(np.asarray(res.history[name])[-n:], axis=0)
 
 
-@pytest.mark.slow  # ~80 s of CPU: compiling the render's gradient dominates
+@pytest.mark.slow  # 80-90 s of CPU: compiling the render's gradient dominates
 def test_recover_ggx_alpha_and_albedo_from_two_starts(ggx_problem):
     # tolerances: alpha within 0.06 absolute, albedo within 0.06 per channel (average of the
     # last 15 iterates, which removes most of the Adam noise ball at spp 8)
