@@ -55,6 +55,7 @@ from typing import Any
 
 import numpy as np
 
+from jaxgfx._jaxcache import enable_compilation_cache
 from jaxgfx.config import config_to_dict, load_config, read_yaml
 
 __all__ = [
@@ -70,6 +71,7 @@ __all__ = [
     "camera_to_linear",
     "prepare_fit",
     "run_fit",
+    "enable_compilation_cache",
 ]
 
 RESPONSE_MODELS = ("gamma", "srgb", "linear", "s-curve", "filmic", "log")
@@ -816,18 +818,3 @@ def _fit_and_write(cfg: FitConfig, prep: _Prepared, out_dir: str | None) -> dict
         with open(os.path.join(out_dir, "result.json"), "w", encoding="utf-8") as f:
             json.dump(out, f, indent=1)
     return out
-
-
-def enable_compilation_cache() -> str | None:
-    """Turn on JAX's persistent compilation cache for command-line runs (the fit step of a
-    render takes minutes to compile on a small CPU; later runs of the same configuration load
-    it). Directory: ``$JAXGFX_JIT_CACHE`` or ``~/.cache/jaxgfx/jit``; ``JAXGFX_JIT_CACHE=off``
-    disables it. Returns the directory used (None when disabled or already configured)."""
-    import jax
-
-    path = os.environ.get("JAXGFX_JIT_CACHE", os.path.expanduser("~/.cache/jaxgfx/jit"))
-    if path.lower() == "off" or jax.config.jax_compilation_cache_dir:
-        return None
-    os.makedirs(path, exist_ok=True)
-    jax.config.update("jax_compilation_cache_dir", path)
-    return path
