@@ -98,11 +98,22 @@ def speed(desc, *, spp, depth, repeat):
     def loss(params, key):
         return jnp.mean((fwd(params, key) - target) ** 2)
 
+    @jax.jit
+    def fwd_attached(params, key):
+        s = _apply(scene, params)
+        return render(s, key, spp=spp, integrator="path", max_depth=depth, sampling="attached")
+
     grad = jax.jit(jax.grad(loss))
     dfwd = decorrelated(fwd)
     dgrad = jax.jit(jax.grad(lambda p, k: jnp.mean((dfwd(p, k) - target) ** 2)))
     out = {}
-    for name, fn in (("forward", fwd), ("grad", grad), ("grad_decorrelated", dgrad)):
+    runs = (
+        ("forward", fwd),
+        ("forward_attached", fwd_attached),
+        ("grad", grad),
+        ("grad_decorrelated", dgrad),
+    )
+    for name, fn in runs:
         t = time.perf_counter()
         jax.block_until_ready(fn(params, key))
         first = time.perf_counter() - t
