@@ -68,7 +68,10 @@ def _pytest(tree: Path, node_ids, timeout: float):
         p = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
         return "timeout", time.perf_counter() - t0, ""
-    tail = "\n".join((p.stdout + p.stderr).strip().splitlines()[-3:])
+    lines = (p.stdout + p.stderr).strip().splitlines()
+    # the failing assertion (how far the mutant landed outside the tolerance), else the tail
+    evidence = [ln[1:].strip() for ln in lines if ln.startswith("E ") and ln[1:].strip()]
+    tail = "\n".join(evidence[:8] if p.returncode == 1 and evidence else lines[-3:])
     return p.returncode, time.perf_counter() - t0, tail
 
 
@@ -80,6 +83,9 @@ def _check_list(mutants) -> list[str]:
         if name in names:
             errors.append(f"{name}: duplicate name")
         names.add(name)
+        if not (ROOT / m["file"]).is_file():
+            errors.append(f"{name}: no file {m['file']}")
+            continue
         text = (ROOT / m["file"]).read_text()
         n = text.count(m["old"])
         if n != 1:
@@ -99,6 +105,7 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout", type=float, default=300.0, help="seconds per pytest run")
     ap.add_argument("--json", default=None, help="also write the summary to this file")
     ap.add_argument("--no-baseline", action="store_true", help="skip the unmutated run")
+    ap.add_argument("-v", "--verbose", action="store_true", help="print each failed assertion")
     args = ap.parse_args(argv)
 
     mutants = [m for m in MUTANTS if args.only in m["name"]]
@@ -150,10 +157,11 @@ def main(argv=None) -> int:
                     "seconds": round(dt, 1),
                     "tests": m["tests"],
                     "why": m["why"],
+                    "evidence": tail,
                 }
             )
             print(f"{status:10s} {dt:6.1f} s  {m['name']}", flush=True)
-            if status != "killed":
+            if status != "killed" or args.verbose:
                 print("    " + tail.replace("\n", "\n    "), flush=True)
     total = time.perf_counter() - t_start
     bad = [r for r in results if r["status"] != "killed"]

@@ -24,31 +24,13 @@ from jaxgfx.render.bsdf import RoughConductor, RoughPlastic
 from jaxgfx.render.parameters import parameter_paths
 from jaxgfx.render.scene.mitsuba import to_mitsuba_dict
 
+from ._scenes import plane_scene
+
 KEY = jax.random.key(3)
 
 
 def _plane(material, emitters=({"type": "constant", "radiance": [1.0, 2.0, 0.5]},)):
-    return {
-        "camera": {
-            "origin": [0, 3, 0],
-            "target": [0, 0, 0],
-            "up": [0, 0, 1],
-            "fov": 20,
-            "width": 8,
-            "height": 8,
-        },
-        "shapes": [
-            {
-                "type": "rectangle",
-                "center": [0, 0, 0],
-                "normal": [0, 1, 0],
-                "size": [2.0, 2.0],
-                "material": "m",
-            }
-        ],
-        "materials": {"m": material},
-        "emitters": list(emitters),
-    }
+    return plane_scene(emitters, material, cam={"width": 8, "height": 8})
 
 
 @pytest.fixture(scope="module")

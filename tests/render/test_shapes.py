@@ -379,6 +379,7 @@ def test_two_phase_scene_intersection_matches_per_shape_merge(key):
     d = jax.random.normal(k1, (1000, 3)) * jnp.array([0.4, 0.4, 0.1]) + jnp.array([0, 0, 1.0])
     d = d / jnp.linalg.norm(d, axis=-1, keepdims=True)
     h = jax.jit(S.intersect_scene)(shapes, o, d)
+
     def per_shape_merge(shapes, o, d):
         ref = empty_hit((1000,))
         for i, s in enumerate(shapes):
