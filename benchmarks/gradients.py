@@ -98,11 +98,22 @@ def speed(desc, *, spp, depth, repeat):
     def loss(params, key):
         return jnp.mean((fwd(params, key) - target) ** 2)
 
+    @jax.jit
+    def fwd_attached(params, key):
+        s = _apply(scene, params)
+        return render(s, key, spp=spp, integrator="path", max_depth=depth, sampling="attached")
+
     grad = jax.jit(jax.grad(loss))
     dfwd = decorrelated(fwd)
     dgrad = jax.jit(jax.grad(lambda p, k: jnp.mean((dfwd(p, k) - target) ** 2)))
     out = {}
-    for name, fn in (("forward", fwd), ("grad", grad), ("grad_decorrelated", dgrad)):
+    runs = (
+        ("forward", fwd),
+        ("forward_attached", fwd_attached),
+        ("grad", grad),
+        ("grad_decorrelated", dgrad),
+    )
+    for name, fn in runs:
         t = time.perf_counter()
         jax.block_until_ready(fn(params, key))
         first = time.perf_counter() - t
@@ -203,7 +214,13 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out")
+    ap.add_argument(
+        "--sections",
+        default="speed,memory,stats,visibility",
+        help="comma-separated subset of speed,memory,stats,visibility",
+    )
     a = ap.parse_args(argv)
+    sections = set(a.sections.split(","))
     q = a.quick
     example = read_yaml(EXAMPLE)
     mesh = copy.deepcopy(example)
@@ -220,18 +237,22 @@ def main(argv=None):
         "machine": platform.processor() or platform.machine(),
         "jax": jax.__version__,
         "devices": [str(d) for d in jax.devices()],
-        "speed": {
-            "example": speed(_with_res(example, res), spp=spp, depth=3, repeat=3),
-            "mesh": speed(_with_res(mesh, res // 2), spp=spp, depth=3, repeat=3),
-        },
-        "memory_MB": memory(
+    }
+    if "memory" in sections:
+        result["memory_MB"] = memory(
             _with_res(example, 32),
             spps=[1, 4, 16] if q else [1, 4, 16, 64, 256],
             depths=[2, 3, 4] if q else [2, 3, 4, 6, 8],
-        ),
-        "grad_stats_alpha": statistics_alpha(spp=32 if q else 128, n=4 if q else 16),
-        "visibility": visibility(spp=32 if q else 128, n=4 if q else 16),
-    }
+        )
+    if "speed" in sections:
+        result["speed"] = {
+            "example": speed(_with_res(example, res), spp=spp, depth=3, repeat=3),
+            "mesh": speed(_with_res(mesh, res // 2), spp=spp, depth=3, repeat=3),
+        }
+    if "stats" in sections:
+        result["grad_stats_alpha"] = statistics_alpha(spp=32 if q else 128, n=4 if q else 16)
+    if "visibility" in sections:
+        result["visibility"] = visibility(spp=32 if q else 128, n=4 if q else 16)
     js = json.dumps(result, indent=1)
     print(js)
     if a.out:
