@@ -5,6 +5,7 @@ Usage (from the repository root; ``make mutate`` runs the first form):
     python tools/mutate.py                      # all mutants, fail if any survives
     python tools/mutate.py --only delta_e       # mutants whose name contains a substring
     python tools/mutate.py --list               # print the list and exit
+    python tools/mutate.py --check              # only check that every patch still applies
     python tools/mutate.py --json out/mutate.json
 
 Each mutant in ``tools/mutants.py`` is an explicit patch (file, exact old text, new text) and
@@ -102,6 +103,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", default="", help="run mutants whose name contains this")
     ap.add_argument("--list", action="store_true", help="print the mutants and exit")
+    ap.add_argument(
+        "--check", action="store_true", help="only check that every patch applies, then exit"
+    )
     ap.add_argument("--timeout", type=float, default=300.0, help="seconds per pytest run")
     ap.add_argument("--json", default=None, help="also write the summary to this file")
     ap.add_argument("--no-baseline", action="store_true", help="skip the unmutated run")
@@ -117,6 +121,9 @@ def main(argv=None) -> int:
     if errors:
         print("mutant list is stale:\n  " + "\n  ".join(errors), file=sys.stderr)
         return 2
+    if args.check:
+        print(f"{len(mutants)} mutants apply cleanly")
+        return 0
 
     t_start = time.perf_counter()
     results = []
