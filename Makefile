@@ -23,7 +23,7 @@ demo: $(STAMP)
 	$(PY) -m experiments.demo --out out
 
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q --durations=15
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m 'slow and not mitsuba'
@@ -41,8 +41,13 @@ bench-render: $(STAMP)
 	$(PY) -m pip install -q -e '.[dev,mitsuba]'
 	$(PY) -m benchmarks.render --plot out/bench
 
+# mutation check (issue 15): each curated mutant in tools/mutants.py must fail its tests
+.PHONY: mutate
+mutate: $(STAMP)
+	$(PY) tools/mutate.py --json out/mutate.json
+
 lint: $(STAMP)
-	$(VENV)/bin/ruff check jaxgfx tests experiments benchmarks
+	$(VENV)/bin/ruff check jaxgfx tests experiments benchmarks tools
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

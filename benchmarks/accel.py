@@ -39,9 +39,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgfx.render import accel as A
-from jaxgfx.render import shapes as S
-from jaxgfx.render.mesh import make_triangle_soup
+from jaxgfx.render import geometry as S
+from jaxgfx.render.geometry import accel as A
+from jaxgfx.render.geometry.mesh_io import make_triangle_soup
 
 
 def _rays(n, seed=0):

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgfx.render.bsdf import Diffuse, RoughConductor, RoughPlastic
-from jaxgfx.render.texture import Texture, lookup
+from jaxgfx.render.bsdf.texture import Texture, lookup
 
 
 def _time(fn, repeat):

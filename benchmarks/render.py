@@ -9,7 +9,7 @@
    others 16; ``--quick``: 4 spp, 128^2 only, a 6 240-triangle sphere, 1 repeat). jaxgfx: one
    warm-up call, then the median of ``repeat`` calls; ``compile_s`` = first call minus the
    median; samples/s = W H spp / median. Mitsuba 3 renders the same scenes through
-   :func:`jaxgfx.render.mitsuba.to_mitsuba_dict` in ``llvm_ad_rgb`` when it works (sets
+   :func:`jaxgfx.render.scene.mitsuba.to_mitsuba_dict` in ``llvm_ad_rgb`` when it works (sets
    ``DRJIT_LIBLLVM_PATH`` to Debian's ``libLLVM.so.19.1`` if present and unset), otherwise
    ``scalar_rgb``: a warm-up render (LLVM JIT compilation), then the median of ``repeat``.
 2. Equal-time error at 64^2 (example scene without its point light: a delta light cannot be
@@ -38,7 +38,7 @@ import jax
 import numpy as np
 
 from jaxgfx.config import read_yaml
-from jaxgfx.render.mesh import make_uv_sphere, save_ply
+from jaxgfx.render.geometry.mesh_io import make_uv_sphere, save_ply
 from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
 
@@ -131,7 +131,7 @@ def _mitsuba(variant_pref):
 
 
 def bench_mitsuba(mi, desc, *, spp, integrator, max_depth, repeat):
-    from jaxgfx.render.mitsuba import mitsuba_integrator, to_mitsuba_dict
+    from jaxgfx.render.scene.mitsuba import mitsuba_integrator, to_mitsuba_dict
 
     t = time.perf_counter()
     d = to_mitsuba_dict(desc, mi=mi)

@@ -22,6 +22,7 @@ import time
 import jax
 import numpy as np
 
+from jaxgfx.render.integrators import PathIntegrator
 from jaxgfx.render.scene import load_scene
 
 _render_mod = importlib.import_module("jaxgfx.render.render")
@@ -78,7 +79,7 @@ def measure(variant, size=64, spp=4, repeat=5):
     key = jax.random.key(0)
 
     def f(s, k):
-        return _render_mod._render(s, k, spp, "path", 3, 5, "mis")
+        return _render_mod._render(s, k, spp, PathIntegrator(max_depth=3))
 
     jaxpr_lines = str(jax.make_jaxpr(f)(scene, key)).count("\n")
     lowered = jax.jit(f).lower(scene, key)

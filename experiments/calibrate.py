@@ -3,7 +3,9 @@
     python -m experiments.calibrate --config configs/calibrate.yaml [INPUTS ...] --out out/calibrate
 
 With no inputs it runs on the embedded synthetic stack (known radiance, response and noise)
-and reports the curve and radiance errors against the ground truth.
+and reports the curve and radiance errors against the ground truth. The options are those of
+``jaxgfx calibrate`` (one definition, in ``jaxgfx.cli``); the job is
+``jaxgfx.pipelines.calibrate.run_calibrate``.
 """
 
 from __future__ import annotations
@@ -11,18 +13,14 @@ from __future__ import annotations
 import argparse
 import sys
 
-from jaxgfx.pipelines.calibrate import run_calibrate_cli
+from jaxgfx.cli import add_command_arguments, run_command
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("inputs", nargs="*")
-    p.add_argument("--config", default="configs/calibrate.yaml")
-    p.add_argument("--out", default="out/calibrate")
-    p.add_argument("--times", default=None)
-    p.add_argument("--method", default=None)
-    p.add_argument("--quiet", action="store_true")
-    return run_calibrate_cli(p.parse_args(argv))
+    add_command_arguments(p, "calibrate")
+    p.set_defaults(config="configs/calibrate.yaml")
+    return run_command(p.parse_args(argv))
 
 
 if __name__ == "__main__":

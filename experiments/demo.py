@@ -10,8 +10,9 @@ import os
 import sys
 
 from jaxgfx.config import load_config
-from jaxgfx.pipelines.calibrate import CalibrateConfig, run_calibrate
+from jaxgfx.pipelines.calibrate import CalibrateConfig, CalibrateJob, run_calibrate
 from jaxgfx.pipelines.image_demo import run_image_demo
+from jaxgfx.pipelines.render import RenderJob, run_render
 
 
 def main(argv=None) -> int:
@@ -23,7 +24,9 @@ def main(argv=None) -> int:
 
     cfg = load_config(CalibrateConfig, args.config if os.path.exists(args.config) else None)
     cal_dir = os.path.join(args.out, "calibrate")
-    report = run_calibrate(cfg, None, cal_dir, progress=not args.quiet)
+    report = run_calibrate(
+        CalibrateJob(config=cfg, out=cal_dir, overwrite=True, progress=not args.quiet)
+    )
     print(f"[calibrate] outputs in {os.path.abspath(cal_dir)}")
     for name, path in report["outputs"].items():
         print(f"  {name:14s} {path}")
@@ -37,14 +40,14 @@ def main(argv=None) -> int:
     res = run_image_demo(img_dir)
     print(f"[image] {len(res['paths'])} outputs in {os.path.abspath(img_dir)}")
 
-    from jaxgfx.cli import main as cli_main
-
     # the example scene of issue 5, and the textured-materials example (bitmap/checkerboard)
     for name in ("example", "textured"):
         scene_path = os.path.join("configs", "scenes", f"{name}.yaml")
         if os.path.exists(scene_path):
             out = os.path.join(args.out, "render", f"{name}.exr")
-            cli_main(["render", scene_path, out, "--spp", "16", "--integrator", "path"])
+            job = RenderJob(scene_path, out, spp=16, integrator="path", overwrite=True)
+            res = run_render(job)
+            print(f"[render] {' and '.join(res['outputs'].values())} ({res['seconds']:.1f} s)")
     return 0
 
 

@@ -1,6 +1,7 @@
 """Command-line entry point: ``jaxgfx <subcommand> ...``.
 
-Subcommands
+Subcommands (the :data:`COMMANDS` registry; each is a thin argument → job layer over a
+function in :mod:`jaxgfx.pipelines`)
 -----------
 ``jaxgfx filter IN OUT --op gaussian --sigma 2``
     Apply one image operation (see ``jaxgfx filter --list``) to a PNG/JPEG/TIFF/EXR/HDR file.
@@ -9,24 +10,41 @@ Subcommands
 ``jaxgfx render SCENE.yaml OUT.exr --spp 64 --integrator path``
     Render a scene description with the Monte Carlo renderer.
 
+Every subcommand takes ``--overwrite`` (replace existing results; without it an output that
+already exists is refused before any work) and ``--debug`` (show the traceback of an error).
+Errors print one line ``jaxgfx CMD: error: ...`` naming the argument or path, exit status 1
+(2 for usage errors). Outputs appear only when the whole job succeeded (see README.md).
+
 Heavy modules are imported inside the subcommands so that ``jaxgfx --help`` is instant.
+To add a subcommand: ``COMMANDS["name"] = Command(help, description, add_arguments, run)``.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import os
 import sys
+from collections.abc import Callable
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "COMMANDS", "Command", "run_command", "format_error"]
 
 
-def _add_filter(sub):
-    p = sub.add_parser(
-        "filter",
-        help="apply an image operation to a file",
-        description="Apply one jaxgfx image operation to an image file. Display-referred files "
-        "(PNG/JPEG/TIFF) are processed as floats in [0, 1]; EXR/HDR as linear radiance.",
-    )
+@dataclasses.dataclass(frozen=True)
+class Command:
+    """A subcommand: ``add_arguments(parser)`` declares its options, ``run(args) -> int``
+    turns them into a job object, calls the pipeline and prints a summary."""
+
+    help: str
+    description: str
+    add_arguments: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace], int]
+
+
+# ----------------------------------------------------------------------------- filter
+
+
+def _filter_arguments(p):
     p.add_argument("input", nargs="?", help="input image (.png .jpg .tif .exr .hdr)")
     p.add_argument("output", nargs="?", help="output image; format from the extension")
     p.add_argument("--op", default="gaussian", help="operation name (see --list)")
@@ -46,100 +64,175 @@ def _add_filter(sub):
         ("padding", str, "padding mode (zero, edge, reflect, wrap)"),
     ]:
         p.add_argument(f"--{name}", type=kind, default=None, help=hlp)
-    p.set_defaults(func=_cmd_filter)
 
 
-def _cmd_filter(args) -> int:
-    from jaxgfx.pipelines.filter_ops import FILTER_OPS, apply_filter_file
+_FILTER_PARAMS = (
+    "sigma radius size sigma_spatial sigma_range amount low high gamma cutoff pattern padding"
+).split()
+
+
+def _filter_run(args) -> int:
+    from jaxgfx.pipelines.filter_ops import FILTER_OPS, FilterJob, run_filter
 
     if args.list:
         for name, op in sorted(FILTER_OPS.items()):
             print(f"{name:14s} {op.doc}  params: {', '.join(op.params) or '-'}")
         return 0
     if not args.input or not args.output:
-        print("jaxgfx filter: error: INPUT and OUTPUT are required", file=sys.stderr)
-        return 2
-    params = {
-        k: v
-        for k, v in vars(args).items()
-        if k not in ("input", "output", "op", "list", "func", "command") and v is not None
-    }
-    out = apply_filter_file(args.input, args.output, args.op, **params)
-    print(f"wrote {out}")
+        raise _UsageError("INPUT and OUTPUT are required")
+    params = {k: getattr(args, k) for k in _FILTER_PARAMS if getattr(args, k) is not None}
+    job = FilterJob(args.input, args.output, args.op, params, overwrite=args.overwrite)
+    print(f"wrote {run_filter(job)}")
     return 0
 
 
-def _add_calibrate(sub):
-    p = sub.add_parser(
-        "calibrate",
-        help="fit a camera response from bracketed exposures and merge an HDR radiance map",
-        description="Calibrate a camera from a bracketed stack (RAW or JPEG/PNG/TIFF files, or "
-        "a directory of them); with no inputs, runs on the embedded synthetic stack.",
-    )
+# ----------------------------------------------------------------------------- calibrate
+
+
+def _calibrate_arguments(p):
     p.add_argument("inputs", nargs="*", help="image files or one directory")
     p.add_argument("--config", default=None, help="YAML config (see configs/calibrate.yaml)")
     p.add_argument("--out", default="out/calibrate", help="output directory")
     p.add_argument("--times", default=None, help="comma-separated exposure times (seconds)")
     p.add_argument("--method", default=None, help="response method (overrides the config)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=_cmd_calibrate)
 
 
-def _cmd_calibrate(args) -> int:
-    from jaxgfx.pipelines.calibrate import run_calibrate_cli
+def calibrate_job(args):
+    """``argparse`` namespace of ``jaxgfx calibrate`` → :class:`CalibrateJob` (checked)."""
+    from jaxgfx.config import load_config
+    from jaxgfx.io import parse_exposure_time
+    from jaxgfx.pipelines.calibrate import CalibrateConfig, CalibrateJob
 
-    return run_calibrate_cli(args)
+    overrides: dict = {}
+    if args.times is not None:
+        parts = args.times.split(",")
+        overrides["exposure_times"] = [
+            parse_exposure_time(t, f"--times [{i}]") for i, t in enumerate(parts)
+        ]
+    if args.method is not None:
+        from jaxgfx.config import read_yaml
 
-
-def _add_render(sub):
-    p = sub.add_parser(
-        "render",
-        help="render a scene description (YAML) to EXR + PNG",
-        description="Render a scene (see docs/render.md) with the Monte Carlo renderer.",
+        base = read_yaml(args.config) if args.config else {}
+        overrides["response"] = {**base.get("response", {}), "method": args.method}
+    cfg = load_config(CalibrateConfig, args.config, **overrides)
+    return CalibrateJob(
+        config=cfg,
+        inputs=tuple(args.inputs),
+        out=args.out,
+        overwrite=args.overwrite,
+        progress=not args.quiet,
     )
+
+
+def _calibrate_run(args) -> int:
+    from jaxgfx.pipelines.calibrate import run_calibrate
+
+    job = calibrate_job(args)
+    report = run_calibrate(job)
+    if report["replaced"]:
+        print(f"replaced the previous results in {os.path.abspath(job.out)}")
+    print(f"outputs in {os.path.abspath(job.out)}:")
+    for name, p in report["outputs"].items():
+        print(f"  {name:14s} {p}")
+    if "errors_vs_ground_truth" in report:
+        e = report["errors_vs_ground_truth"][job.config.response.method]
+        print(
+            f"curve error {e['curve_rmse_ln']:.4f} (RMSE ln-exposure), radiance error "
+            f"{e['radiance_median_abs_ln']:.4f} (median |ln E - ln E_true|)"
+        )
+    return 0
+
+
+# ----------------------------------------------------------------------------- render
+
+
+def _render_arguments(p):
     p.add_argument("scene", help="scene YAML file")
-    p.add_argument("output", help="output .exr (a tone-mapped .png is written beside it)")
+    p.add_argument(
+        "output",
+        help="output image: .exr/.hdr/.tif hold linear radiance (a .png preview is written "
+        "beside it), .png/.jpg the sRGB display image",
+    )
     p.add_argument("--spp", type=int, default=64)
     p.add_argument("--integrator", default="path", help="path | direct | whitted | aov")
     p.add_argument("--max-depth", type=int, default=3)
     p.add_argument("--seed", type=int, default=0)
-    p.set_defaults(func=_cmd_render)
+    p.add_argument(
+        "--preview", default=None, help="preview .png path, or 'none' (default: OUT's stem.png)"
+    )
 
 
-def _cmd_render(args) -> int:
-    import os
-    import time
+def _render_run(args) -> int:
+    from jaxgfx.pipelines.render import RenderJob, run_render
 
-    import jax
-    import numpy as np
-
-    from jaxgfx import io
-    from jaxgfx.color import linear_to_srgb
-    from jaxgfx.render.render import render
-    from jaxgfx.render.scene import load_scene
-
-    scene = load_scene(args.scene)
-    t0 = time.perf_counter()
-    img = render(
-        scene,
-        jax.random.key(args.seed),
+    job = RenderJob(
+        scene=args.scene,
+        output=args.output,
         spp=args.spp,
         integrator=args.integrator,
         max_depth=args.max_depth,
+        seed=args.seed,
+        preview=args.preview,
+        overwrite=args.overwrite,
     )
-    img = np.asarray(jax.block_until_ready(img))
-    dt = time.perf_counter() - t0
-    parent = os.path.dirname(os.path.abspath(args.output))
-    os.makedirs(parent, exist_ok=True)
-    io.write_exr(args.output, np.ascontiguousarray(img, np.float32))
-    png = os.path.splitext(args.output)[0] + ".png"
-    # AOV images: the PNG shows the albedo channels
-    io.write_png(png, np.asarray(linear_to_srgb(np.clip(img[..., :3], 0.0, 1.0))))
-    n = img.shape[0] * img.shape[1] * args.spp
+    res = run_render(job)
     print(
-        f"wrote {args.output} and {png} ({dt:.2f} s incl. compile, {n / dt / 1e6:.2f} M samples/s)"
+        f"wrote {' and '.join(res['outputs'].values())} ({res['seconds']:.2f} s incl. compile, "
+        f"{res['samples_per_second'] / 1e6:.2f} M samples/s)"
     )
     return 0
+
+
+COMMANDS: dict[str, Command] = {
+    "filter": Command(
+        "apply an image operation to a file",
+        "Apply one jaxgfx image operation to an image file. Display-referred files "
+        "(PNG/JPEG/TIFF) are processed as floats in [0, 1]; EXR/HDR as linear radiance.",
+        _filter_arguments,
+        _filter_run,
+    ),
+    "calibrate": Command(
+        "fit a camera response from bracketed exposures and merge an HDR radiance map",
+        "Calibrate a camera from a bracketed stack (RAW or JPEG/PNG/TIFF files, or "
+        "a directory of them); with no inputs, runs on the embedded synthetic stack.",
+        _calibrate_arguments,
+        _calibrate_run,
+    ),
+    "render": Command(
+        "render a scene description (YAML) to EXR + PNG",
+        "Render a scene (see docs/render.md) with the Monte Carlo renderer.",
+        _render_arguments,
+        _render_run,
+    ),
+}
+
+
+# ----------------------------------------------------------------------------- driver
+
+
+class _UsageError(Exception):
+    """A usage error found after parsing (exit status 2)."""
+
+
+def _common_options() -> argparse.ArgumentParser:
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace existing results at the output path(s) (default: refuse)",
+    )
+    common.add_argument("--debug", action="store_true", help="show the full traceback of an error")
+    return common
+
+
+def add_command_arguments(parser: argparse.ArgumentParser, name: str) -> None:
+    """Declare subcommand ``name``'s options (and ``--overwrite``/``--debug``) on ``parser``
+    (used by ``experiments/*.py`` to offer the same options)."""
+    COMMANDS[name].add_arguments(parser)
+    for action in _common_options()._actions:
+        parser._add_action(action)
+    parser.set_defaults(func=COMMANDS[name].run, command=name)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -149,11 +242,62 @@ def build_parser() -> argparse.ArgumentParser:
         prog="jaxgfx", description="Differentiable image processing, HDR and rendering in JAX."
     )
     parser.add_argument("--version", action="version", version=f"jaxgfx {__version__}")
+    parser.add_argument(
+        "--debug", dest="debug_all", action="store_true", help="show tracebacks of errors"
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    _add_filter(sub)
-    _add_calibrate(sub)
-    _add_render(sub)
+    common = _common_options()
+    for name, cmd in COMMANDS.items():
+        p = sub.add_parser(name, help=cmd.help, description=cmd.description, parents=[common])
+        cmd.add_arguments(p)
+        p.set_defaults(func=cmd.run)
     return parser
+
+
+def format_error(e: BaseException) -> str:
+    """One line for an exception: OS errors as ``'path': reason``, others as their message
+    (exceptions that are not user errors are prefixed with their type)."""
+    if isinstance(e, OSError) and e.filename is not None:
+        msg = e.strerror or str(e)
+        return f"{msg}: '{os.fspath(e.filename)}'"
+    if isinstance(e, (ValueError, TypeError, OSError, _UsageError)):
+        text = str(e)
+    elif type(e).__name__ in ("JaxRuntimeError", "XlaRuntimeError", "EquinoxRuntimeError"):
+        text = _runtime_message(str(e))
+    else:
+        text = f"{type(e).__name__}: {e}"
+    text = " ".join(text.split()) or type(e).__name__
+    return text
+
+
+def _runtime_message(text: str) -> str:
+    """The message of an ``eqx.error_if`` check inside a compiled program (the last line of
+    the callback traceback that names it), else the first line."""
+    for line in text.splitlines():
+        if "EquinoxRuntimeError:" in line:
+            return line.split("EquinoxRuntimeError:", 1)[1].strip()
+    return text.strip().splitlines()[0] if text.strip() else "runtime error"
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """Run a parsed command; every failure becomes one line on stderr and a nonzero status
+    (1; 2 for usage errors; 130 for Ctrl-C). With ``--debug`` the traceback is shown."""
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print(f"jaxgfx {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # noqa: BLE001 - the CLI boundary: one line per failure
+        debug = getattr(args, "debug", False) or getattr(args, "debug_all", False)
+        if debug:
+            import traceback
+
+            traceback.print_exc()
+        status = 2 if isinstance(e, _UsageError) else 1
+        expected = isinstance(e, (ValueError, TypeError, OSError, _UsageError))
+        hint = "" if debug or expected else " (rerun with --debug for the traceback)"
+        print(f"jaxgfx {args.command}: error: {format_error(e)}{hint}", file=sys.stderr)
+        return status
 
 
 def main(argv=None) -> int:
@@ -162,11 +306,7 @@ def main(argv=None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    try:
-        return int(args.func(args) or 0)
-    except (ValueError, TypeError, FileNotFoundError) as e:
-        print(f"jaxgfx {args.command}: error: {e}", file=sys.stderr)
-        return 1
+    return run_command(args)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -36,11 +36,15 @@ def read_yaml(path: str | os.PathLike) -> dict:
     path = os.fspath(path)
     if not os.path.exists(path):
         raise FileNotFoundError(f"config file not found: {path}")
+    if os.path.isdir(path):
+        raise IsADirectoryError(21, "config: is a folder, expected a YAML file", path)
     with open(path, encoding="utf-8") as f:
         try:
             data = yaml.safe_load(f)
         except yaml.YAMLError as e:
-            raise ValueError(f"{path}: not valid YAML ({e})") from None
+            raise ValueError(f"{path}: not valid YAML ({' '.join(str(e).split())})") from None
+        except UnicodeDecodeError:
+            raise ValueError(f"{path}: not a UTF-8 text (YAML) file") from None
     if data is None:
         return {}
     if not isinstance(data, Mapping):

@@ -26,25 +26,46 @@ def test_matches_numpy_and_grads(x64, fn, ref, xs):
     check_grads(fn, (x,), order=2, modes=["fwd", "rev"])
 
 
+_LOG_TINY32 = float(np.log(np.finfo(np.float32).tiny))  # -87.33654...
+
+
 @pytest.mark.parametrize(
-    "fn, x",
+    "fn, x, value, grad",
     [
-        (_math.safe_sqrt, 0.0),
-        (_math.safe_sqrt, -1.0),
-        (_math.safe_log, 0.0),
-        (lambda x: _math.safe_pow(x, 0.5), 0.0),
-        (_math.safe_arccos, 1.0),
-        (_math.safe_arccos, -1.0),
-        (lambda x: _math.safe_div(1.0, x), 0.0),
-        (lambda x: _math.safe_atan2(x, x), 0.0),
-        (lambda x: _math.safe_norm(jnp.stack([x, x, x])), 0.0),
-        (lambda x: _math.safe_normalize(jnp.stack([x, x, x])).sum(), 0.0),
+        # (function, singular point, documented value there, documented gradient there)
+        (_math.safe_sqrt, 0.0, 0.0, 0.0),
+        (_math.safe_sqrt, -1.0, 0.0, 0.0),
+        (_math.safe_log, 0.0, _LOG_TINY32, 0.0),  # log(floor), floor = smallest normal
+        (lambda x: _math.safe_pow(x, 0.5), 0.0, 0.0, 0.0),
+        (_math.safe_arccos, 1.0, 0.0, 0.0),
+        (_math.safe_arccos, -1.0, np.pi, 0.0),
+        (lambda x: _math.safe_div(1.0, x), 0.0, 0.0, 0.0),  # the fill value
+        (lambda x: _math.safe_div(1.0, x, fill=-1.0), 0.0, -1.0, 0.0),
+        (lambda x: _math.safe_atan2(x, x), 0.0, 0.0, 0.0),
+        (lambda x: _math.safe_norm(jnp.stack([x, x, x])), 0.0, 0.0, 0.0),
+        (lambda x: _math.safe_normalize(jnp.stack([x, x, x])).sum(), 0.0, 0.0, 0.0),
     ],
 )
-def test_singular_points_finite(fn, x):
+def test_singular_points_values_and_grads(fn, x, value, grad):
     x = jnp.float32(x)
-    assert np.isfinite(fn(x))
-    assert np.isfinite(jax.grad(fn)(x))
+    v, g = jax.jit(jax.value_and_grad(fn))(x)
+    np.testing.assert_allclose(float(v), value, rtol=1e-6, atol=0)
+    assert float(g) == grad
+
+
+def test_safe_functions_next_to_their_singular_points(x64):
+    # just inside the safe region the ordinary formula holds (values and derivatives)
+    for x in (1e-300, 1e-8):
+        np.testing.assert_allclose(float(_math.safe_sqrt(x)), np.sqrt(x), rtol=1e-15)
+        np.testing.assert_allclose(
+            float(jax.grad(_math.safe_sqrt)(x)), 0.5 / np.sqrt(x), rtol=1e-15
+        )
+        np.testing.assert_allclose(float(jax.grad(_math.safe_log)(x)), 1.0 / x, rtol=1e-15)
+    c = 1.0 - 1e-6
+    np.testing.assert_allclose(float(_math.safe_arccos(c)), np.arccos(c), rtol=1e-9)
+    np.testing.assert_allclose(
+        float(jax.grad(_math.safe_arccos)(c)), -1.0 / np.sqrt(1.0 - c * c), rtol=1e-9
+    )
 
 
 def test_safe_normalize_and_atan2_values():
@@ -79,7 +100,17 @@ def test_checks_raise_with_names():
 def test_typing_aliases_import():
     import jaxgfx.typing as t
 
-    assert t.Image is not None and t.AnyImage is not None
+    # the aliases check shapes and dtypes (isinstance works on jaxtyping annotations)
+    assert isinstance(jnp.zeros((2, 4, 5, 3)), t.Image)
+    assert isinstance(jnp.zeros((4, 5, 3)), t.Image)
+    assert not isinstance(jnp.zeros((4, 5)), t.Image)  # no channel axis
+    assert not isinstance(jnp.zeros((4, 5, 3), jnp.int32), t.Image)
+    assert isinstance(jnp.zeros((4, 5)), t.Gray) and isinstance(jnp.zeros((7,)), t.AnyImage)
+    assert isinstance(jnp.zeros((8, 3)), t.Vec3) and not isinstance(jnp.zeros((8, 4)), t.Vec3)
+    assert isinstance(jnp.eye(3), t.Mat33) and not isinstance(jnp.zeros((3, 4)), t.Mat33)
+    assert isinstance(jnp.float32(1.0), t.Scalar) and not isinstance(jnp.zeros(2), t.Scalar)
+    assert isinstance(jnp.zeros((4, 5), bool), t.Mask)
+    assert not isinstance(jnp.zeros((4, 5)), t.Mask)
 
 
 # ---------------------------------------------------------------- fusion-friendly helpers

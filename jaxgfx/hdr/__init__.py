@@ -7,7 +7,9 @@ from ._metrics import radiance_error as radiance_error
 from ._metrics import response_curve_error as response_curve_error
 from ._model import CameraResponse as CameraResponse
 from .merge import merge_radiance as merge_radiance
+from .response import MIN_USABLE_PIXELS as MIN_USABLE_PIXELS
 from .response import RESPONSE_METHODS as RESPONSE_METHODS
+from .response import check_response_options as check_response_options
 from .response import recover_response as recover_response
 from .synthetic import SYNTHETIC_RESPONSES as SYNTHETIC_RESPONSES
 from .synthetic import BracketedStack as BracketedStack
@@ -28,6 +30,8 @@ __all__ = [
     "BracketedStack",
     "NoiseParams",
     "recover_response",
+    "check_response_options",
+    "MIN_USABLE_PIXELS",
     "merge_radiance",
     "response_curve_error",
     "radiance_error",

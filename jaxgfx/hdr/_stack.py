@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -75,6 +76,13 @@ def prepare_stack(
     if t.ndim != 1 or t.shape[0] != n:
         raise ValueError(
             f"exposure_times: expected shape ({n},) matching the {n} frames, got {t.shape}"
+        )
+    if not is_concrete(t):
+        # traced (jit / grad / vmap): the same check inside the program, raised at run time
+        t = eqx.error_if(
+            t,
+            ~jnp.all(jnp.isfinite(t) & (t > 0)),
+            "exposure_times: expected finite values > 0 seconds",
         )
     if is_concrete(t):
         a = np.asarray(t)

@@ -13,17 +13,37 @@ Conventions
 from __future__ import annotations
 
 import functools
+import inspect
 
+import equinox as eqx
 import jax
+import jax.numpy as jnp
+import numpy as np
 
-from .._checks import check_choice
+from .._checks import check_choice, is_concrete
 from ._debevec import recover_debevec
 from ._model import CameraResponse, resolve_anchor
 from ._parametric import recover_gamma, recover_polynomial, recover_spline
 from ._robertson import recover_robertson
 from ._stack import normalize_stack, prepare_stack
 
-__all__ = ["CameraResponse", "recover_response", "RESPONSE_METHODS"]
+__all__ = [
+    "CameraResponse",
+    "recover_response",
+    "RESPONSE_METHODS",
+    "check_response_options",
+    "MIN_USABLE_PIXELS",
+]
+
+MIN_USABLE_PIXELS = 16
+"""Response recovery needs at least this many *usable* pixels per channel: pixels whose level
+is strictly between 0 and the clipping level (``code_max``) in at least 2 frames of the
+stack. A bracket where every pixel is clipped or black holds no information about the curve;
+:func:`recover_response` raises ``ValueError`` for it instead of returning a flat fit."""
+
+MIN_SAMPLES = 32
+"""Smallest ``n_samples`` option: pixels are sampled in 32 intensity bins, the same number
+from each (``n_samples`` is rounded down to a multiple of 32)."""
 
 RESPONSE_METHODS = {
     "debevec": recover_debevec,
@@ -34,6 +54,65 @@ RESPONSE_METHODS = {
 }
 """Response-recovery methods by name; each ``fn(z, t, code_max, **options) -> CameraResponse``
 with normalised levels ``z`` ``(N, H, W, C)`` and ascending times ``t`` ``(N,)``."""
+
+
+def check_response_options(method: str, options, *, name: str = "options") -> dict:
+    """Check method-specific ``options`` of :func:`recover_response` before any work.
+
+    Names must be keyword options of the method (``key`` and ``anchor`` are common to all);
+    ``n_samples`` must be an integer >= :data:`MIN_SAMPLES`. Raises ``ValueError`` naming
+    ``name`` and listing the accepted options. Returns ``options`` as a dict.
+
+    >>> check_response_options("debevec", {"lam": 50.0})
+    {'lam': 50.0}
+    """
+    check_choice(method, "method", tuple(RESPONSE_METHODS.keys()))
+    if not isinstance(options, dict):
+        raise TypeError(f"{name}: expected a mapping of option names to values, got {options!r}")
+    params = inspect.signature(RESPONSE_METHODS[method]).parameters
+    accepted = sorted(k for k, p in params.items() if p.kind is inspect.Parameter.KEYWORD_ONLY)
+    unknown = sorted(set(options) - set(accepted))
+    if unknown:
+        raise ValueError(
+            f"{name}: method {method!r} has no option {', '.join(map(repr, unknown))}; "
+            f"accepted: {', '.join(accepted)}"
+        )
+    if "n_samples" in options:
+        n = options["n_samples"]
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < MIN_SAMPLES:
+            raise ValueError(
+                f"{name}: n_samples: expected an integer >= {MIN_SAMPLES} (pixels per "
+                f"channel, drawn from 32 intensity bins), got {n!r}"
+            )
+    return dict(options)
+
+
+def _check_usable(raw, code_max) -> None:
+    """``ValueError`` when fewer than :data:`MIN_USABLE_PIXELS` pixels per channel are usable
+    (concrete stacks); under tracing an ``eqx.error_if`` check in the jitted core does it."""
+    if not is_concrete(raw):
+        return
+    a = np.asarray(raw)
+    inside = (a > 0) & (a < code_max)
+    usable = np.count_nonzero(np.count_nonzero(inside, axis=0) >= 2, axis=(0, 1))
+    if np.min(usable) < MIN_USABLE_PIXELS:
+        raise ValueError(
+            f"images: too few usable pixels for a response fit: {int(np.min(usable))} per "
+            f"channel (at least {MIN_USABLE_PIXELS} needed) are neither black (0) nor clipped "
+            f"({code_max:g}) in at least 2 frames; the bracket is all saturated or all black "
+            "— add shorter / longer exposures"
+        )
+
+
+def _usable_error_if(z, t):
+    inside = (z > 0) & (z < 1)
+    usable = jnp.sum(jnp.sum(inside, axis=0) >= 2, axis=(0, 1))
+    return eqx.error_if(
+        t,
+        jnp.min(usable) < MIN_USABLE_PIXELS,
+        f"images: too few usable pixels for a response fit (< {MIN_USABLE_PIXELS} per channel "
+        "neither black nor clipped in at least 2 frames)",
+    )
 
 
 def recover_response(images, exposure_times, *, method: str = "debevec", **options):
@@ -47,6 +126,11 @@ def recover_response(images, exposure_times, *, method: str = "debevec", **optio
     Method options are documented on each method (``jaxgfx.hdr._debevec.recover_debevec``…).
 
     Returns a :class:`CameraResponse` with one curve per channel. Jittable (options static).
+    Raises ``ValueError`` for unknown options (:func:`check_response_options`) and for a
+    stack with fewer than :data:`MIN_USABLE_PIXELS` usable pixels per channel (all clipped
+    or all black). Under ``jax.jit`` / ``jax.grad`` these value checks (and those on the
+    exposure times) run inside the program with ``eqx.error_if``: a bad stack raises an
+    error at run time instead of returning a meaningless curve.
 
     References: Debevec & Malik, SIGGRAPH 1997; Robertson, Borman & Stevenson, JEI 2003;
     Mitsunaga & Nayar, CVPR 1999.
@@ -55,7 +139,9 @@ def recover_response(images, exposure_times, *, method: str = "debevec", **optio
     ``method="gamma"``.
     """
     check_choice(method, "method", tuple(RESPONSE_METHODS.keys()))
+    check_response_options(method, options)
     raw, t, code_max, _ = prepare_stack(images, exposure_times, min_frames=2, raw=True)
+    _check_usable(raw, code_max)
     if "anchor" in options:
         options["anchor"] = resolve_anchor(options["anchor"])
     key = options.pop("key", None)
@@ -72,4 +158,6 @@ def recover_response(images, exposure_times, *, method: str = "debevec", **optio
 @functools.partial(jax.jit, static_argnames=("method", "code_max", "opts"))
 def _recover_jit(raw, t, key, *, method, code_max, opts):
     z, t = normalize_stack(raw, t, code_max)
+    if not is_concrete(raw):  # the boundary check could not see the values
+        t = _usable_error_if(z, t)
     return RESPONSE_METHODS[method](z, t, code_max, key=key, **dict(opts))

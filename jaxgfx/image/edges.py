@@ -250,6 +250,8 @@ def canny(
     blurred image: a unit step blurred by ``sigma`` peaks near ``8 / (sqrt(2 pi) sigma)``.
     Defaults ``low = 0.1``, ``high = 0.2`` as ``skimage.feature.canny`` for float images.
     With ``use_quantiles=True`` they are quantiles in ``[0, 1]`` of the magnitude image.
+    A pixel with zero gradient magnitude is never an edge, so a flat image has no edges
+    whatever the thresholds (as scikit-image).
 
     Args:
         image: ``(H, W)`` or ``(..., H, W, C)``.
@@ -289,7 +291,9 @@ def canny(
         lo = jnp.asarray(low, mag.dtype)
         hi = jnp.asarray(high, mag.dtype)
     fwd, bwd = _neighbours(mag, gx, gy)
-    nms = (mag >= fwd) & (mag >= bwd) & _border_mask(mag.shape)
+    # a pixel without gradient is never an edge (a flat image has none, as scikit-image),
+    # whatever the thresholds (quantile thresholds of a flat image are 0)
+    nms = (mag >= fwd) & (mag >= bwd) & (mag > 0) & _border_mask(mag.shape)
     weak = nms & (mag >= lo)
     strong = weak & (mag >= hi)
     e = _hysteresis(strong, weak)

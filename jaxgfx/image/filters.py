@@ -543,11 +543,23 @@ def laplacian_of_gaussian(
     x = check_image(image)
     check_padding(padding)
     check_positive(sigma, "sigma")
+    s_min = float(jnp.finfo(x.dtype).max) ** (-1.0 / 3.0) * 4.0
+    if is_concrete(sigma) and float(np.min(np.asarray(sigma))) < s_min:
+        raise ValueError(
+            f"sigma: expected >= {s_min:.3g} pixels for {jnp.dtype(x.dtype).name} images (the "
+            f"kernel's centre -2/sigma^2 and its sigma-derivative overflow below), got {sigma!r}"
+        )
     r = max(1, _static_radius(sigma, truncate, radius))
     s = jnp.asarray(sigma, x.dtype)
     g = gaussian_kernel1d(s, r, dtype=x.dtype)
     i = jnp.arange(-r, r + 1, dtype=x.dtype)
-    g2 = g * (i * i / s**4 - 1.0 / s**2)
+    # G''(i) = G(i) i^2 / s^4 - G(i) / s^2. The first term in log space: G(i) underflows to 0
+    # for s << 1 while i^2 / s^4 overflows, and 0 * inf would make the sigma-gradient NaN.
+    i2 = i * i
+    log_g = jax.nn.log_softmax(-i2 / (2.0 * s * s))
+    safe_i2 = jnp.where(i == 0, 1.0, i2)
+    tail = jnp.where(i == 0, 0.0, jnp.exp(log_g + jnp.log(safe_i2) - 4.0 * jnp.log(s)))
+    g2 = tail - g / (s * s)
     return convolve_separable(x, g2, g, padding=padding) + convolve_separable(
         x, g, g2, padding=padding
     )

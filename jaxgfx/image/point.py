@@ -333,7 +333,8 @@ def equalize_histogram(image, *, bins=256, per_channel=False):
     centres, and ``out = interp(x, centres, cdf)``. Output lies in ``(0, 1]`` with an
     approximately uniform histogram. Statistics are over all channels together (as skimage) or,
     with ``per_channel=True``, per channel; each image of a batch is equalised alone. A flat
-    image maps to 1.
+    image (one value everywhere) maps to 0.5, the middle of the output range, as
+    ``skimage.exposure.equalize_hist`` (it has no histogram to equalise).
 
     Args:
         image: ``(H, W)`` or ``(..., H, W, C)``.
@@ -373,7 +374,7 @@ def _equalize(x3, bins, per_channel):
         cdf = jnp.cumsum(counts) / v.shape[0]
         centres = lo + (jnp.arange(bins, dtype=v.dtype) + 0.5) * (span / bins)
         out = jnp.interp(v, centres, cdf)
-        return jnp.where(flat, jnp.ones_like(out), out)
+        return jnp.where(flat, jnp.full_like(out, 0.5), out)
 
     out = jax.vmap(one)(g)
     if per_channel:

@@ -15,12 +15,15 @@ from .hdr_rgbe import read_hdr as read_hdr
 from .hdr_rgbe import read_hdr_header as read_hdr_header
 from .hdr_rgbe import write_hdr as write_hdr
 from .ldr import exif_exposure_time as exif_exposure_time
+from .ldr import exposure_order as exposure_order
+from .ldr import parse_exposure_time as parse_exposure_time
 from .ldr import read_image as read_image
 from .ldr import read_ldr_stack as read_ldr_stack
 from .ldr import write_png as write_png
 from .raw import RawImage as RawImage
 from .raw import read_raw as read_raw
 from .raw import read_raw_linear_rgb as read_raw_linear_rgb
+from .raw import read_raw_stack as read_raw_stack
 
 __all__ = [
     "read_exr",
@@ -32,11 +35,14 @@ __all__ = [
     "RawImage",
     "read_raw",
     "read_raw_linear_rgb",
+    "read_raw_stack",
     "write_dng",
     "read_image",
     "write_png",
     "read_ldr_stack",
     "exif_exposure_time",
+    "parse_exposure_time",
+    "exposure_order",
     "read_any",
     "write_any",
 ]

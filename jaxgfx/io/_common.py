@@ -15,18 +15,31 @@ def existing_file(path, name: str = "path") -> Path:
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"{name}: expected a file path (str or os.PathLike), got {type(path)}")
     p = Path(path)
+    if p.is_dir():
+        raise IsADirectoryError(21, f"{name}: is a folder, expected a file", str(p))
     if not p.is_file():
         raise FileNotFoundError(f"{name}: no such file: '{p}'")
     return p
 
 
 def output_path(path, name: str = "path") -> Path:
-    """Return ``path`` as a :class:`Path` whose parent folder exists."""
+    """Return ``path`` as a :class:`Path` that can be written: every writer checks this first,
+    so they all fail the same way, naming the path — ``FileNotFoundError`` (folder missing),
+    ``NotADirectoryError`` (a file where the folder should be), ``IsADirectoryError``
+    (``path`` is a folder), ``PermissionError`` (folder not writable, or read-only file
+    system)."""
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"{name}: expected a file path (str or os.PathLike), got {type(path)}")
     p = Path(path)
-    if not p.parent.is_dir():
-        raise FileNotFoundError(f"{name}: folder does not exist: '{p.parent}'")
+    parent = p.parent
+    if not parent.is_dir():
+        if parent.exists():
+            raise NotADirectoryError(20, f"{name}: not a folder", str(parent))
+        raise FileNotFoundError(f"{name}: folder does not exist: '{parent}'")
+    if p.is_dir():
+        raise IsADirectoryError(21, f"{name}: is a folder, expected a file path", str(p))
+    if not os.access(parent, os.W_OK) or (p.exists() and not os.access(p, os.W_OK)):
+        raise PermissionError(13, f"{name}: not writable", str(p))
     return p
 
 

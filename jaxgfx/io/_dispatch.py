@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 import tifffile
 from PIL import Image
@@ -42,6 +45,8 @@ RAW_EXTENSIONS = frozenset(
 )
 LDR_EXTENSIONS = frozenset({".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"})
 _HDR_EXTENSIONS = frozenset({".hdr", ".pic", ".rgbe"})
+WRITE_EXTENSIONS = (".exr", ".hdr", ".pic", ".rgbe", ".png", ".jpg", ".jpeg", ".tif", ".tiff")
+"""What :func:`write_any` can write (``.bmp`` and camera raws are read-only here)."""
 
 
 def read_any(path) -> np.ndarray:
@@ -74,8 +79,14 @@ def write_any(path, image) -> None:
     (16-bit for uint16 input, else 8-bit; floats in [0, 1]), ``.jpg`` / ``.jpeg`` (8-bit,
     quality 95), ``.tif`` / ``.tiff`` (dtype kept: float32 linear or uint8/uint16). Raw
     formats cannot be written here (use :func:`write_dng` with a mosaic)."""
+    p = Path(path) if isinstance(path, (str, os.PathLike)) else path
+    ext = p.suffix.lower() if isinstance(p, Path) else ""
+    if isinstance(p, Path) and ext not in WRITE_EXTENSIONS and ext not in RAW_EXTENSIONS:
+        raise ValueError(
+            f"'{p}': cannot write {ext or 'files without an extension'!r}; "
+            f"writable: {' '.join(WRITE_EXTENSIONS)}"
+        )
     p = output_path(path)
-    ext = p.suffix.lower()
     arr = as_image_array(image)
     if ext == ".exr":
         write_exr(p, arr)
@@ -100,7 +111,10 @@ def write_any(path, image) -> None:
     elif ext in RAW_EXTENSIONS:
         raise ValueError(f"'{p}': cannot write raw images; use write_dng(path, mosaic)")
     else:
-        raise ValueError(f"'{p}': unsupported extension {ext!r}; known: {_known()}")
+        raise ValueError(
+            f"'{p}': cannot write {ext or 'files without an extension'!r}; "
+            f"writable: {' '.join(WRITE_EXTENSIONS)}"
+        )
 
 
 def _photometric(arr: np.ndarray) -> str:

@@ -134,8 +134,10 @@ def read_exr(path, *, channels=None) -> np.ndarray:
     exact). Reference: OpenEXR file layout, Kainz et al., "Technical Introduction to OpenEXR"
     (2004).
 
-    >>> write_exr("/tmp/_doc.exr", np.full((2, 3, 3), 0.5, np.float32))  # doctest: +SKIP
-    >>> read_exr("/tmp/_doc.exr").shape  # doctest: +SKIP
+    >>> import os, tempfile
+    >>> path = os.path.join(tempfile.mkdtemp(), "doc.exr")
+    >>> write_exr(path, np.full((2, 3, 3), 0.5, np.float32))
+    >>> read_exr(path).shape
     (2, 3, 3)
     """
     f, p = _open(path)
@@ -185,6 +187,15 @@ def _default_names(c: int) -> list[str]:
     raise ValueError(f"image: {c} channels have no default names; pass channels=[...] (C names)")
 
 
+_OS_FAILURES = (
+    ("Permission denied", PermissionError, 13),
+    ("Read-only file system", PermissionError, 30),
+    ("Is a directory", IsADirectoryError, 21),
+    ("No such file or directory", FileNotFoundError, 2),
+    ("No space left on device", OSError, 28),
+)
+
+
 def write_exr(path, image, *, half=False, channels=None, compression="zip", header=None) -> None:
     """Write ``image`` ``(H, W)`` or ``(H, W, C)`` as a scanline OpenEXR file.
 
@@ -228,4 +239,9 @@ def write_exr(path, image, *, half=False, channels=None, compression="zip", head
     try:
         OpenEXR.File(hdr, planes).write(str(p))
     except (RuntimeError, TypeError, ValueError) as e:
+        # OpenEXR reports file-system failures as RuntimeError text: raise the OSError the
+        # other writers raise for them (see _common.output_path)
+        for text, err, code in _OS_FAILURES:
+            if text in str(e):
+                raise err(code, f"could not write OpenEXR file ({text})", str(p)) from None
         raise ValueError(f"'{p}': could not write OpenEXR file ({e})") from None

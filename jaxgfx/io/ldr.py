@@ -22,7 +22,14 @@ from PIL import Image, UnidentifiedImageError
 
 from ._common import as_image_array, existing_file, output_path
 
-__all__ = ["read_image", "write_png", "read_ldr_stack", "exif_exposure_time"]
+__all__ = [
+    "read_image",
+    "write_png",
+    "read_ldr_stack",
+    "exif_exposure_time",
+    "parse_exposure_time",
+    "exposure_order",
+]
 
 _TIFF_EXT = {".tif", ".tiff"}
 _EXIF_IFD = 0x8769
@@ -174,14 +181,40 @@ def write_png(path, image, *, bits: int = 8) -> None:
 # ----------------------------------------------------------------------------- stacks
 
 
-def _parse_time(v, where: str) -> float:
+def parse_exposure_time(value, where: str = "exposure time") -> float:
+    """Parse one exposure time in seconds: a number or a string like ``"0.004"`` or
+    ``"1/250"``. The one parser of exposure times in jaxgfx (sidecars, ``--times``, configs).
+
+    Raises ``ValueError`` starting with ``where`` for text that is not a number or fraction
+    (``"1/0"`` included) and for a time that is not finite and > 0.
+
+    >>> parse_exposure_time("1/250")
+    0.004
+    """
     try:
-        t = float(Fraction(str(v).strip())) if isinstance(v, str) else float(v)
-    except (ValueError, TypeError, ZeroDivisionError):
-        raise ValueError(f"{where}: bad exposure time {v!r}") from None
+        if isinstance(value, str):
+            t = float(Fraction(value.strip()))
+        elif isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
+            raise TypeError
+        else:
+            t = float(value)
+    except (ValueError, TypeError, ZeroDivisionError, OverflowError):
+        raise ValueError(
+            f"{where}: expected a number of seconds or a fraction like 1/250, got {value!r}"
+        ) from None
     if not np.isfinite(t) or t <= 0:
-        raise ValueError(f"{where}: exposure time must be positive, got {v!r}")
+        raise ValueError(f"{where}: exposure time must be finite and > 0 seconds, got {value!r}")
     return t
+
+
+def exposure_order(times) -> np.ndarray:
+    """Indices that sort exposure ``times`` ascending (stable: equal times keep file order).
+    The one place the host-side pipelines order a bracket (LDR stacks and RAW stacks).
+
+    >>> exposure_order([4.0, 1.0, 4.0, 0.5]).tolist()
+    [3, 1, 0, 2]
+    """
+    return np.argsort(np.asarray(times, np.float64), kind="stable")
 
 
 def exif_exposure_time(path) -> float | None:
@@ -229,12 +262,12 @@ def _read_sidecar(sidecar, names: list[str]) -> list[float]:
             missing = [n for n in names if n not in data]
             if missing:
                 raise ValueError(f"'{s}': no exposure time for {missing}")
-            return [_parse_time(data[n], f"'{s}' [{n}]") for n in names]
+            return [parse_exposure_time(data[n], f"'{s}' [{n}]") for n in names]
     if not isinstance(data, list) or len(data) != len(names):
         raise ValueError(
             f"'{s}': expected a list of {len(names)} exposure times (one per image), got {data!r}"
         )
-    return [_parse_time(v, f"'{s}' [{i}]") for i, v in enumerate(data)]
+    return [parse_exposure_time(v, f"'{s}' [{i}]") for i, v in enumerate(data)]
 
 
 def read_ldr_stack(paths, *, exposure_times=None, sidecar=None, return_order: bool = False):
@@ -271,9 +304,14 @@ def read_ldr_stack(paths, *, exposure_times=None, sidecar=None, return_order: bo
         times = np.empty(n)
         for i, f in enumerate(files):
             v = exif_exposure_time(f)
-            if v is None or not np.isfinite(v) or v <= 0:
+            if v is None:
                 raise ValueError(
                     f"'{f}': no EXIF ExposureTime; pass exposure_times= or a sidecar file"
+                )
+            if not np.isfinite(v) or v <= 0:
+                raise ValueError(
+                    f"'{f}': EXIF ExposureTime is {v:g} s (expected > 0); "
+                    "pass exposure_times= or a sidecar file"
                 )
             times[i] = v
     images = []
@@ -291,6 +329,6 @@ def read_ldr_stack(paths, *, exposure_times=None, sidecar=None, return_order: bo
     dtypes = {im.dtype for im in images}
     if len(dtypes) > 1:
         raise ValueError(f"images have different bit depths: {sorted(str(d) for d in dtypes)}")
-    order = np.argsort(times, kind="stable")
+    order = exposure_order(times)
     stack = np.stack([images[i] for i in order])
     return (stack, times[order], order) if return_order else (stack, times[order])

@@ -19,7 +19,7 @@ import tifffile
 
 from ._common import existing_file
 
-__all__ = ["RawImage", "read_raw", "read_raw_linear_rgb"]
+__all__ = ["RawImage", "read_raw", "read_raw_linear_rgb", "read_raw_stack"]
 
 _EXIF_TAGS = {
     "exposure_time": (33434, ("ExposureTime",)),
@@ -237,3 +237,43 @@ def read_raw_linear_rgb(path) -> np.ndarray:
     except rawpy.LibRawError as e:
         raise ValueError(f"'{p}': corrupt RAW data ({type(e).__name__}: {e})") from None
     return (np.asarray(rgb, np.float32) / 65535.0).astype(np.float32)
+
+
+def read_raw_stack(paths, *, exposure_times=None) -> tuple[list[RawImage], np.ndarray]:
+    """Read a bracket of RAW files, sorted by exposure time (shortest first).
+
+    ``exposure_times``: ``N`` positive seconds in ``paths`` order (``None`` or empty: each
+    file's EXIF ExposureTime). Returns ``(raws, times)``: the :class:`RawImage` frames and
+    ``(N,)`` float64 seconds, ascending (:func:`jaxgfx.io.exposure_order`). Raises
+    ``ValueError`` naming the file with no (or a zero) exposure time, or when the CFA
+    patterns or mosaic sizes differ.
+    """
+    from .ldr import exposure_order, parse_exposure_time
+
+    if isinstance(paths, (str, bytes)) or not hasattr(paths, "__len__") or len(paths) == 0:
+        raise ValueError(f"paths: expected a non-empty list of RAW files, got {paths!r}")
+    raws = [read_raw(q) for q in paths]
+    n = len(raws)
+    if exposure_times is not None and len(exposure_times) > 0:
+        if len(exposure_times) != n:
+            raise ValueError(
+                f"exposure_times: expected {n} values (one per file), got {len(exposure_times)}"
+            )
+        times = [
+            parse_exposure_time(t, f"exposure_times[{i}]") for i, t in enumerate(exposure_times)
+        ]
+    else:
+        times = []
+        for r in raws:
+            if r.exposure_time is None:
+                raise ValueError(f"'{r.path}': no EXIF ExposureTime; pass exposure times (--times)")
+            times.append(parse_exposure_time(r.exposure_time, f"'{r.path}': EXIF ExposureTime"))
+    patterns = {r.cfa_pattern for r in raws}
+    if len(patterns) != 1:
+        raise ValueError(f"paths: RAW files have different CFA patterns {sorted(patterns)}")
+    sizes = {Path(r.path).name: r.mosaic.shape for r in raws}
+    if len(set(sizes.values())) != 1:
+        raise ValueError(f"paths: RAW mosaics have different sizes: {sizes}")
+    times = np.asarray(times, np.float64)
+    order = exposure_order(times)
+    return [raws[i] for i in order], times[order]

@@ -1,1 +1,40 @@
-"""jaxgfx.optim (see docs/)."""
+"""jaxgfx.optim: fitting parameters by gradient descent or least squares, image losses and
+bijections for bounded parameters (see docs/inverse.md).
+
+This package never imports :mod:`jaxgfx.render`; losses that render are written by the caller
+(or by :mod:`jaxgfx.pipelines.fit`) and passed to :func:`fit`.
+"""
+
+from ._loop import LEAST_SQUARES_SOLVERS as LEAST_SQUARES_SOLVERS
+from ._loop import OPTIMIZERS as OPTIMIZERS
+from ._loop import FitResult as FitResult
+from ._loop import fit as fit
+from ._loop import fit_least_squares as fit_least_squares
+from ._losses import LOSS_SPACES as LOSS_SPACES
+from ._losses import LOSSES as LOSSES
+from ._losses import censored_l2_loss as censored_l2_loss
+from ._losses import image_loss as image_loss
+from ._losses import l1_loss as l1_loss
+from ._losses import l2_loss as l2_loss
+from ._losses import relative_l2_loss as relative_l2_loss
+from ._transforms import Interval as Interval
+from ._transforms import from_unconstrained as from_unconstrained
+from ._transforms import to_unconstrained as to_unconstrained
+
+__all__ = [
+    "fit",
+    "fit_least_squares",
+    "FitResult",
+    "OPTIMIZERS",
+    "LEAST_SQUARES_SOLVERS",
+    "l2_loss",
+    "relative_l2_loss",
+    "l1_loss",
+    "image_loss",
+    "censored_l2_loss",
+    "LOSSES",
+    "LOSS_SPACES",
+    "Interval",
+    "to_unconstrained",
+    "from_unconstrained",
+]

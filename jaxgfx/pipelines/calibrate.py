@@ -1,8 +1,9 @@
 """The main job: calibrate a camera from a bracketed stack and merge a radiance map.
 
-``run_calibrate(config, inputs, out_dir)`` loads a bracketed stack (LDR files with EXIF or
-sidecar exposure times, RAW files, or — with no inputs — the embedded synthetic stack generated
-from a known radiance, response and noise model), optionally aligns it, fits the camera
+``run_calibrate(job)`` (a :class:`CalibrateJob`: config, inputs, out) loads a bracketed
+stack (LDR files with EXIF or sidecar exposure times, RAW files, or — with no inputs — the
+embedded synthetic stack generated from a known radiance, response and noise model),
+optionally aligns it, fits the camera
 response (LDR) or the sensor calibration (RAW: black/white level, linearity, actual exposure
 ratios, photon-transfer noise model), merges an HDR radiance map with a per-pixel variance, and
 writes::
@@ -14,7 +15,10 @@ writes::
     preview.png         exposure-normalised sRGB preview of the radiance map
     report.json         fitted parameters, uncertainties, residuals, errors, timings
 
-The CLI (``jaxgfx calibrate``) and ``experiments/calibrate.py`` both call this function.
+Only when the whole run succeeded do they appear in ``out`` (staged next to it, then moved
+into place); ``out`` holding a previous run's results is refused unless ``overwrite``.
+``jaxgfx calibrate`` and ``experiments/calibrate.py`` are thin argument-to-job layers over
+:func:`run_calibrate`; the report is assembled in :func:`build_report` only.
 """
 
 from __future__ import annotations
@@ -27,7 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from jaxgfx.config import config_to_dict, load_config
+from jaxgfx.config import config_to_dict
+from jaxgfx.pipelines._output import StagedDir
 
 __all__ = [
     "SyntheticConfig",
@@ -35,8 +40,11 @@ __all__ = [
     "MergeConfig",
     "AlignConfig",
     "CalibrateConfig",
+    "CalibrateJob",
+    "CalibrateResult",
+    "OUTPUT_NAMES",
+    "build_report",
     "run_calibrate",
-    "run_calibrate_cli",
     "RAW_EXTENSIONS",
 ]
 
@@ -59,12 +67,47 @@ class SyntheticConfig:
     read_sigma: float = 1.0e-3
 
     def validate(self):
-        if self.height < 8 or self.width < 8:
-            raise ValueError("synthetic.height/width: expected at least 8 pixels")
+        for name in ("height", "width"):
+            if getattr(self, name) < 8:
+                raise ValueError(
+                    f"synthetic.{name}: expected at least 8 pixels, got {getattr(self, name)}"
+                )
         if len(self.exposure_times) < 2 or any(t <= 0 for t in self.exposure_times):
             raise ValueError("synthetic.exposure_times: expected >= 2 positive times")
         if self.bits not in (8, 16):
             raise ValueError(f"synthetic.bits: expected 8 or 16, got {self.bits}")
+        if self.seed < 0:
+            raise ValueError(f"synthetic.seed: expected an integer >= 0, got {self.seed}")
+        if not (np.isfinite(self.dynamic_range) and self.dynamic_range > 1):
+            raise ValueError(
+                f"synthetic.dynamic_range: expected a finite value > 1, got {self.dynamic_range}"
+            )
+        for name in ("gain", "read_sigma"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise ValueError(f"synthetic.{name}: expected a finite value >= 0, got {v}")
+        if any(not np.isfinite(t) for t in self.exposure_times):
+            raise ValueError("synthetic.exposure_times: expected finite times")
+        from jaxgfx.hdr import SYNTHETIC_RESPONSES
+
+        if self.response not in SYNTHETIC_RESPONSES:
+            raise ValueError(
+                f"synthetic.response: expected one of {', '.join(SYNTHETIC_RESPONSES)}, "
+                f"got {self.response!r}"
+            )
+
+
+_CHOICES = {
+    "response.method": ("debevec", "robertson", "gamma", "polynomial", "spline"),
+    "merge.weighting": ("hat", "gaussian", "linear", "noise"),
+    "align.method": ("phase", "mtb"),
+    "demosaic": ("malvar", "bilinear"),
+}
+
+
+def _check_choice(value, where: str):
+    if value not in _CHOICES[where]:
+        raise ValueError(f"{where}: expected one of {', '.join(_CHOICES[where])}, got {value!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -73,10 +116,25 @@ class ResponseConfig:
     options: dict = dataclasses.field(default_factory=dict)
     compare: tuple[str, ...] = ("debevec", "robertson", "polynomial", "spline")
 
+    def validate(self):
+        _check_choice(self.method, "response.method")
+        for i, m in enumerate(self.compare):
+            if m not in _CHOICES["response.method"]:
+                raise ValueError(
+                    f"response.compare[{i}]: expected one of "
+                    f"{', '.join(_CHOICES['response.method'])}, got {m!r}"
+                )
+        from jaxgfx.hdr import check_response_options
+
+        check_response_options(self.method, self.options, name="response.options")
+
 
 @dataclasses.dataclass(frozen=True)
 class MergeConfig:
     weighting: str = "hat"
+
+    def validate(self):
+        _check_choice(self.weighting, "merge.weighting")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -84,9 +142,14 @@ class AlignConfig:
     enabled: bool = False
     method: str = "phase"
 
+    def validate(self):
+        _check_choice(self.method, "align.method")
+
 
 @dataclasses.dataclass(frozen=True)
 class CalibrateConfig:
+    """What to compute (the YAML of ``configs/calibrate.yaml``); every field checked on load."""
+
     exposure_times: tuple[float, ...] | None = None
     synthetic: SyntheticConfig = SyntheticConfig()
     response: ResponseConfig = ResponseConfig()
@@ -94,6 +157,51 @@ class CalibrateConfig:
     align: AlignConfig = AlignConfig()
     demosaic: str = "malvar"
     preview_key: float = 0.18
+
+    def validate(self):
+        _check_choice(self.demosaic, "demosaic")
+        if not (np.isfinite(self.preview_key) and self.preview_key > 0):
+            raise ValueError(
+                f"preview_key: expected a finite value > 0 (log-average maps to it), "
+                f"got {self.preview_key!r}"
+            )
+        if self.exposure_times is not None:
+            from jaxgfx.io import parse_exposure_time
+
+            for i, t in enumerate(self.exposure_times):
+                parse_exposure_time(t, f"exposure_times[{i}]")
+        if self.merge.weighting == "noise":
+            raise ValueError(
+                "merge.weighting: 'noise' needs a noise model, which LDR calibration does not "
+                "fit (RAW inputs use it automatically); expected hat, gaussian or linear"
+            )
+
+
+OUTPUT_NAMES = (
+    "radiance.exr",
+    "variance.exr",
+    "confidence.png",
+    "preview.png",
+    "response.png",
+    "report.json",
+)
+"""Every file a calibration run may write into ``out`` (a RAW run writes no response.png)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class CalibrateJob:
+    """One run of the calibration job: the config plus where to read and write.
+
+    ``inputs``: image files or one folder (empty: the embedded synthetic stack);
+    ``out``: the results folder (see :mod:`jaxgfx.pipelines._output` for the guarantees);
+    ``overwrite``: replace the results of a previous run in ``out`` (else refused).
+    """
+
+    config: CalibrateConfig = CalibrateConfig()
+    inputs: tuple[str, ...] = ()
+    out: str = "out/calibrate"
+    overwrite: bool = False
+    progress: bool = True
 
 
 def _collect_inputs(inputs) -> list[str]:
@@ -242,24 +350,116 @@ def _jsonable(x: Any):
     return x
 
 
-def _write_outputs(out_dir, radiance, variance, cfg: CalibrateConfig) -> dict:
+@dataclasses.dataclass
+class CalibrateResult:
+    """What the computation produced (host NumPy), before anything is written."""
+
+    radiance: np.ndarray
+    variance: np.ndarray
+    times: np.ndarray | None = None
+    image_shape: tuple | None = None
+    response: Any = None  # the fitted CameraResponse (LDR)
+    curves: dict | None = None  # method -> CameraResponse, for response.png
+    truth: tuple | None = None  # (true response, true radiance) of a synthetic stack
+    errors: dict | None = None  # method -> errors vs the ground truth
+    raw_calibration: Any = None  # RawCalibration (RAW)
+    alignment_shifts: Any = None
+    synthetic: dict | None = None
+
+
+def _write_outputs(folder, result: CalibrateResult, cfg: CalibrateConfig) -> list[str]:
+    """Write the images and the plot into ``folder``; returns the file names written."""
     from jaxgfx import io
 
-    paths = {}
-    paths["radiance"] = os.path.join(out_dir, "radiance.exr")
-    io.write_exr(paths["radiance"], np.ascontiguousarray(radiance, np.float32))
-    paths["variance"] = os.path.join(out_dir, "variance.exr")
-    io.write_exr(paths["variance"], np.ascontiguousarray(variance, np.float32))
+    radiance, variance = result.radiance, result.variance
+    io.write_exr(os.path.join(folder, "radiance.exr"), np.ascontiguousarray(radiance, np.float32))
+    io.write_exr(os.path.join(folder, "variance.exr"), np.ascontiguousarray(variance, np.float32))
     rel = np.sqrt(np.maximum(variance, 0)) / np.maximum(np.abs(radiance), 1e-12)
     conf = np.clip(1.0 - rel.mean(axis=-1) / 0.1, 0.0, 1.0)  # 0 at >= 10% relative std. error
-    paths["confidence"] = os.path.join(out_dir, "confidence.png")
-    io.write_png(paths["confidence"], conf.astype(np.float32))
-    paths["preview"] = os.path.join(out_dir, "preview.png")
-    io.write_png(paths["preview"], _preview(radiance, cfg.preview_key))
-    return paths
+    io.write_png(os.path.join(folder, "confidence.png"), conf.astype(np.float32))
+    io.write_png(os.path.join(folder, "preview.png"), _preview(radiance, cfg.preview_key))
+    names = ["radiance.exr", "variance.exr", "confidence.png", "preview.png"]
+    if result.curves:
+        _plot_response(
+            os.path.join(folder, "response.png"),
+            result.curves,
+            result.truth[0] if result.truth is not None else None,
+        )
+        names.append("response.png")
+    return names
 
 
-def _run_ldr(cfg, images, times, truth, out_dir, steps: _Steps, report: dict):
+_OUTPUT_KEYS = {
+    "radiance.exr": "radiance",
+    "variance.exr": "variance",
+    "confidence.png": "confidence",
+    "preview.png": "preview",
+    "response.png": "response_plot",
+    "report.json": "report",
+}
+
+
+def build_report(job: CalibrateJob, files, result: CalibrateResult, timings: dict, outputs):
+    """The report (``report.json``): config, inputs, fitted parameters, errors, timings and
+    output paths. The one place its fields are assembled; add new fields here."""
+    cfg = job.config
+    report: dict = {"config": config_to_dict(cfg), "inputs": files or "embedded synthetic stack"}
+    if result.synthetic is not None:
+        report["synthetic"] = result.synthetic
+    if result.times is not None:
+        report["exposure_times"] = np.asarray(result.times).tolist()
+    if result.image_shape is not None:
+        report["image_shape"] = list(result.image_shape)
+    if result.alignment_shifts is not None:
+        report["alignment_shifts_px"] = np.asarray(result.alignment_shifts).tolist()
+    if result.raw_calibration is not None:
+        report["raw_calibration"] = _jsonable(result.raw_calibration.to_dict())
+    if result.response is not None:
+        report["response"] = {
+            "method": cfg.response.method,
+            "summary": _response_summary(result.response),
+        }
+    if result.errors is not None:
+        report["errors_vs_ground_truth"] = result.errors
+    report["timings_s"] = timings
+    report["outputs"] = outputs
+    return report
+
+
+def _load_ldr(cfg: CalibrateConfig, files, sidecar, steps, result_kw: dict):
+    """The LDR stack (files, or the embedded synthetic one) as ``(images, times, truth)``."""
+    import jax
+
+    from jaxgfx import hdr, io
+
+    steps.start("load")
+    if files:
+        images, times = io.read_ldr_stack(files, exposure_times=cfg.exposure_times, sidecar=sidecar)
+        truth = None
+    else:
+        s = cfg.synthetic
+        k1, k2 = jax.random.split(jax.random.key(s.seed))
+        radiance = hdr.synthetic_radiance(k1, s.height, s.width, dynamic_range=s.dynamic_range)
+        true_resp = hdr.synthetic_response(s.response)
+        times = np.asarray(s.exposure_times, np.float64)
+        images = hdr.make_bracketed_stack(
+            k2, radiance, times, true_resp, bits=s.bits, gain=s.gain, read_sigma=s.read_sigma
+        ).images
+        truth = (true_resp, np.asarray(radiance))
+        result_kw["synthetic"] = {"response": s.response, "bits": s.bits}
+    images = np.asarray(images)
+    times = np.asarray(times, np.float64)
+    result_kw["times"] = times
+    result_kw["image_shape"] = images.shape
+    if cfg.align.enabled:
+        steps.start("align")
+        aligned, shifts = hdr.align_stack(_to_float01(images), method=cfg.align.method)
+        result_kw["alignment_shifts"] = shifts
+        images = np.asarray(aligned)
+    return images, times, truth
+
+
+def _fit_ldr(cfg: CalibrateConfig, images, times, truth, steps, result_kw) -> CalibrateResult:
     import jax
 
     from jaxgfx import hdr
@@ -273,55 +473,45 @@ def _run_ldr(cfg, images, times, truth, out_dir, steps: _Steps, report: dict):
     radiance, variance = hdr.merge_radiance(
         images, times, resp, weighting=cfg.merge.weighting, return_variance=True
     )
-    radiance = np.asarray(radiance, np.float32)
-    variance = np.asarray(variance, np.float32)
     steps.start("evaluate")
-    report["response"] = {"method": cfg.response.method, "summary": _response_summary(resp)}
     curves = {cfg.response.method: resp}
+    errors = None
     if truth is not None:
         true_resp, true_radiance = truth
-        errs = {}
+        errors = {}
         for m in dict.fromkeys((cfg.response.method, *cfg.response.compare)):
             r = curves.get(m) or hdr.recover_response(images, times, method=m)
             curves[m] = r
             e = hdr.merge_radiance(images, times, r, weighting=cfg.merge.weighting)
-            errs[m] = {
+            errors[m] = {
                 "curve_rmse_ln": float(hdr.response_curve_error(r, true_resp)),
                 "radiance_median_abs_ln": float(hdr.radiance_error(e, true_radiance)),
             }
-        report["errors_vs_ground_truth"] = errs
-    steps.start("write outputs")
-    paths = _write_outputs(out_dir, radiance, variance, cfg)
-    paths["response_plot"] = os.path.join(out_dir, "response.png")
-    _plot_response(paths["response_plot"], curves, truth[0] if truth is not None else None)
-    return paths
+    return CalibrateResult(
+        radiance=np.asarray(radiance, np.float32),
+        variance=np.asarray(variance, np.float32),
+        response=resp,
+        curves=curves,
+        truth=truth,
+        errors=errors,
+        **result_kw,
+    )
 
 
-def _run_raw(cfg, files, out_dir, steps: _Steps, report: dict):
+def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
     from jaxgfx import hdr, image, io
     from jaxgfx.hdr.raw_calibration import calibrate_raw_stack
 
     steps.start("read raw")
-    raws = [io.read_raw(f) for f in files]
-    patterns = {r.cfa_pattern for r in raws}
-    if len(patterns) != 1:
-        raise ValueError(f"inputs: RAW files have different CFA patterns {sorted(patterns)}")
-    pattern = patterns.pop()
-    times = np.array(
-        cfg.exposure_times if cfg.exposure_times else [r.exposure_time for r in raws], np.float64
-    )
-    if np.any(~np.isfinite(times)) or np.any(times <= 0):
-        raise ValueError("exposure_times: missing in the RAW files' EXIF; pass --times")
-    order = np.argsort(times)
-    mosaics = np.stack([raws[i].mosaic for i in order]).astype(np.float32)
-    times = times[order]
+    raws, times = io.read_raw_stack(files, exposure_times=cfg.exposure_times)
+    pattern = raws[0].cfa_pattern
+    mosaics = np.stack([r.mosaic for r in raws]).astype(np.float32)
     black = np.asarray(raws[0].black_level, np.float32)
     white = float(raws[0].white_level)
     steps.start("raw calibration")
     cal = calibrate_raw_stack(mosaics, times, cfa_pattern=pattern, black=black, white=white)
-    report["raw_calibration"] = _jsonable(cal.to_dict())
     steps.start("merge")
-    norm = np.stack([r.normalized() for r in (raws[i] for i in order)])[..., None]
+    norm = np.stack([r.normalized() for r in raws])[..., None]
     ratios = np.asarray(cal.ratios.ratios, np.float64)
     ref = int(np.asarray(cal.ratios.reference))
     good = ratios.shape == times.shape and np.all(np.isfinite(ratios)) and np.all(ratios > 0)
@@ -341,115 +531,79 @@ def _run_raw(cfg, files, out_dir, steps: _Steps, report: dict):
     var_rgb = np.asarray(
         image.demosaic(np.asarray(var)[..., 0], pattern, method="bilinear"), np.float32
     )
-    steps.start("write outputs")
-    return _write_outputs(out_dir, rgb.astype(np.float32), var_rgb, cfg)
+    return CalibrateResult(
+        radiance=rgb.astype(np.float32),
+        variance=var_rgb,
+        times=times,
+        image_shape=mosaics.shape,
+        raw_calibration=cal,
+    )
+
+
+def _as_job(job, inputs, out_dir, progress, overwrite) -> CalibrateJob:
+    if job is None or isinstance(job, CalibrateConfig):
+        job = CalibrateJob(config=job or CalibrateConfig())
+    if not isinstance(job, CalibrateJob):
+        raise TypeError(f"job: expected a CalibrateJob or CalibrateConfig, got {type(job)}")
+    changes: dict = {}
+    if inputs is not None:
+        changes["inputs"] = (inputs,) if isinstance(inputs, (str, os.PathLike)) else inputs
+    if out_dir is not None:
+        changes["out"] = out_dir
+    if progress is not None:
+        changes["progress"] = progress
+    if overwrite is not None:
+        changes["overwrite"] = overwrite
+    job = dataclasses.replace(job, **changes)
+    return dataclasses.replace(
+        job, inputs=tuple(os.fspath(i) for i in job.inputs or ()), out=os.fspath(job.out)
+    )
 
 
 def run_calibrate(
-    config: CalibrateConfig | None = None,
+    job: CalibrateJob | CalibrateConfig | None = None,
     inputs=None,
-    out_dir: str = "out/calibrate",
+    out_dir=None,
     *,
-    progress: bool = True,
+    progress: bool | None = None,
+    overwrite: bool | None = None,
 ) -> dict:
-    """Run the calibration job; returns the report dict (also written to ``report.json``)."""
-    import jax
+    """Run the calibration job; returns the report dict (also written to ``report.json``).
 
-    from jaxgfx import hdr, io
-
-    cfg = config or CalibrateConfig()
-    os.makedirs(out_dir, exist_ok=True)
-    files = _collect_inputs(inputs)
+    ``job``: a :class:`CalibrateJob` (or a :class:`CalibrateConfig`, with ``inputs``,
+    ``out_dir``, ``progress``, ``overwrite`` given here; explicit arguments override the
+    job's fields). Inputs and the output folder are checked before any computation; results
+    appear in ``out`` only when the whole run succeeded (see :mod:`jaxgfx.pipelines._output`).
+    The returned dict also has ``"replaced"``: the previous results that were replaced.
+    """
+    job = _as_job(job, inputs, out_dir, progress, overwrite)
+    cfg = job.config
+    files = _collect_inputs(job.inputs)
     is_raw = bool(files) and all(f.lower().endswith(RAW_EXTENSIONS) for f in files)
     if files and not is_raw and any(f.lower().endswith(RAW_EXTENSIONS) for f in files):
         raise ValueError("inputs: mix of RAW and LDR files; calibrate one kind at a time")
-    steps = _Steps(total=5 if files else 6, enabled=progress)
+    if files and len(files) < 2:
+        raise ValueError(f"inputs: a bracket needs at least 2 images, got {files}")
     t_all = time.perf_counter()
-    report: dict = {"config": config_to_dict(cfg), "inputs": files or "embedded synthetic stack"}
-    try:
-        if is_raw:
-            paths = _run_raw(cfg, files, out_dir, steps, report)
-        else:
-            steps.start("load")
-            truth = None
-            if files:
-                images, times = io.read_ldr_stack(
-                    files, exposure_times=cfg.exposure_times, sidecar=_find_sidecar(inputs)
-                )
-            else:
-                s = cfg.synthetic
-                key = jax.random.key(s.seed)
-                k1, k2 = jax.random.split(key)
-                radiance = hdr.synthetic_radiance(
-                    k1, s.height, s.width, dynamic_range=s.dynamic_range
-                )
-                true_resp = hdr.synthetic_response(s.response)
-                times = np.asarray(s.exposure_times, np.float64)
-                images = hdr.make_bracketed_stack(
-                    k2,
-                    radiance,
-                    times,
-                    true_resp,
-                    bits=s.bits,
-                    gain=s.gain,
-                    read_sigma=s.read_sigma,
-                ).images
-                truth = (true_resp, np.asarray(radiance))
-                report["synthetic"] = {"response": s.response, "bits": s.bits}
-            images = np.asarray(images)
-            times = np.asarray(times, np.float64)
-            report["exposure_times"] = times.tolist()
-            report["image_shape"] = list(images.shape)
-            if cfg.align.enabled:
-                steps.start("align")
-                from jaxgfx.hdr.align import align_stack
-
-                aligned, shifts = align_stack(_to_float01(images), method=cfg.align.method)
-                report["alignment_shifts_px"] = np.asarray(shifts).tolist()
-                images = np.asarray(aligned)
-            paths = _run_ldr(cfg, images, times, truth, out_dir, steps, report)
-    finally:
-        steps.close()
-    report["timings_s"] = {**steps.timings, "total": round(time.perf_counter() - t_all, 4)}
-    report["outputs"] = paths
-    paths["report"] = os.path.join(out_dir, "report.json")
-    with open(paths["report"], "w", encoding="utf-8") as f:
-        json.dump(_jsonable(report), f, indent=2)
-    return report
-
-
-def run_calibrate_cli(args) -> int:
-    """Entry used by ``jaxgfx calibrate`` and ``experiments/calibrate.py``."""
-    overrides: dict = {}
-    if getattr(args, "times", None):
+    with StagedDir(job.out, OUTPUT_NAMES, overwrite=job.overwrite) as stage:
+        steps = _Steps(total=5 if files else 6, enabled=job.progress)
         try:
-            overrides["exposure_times"] = [float(eval_fraction(t)) for t in args.times.split(",")]
-        except ValueError:
-            raise ValueError(
-                f"--times: expected comma-separated numbers, got {args.times!r}"
-            ) from None
-    cfg = load_config(CalibrateConfig, args.config, **overrides)
-    if getattr(args, "method", None):
-        cfg = dataclasses.replace(
-            cfg, response=dataclasses.replace(cfg.response, method=args.method)
-        )
-    report = run_calibrate(cfg, args.inputs, args.out, progress=not args.quiet)
-    print(f"outputs in {os.path.abspath(args.out)}:")
-    for name, p in report["outputs"].items():
-        print(f"  {name:14s} {p}")
-    if "errors_vs_ground_truth" in report:
-        e = report["errors_vs_ground_truth"][cfg.response.method]
-        print(
-            f"curve error {e['curve_rmse_ln']:.4f} (RMSE ln-exposure), radiance error "
-            f"{e['radiance_median_abs_ln']:.4f} (median |ln E - ln E_true|)"
-        )
-    return 0
-
-
-def eval_fraction(text: str) -> float:
-    """Parse '1/250' or '0.004' as a float."""
-    text = text.strip()
-    if "/" in text:
-        num, den = text.split("/", 1)
-        return float(num) / float(den)
-    return float(text)
+            if is_raw:
+                result = _fit_raw(cfg, files, steps)
+            else:
+                result_kw: dict = {}
+                images, times, truth = _load_ldr(
+                    cfg, files, _find_sidecar(job.inputs), steps, result_kw
+                )
+                result = _fit_ldr(cfg, images, times, truth, steps, result_kw)
+            steps.start("write outputs")
+            names = _write_outputs(stage.path, result, cfg)
+        finally:
+            steps.close()
+        names.append("report.json")
+        outputs = {_OUTPUT_KEYS[n]: os.path.join(job.out, n) for n in names}
+        timings = {**steps.timings, "total": round(time.perf_counter() - t_all, 4)}
+        report = build_report(job, files, result, timings, outputs)
+        with open(os.path.join(stage.path, "report.json"), "w", encoding="utf-8") as f:
+            json.dump(_jsonable(report), f, indent=2)
+    return {**report, "replaced": stage.replaced}

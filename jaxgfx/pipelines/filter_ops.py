@@ -13,7 +13,15 @@ from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["FILTER_OPS", "FilterOp", "apply_filter", "apply_filter_file"]
+__all__ = [
+    "FILTER_OPS",
+    "FilterOp",
+    "FilterJob",
+    "apply_filter",
+    "apply_filter_file",
+    "check_filter_params",
+    "run_filter",
+]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -159,8 +167,9 @@ FILTER_OPS: dict[str, FilterOp] = {
 }
 
 
-def apply_filter(image, op: str, **params):
-    """Apply the named operation to an image array; unknown op/params raise ValueError."""
+def check_filter_params(op: str, params: dict) -> dict:
+    """The keyword arguments for ``op``: defaults updated with ``params``. Raises
+    ``ValueError`` for an unknown op or parameter, naming it (``--radius``, ...)."""
     if op not in FILTER_OPS:
         raise ValueError(f"op: expected one of {sorted(FILTER_OPS)}, got {op!r}")
     spec = FILTER_OPS[op]
@@ -170,26 +179,96 @@ def apply_filter(image, op: str, **params):
             f"op {op!r} takes parameters {list(spec.params) or 'none'}; "
             f"unexpected: {', '.join('--' + u.replace('_', '-') for u in unknown)}"
         )
-    kwargs = {**spec.defaults, **params}
-    return np.asarray(spec.fn(image, **kwargs))
+    for name, check in _PARAM_CHECKS.items():
+        if name in params:
+            check(params[name])
+    return {**spec.defaults, **params}
+
+
+def _nonneg_int(name):
+    def check(v):
+        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+            raise ValueError(f"--{name}: expected an integer >= 0, got {v!r}")
+
+    return check
+
+
+def _positive(name):
+    def check(v):
+        if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+            raise ValueError(f"--{name}: expected a finite value > 0, got {v!r}")
+
+    return check
+
+
+def _finite(name):
+    def check(v):
+        if not (isinstance(v, (int, float)) and np.isfinite(v)):
+            raise ValueError(f"--{name}: expected a finite number, got {v!r}")
+
+    return check
+
+
+# CLI-level checks of parameters that the ops transform before the library sees them
+# (``box`` turns --radius r into a size 2r+1): the error names the option the user typed.
+_PARAM_CHECKS = {
+    "radius": _nonneg_int("radius"),
+    "sigma": _positive("sigma"),
+    "sigma_spatial": _positive("sigma-spatial"),
+    "sigma_range": _positive("sigma-range"),
+    "cutoff": _positive("cutoff"),
+    "gamma": _positive("gamma"),
+    "amount": _finite("amount"),
+    "low": _finite("low"),
+    "high": _finite("high"),
+}
+
+
+def apply_filter(image, op: str, **params):
+    """Apply the named operation to an image array; unknown op/params raise ValueError."""
+    kwargs = check_filter_params(op, params)
+    return np.asarray(FILTER_OPS[op].fn(image, **kwargs))
 
 
 _DISPLAY_EXT = (".png", ".jpg", ".jpeg", ".tif", ".tiff")
 
 
-def apply_filter_file(src, dst, op: str, **params) -> str:
-    """Read ``src``, apply ``op``, write ``dst`` (format from its extension). Returns ``dst``."""
-    from jaxgfx import io
+@dataclasses.dataclass(frozen=True)
+class FilterJob:
+    """One ``jaxgfx filter`` run: ``input`` → ``op(**params)`` → ``output`` (format from the
+    extension; display formats are clipped to [0, 1]). ``overwrite``: replace an existing
+    ``output`` (else refused)."""
 
-    img = io.read_any(src)
-    img = np.asarray(img)
-    if np.issubdtype(img.dtype, np.integer):
-        img = img.astype(np.float32) / np.iinfo(img.dtype).max
-    out = apply_filter(img.astype(np.float32), op, **params)
-    if os.path.splitext(os.fspath(dst))[1].lower() in _DISPLAY_EXT:
-        out = np.clip(out, 0.0, 1.0)
-    parent = os.path.dirname(os.fspath(dst))
-    if parent:
-        os.makedirs(parent, exist_ok=True)
-    io.write_any(dst, out)
-    return os.fspath(dst)
+    input: str
+    output: str
+    op: str = "gaussian"
+    params: dict = dataclasses.field(default_factory=dict)
+    overwrite: bool = False
+
+
+def run_filter(job: FilterJob) -> str:
+    """Run a :class:`FilterJob`: the op, its parameters and the output path are checked
+    before the input is read; the output is staged and moved into place at the end.
+    Returns the output path."""
+    from jaxgfx import io
+    from jaxgfx.pipelines._output import StagedFiles, check_output_extension
+
+    kwargs = check_filter_params(job.op, dict(job.params))
+    ext = check_output_extension(job.output, "output")
+    if os.path.isdir(job.input):
+        raise IsADirectoryError(21, "input: is a directory, expected an image file", job.input)
+    with StagedFiles({"output": job.output}, overwrite=job.overwrite) as stage:
+        img = np.asarray(io.read_any(job.input))
+        if np.issubdtype(img.dtype, np.integer):
+            img = img.astype(np.float32) / np.iinfo(img.dtype).max
+        out = np.asarray(FILTER_OPS[job.op].fn(img.astype(np.float32), **kwargs))
+        if ext in _DISPLAY_EXT:
+            out = np.clip(out, 0.0, 1.0)
+        io.write_any(stage.staging["output"], out)
+    return os.fspath(job.output)
+
+
+def apply_filter_file(src, dst, op: str, **params) -> str:
+    """Read ``src``, apply ``op``, write ``dst`` (format from its extension), replacing an
+    existing ``dst``. Returns ``dst``. (``run_filter`` with ``overwrite=True``.)"""
+    return run_filter(FilterJob(os.fspath(src), os.fspath(dst), op, dict(params), overwrite=True))

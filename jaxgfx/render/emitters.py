@@ -23,7 +23,7 @@ import jax.numpy as jnp
 
 from jaxgfx._checks import as_float_array, check_finite
 from jaxgfx._math import safe_arccos, safe_atan2, safe_div, safe_sqrt, sincos, sum_last, take_rows
-from jaxgfx.render.bsdf._base import rgb_param
+from jaxgfx.render.bsdf import rgb_param
 from jaxgfx.render.warp import Distribution2D
 
 __all__ = [

@@ -108,3 +108,54 @@ def test_bad_arguments():
         delta_e_2000(np.zeros(3), np.ones(4))
     with pytest.raises(ValueError, match="^lab1: .*NaN"):
         delta_e_1976(np.array([np.nan, 0, 0]), np.ones(3))
+
+
+# ----------------------------------------------- kL, kC, kH: closed forms (Sharma 2005, (22))
+
+
+def _S_C(c_mean):
+    return 1.0 + 0.045 * c_mean
+
+
+@pytest.mark.parametrize("kC, kH", [(1.2, 0.8), (0.7, 1.5)])
+def test_pure_chroma_difference_closed_form(x64, kC, kH):
+    # a* = 0: a' = (1 + G) a* = 0, so C' = |b*| and h' = 90 deg for both colours; the pair
+    # differs only in chroma and dE00 = |dC'| / (kC S_C), S_C = 1 + 0.045 mean(C'),
+    # independent of kH (and of G, T, R_T)
+    b1 = np.array([5.0, 20.0, 40.0, 70.0])
+    b2 = b1 + np.array([3.0, 6.0, -9.0, 12.0])
+    lab1 = np.stack([np.full(4, 60.0), np.zeros(4), b1], -1)
+    lab2 = np.stack([np.full(4, 60.0), np.zeros(4), b2], -1)
+    want = np.abs(b2 - b1) / (kC * _S_C(0.5 * (b1 + b2)))
+    got = np.asarray(_de00(lab1, lab2, kC=kC, kH=kH))
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+    # and with kC = 1 it is colour-science's value
+    np.testing.assert_allclose(
+        np.asarray(_de00(lab1, lab2, kH=kH)), delta_E_CIE2000(lab1, lab2), rtol=1e-12
+    )
+
+
+@pytest.mark.parametrize("kC, kH", [(1.2, 0.8), (0.7, 1.5)])
+def test_pure_hue_difference_scales_with_one_over_kH(x64, kC, kH):
+    # (L, -a, b) vs (L, a, b): same C' (G is shared), dC' = 0, dL' = 0, so dE00 = |dH'| /
+    # (kH S_H): exactly colour-science's reference-condition value divided by kH, whatever kC
+    a = np.array([4.0, 15.0, 30.0, -25.0])
+    b = np.array([10.0, -20.0, 5.0, 40.0])
+    lab1 = np.stack([np.full(4, 45.0), -a, b], -1)
+    lab2 = np.stack([np.full(4, 45.0), a, b], -1)
+    ref = delta_E_CIE2000(lab1, lab2)
+    assert np.all(ref > 1.0)
+    got = np.asarray(_de00(lab1, lab2, kC=kC, kH=kH))
+    np.testing.assert_allclose(got, ref / kH, rtol=1e-12)
+
+
+def test_weights_are_homogeneous_where_R_T_is_active(x64):
+    # blue pairs (h' near 275 deg, where the rotation term R_T couples dC' and dH'):
+    # dE00(kL = kC = kH = k) = dE00(1, 1, 1) / k exactly
+    lab1 = np.array([[50.0, 2.6772, -79.7751], [40.0, -10.0, -50.0], [70.0, 5.0, -30.0]])
+    lab2 = np.array([[50.0, 0.0, -82.7485], [42.0, -2.0, -58.0], [68.0, 12.0, -26.0]])
+    ref = delta_E_CIE2000(lab1, lab2)
+    for k in (0.5, 1.3):
+        np.testing.assert_allclose(
+            np.asarray(_de00(lab1, lab2, kL=k, kC=k, kH=k)), ref / k, rtol=1e-12
+        )

@@ -87,8 +87,14 @@ def test_noise_weighting_variance_matches_monte_carlo():
     pred = np.mean(np.asarray(v_n), axis=0)
     ok = np.asarray(rad) < 0.9  # not clipped in the shortest frame
     ratio = emp[ok] / pred[ok]
-    # 47 dof: the chi2 sample-variance ratio has sd ~ sqrt(2/47) = 0.21 per pixel
-    assert 0.85 < np.median(ratio) < 1.15
+    # 47 dof: the sample-variance ratio has mean 1 and sd sqrt(2/47) = 0.21 per pixel, so
+    # its mean over the ~3000 pixels has se 0.0037. The band +-3 % is 8 se (measured means
+    # 0.990, 0.993, 0.983 over keys 3, 4, 5: the Gaussian noise model's small bias) and
+    # fails when the predicted variance is off by 5 %. (The median is biased low by
+    # 2/(3*47) = 1.4 % for a chi2 ratio, so the mean is the statistic here.)
+    assert ratio.size > 2500
+    assert abs(np.mean(ratio) - 1.0) < 0.03, np.mean(ratio)
+    assert abs(np.std(ratio) - np.sqrt(2 / 47)) < 0.2 * np.sqrt(2 / 47), np.std(ratio)
     mse_n = np.mean((np.asarray(e_n) - np.asarray(rad)) ** 2 / np.asarray(rad) ** 2)
     mse_h = np.mean((np.asarray(e_h) - np.asarray(rad)) ** 2 / np.asarray(rad) ** 2)
     assert mse_n < 0.8 * mse_h

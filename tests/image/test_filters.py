@@ -50,6 +50,25 @@ def test_gaussian_matches_cv2(sigma, img3):
     np.testing.assert_allclose(np.asarray(gaussian_blur(img3, sigma)), want, atol=1e-6)
 
 
+@pytest.mark.parametrize("sigma, r", [(0.7, 3), (1.5, 5)])
+def test_gaussian_fractional_sigma_radius_rule(sigma, r, img3):
+    """The radius rule is r = ceil(truncate * sigma) (truncate = 3): 0.7 -> 3 (not 2),
+    1.5 -> 5 (not 4). OpenCV with ksize 2r + 1 and SciPy with radius=r are the references;
+    a floor-rounded radius differs from them by ~1e-3, a 5 % sigma error by ~1e-2."""
+    assert r == int(np.ceil(3 * sigma))
+    # the rule is visible on an impulse: the response is exactly 2r + 1 taps wide
+    imp = np.zeros_like(img3)
+    imp[16, 14] = 1.0
+    out = np.asarray(gaussian_blur(np.stack([img3, imp]), sigma))
+    got = out[0]
+    want = cv2.GaussianBlur(img3, (2 * r + 1, 2 * r + 1), sigma, borderType=cv2.BORDER_REFLECT_101)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)
+    want_sp = per_channel(lambda c: ndi.gaussian_filter(c, sigma, mode="mirror", radius=r), img3)
+    np.testing.assert_allclose(got, want_sp, rtol=0, atol=1e-6)
+    row = out[1, 16, :, 0]
+    assert np.count_nonzero(row) == 2 * r + 1
+
+
 @pytest.mark.parametrize("mode", PAD_MODES)
 def test_gaussian_matches_scipy_modes(mode, img3):
     # scipy radius int(truncate * sigma + 0.5) = 6 = ceil(3 * 2)

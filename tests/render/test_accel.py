@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from jax.test_util import check_grads
 
-from jaxgfx.render import accel as A
-from jaxgfx.render import mesh as M
-from jaxgfx.render import shapes as S
+from jaxgfx.render import geometry as S
+from jaxgfx.render.geometry import accel as A
+from jaxgfx.render.geometry import mesh_io as M
 
 BUILDERS = {"bvh": A.build_bvh, "grid": A.build_grid, "kdtree": A.build_kdtree}
 

@@ -7,7 +7,8 @@ import pytest
 from jax.test_util import check_grads
 from scipy.ndimage import map_coordinates
 
-from jaxgfx.render.frame import (
+from jaxgfx.render.bsdf.texture import Texture, lookup
+from jaxgfx.render.geometry.frame import (
     cos_theta,
     frame_from_normal,
     sincos_phi,
@@ -15,7 +16,6 @@ from jaxgfx.render.frame import (
     to_local,
     to_world,
 )
-from jaxgfx.render.texture import Texture, lookup
 
 
 @jax.jit

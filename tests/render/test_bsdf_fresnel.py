@@ -9,7 +9,7 @@ import pytest
 from jax.test_util import check_grads
 from scipy.integrate import quad
 
-from jaxgfx.render.fresnel import (
+from jaxgfx.render.bsdf.fresnel import (
     fresnel_conductor,
     fresnel_dielectric,
     fresnel_dielectric_polarized,

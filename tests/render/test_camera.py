@@ -113,8 +113,10 @@ def test_gaussian_filter_moments():
     a = 4.0
     phi = exp(-a * a / 2) / sqrt(2 * pi)
     var = 0.25 * (1 - 2 * a * phi / erf(a / sqrt(2)))
+    # sd of a sample variance ~ var sqrt(2 / n) (kurtosis ~3 at 4 sd truncation): 5 se = 1.1 %
+    # of var, so a 5 % stddev error (10 % in var) fails (measured |z| < 1.7 over keys 2-5)
     se = var * np.sqrt(2 / x.size)
-    assert abs(x.var() - var) < 5 * se * 3
+    assert abs(x.var() - var) < 5 * se
     assert abs(x.mean()) < 5 * np.sqrt(var / x.size)
     with pytest.raises(ValueError, match="filter"):
         make_filter("mitchell")

@@ -25,33 +25,13 @@ import pytest
 from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
 
+from ._scenes import camera, inside_sphere_scene, metal_floor_scene, point_light
+
 KEY = jax.random.key(11)
 
 
-def _metal_scene(material, *, cam_origin=(0, 1.2, 3.0), cam_target=(0, 0, 0), light=None):
-    light = light or {"center": [0, 2.5, -1.0], "normal": [0, -1, 0.3], "size": [1.5, 1.5]}
-    return load_scene(
-        {
-            "camera": {
-                "origin": list(cam_origin),
-                "target": list(cam_target),
-                "fov": 50,
-                "width": 10,
-                "height": 10,
-            },
-            "shapes": [
-                {
-                    "type": "rectangle",
-                    "center": [0, 0, 0],
-                    "normal": [0, 1, 0],
-                    "size": [4, 4],
-                    "material": "floor",
-                },
-            ],
-            "materials": {"floor": material},
-            "emitters": [{"type": "area", "shape": {"type": "rectangle", **light}, "radiance": 5}],
-        }
-    )
+def _metal_scene(material, **kw):
+    return load_scene(metal_floor_scene(material, **kw))
 
 
 ROUGH = {"type": "roughconductor", "alpha": 0.3, "reflectance": 0.9}
@@ -134,22 +114,15 @@ def _mesh_plane_scene(albedo=0.5):
     n = [[0, -1, 0]] * 6
     scene = load_scene(
         {
-            "camera": {
-                "origin": [0, 3, 0.001],
-                "target": [0, 0, 0],
-                "up": [0, 0, -1],
-                "fov": 30,
-                "width": 8,
-                "height": 8,
-            },
+            "camera": camera([0, 3, 0.001], [0, 0, 0], fov=30, width=8, up=[0, 0, -1]),
             "shapes": [{"type": "mesh", "vertices": v, "faces": f, "material": "m"}],
             "materials": {"m": {"type": "diffuse", "reflectance": albedo}},
-            "emitters": [{"type": "point", "position": [0.3, 2.0, 0.2], "intensity": 16.0}],
+            "emitters": [point_light([0.3, 2.0, 0.2], 16.0)],
         }
     )
     mesh = scene.shapes[0]
     normals = jnp.asarray(n, mesh.vertices.dtype)
-    from jaxgfx.render.shapes import TriangleMesh
+    from jaxgfx.render.geometry import TriangleMesh
 
     mesh = TriangleMesh(mesh.vertices, mesh.faces, normals)
     return eqx.tree_at(lambda s: s.shapes[0], scene, mesh)
@@ -182,20 +155,7 @@ def test_backfacing_shading_normals_and_degenerate_triangle_closed_form():
 
 
 def _inside_sphere(albedo=0.5, radius=2.0, intensity=10.0):
-    return load_scene(
-        {
-            "camera": {
-                "origin": [0.5, 0.2, 0.3],
-                "target": [0, 0, -1],
-                "fov": 60,
-                "width": 8,
-                "height": 8,
-            },
-            "shapes": [{"type": "sphere", "center": [0, 0, 0], "radius": radius, "material": "m"}],
-            "materials": {"m": {"type": "diffuse", "reflectance": albedo}},
-            "emitters": [{"type": "point", "position": [0, 0, 0], "intensity": intensity}],
-        }
-    )
+    return load_scene(inside_sphere_scene(albedo, radius, intensity))
 
 
 def test_camera_inside_sphere_closed_form():

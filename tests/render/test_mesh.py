@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from jaxgfx.render import mesh as M
-from jaxgfx.render.shapes import TriangleMesh, area
+from jaxgfx.render.geometry import TriangleMesh, area
+from jaxgfx.render.geometry import mesh_io as M
 
 OBJ = """# a unit square as one quad, a triangle with negative indices, comments and groups
 mtllib none.mtl

@@ -9,7 +9,7 @@ import pytest
 from jax.test_util import check_grads
 from scipy.special import erf
 
-from jaxgfx.render.microfacet import MicrofacetDistribution
+from jaxgfx.render.bsdf.microfacet import MicrofacetDistribution
 from jaxgfx.testing import chi2_test
 
 

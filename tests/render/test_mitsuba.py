@@ -1,4 +1,4 @@
-"""Mitsuba 3 export and comparison renders (``jaxgfx.render.mitsuba``).
+"""Mitsuba 3 export and comparison renders (``jaxgfx.render.scene.mitsuba``).
 
 The converter tests run without Mitsuba. The comparison tests need ``mitsuba`` (test extra)
 and skip cleanly without it: each renders a small scene K times independently in jaxgfx and in
@@ -20,14 +20,14 @@ import jax
 import numpy as np
 import pytest
 
-from jaxgfx.render.mitsuba import (
+from jaxgfx.render.render import render
+from jaxgfx.render.scene import load_scene
+from jaxgfx.render.scene.mitsuba import (
     envmap_for_mitsuba,
     mitsuba_integrator,
     render_mitsuba,
     to_mitsuba_dict,
 )
-from jaxgfx.render.render import render
-from jaxgfx.render.scene import load_scene
 
 K = 8  # independent replicate renders per renderer
 RES = 32
@@ -110,7 +110,7 @@ def test_material_mapping_values():
     np.testing.assert_allclose(floor["bsdf"]["reflectance"]["value"], [0.1, 0.2, 0.3], rtol=1e-6)
     # materials not used by a shape are still validated but not emitted
     assert "glass" not in str(d)
-    from jaxgfx.render import mitsuba as M
+    from jaxgfx.render.scene import mitsuba as M
 
     glass = M._material(desc["materials"]["glass"], "materials.glass")
     assert glass["type"] == "dielectric" and glass["int_ior"] == pytest.approx(1.33)
@@ -245,7 +245,7 @@ def test_inline_mesh_written_as_ply(tmp_path):
         ],
     }
     d = to_mitsuba_dict(desc, work_dir=tmp_path)["shape_0"]
-    from jaxgfx.render.mesh import load_ply
+    from jaxgfx.render.geometry.mesh_io import load_ply
 
     m = load_ply(d["filename"])
     np.testing.assert_allclose(np.asarray(m.vertices), v)
@@ -559,8 +559,8 @@ def test_example_scene_gaussian_filter(mi):
 def test_obj_mesh_and_sphere_emitter(mi, tmp_path):
     """A 320-triangle OBJ with vertex normals (BVH path) lit by a spherical area light, and
     the same mesh without normals (flat shading: Mitsuba's face_normals)."""
-    from jaxgfx.render.mesh import make_icosphere, save_obj
-    from jaxgfx.render.shapes import TriangleMesh
+    from jaxgfx.render.geometry import TriangleMesh
+    from jaxgfx.render.geometry.mesh_io import make_icosphere, save_obj
 
     m = make_icosphere(2, radius=0.6, center=(0.0, 0.6, 0.0))
     save_obj(tmp_path / "smooth.obj", m)
@@ -590,7 +590,7 @@ def test_obj_mesh_and_sphere_emitter(mi, tmp_path):
 @pytest.mark.mitsuba
 def test_tangent_frames_agree_on_rectangles_not_on_spheres(mi):
     """Why anisotropic materials are exported on rectangles only."""
-    from jaxgfx.render.frame import frame_from_normal
+    from jaxgfx.render.geometry.frame import frame_from_normal
 
     sc = mi.load_dict(
         {

@@ -11,8 +11,6 @@ channels with ``|z| < 3``. Pixels whose samples are all identical (zero variance
 pass when the means agree to float32 rounding.
 """
 
-import os
-
 import jax
 import numpy as np
 import pytest
@@ -21,24 +19,11 @@ from jaxgfx.render.integrators.path import STRATEGIES
 from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
 
-EXAMPLE = os.path.join(os.path.dirname(__file__), "..", "..", "configs", "scenes", "example.yaml")
+from ._scenes import env_scene, example_scene
 
 
 def _example(width=16, *, floor=0.5, metal=1.0, full=True):
-    """The example scene (configs/scenes/example.yaml) at ``width``²; ``full=False`` drops the
-    glass sphere and the constant sky (a smaller program: compiles ~3x faster)."""
-    import yaml
-
-    with open(EXAMPLE) as f:
-        desc = yaml.safe_load(f)
-    if not full:
-        desc["shapes"] = [s for s in desc["shapes"] if s.get("material") != "glass"]
-        desc["materials"].pop("glass")
-        desc["emitters"] = [e for e in desc["emitters"] if e["type"] != "constant"]
-    desc["camera"] |= {"width": width, "height": width}
-    desc["materials"]["floor"]["reflectance"] = [floor] * 3
-    desc["materials"]["metal"]["reflectance"] = metal
-    return load_scene(desc)
+    return load_scene(example_scene(width, floor=floor, metal=metal, full=full))
 
 
 def _stats(scene, seed, k, spp, integrator, max_depth=3):
@@ -109,29 +94,7 @@ def _strategy_stats(scene, seed, k, spp, strategy):
 
 
 def _env_scene(emitter, width=12):
-    return load_scene(
-        {
-            "camera": {
-                "origin": [0, 1.0, 3.0],
-                "target": [0, 0.2, 0],
-                "fov": 50,
-                "width": width,
-                "height": width,
-            },
-            "shapes": [
-                {"type": "sphere", "center": [0, 0.5, 0], "radius": 0.5, "material": "m"},
-                {
-                    "type": "rectangle",
-                    "center": [0, 0, 0],
-                    "normal": [0, 1, 0],
-                    "size": [3, 3],
-                    "material": "m",
-                },
-            ],
-            "materials": {"m": {"type": "diffuse", "reflectance": 0.6}},
-            "emitters": [emitter],
-        }
-    )
+    return load_scene(env_scene(emitter, width))
 
 
 def test_constant_envmap_matches_constant_emitter():

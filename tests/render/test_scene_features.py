@@ -18,13 +18,15 @@ from jax.test_util import check_grads
 from PIL import Image
 
 from jaxgfx.render.bsdf import Diffuse, RoughConductor
+from jaxgfx.render.bsdf.texture import Texture
+from jaxgfx.render.bsdf.textured import Checkerboard, Textured, texture_eval, texture_from_dict
+from jaxgfx.render.geometry import Spheres, intersect
+from jaxgfx.render.geometry.sdf import SDFSphere
+from jaxgfx.render.geometry.sphere_tracing import SDFShape
 from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
-from jaxgfx.render.sdf import SDFSphere
-from jaxgfx.render.sdf_shape import SDFShape
-from jaxgfx.render.shapes import Spheres, intersect
-from jaxgfx.render.texture import Texture
-from jaxgfx.render.textured import Checkerboard, Textured, texture_eval, texture_from_dict
+
+from ._scenes import camera, point_light, sphere, textured_plane_scene
 
 KEY = jax.random.key(3)
 
@@ -113,28 +115,7 @@ def test_textured_at_matches_per_ray_bsdfs(x64):
 
 
 def _plane_scene(tex, *, material=None, width=8):
-    mat = material or {"type": "diffuse", "reflectance": tex}
-    return {
-        "camera": {
-            "origin": [0, 3, 0.01],
-            "target": [0, 0, 0],
-            "up": [0, 0, -1],
-            "fov": 30,
-            "width": width,
-            "height": width,
-        },
-        "shapes": [
-            {
-                "type": "rectangle",
-                "center": [0, 0, 0],
-                "normal": [0, 1, 0],
-                "size": [2.0, 2.0],
-                "material": "m",
-            }
-        ],
-        "materials": {"m": mat},
-        "emitters": [{"type": "point", "position": [0.3, 2.0, 0.2], "intensity": 10}],
-    }
+    return textured_plane_scene(tex, material=material, width=width)
 
 
 TEX_IMG = np.array([[[0.9, 0.5, 0.1], [0.2, 0.4, 0.8]], [[0.6, 0.6, 0.6], [0.3, 0.1, 0.7]]])
@@ -232,20 +213,14 @@ def _sphere_scene(kind, radius=1.0, *, origin=(0, 0, 4), fov=40):
     if kind == "sdf":
         shape = {"type": "sdf", "expr": {"op": "sphere", "center": [0, 0, 0], "radius": radius}}
     else:
-        shape = {"type": "sphere", "center": [0, 0, 0], "radius": radius}
+        shape = sphere([0, 0, 0], radius)
     return load_scene(
         {
-            "camera": {
-                "origin": list(origin),
-                "target": [0, 0, 0],
-                "fov": fov,
-                "width": 12,
-                "height": 12,
-            },
+            "camera": camera(origin, [0, 0, 0], fov=fov, width=12),
             "shapes": [shape | {"material": "m"}],
             "materials": {"m": {"type": "diffuse", "reflectance": 0.7}},
             "emitters": [
-                {"type": "point", "position": [1.5, 2.0, 3.0], "intensity": 30},
+                point_light([1.5, 2.0, 3.0], 30),
                 {"type": "constant", "radiance": 0.2},
             ],
         }

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from jax.test_util import check_grads
 
-from jaxgfx.render import sdf as S
-from jaxgfx.render.shapes import Spheres, intersect
+from jaxgfx.render import geometry as S
+from jaxgfx.render.geometry import Spheres, intersect
 
 trace_jit = jax.jit(S.sphere_trace, static_argnames=("max_steps", "eps"))
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from jax.test_util import check_grads
 
-from jaxgfx.render import shapes as S
-from jaxgfx.render.ray import offset_ray_origin, spawn_ray
+from jaxgfx.render import geometry as S
+from jaxgfx.render.geometry.ray import offset_ray_origin, spawn_ray
 
 intersect_jit = jax.jit(S.intersect, static_argnames=("method",))
 
@@ -363,7 +363,7 @@ def test_bad_inputs():
 
 def test_two_phase_scene_intersection_matches_per_shape_merge(key):
     """intersect_scene groups shapes by type; the records must equal a per-shape merge."""
-    from jaxgfx.render.ray import empty_hit, merge_hits
+    from jaxgfx.render.geometry.ray import empty_hit, merge_hits
 
     shapes = [
         S.Spheres([[0, 0, 5.0], [1.5, 0.5, 7.0]], [1.0, 1.2]),
@@ -379,6 +379,7 @@ def test_two_phase_scene_intersection_matches_per_shape_merge(key):
     d = jax.random.normal(k1, (1000, 3)) * jnp.array([0.4, 0.4, 0.1]) + jnp.array([0, 0, 1.0])
     d = d / jnp.linalg.norm(d, axis=-1, keepdims=True)
     h = jax.jit(S.intersect_scene)(shapes, o, d)
+
     def per_shape_merge(shapes, o, d):
         ref = empty_hit((1000,))
         for i, s in enumerate(shapes):

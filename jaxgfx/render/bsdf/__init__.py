@@ -12,6 +12,7 @@ import inspect
 
 from jaxgfx.render.bsdf._base import BSDF as BSDF
 from jaxgfx.render.bsdf._base import BSDFSample as BSDFSample
+from jaxgfx.render.bsdf._base import rgb_param as rgb_param
 from jaxgfx.render.bsdf._conductor import Mirror as Mirror
 from jaxgfx.render.bsdf._dielectric import SmoothDielectric as SmoothDielectric
 from jaxgfx.render.bsdf._diffuse import Diffuse as Diffuse
@@ -30,6 +31,7 @@ __all__ = [
     "RoughPlastic",
     "BSDF_TYPES",
     "make_bsdf",
+    "rgb_param",
 ]
 
 BSDF_TYPES = {

@@ -2,15 +2,28 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 import jax.numpy as jnp
 
-from jaxgfx._checks import as_float_array, check_finite, check_nonnegative
+from jaxgfx._checks import as_float_array, check_finite, check_nonnegative, check_positive
 
-__all__ = ["BSDF", "BSDFSample"]
+__all__ = [
+    "BSDF",
+    "BSDFSample",
+    "to_rgb",
+    "rgb_param",
+    "scalar_param",
+    "rgb_field",
+    "float_field",
+    "check_rgb",
+    "check_scalar",
+    "sample_setup",
+    "glossy_sample",
+]
 
 INV_PI = 1.0 / math.pi
 
@@ -43,6 +56,9 @@ class BSDF(eqx.Module):
 
     has_delta: ClassVar[bool] = False
     is_transmissive: ClassVar[bool] = False
+    PARAMETER_ALIASES: ClassVar[dict[str, tuple[str, ...]]] = {}
+    """Description keys that are not attribute names -> the dotted attribute paths they set
+    (see :mod:`jaxgfx.render.parameters`)."""
 
     def eval(self, wo, wi):  # pragma: no cover - interface
         raise NotImplementedError
@@ -58,12 +74,11 @@ class BSDF(eqx.Module):
         raise NotImplementedError
 
 
-def rgb_param(x, name, *, nonnegative=True):
-    """Parameter as an RGB array ``(..., 3)``; a scalar is broadcast to 3 channels."""
+def to_rgb(x, name):
+    """Parameter as an RGB array ``(..., 3)`` (conversion only; a scalar or a last axis of 1 is
+    broadcast to 3 channels). ``TypeError`` / ``ValueError`` naming ``name`` for non-numbers or
+    other shapes; values are checked by :func:`check_rgb`."""
     arr = as_float_array(x, name)
-    check_finite(arr, name)
-    if nonnegative:
-        check_nonnegative(arr, name)
     if arr.ndim == 0:
         arr = jnp.broadcast_to(arr, (3,))
     elif arr.shape[-1] not in (1, 3):
@@ -73,11 +88,35 @@ def rgb_param(x, name, *, nonnegative=True):
     return arr
 
 
+def rgb_param(x, name, *, nonnegative=True):
+    """Parameter as an RGB array ``(..., 3)``; a scalar is broadcast to 3 channels. Checked
+    finite (and >= 0 unless ``nonnegative=False``) when concrete."""
+    arr = as_float_array(x, name)
+    check_finite(arr, name)
+    if nonnegative:
+        check_nonnegative(arr, name)
+    return to_rgb(arr, name)
+
+
 def scalar_param(x, name):
     """Parameter as a float array (scalar or batch-shaped), checked finite."""
     arr = as_float_array(x, name)
     check_finite(arr, name)
     return arr
+
+
+def rgb_field(default, name, **kwargs):
+    """An ``eqx.field`` holding an RGB parameter: converted by :func:`to_rgb` on construction;
+    validate it with :func:`check_rgb` in ``__check_init__``."""
+    return eqx.field(default=default, converter=functools.partial(to_rgb, name=name), **kwargs)
+
+
+def float_field(default, name, **kwargs):
+    """An ``eqx.field`` holding a float parameter (scalar or batch-shaped), converted by
+    ``as_float_array``; validate it with :func:`check_scalar` in ``__check_init__``."""
+    return eqx.field(
+        default=default, converter=functools.partial(as_float_array, name=name), **kwargs
+    )
 
 
 def batch_dtype(*xs):
@@ -108,3 +147,42 @@ def prep_u(u1, u2):
 def mask3(valid, x):
     """``where(valid[..., None], x, 0)`` broadcasting ``x`` to (..., 3)."""
     return jnp.where(valid[..., None], x, 0.0)
+
+
+def check_rgb(x, name, *, nonnegative=True):
+    """``__check_init__`` half of :func:`rgb_param`: a concrete RGB parameter must be finite
+    (and >= 0 unless ``nonnegative=False``) with a last axis of 3; tracers pass."""
+    check_finite(x, name)
+    if nonnegative:
+        check_nonnegative(x, name)
+    if jnp.ndim(x) == 0 or jnp.shape(x)[-1] != 3:
+        raise ValueError(f"{name}: expected a scalar or an RGB array (..., 3), got {jnp.shape(x)}")
+
+
+def check_scalar(x, name, *, positive=False):
+    """``__check_init__`` half of :func:`scalar_param`: finite (and > 0 if ``positive``)."""
+    check_finite(x, name)
+    if positive:
+        check_positive(x, name)
+
+
+def sample_setup(wo, u1, u2):
+    """The common start of ``BSDF.sample``: validate ``wo (..., 3)``, ``u1 (...)``,
+    ``u2 (..., 2)``, broadcast ``wo`` to the batch shape; returns ``(wo, u1, u2, shape)``."""
+    wo = prep_dirs(wo)
+    u1, u2 = prep_u(u1, u2)
+    shape = jnp.broadcast_shapes(wo.shape[:-1], u1.shape, u2.shape[:-1])
+    wo = jnp.broadcast_to(wo, shape + (3,))
+    return wo, u1, u2, shape
+
+
+def glossy_sample(wi, pdf, weight, valid, shape, dtype) -> BSDFSample:
+    """The common end of a non-delta ``BSDF.sample``: ``pdf`` and ``weight`` zeroed where not
+    ``valid``, ``is_delta = False``, ``eta = 1`` (reflection)."""
+    return BSDFSample(
+        wi=wi,
+        pdf=jnp.where(valid, pdf, 0.0),
+        weight=mask3(valid, weight),
+        is_delta=jnp.zeros(shape, bool),
+        eta=jnp.ones(shape, dtype),
+    )

@@ -6,11 +6,19 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from jaxgfx._checks import check_choice
-from jaxgfx.render.bsdf._base import BSDF, BSDFSample, mask3, prep_dirs, prep_u, rgb_param
-from jaxgfx.render.frame import reflect
-from jaxgfx.render.fresnel import fresnel_conductor, fresnel_schlick
+from jaxgfx.render.bsdf._base import (
+    BSDF,
+    BSDFSample,
+    check_rgb,
+    mask3,
+    prep_dirs,
+    sample_setup,
+    to_rgb,
+)
+from jaxgfx.render.bsdf.fresnel import fresnel_conductor, fresnel_schlick
+from jaxgfx.render.geometry.frame import reflect
 
-__all__ = ["Mirror", "fresnel_factor"]
+__all__ = ["Mirror", "fresnel_factor", "resolve_fresnel", "check_fresnel", "FRESNEL_MODES"]
 
 FRESNEL_MODES = ("none", "conductor", "schlick")
 
@@ -29,19 +37,28 @@ def fresnel_factor(mode, cos_theta, reflectance, eta, k):
     return fresnel_schlick(reflectance, c)
 
 
-def _resolve(fresnel, eta, k):
+def resolve_fresnel(fresnel, eta, k):
+    """Constructor arguments ``(fresnel, eta, k)`` of a conductor -> field values: ``fresnel``
+    defaults to ``"conductor"`` when ``eta`` is given, else ``"none"``; ``k`` defaults to 0
+    for ``"conductor"``; ``eta``, ``k`` converted to RGB (validated by :func:`check_fresnel`)."""
     if fresnel is None:
         fresnel = "none" if eta is None else "conductor"
-    check_choice(fresnel, "fresnel", FRESNEL_MODES)
-    if fresnel == "conductor":
-        if eta is None:
-            raise ValueError("eta: required when fresnel='conductor'")
-        eta = rgb_param(eta, "eta")
-        k = rgb_param(0.0 if k is None else k, "k")
-    else:
-        eta = None if eta is None else rgb_param(eta, "eta")
-        k = None if k is None else rgb_param(k, "k")
+    if fresnel == "conductor" and eta is not None and k is None:
+        k = 0.0
+    eta = None if eta is None else to_rgb(eta, "eta")
+    k = None if k is None else to_rgb(k, "k")
     return fresnel, eta, k
+
+
+def check_fresnel(fresnel, eta, k):
+    """``__check_init__`` of the conductor Fresnel fields (shared with ``RoughConductor``)."""
+    check_choice(fresnel, "fresnel", FRESNEL_MODES)
+    if fresnel == "conductor" and (eta is None or k is None):
+        raise ValueError("eta: required when fresnel='conductor'")
+    if eta is not None:
+        check_rgb(eta, "eta")
+    if k is not None:
+        check_rgb(k, "k")
 
 
 class Mirror(BSDF):
@@ -65,8 +82,12 @@ class Mirror(BSDF):
     has_delta = True
 
     def __init__(self, reflectance=1.0, *, eta=None, k=None, fresnel=None):
-        self.reflectance = rgb_param(reflectance, "reflectance")
-        self.fresnel, self.eta, self.k = _resolve(fresnel, eta, k)
+        self.reflectance = to_rgb(reflectance, "reflectance")
+        self.fresnel, self.eta, self.k = resolve_fresnel(fresnel, eta, k)
+
+    def __check_init__(self):
+        check_rgb(self.reflectance, "reflectance")
+        check_fresnel(self.fresnel, self.eta, self.k)
 
     @property
     def albedo(self):
@@ -83,10 +104,7 @@ class Mirror(BSDF):
         return jnp.zeros(shape, jnp.result_type(wo, wi))
 
     def sample(self, wo, u1, u2):
-        wo = prep_dirs(wo)
-        u1, u2 = prep_u(u1, u2)
-        shape = jnp.broadcast_shapes(wo.shape[:-1], u1.shape, u2.shape[:-1])
-        wo = jnp.broadcast_to(wo, shape + (3,))
+        wo, u1, u2, shape = sample_setup(wo, u1, u2)
         co = wo[..., 2]
         valid = co > 0
         f = fresnel_factor(self.fresnel, co, self.reflectance, self.eta, self.k)

@@ -4,17 +4,18 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from jaxgfx._checks import check_positive
 from jaxgfx.render.bsdf._base import (
     BSDF,
     BSDFSample,
+    check_rgb,
+    check_scalar,
+    float_field,
     mask3,
     prep_dirs,
-    prep_u,
-    rgb_param,
-    scalar_param,
+    rgb_field,
+    sample_setup,
 )
-from jaxgfx.render.fresnel import fresnel_dielectric
+from jaxgfx.render.bsdf.fresnel import fresnel_dielectric
 
 __all__ = ["SmoothDielectric"]
 
@@ -35,17 +36,17 @@ class SmoothDielectric(BSDF):
     ``1/2.25 ≈ 0.444``.
     """
 
-    eta: jnp.ndarray
-    specular_reflectance: jnp.ndarray
-    specular_transmittance: jnp.ndarray
+    eta: jnp.ndarray = float_field(1.5046, "eta")
+    specular_reflectance: jnp.ndarray = rgb_field(1.0, "specular_reflectance", kw_only=True)
+    specular_transmittance: jnp.ndarray = rgb_field(1.0, "specular_transmittance", kw_only=True)
 
     has_delta = True
     is_transmissive = True
 
-    def __init__(self, eta=1.5046, *, specular_reflectance=1.0, specular_transmittance=1.0):
-        self.eta = scalar_param(check_positive(eta, "eta"), "eta")
-        self.specular_reflectance = rgb_param(specular_reflectance, "specular_reflectance")
-        self.specular_transmittance = rgb_param(specular_transmittance, "specular_transmittance")
+    def __check_init__(self):
+        check_scalar(self.eta, "eta", positive=True)
+        check_rgb(self.specular_reflectance, "specular_reflectance")
+        check_rgb(self.specular_transmittance, "specular_transmittance")
 
     @property
     def albedo(self):
@@ -61,10 +62,7 @@ class SmoothDielectric(BSDF):
         return jnp.zeros(jnp.broadcast_shapes(wo.shape, wi.shape)[:-1], jnp.result_type(wo, wi))
 
     def sample(self, wo, u1, u2):
-        wo = prep_dirs(wo)
-        u1, u2 = prep_u(u1, u2)
-        shape = jnp.broadcast_shapes(wo.shape[:-1], u1.shape, u2.shape[:-1])
-        wo = jnp.broadcast_to(wo, shape + (3,))
+        wo, u1, u2, shape = sample_setup(wo, u1, u2)
         co = wo[..., 2]
         fr = fresnel_dielectric(co, self.eta)
         r = fr.r

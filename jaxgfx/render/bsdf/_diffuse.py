@@ -7,11 +7,12 @@ import jax.numpy as jnp
 from jaxgfx.render.bsdf._base import (
     BSDF,
     INV_PI,
-    BSDFSample,
+    check_rgb,
+    glossy_sample,
     mask3,
     prep_dirs,
     prep_u,
-    rgb_param,
+    rgb_field,
 )
 from jaxgfx.render.warp import square_to_cosine_hemisphere
 
@@ -29,10 +30,10 @@ class Diffuse(BSDF):
     Example: ``Diffuse(1.0).eval(z, z) = [1/π]*3 ≈ 0.3183``.
     """
 
-    reflectance: jnp.ndarray
+    reflectance: jnp.ndarray = rgb_field(0.5, "reflectance")
 
-    def __init__(self, reflectance=0.5):
-        self.reflectance = rgb_param(reflectance, "reflectance")
+    def __check_init__(self):
+        check_rgb(self.reflectance, "reflectance")
 
     @property
     def albedo(self):
@@ -56,13 +57,5 @@ class Diffuse(BSDF):
         wi = square_to_cosine_hemisphere(u2)
         wi = jnp.broadcast_to(wi, jnp.broadcast_shapes(wi.shape, wo.shape))
         valid = (wo[..., 2] > 0) & (wi[..., 2] > 0)
-        pdf = jnp.where(valid, wi[..., 2] * INV_PI, 0.0)
-        weight = mask3(valid, self.reflectance)
-        shape = valid.shape
-        return BSDFSample(
-            wi=wi,
-            pdf=pdf,
-            weight=weight,
-            is_delta=jnp.zeros(shape, bool),
-            eta=jnp.ones(shape, pdf.dtype),
-        )
+        pdf = wi[..., 2] * INV_PI
+        return glossy_sample(wi, pdf, self.reflectance, valid, valid.shape, pdf.dtype)

@@ -12,14 +12,15 @@ from jaxgfx._math import safe_div, safe_pow, vdot
 from jaxgfx.render.bsdf._base import (
     BSDF,
     INV_PI,
-    BSDFSample,
+    check_rgb,
+    float_field,
+    glossy_sample,
     mask3,
     prep_dirs,
-    prep_u,
-    rgb_param,
-    scalar_param,
+    rgb_field,
+    sample_setup,
 )
-from jaxgfx.render.frame import frame_from_normal, reflect, to_world
+from jaxgfx.render.geometry.frame import frame_from_normal, reflect, to_world
 from jaxgfx.render.warp import square_to_cosine_hemisphere, square_to_phong_lobe
 
 __all__ = ["Phong"]
@@ -44,16 +45,15 @@ class Phong(BSDF):
     Example: normalised, ``kd = 0, ks = 1, n = 0``: ``f = 1/π``.
     """
 
-    kd: jnp.ndarray
-    ks: jnp.ndarray
-    exponent: jnp.ndarray
-    normalized: bool = eqx.field(static=True, default=True)
+    kd: jnp.ndarray = rgb_field(0.5, "kd")
+    ks: jnp.ndarray = rgb_field(0.2, "ks")
+    exponent: jnp.ndarray = float_field(30.0, "exponent")
+    normalized: bool = eqx.field(static=True, default=True, converter=bool, kw_only=True)
 
-    def __init__(self, kd=0.5, ks=0.2, exponent=30.0, *, normalized=True):
-        self.kd = rgb_param(kd, "kd")
-        self.ks = rgb_param(ks, "ks")
-        self.exponent = scalar_param(check_nonnegative(exponent, "exponent"), "exponent")
-        self.normalized = bool(normalized)
+    def __check_init__(self):
+        check_rgb(self.kd, "kd")
+        check_rgb(self.ks, "ks")
+        check_nonnegative(self.exponent, "exponent")
 
     @property
     def albedo(self):
@@ -89,10 +89,7 @@ class Phong(BSDF):
         return jnp.where(valid, ps * p_spec + (1.0 - ps) * ci * INV_PI, 0.0)
 
     def sample(self, wo, u1, u2):
-        wo = prep_dirs(wo)
-        u1, u2 = prep_u(u1, u2)
-        shape = jnp.broadcast_shapes(wo.shape[:-1], u1.shape, u2.shape[:-1])
-        wo = jnp.broadcast_to(wo, shape + (3,))
+        wo, u1, u2, shape = sample_setup(wo, u1, u2)
         ps = self._spec_prob()
         r = reflect(wo)
         r = jnp.where((wo[..., 2] > 0)[..., None], r, jnp.array([0.0, 0.0, 1.0], wo.dtype))
@@ -102,10 +99,4 @@ class Phong(BSDF):
         pdf = self.pdf(wo, wi)
         valid = (wo[..., 2] > 0) & (wi[..., 2] > 0) & (pdf > 0)
         weight = self.eval(wo, wi) / jnp.where(valid, pdf, 1.0)[..., None]
-        return BSDFSample(
-            wi=wi,
-            pdf=jnp.where(valid, pdf, 0.0),
-            weight=mask3(valid, weight),
-            is_delta=jnp.zeros(shape, bool),
-            eta=jnp.ones(shape, wo.dtype),
-        )
+        return glossy_sample(wi, pdf, weight, valid, shape, wo.dtype)

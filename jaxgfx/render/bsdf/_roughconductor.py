@@ -2,14 +2,24 @@
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import equinox as eqx
 import jax.numpy as jnp
 
 from jaxgfx._math import safe_div, safe_normalize, vdot
-from jaxgfx.render.bsdf._base import BSDF, BSDFSample, mask3, prep_dirs, prep_u, rgb_param
-from jaxgfx.render.bsdf._conductor import _resolve, fresnel_factor
-from jaxgfx.render.frame import reflect
-from jaxgfx.render.microfacet import MicrofacetDistribution, reflection_pdf
+from jaxgfx.render.bsdf._base import (
+    BSDF,
+    check_rgb,
+    glossy_sample,
+    mask3,
+    prep_dirs,
+    sample_setup,
+    to_rgb,
+)
+from jaxgfx.render.bsdf._conductor import check_fresnel, fresnel_factor, resolve_fresnel
+from jaxgfx.render.bsdf.microfacet import MicrofacetDistribution, reflection_pdf
+from jaxgfx.render.geometry.frame import reflect
 
 __all__ = ["RoughConductor"]
 
@@ -37,6 +47,12 @@ class RoughConductor(BSDF):
     k: jnp.ndarray | None
     fresnel: str = eqx.field(static=True, default="none")
 
+    PARAMETER_ALIASES: ClassVar[dict[str, tuple[str, ...]]] = {
+        "alpha": ("distribution.alpha_u", "distribution.alpha_v"),
+        "alpha_u": ("distribution.alpha_u",),
+        "alpha_v": ("distribution.alpha_v",),
+    }
+
     def __init__(
         self,
         alpha=0.1,
@@ -52,8 +68,12 @@ class RoughConductor(BSDF):
         self.distribution = MicrofacetDistribution(
             distribution, alpha, alpha_v, sample_visible=sample_visible
         )
-        self.reflectance = rgb_param(reflectance, "reflectance")
-        self.fresnel, self.eta, self.k = _resolve(fresnel, eta, k)
+        self.reflectance = to_rgb(reflectance, "reflectance")
+        self.fresnel, self.eta, self.k = resolve_fresnel(fresnel, eta, k)
+
+    def __check_init__(self):
+        check_rgb(self.reflectance, "reflectance")
+        check_fresnel(self.fresnel, self.eta, self.k)
 
     @property
     def albedo(self):
@@ -82,10 +102,7 @@ class RoughConductor(BSDF):
         return jnp.where(valid, self._pdf_m(wo, h), 0.0)
 
     def sample(self, wo, u1, u2):
-        wo = prep_dirs(wo)
-        u1, u2 = prep_u(u1, u2)
-        shape = jnp.broadcast_shapes(wo.shape[:-1], u1.shape, u2.shape[:-1])
-        wo = jnp.broadcast_to(wo, shape + (3,))
+        wo, u1, u2, shape = sample_setup(wo, u1, u2)
         d = self.distribution
         co = wo[..., 2]
         wo_up = jnp.where((co > 0)[..., None], wo, jnp.array([0.0, 0.0, 1.0], wo.dtype))
@@ -100,10 +117,4 @@ class RoughConductor(BSDF):
             w = d.smith_g1(wi, m)
         else:
             w = safe_div(d.G(wo, wi, m) * dot_om, co * m[..., 2])
-        return BSDFSample(
-            wi=wi,
-            pdf=jnp.where(valid, pdf, 0.0),
-            weight=mask3(valid, w[..., None] * F),
-            is_delta=jnp.zeros(shape, bool),
-            eta=jnp.ones(shape, co.dtype),
-        )
+        return glossy_sample(wi, pdf, w[..., None] * F, valid, shape, co.dtype)

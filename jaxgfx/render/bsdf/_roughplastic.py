@@ -2,24 +2,27 @@
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import equinox as eqx
 import jax.numpy as jnp
 
-from jaxgfx._checks import check_positive
+from jaxgfx._checks import as_float_array
 from jaxgfx._math import safe_div, safe_normalize, vdot
 from jaxgfx.render.bsdf._base import (
     BSDF,
     INV_PI,
-    BSDFSample,
+    check_rgb,
+    check_scalar,
+    glossy_sample,
     mask3,
     prep_dirs,
-    prep_u,
-    rgb_param,
-    scalar_param,
+    sample_setup,
+    to_rgb,
 )
-from jaxgfx.render.frame import reflect
-from jaxgfx.render.fresnel import fresnel_dielectric, fresnel_diffuse_reflectance
-from jaxgfx.render.microfacet import MicrofacetDistribution, reflection_pdf
+from jaxgfx.render.bsdf.fresnel import fresnel_dielectric, fresnel_diffuse_reflectance
+from jaxgfx.render.bsdf.microfacet import MicrofacetDistribution, reflection_pdf
+from jaxgfx.render.geometry.frame import reflect
 from jaxgfx.render.warp import square_to_cosine_hemisphere
 
 __all__ = ["RoughPlastic"]
@@ -53,6 +56,12 @@ class RoughPlastic(BSDF):
     eta: jnp.ndarray
     nonlinear: bool = eqx.field(static=True, default=False)
 
+    PARAMETER_ALIASES: ClassVar[dict[str, tuple[str, ...]]] = {
+        "alpha": ("distribution.alpha_u", "distribution.alpha_v"),
+        "alpha_u": ("distribution.alpha_u",),
+        "alpha_v": ("distribution.alpha_v",),
+    }
+
     def __init__(
         self,
         diffuse_reflectance=0.5,
@@ -67,10 +76,15 @@ class RoughPlastic(BSDF):
         self.distribution = MicrofacetDistribution(
             distribution, alpha, sample_visible=sample_visible
         )
-        self.diffuse_reflectance = rgb_param(diffuse_reflectance, "diffuse_reflectance")
-        self.specular_reflectance = rgb_param(specular_reflectance, "specular_reflectance")
-        self.eta = scalar_param(check_positive(eta, "eta"), "eta")
+        self.diffuse_reflectance = to_rgb(diffuse_reflectance, "diffuse_reflectance")
+        self.specular_reflectance = to_rgb(specular_reflectance, "specular_reflectance")
+        self.eta = as_float_array(eta, "eta")
         self.nonlinear = bool(nonlinear)
+
+    def __check_init__(self):
+        check_rgb(self.diffuse_reflectance, "diffuse_reflectance")
+        check_rgb(self.specular_reflectance, "specular_reflectance")
+        check_scalar(self.eta, "eta", positive=True)
 
     @property
     def albedo(self):
@@ -119,10 +133,7 @@ class RoughPlastic(BSDF):
         return jnp.where(valid, p, 0.0)
 
     def sample(self, wo, u1, u2):
-        wo = prep_dirs(wo)
-        u1, u2 = prep_u(u1, u2)
-        shape = jnp.broadcast_shapes(wo.shape[:-1], u1.shape, u2.shape[:-1])
-        wo = jnp.broadcast_to(wo, shape + (3,))
+        wo, u1, u2, shape = sample_setup(wo, u1, u2)
         co = wo[..., 2]
         wo_up = jnp.where((co > 0)[..., None], wo, jnp.array([0.0, 0.0, 1.0], wo.dtype))
         m, _ = self.distribution.sample(wo_up, u2)
@@ -132,10 +143,4 @@ class RoughPlastic(BSDF):
         pdf = self.pdf(wo, wi)
         valid = (co > 0) & (wi[..., 2] > 0) & (pdf > 0)
         weight = self.eval(wo, wi) / jnp.where(valid, pdf, 1.0)[..., None]
-        return BSDFSample(
-            wi=wi,
-            pdf=jnp.where(valid, pdf, 0.0),
-            weight=mask3(valid, weight),
-            is_delta=jnp.zeros(shape, bool),
-            eta=jnp.ones(shape, wo.dtype),
-        )
+        return glossy_sample(wi, pdf, weight, valid, shape, wo.dtype)

@@ -7,9 +7,9 @@ import jax
 import jax.numpy as jnp
 
 from jaxgfx._math import safe_div, safe_sqrt, sum_last, take_rows
-from jaxgfx.render.frame import frame_from_normal, to_local, to_world
-from jaxgfx.render.ray import spawn_ray
-from jaxgfx.render.shapes import area, intersect_scene, occluded_scene, sample_area
+from jaxgfx.render.geometry import area, intersect_scene, occluded_scene, sample_area
+from jaxgfx.render.geometry.frame import frame_from_normal, to_local, to_world
+from jaxgfx.render.geometry.ray import spawn_ray
 
 __all__ = [
     "intersect",
@@ -50,7 +50,7 @@ def dispatch(scene, mat_id, fn, *, uv=None):
     """Evaluate ``fn(bsdf)`` for every material of the scene and select per ray by ``mat_id``.
 
     Only the materials the scene defines are evaluated (a one-material scene pays for one).
-    Textured materials (``jaxgfx.render.textured.Textured``) are resolved at the hit ``uv``.
+    Textured materials (``jaxgfx.render.bsdf.textured.Textured``) are resolved at the hit ``uv``.
     """
     # textures: only materials with an ``at`` method pay for a lookup
     outs = [fn(m.at(uv) if hasattr(m, "at") else m) for m in scene.materials]

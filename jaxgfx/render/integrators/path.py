@@ -8,16 +8,15 @@ every scene parameter (no ``while_loop`` carries radiance or throughput).
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from jaxgfx._math import fusion_barrier, max_last, safe_div
 from jaxgfx.render.integrators import _common as C
+from jaxgfx.render.integrators.base import N_RANDOM, Integrator, check_depth
 
-__all__ = ["path_radiance", "N_RANDOM", "STRATEGIES"]
-
-N_RANDOM = 7  # uniform numbers per bounce: light select, light (2), bsdf lobe, bsdf (2), RR
-
+__all__ = ["PathIntegrator", "DirectIntegrator", "path_radiance", "N_RANDOM", "STRATEGIES"]
 
 STRATEGIES = ("mis", "light", "bsdf")
 
@@ -122,3 +121,73 @@ def path_radiance(scene, o, d, u, *, max_depth: int, rr_depth: int = 5, strategy
     hit = C.intersect(scene, o, d)
     term = _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy)
     return L + jnp.where(alive[..., None], beta * term, 0.0)
+
+
+def _check_strategy(strategy):
+    if strategy not in STRATEGIES:
+        raise ValueError(f"strategy: expected one of {STRATEGIES}, got {strategy!r}")
+
+
+class PathIntegrator(Integrator):
+    """Path tracing with next-event estimation, MIS and Russian roulette (:func:`path_radiance`).
+
+    ``max_depth`` follows Mitsuba 3 (1: emitters only, 2: direct light, 3: one indirect
+    bounce); Russian roulette starts after ``rr_depth`` bounces; ``strategy``: ``"mis"``,
+    ``"light"`` or ``"bsdf"``. All static.
+
+    >>> PathIntegrator(max_depth=3).random_shape
+    (3, 7)
+    """
+
+    max_depth: int = eqx.field(static=True, default=3)
+    rr_depth: int = eqx.field(static=True, default=5)
+    strategy: str = eqx.field(static=True, default="mis")
+
+    def __check_init__(self):
+        check_depth("max_depth", self.max_depth)
+        check_depth("rr_depth", self.rr_depth)
+        _check_strategy(self.strategy)
+
+    @property
+    def random_shape(self):
+        return (self.max_depth, N_RANDOM)
+
+    def __call__(self, scene, o, d, u):
+        return path_radiance(
+            scene,
+            o,
+            d,
+            u,
+            max_depth=self.max_depth,
+            rr_depth=self.rr_depth,
+            strategy=self.strategy,
+        )
+
+
+class DirectIntegrator(Integrator):
+    """Emitted plus direct light (a path of depth 2: :class:`PathIntegrator` with
+    ``max_depth = 2``); ``strategy`` as there.
+
+    >>> DirectIntegrator().max_depth
+    2
+    """
+
+    rr_depth: int = eqx.field(static=True, default=5)
+    strategy: str = eqx.field(static=True, default="mis")
+
+    def __check_init__(self):
+        check_depth("rr_depth", self.rr_depth)
+        _check_strategy(self.strategy)
+
+    @property
+    def max_depth(self) -> int:
+        return 2
+
+    @property
+    def random_shape(self):
+        return (self.max_depth, N_RANDOM)
+
+    def __call__(self, scene, o, d, u):
+        return path_radiance(
+            scene, o, d, u, max_depth=2, rr_depth=self.rr_depth, strategy=self.strategy
+        )

@@ -10,12 +10,14 @@ camera sample (light sampling only), point lights exactly.
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax.numpy as jnp
 
 from jaxgfx._math import safe_div
 from jaxgfx.render.integrators import _common as C
+from jaxgfx.render.integrators.base import N_RANDOM, Integrator, check_depth
 
-__all__ = ["whitted_radiance"]
+__all__ = ["WhittedIntegrator", "whitted_radiance"]
 
 
 def _direct(scene, hit, frame, ng, wo, mat, alive, u):
@@ -92,3 +94,23 @@ def whitted_radiance(scene, o, d, u, *, max_depth: int):
         d = jnp.concatenate(new_d, -2)
         beta = jnp.concatenate(new_beta, -2)
     return L
+
+
+class WhittedIntegrator(Integrator):
+    """Whitted (1980) ray tracing to ``max_depth`` specular levels (:func:`whitted_radiance`).
+
+    >>> WhittedIntegrator(max_depth=2).random_shape
+    (2, 7)
+    """
+
+    max_depth: int = eqx.field(static=True, default=3)
+
+    def __check_init__(self):
+        check_depth("max_depth", self.max_depth)
+
+    @property
+    def random_shape(self):
+        return (self.max_depth, N_RANDOM)
+
+    def __call__(self, scene, o, d, u):
+        return whitted_radiance(scene, o, d, u, max_depth=self.max_depth)

@@ -54,6 +54,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from jaxgfx.render.parameters import get_path
+
 __all__ = [
     "to_mitsuba_dict",
     "mitsuba_integrator",
@@ -107,7 +109,7 @@ def _look_at_matrix(origin, target, up):
 
 def _frame_from_normal(n):
     """The (s, t) tangents jaxgfx builds for a rectangle's unit normal (Duff et al. 2017)."""
-    from jaxgfx.render.frame import frame_from_normal
+    from jaxgfx.render.geometry.frame import frame_from_normal
 
     fr = frame_from_normal(np.asarray(n, np.float64))
     return np.asarray(fr.s, np.float64), np.asarray(fr.t, np.float64)
@@ -161,15 +163,23 @@ def _conductor_fresnel(m, where) -> dict:
     return out
 
 
-def _distribution(dist, where) -> dict:
-    au, av = np.asarray(dist.alpha_u), np.asarray(dist.alpha_v)
-    if au.size != 1 or av.size != 1:
-        raise ValueError(f"{where}.alpha: expected a scalar roughness")
+def _distribution(m, where) -> dict:
+    """Mitsuba's distribution and roughness keys of a microfacet BSDF ``m``, read through its
+    ``PARAMETER_ALIASES`` (whose names are Mitsuba's): the isotropic alias (``alpha``, which
+    sets several fields) when those fields are equal, else the per-axis ones."""
+    dist = m.distribution
     out = {"distribution": dist.type, "sample_visible": bool(dist.sample_visible)}
-    if _float(au) == _float(av):
-        out["alpha"] = _float(au)
+    values = {}
+    for name, paths in type(m).PARAMETER_ALIASES.items():
+        vs = [np.asarray(get_path(m, p.split("."))) for p in paths]
+        if any(v.size != 1 for v in vs):
+            raise ValueError(f"{where}.{name}: expected a scalar roughness")
+        values[name] = [_float(v) for v in vs]
+    shared = {n: v for n, v in values.items() if len(v) > 1}
+    if shared and all(len(set(v)) == 1 for v in shared.values()):
+        out.update({n: v[0] for n, v in shared.items()})
     else:
-        out["alpha_u"], out["alpha_v"] = _float(au), _float(av)
+        out.update({n: v[0] for n, v in values.items() if len(v) == 1})
     return out
 
 
@@ -181,7 +191,7 @@ def _material(md, where) -> dict:
         raise ValueError(f"{where}: expected a mapping with a 'type' key")
     if md.get("type") == "phong":
         raise NotImplementedError(f"{where}.type: 'phong' has no Mitsuba 3 counterpart")
-    from jaxgfx.render.textured import is_texture_desc
+    from jaxgfx.render.bsdf.textured import is_texture_desc
 
     for k, v in md.items():
         if is_texture_desc(v):
@@ -200,7 +210,7 @@ def _material(md, where) -> dict:
         return _twosided(
             {
                 "type": "roughconductor",
-                **_distribution(m.distribution, where),
+                **_distribution(m, where),
                 **_conductor_fresnel(m, where),
             }
         )
@@ -213,7 +223,7 @@ def _material(md, where) -> dict:
             "specular_transmittance": _rgb(m.specular_transmittance),
         }
     if isinstance(m, B.RoughPlastic):
-        dist = _distribution(m.distribution, where)
+        dist = _distribution(m, where)
         if "alpha_u" in dist:
             raise NotImplementedError(f"{where}.alpha: Mitsuba's roughplastic is isotropic")
         return _twosided(
@@ -235,7 +245,7 @@ def _material(md, where) -> dict:
 
 
 def _shape(d, where, base_dir, work_dir, mi) -> dict:
-    from jaxgfx.render import scene as S
+    from jaxgfx.render.scene import schema as S
 
     if not isinstance(d, Mapping) or "type" not in d:
         raise ValueError(f"{where}: expected a mapping with a 'type' key")
@@ -244,14 +254,14 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
     if kind == "sdf":
         raise NotImplementedError(f"{where}.type: SDF shapes have no Mitsuba 3 counterpart")
     if kind == "sphere":
-        S._expect_keys(d, where, ("type", "center", "radius"), common)
-        c = np.asarray(S._vec(d["center"], f"{where}.center"), np.float64)
-        r = float(S._num(d["radius"], f"{where}.radius", positive=True))
+        S.expect_keys(d, where, ("type", "center", "radius"), common)
+        c = np.asarray(S.vec(d["center"], f"{where}.center"), np.float64)
+        r = float(S.num(d["radius"], f"{where}.radius", positive=True))
         return {"type": "sphere", "center": c.tolist(), "radius": r}
     if kind == "rectangle":
-        S._expect_keys(d, where, ("type", "center", "normal"), (*common, "size"))
-        c = np.asarray(S._vec(d["center"], f"{where}.center"), np.float64)
-        n = np.asarray(S._vec(d["normal"], f"{where}.normal"), np.float64)
+        S.expect_keys(d, where, ("type", "center", "normal"), (*common, "size"))
+        c = np.asarray(S.vec(d["center"], f"{where}.center"), np.float64)
+        n = np.asarray(S.vec(d["normal"], f"{where}.normal"), np.float64)
         if np.linalg.norm(n) == 0:
             raise ValueError(f"{where}.normal: expected a non-zero vector")
         n = n / np.linalg.norm(n)
@@ -263,10 +273,10 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
         m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = s * size[0] / 2, t * size[1] / 2, n, c
         return {"type": "rectangle", "to_world": _transform(m, mi)}
     if kind == "mesh":
-        S._expect_keys(
+        S.expect_keys(
             d, where, ("type",), (*common, "file", "vertices", "faces", "translate", "scale")
         )
-        from jaxgfx.render import mesh as mesh_io
+        from jaxgfx.render.geometry import mesh_io
 
         if "file" in d:
             path = os.fspath(d["file"])
@@ -281,7 +291,7 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
             out = {"type": ext[1:], "filename": os.path.abspath(path)}
         elif "vertices" in d and "faces" in d:
             # validated exactly as load_scene does, then written as a PLY for Mitsuba
-            m = S._mesh({k: d[k] for k in ("vertices", "faces")}, where, base_dir)
+            m = S.mesh_from_desc({k: d[k] for k in ("vertices", "faces")}, where, base_dir)
             name = re.sub(r"[^A-Za-z0-9]+", "_", where).strip("_")
             path = os.path.join(work_dir(), f"{name}.ply")
             mesh_io.save_ply(path, m)
@@ -291,7 +301,7 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
         out["face_normals"] = m.normals is None
         if "translate" in d or "scale" in d:
             sc = np.broadcast_to(np.asarray(d.get("scale", 1.0), np.float64), (3,))
-            tr = np.asarray(S._vec(d.get("translate", [0.0, 0.0, 0.0]), f"{where}.translate"))
+            tr = np.asarray(S.vec(d.get("translate", [0.0, 0.0, 0.0]), f"{where}.translate"))
             mat = np.diag([*sc, 1.0])
             mat[:3, 3] = tr
             out["to_world"] = _transform(mat, mi)
@@ -336,14 +346,14 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
 
     Example: ``to_mitsuba_dict(desc)["sensor"]["fov"] == desc["camera"]["fov"]``.
     """
-    from jaxgfx.render import scene as S
+    from jaxgfx.render.scene import schema as S
 
     if isinstance(desc, (str, os.PathLike)):
         from jaxgfx.config import read_yaml
 
         base_dir = base_dir or os.path.dirname(os.path.abspath(os.fspath(desc)))
         desc = read_yaml(desc)
-    S._expect_keys(desc, "scene", ("camera", "shapes"), ("materials", "emitters", "film"))
+    S.expect_keys(desc, "scene", ("camera", "shapes"), ("materials", "emitters", "film"))
     work_dir = _WorkDir(work_dir)
 
     # -- sensor
@@ -352,13 +362,11 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
         raise NotImplementedError(
             "camera.view_proj_inverse: only look-at cameras are exported to Mitsuba"
         )
-    S._expect_keys(
-        cam, "camera", ("origin", "target", "fov", "width", "height"), ("up", "fov_axis")
-    )
+    S.expect_keys(cam, "camera", ("origin", "target", "fov", "width", "height"), ("up", "fov_axis"))
     # validate exactly as load_scene does (fov range, resolution, degenerate look-at)
-    S._build_camera(cam)
+    S.build_camera(cam)
     film_d = desc.get("film", {}) or {}
-    S._expect_keys(film_d, "film", (), ("filter", "stddev", "radius"))
+    S.expect_keys(film_d, "film", (), ("filter", "stddev", "radius"))
     fname = film_d.get("filter", "box")
     from jaxgfx.render.film import make_filter
 
@@ -441,29 +449,29 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
             raise ValueError(f"{where}: expected a mapping with a 'type' key")
         kind = ed["type"]
         if kind == "area":
-            S._expect_keys(ed, where, ("type", "shape", "radiance"), ("material",))
+            S.expect_keys(ed, where, ("type", "shape", "radiance"), ("material",))
             if isinstance(ed["shape"], Mapping) and "material" in ed["shape"]:
                 raise ValueError(f"{where}.shape.material: put 'material' on the emitter")
             sh = _shape(ed["shape"], f"{where}.shape", base_dir, work_dir, mi)
             sh["bsdf"] = material_of(ed, where, black, ed["shape"]["type"])
-            sh["emitter"] = {"type": "area", "radiance": _rgb(S._rgb(ed["radiance"], where))}
+            sh["emitter"] = {"type": "area", "radiance": _rgb(S.rgb(ed["radiance"], where))}
             out[f"emitter_{i}"] = sh
         elif kind == "point":
-            S._expect_keys(ed, where, ("type", "position", "intensity"))
+            S.expect_keys(ed, where, ("type", "position", "intensity"))
             out[f"emitter_{i}"] = {
                 "type": "point",
-                "position": np.asarray(S._vec(ed["position"], f"{where}.position")).tolist(),
-                "intensity": _rgb(S._rgb(ed["intensity"], f"{where}.intensity")),
+                "position": np.asarray(S.vec(ed["position"], f"{where}.position")).tolist(),
+                "intensity": _rgb(S.rgb(ed["intensity"], f"{where}.intensity")),
             }
         elif kind in ("constant", "envmap"):
             n_env += 1
             if n_env > 1:
                 raise ValueError(f"{where}: only one environment emitter is supported")
             if kind == "constant":
-                S._expect_keys(ed, where, ("type", "radiance"))
+                S.expect_keys(ed, where, ("type", "radiance"))
                 out[f"emitter_{i}"] = {
                     "type": "constant",
-                    "radiance": _rgb(S._rgb(ed["radiance"], f"{where}.radiance")),
+                    "radiance": _rgb(S.rgb(ed["radiance"], f"{where}.radiance")),
                 }
             else:
                 img = S.envmap_image(ed, where, base_dir)
@@ -471,7 +479,7 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
 
                 path = os.path.join(work_dir(), f"envmap_{i}.exr")
                 write_exr(path, envmap_for_mitsuba(img))
-                scale = S._num(ed.get("scale", 1.0), f"{where}.scale")
+                scale = S.num(ed.get("scale", 1.0), f"{where}.scale")
                 out[f"emitter_{i}"] = {"type": "envmap", "filename": path, "scale": float(scale)}
         else:
             raise ValueError(f"{where}.type: expected one of {S.EMITTER_TYPES}, got {kind!r}")

@@ -9,8 +9,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgfx._math import max_last
-from jaxgfx.render.ray import Hit
-from jaxgfx.render.shapes import TriangleMesh, _rays, _small_argmin, primitive_hit
+from jaxgfx.render.geometry.intersect import primitive_hit, small_argmin
+from jaxgfx.render.geometry.mesh import TriangleMesh
+from jaxgfx.render.geometry.ray import Hit, prepare_rays
 
 # Conservative slab test: scale the exit distance by 1 + 2 gamma_3 (pbrt-v4 §6.8.2) so that
 # rounding never culls a box the ray actually crosses.
@@ -64,7 +65,7 @@ def tri_chunk(tris, idx, mask, o, d, tmin, tmax):
     b2 = (qx * dx + qy * dy + qz * dz) * inv_det
     t = (qx * e2[0] + qy * e2[1] + qz * e2[2]) * inv_det
     hit = mask & ok & (b1 >= 0) & (b2 >= 0) & (b1 + b2 <= 1) & (t > tmin) & (t < tmax)
-    return _small_argmin(jnp.where(hit, t, jnp.inf))
+    return small_argmin(jnp.where(hit, t, jnp.inf))
 
 
 def as_numpy_triangles(mesh: TriangleMesh):
@@ -85,7 +86,7 @@ class TriangleAccel(eqx.Module):
         raise NotImplementedError
 
     def _run(self, o, d, tmin, tmax, any_hit):
-        o, d, tmin, tmax = _rays(o, d, tmin, tmax)
+        o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
         batch = o.shape[:-1]
         sg = jax.lax.stop_gradient
         O = sg(o).reshape(-1, 3)
@@ -109,7 +110,7 @@ class TriangleAccel(eqx.Module):
 
     def closest_t(self, o, d, *, tmin=0.0, tmax=jnp.inf):
         """Nearest ``(t, prim_id)`` per ray (``t = inf`` where nothing is hit); not
-        differentiable (see :func:`jaxgfx.render.shapes.intersect_scene`)."""
+        differentiable (see :func:`jaxgfx.render.geometry.intersect_scene`)."""
         _, _, t, prim = self._run(o, d, tmin, tmax, False)
         return jnp.where(prim >= 0, t, jnp.inf), jnp.maximum(prim, 0)
 

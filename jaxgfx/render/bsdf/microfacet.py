@@ -13,6 +13,7 @@ BRDFs", JCGT 3(2), 2014; Heitz, "Sampling the GGX Distribution of Visible Normal
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -48,15 +49,19 @@ class MicrofacetDistribution(eqx.Module):
     type: str = eqx.field(static=True, default="ggx")
     sample_visible: bool = eqx.field(static=True, default=True)
 
+    PARAMETER_ALIASES: ClassVar[dict[str, tuple[str, ...]]] = {"alpha": ("alpha_u", "alpha_v")}
+
     def __init__(self, type="ggx", alpha=0.1, alpha_v=None, *, sample_visible=True):
         check_choice(type, "type", MICROFACET_TYPES)
         self.type = type
         self.sample_visible = bool(sample_visible)
-        self.alpha_u = as_float_array(check_positive(alpha, "alpha"), "alpha")
-        if alpha_v is None:
-            self.alpha_v = self.alpha_u
-        else:
-            self.alpha_v = as_float_array(check_positive(alpha_v, "alpha_v"), "alpha_v")
+        self.alpha_u = as_float_array(alpha, "alpha")
+        self.alpha_v = self.alpha_u if alpha_v is None else as_float_array(alpha_v, "alpha_v")
+
+    def __check_init__(self):
+        check_choice(self.type, "type", MICROFACET_TYPES)
+        check_positive(self.alpha_u, "alpha")
+        check_positive(self.alpha_v, "alpha_v")
 
     # ------------------------------------------------------------------ D
     def eval(self, m):

@@ -9,14 +9,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from jaxgfx.render.accel._common import (
+from jaxgfx.render.geometry.accel._common import (
     STACK_SIZE,
     TriangleAccel,
     as_numpy_triangles,
     slab,
     tri_chunk,
 )
-from jaxgfx.render.shapes import TriangleMesh
+from jaxgfx.render.geometry.mesh import TriangleMesh
 
 __all__ = ["BVH", "build_bvh"]
 

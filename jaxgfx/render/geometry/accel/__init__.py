@@ -6,13 +6,13 @@ and ``accel.occluded(o, d, tmax, *, tmin) -> bool``. Pass the structure to jitte
 as an argument (it is a pytree) rather than closing over it.
 """
 
-from jaxgfx.render.accel.bvh import BVH as BVH
-from jaxgfx.render.accel.bvh import build_bvh as build_bvh
-from jaxgfx.render.accel.grid import UniformGrid as UniformGrid
-from jaxgfx.render.accel.grid import build_grid as build_grid
-from jaxgfx.render.accel.grid import grid_resolution as grid_resolution
-from jaxgfx.render.accel.kdtree import KDTree as KDTree
-from jaxgfx.render.accel.kdtree import build_kdtree as build_kdtree
+from jaxgfx.render.geometry.accel.bvh_sah import BVH as BVH
+from jaxgfx.render.geometry.accel.bvh_sah import build_bvh as build_bvh
+from jaxgfx.render.geometry.accel.grid_dda import UniformGrid as UniformGrid
+from jaxgfx.render.geometry.accel.grid_dda import build_grid as build_grid
+from jaxgfx.render.geometry.accel.grid_dda import grid_resolution as grid_resolution
+from jaxgfx.render.geometry.accel.kdtree_sah import KDTree as KDTree
+from jaxgfx.render.geometry.accel.kdtree_sah import build_kdtree as build_kdtree
 
 ACCEL_BUILDERS = {
     "bvh_sah": build_bvh,

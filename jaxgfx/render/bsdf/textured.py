@@ -3,7 +3,7 @@
 A :class:`Textured` wraps an unchanged BSDF and a mapping ``field -> texture``; ``at(uv)``
 returns the BSDF with those fields replaced by the texture values at the hit's ``uv`` (via
 ``eqx.tree_at``), so every BSDF works with per-ray parameters ``(..., 3)`` / ``(...)``
-unchanged. The integrators resolve textures through ``_common.dispatch(..., uv=hit.uv)``;
+unchanged. The integrators resolve textures through ``dispatch(..., uv=hit.uv)``;
 materials without textures are never wrapped, so untextured scenes compile to the same program.
 
 Scene-description keys (Mitsuba 3 conventions):
@@ -31,7 +31,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgfx._checks import as_float_array, check_finite
-from jaxgfx.render.texture import TEXTURE_FILTERS, TEXTURE_WRAP_MODES, Texture, lookup
+from jaxgfx.render.bsdf.texture import TEXTURE_FILTERS, TEXTURE_WRAP_MODES, Texture, lookup
+from jaxgfx.render.parameters import get_path, parameter_paths
 
 __all__ = [
     "Checkerboard",
@@ -40,7 +41,8 @@ __all__ = [
     "texture_from_dict",
     "texture_eval",
     "is_texture_desc",
-    "make_textured",
+    "texture_min",
+    "texturable_paths",
 ]
 
 TEXTURE_TYPES = ("bitmap", "checkerboard")
@@ -71,23 +73,12 @@ def texture_eval(tex, uv):
     return lookup(tex, uv).astype(uv.dtype)
 
 
-def _field_paths(bsdf, name):
-    """Attribute paths of the BSDF that the description key ``name`` sets."""
-    if name in ("alpha", "alpha_u") and hasattr(bsdf, "distribution"):
-        if name == "alpha":
-            return (("distribution", "alpha_u"), ("distribution", "alpha_v"))
-        return (("distribution", "alpha_u"),)
-    if name == "alpha_v" and hasattr(bsdf, "distribution"):
-        return (("distribution", "alpha_v"),)
-    if hasattr(bsdf, name) and eqx.is_array(getattr(bsdf, name)):
-        return ((name,),)
-    raise ValueError(f"{name}: not a texturable parameter of {type(bsdf).__name__}")
-
-
-def _get(obj, path):
-    for f in path:
-        obj = getattr(obj, f)
-    return obj
+def texturable_paths(bsdf, name):
+    """Attribute paths of the BSDF that the parameter ``name`` sets (its class's alias table)."""
+    try:
+        return parameter_paths(bsdf, name)
+    except ValueError:
+        raise ValueError(f"{name}: not a texturable parameter of {type(bsdf).__name__}") from None
 
 
 class Textured(eqx.Module):
@@ -104,7 +95,7 @@ class Textured(eqx.Module):
 
     def __check_init__(self):
         for k in self.textures:
-            _field_paths(self.bsdf, k)
+            texturable_paths(self.bsdf, k)
 
     @property
     def has_delta(self):
@@ -120,8 +111,8 @@ class Textured(eqx.Module):
         out = self.bsdf
         for name, tex in self.textures.items():
             val = texture_eval(tex, uv)
-            for path in _field_paths(self.bsdf, name):
-                old = _get(self.bsdf, path)
+            for path in texturable_paths(self.bsdf, name):
+                old = get_path(self.bsdf, path)
                 rgb = old.ndim >= 1 and old.shape[-1] == 3
                 if rgb:
                     new = jnp.broadcast_to(val, val.shape[:-1] + (3,))
@@ -129,7 +120,7 @@ class Textured(eqx.Module):
                     new = val[..., 0]
                 else:
                     new = val[..., :3] @ jnp.asarray(_LUMA, val.dtype)
-                out = eqx.tree_at(lambda b, p=path: _get(b, p), out, new)
+                out = eqx.tree_at(lambda b, p=path: get_path(b, p), out, new)
         return out
 
     @property
@@ -163,7 +154,7 @@ def _read_bitmap(path, raw, where):
 
 
 def texture_from_dict(d, where="texture", *, base_dir=None, channels=3):
-    """Build a texture (:class:`~jaxgfx.render.texture.Texture` or :class:`Checkerboard`) from
+    """Build a texture (:class:`~jaxgfx.render.bsdf.texture.Texture` or :class:`Checkerboard`) from
     a description (see the module docstring). ``channels``: 3 for RGB parameters, 1 for
     scalar ones (sets the default checkerboard colours' length). Errors name ``where``."""
     if not is_texture_desc(d):
@@ -214,41 +205,8 @@ def texture_from_dict(d, where="texture", *, base_dir=None, channels=3):
     raise ValueError(f"{where}.type: expected one of {TEXTURE_TYPES}, got {kind!r}")
 
 
-def _min_value(tex):
+def texture_min(tex) -> float:
+    """Smallest value of a concrete texture (for the loader's range checks)."""
     if isinstance(tex, Checkerboard):
         return float(min(jnp.min(tex.color0), jnp.min(tex.color1)))
     return float(jnp.min(tex.image))
-
-
-def make_textured(desc, make_bsdf, *, where="material", base_dir=None):
-    """Build a material from a description whose parameters may be textures.
-
-    Texture-valued keys are replaced by a neutral constant for the BSDF constructor (which
-    validates everything else), then wrapped in :class:`Textured`. Without texture keys the
-    plain BSDF is returned (no wrapper, no cost). Roughness / exponent / eta textures must be
-    positive, colour textures non-negative.
-    """
-    tex_keys = [k for k, v in desc.items() if k != "type" and is_texture_desc(v)]
-    pre = f"{where}." if where else ""
-    if not tex_keys:
-        return make_bsdf(dict(desc))
-    plain = dict(desc)
-    for k in tex_keys:
-        plain[k] = 0.5
-    bsdf = make_bsdf(plain)
-    textures = {}
-    for k in tex_keys:
-        try:
-            paths = _field_paths(bsdf, k)
-        except ValueError as e:
-            raise ValueError(f"{pre}{k}: {e}") from None
-        old = _get(bsdf, paths[0])
-        rgb = old.ndim >= 1 and old.shape[-1] == 3
-        tex = texture_from_dict(desc[k], f"{pre}{k}", base_dir=base_dir, channels=3 if rgb else 1)
-        lo = _min_value(tex)
-        positive = k.startswith("alpha") or k in ("exponent", "eta")
-        if (positive and not lo > 0) or lo < 0:
-            need = "positive" if positive else "non-negative"
-            raise ValueError(f"{pre}{k}: texture values must be {need}, got min {lo}")
-        textures[k] = tex
-    return Textured(bsdf, textures)

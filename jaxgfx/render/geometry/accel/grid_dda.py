@@ -9,8 +9,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from jaxgfx.render.accel._common import TriangleAccel, as_numpy_triangles, slab, tri_chunk
-from jaxgfx.render.shapes import TriangleMesh
+from jaxgfx.render.geometry.accel._common import TriangleAccel, as_numpy_triangles, slab, tri_chunk
+from jaxgfx.render.geometry.mesh import TriangleMesh
 
 __all__ = ["UniformGrid", "build_grid", "grid_resolution"]
 

@@ -1,11 +1,12 @@
 # ruff: noqa: F722  (jaxtyping shape strings)
-"""Signed distance functions (SDFs) and sphere tracing.
+"""Signed distance functions (SDFs): primitives, CSG operators and normals.
 
 An SDF is an ``eqx.Module`` whose ``__call__(p (..., 3)) -> (...)`` returns the signed
 distance (negative inside) from ``p`` to the surface. Primitives are exact distances
 (Quilez, "distance functions", 2008-2023); ``SDFIntersection``/``SDFSubtraction`` and the smooth
 union give bounds rather than exact distances, which sphere tracing tolerates. Build trees from
-plain dicts with :func:`sdf_from_dict`.
+plain dicts with :func:`sdf_from_dict`; intersect them by sphere tracing
+(:mod:`jaxgfx.render.geometry.sphere_tracing`).
 """
 
 from __future__ import annotations
@@ -17,7 +18,6 @@ from jaxtyping import Array, Float
 
 from jaxgfx._checks import check_positive
 from jaxgfx._math import max_last, safe_div, safe_norm, safe_normalize, sum_last
-from jaxgfx.render.ray import Hit
 
 __all__ = [
     "SDF",
@@ -34,7 +34,6 @@ __all__ = [
     "SDF_OPS",
     "sdf_from_dict",
     "sdf_normal",
-    "sphere_trace",
 ]
 
 
@@ -266,74 +265,3 @@ def sdf_normal(sdf: SDF, p: Float[Array, "*b 3"]) -> Float[Array, "*b 3"]:
     """Unit outward normal ``normalize(grad sdf(p))`` by automatic differentiation."""
     g = jax.grad(lambda q: jnp.sum(sdf(q)))(p)
     return safe_normalize(g)
-
-
-def sphere_trace(
-    sdf: SDF,
-    o: Float[Array, "*b 3"],
-    d: Float[Array, "*b 3"],
-    *,
-    tmin=0.0,
-    tmax=100.0,
-    max_steps: int = 128,
-    eps: float = 1e-4,
-) -> Hit:
-    """First surface crossing of rays ``o, d (..., 3)`` (``d`` unit) by sphere tracing.
-
-    Steps ``t += sdf(o + t d)`` from ``tmin`` (Hart 1996) for a static ``max_steps``
-    (``lax.fori_loop``); a hit is declared when ``|sdf| < eps * max(1, t)`` before ``tmax``.
-    The returned ``t`` is made differentiable by one implicit-function Newton step at the
-    converged point, ``t - (f - stop_grad(f)) / stop_grad(grad f . d)``, so ``dt/dtheta =
-    -(df/dtheta) / (grad f . d)`` for any SDF parameter ``theta`` and for ``o, d``. Normals are
-    ``normalize(grad_p sdf)``; ``uv = 0``, ``prim_id = 0`` on hits.
-    Example: unit :class:`SDFSphere` at the origin, ray from ``(0, 0, -3)`` along ``+z`` →
-    ``t = 2``.
-    """
-    if not isinstance(max_steps, int) or max_steps < 1:
-        raise ValueError(f"max_steps: expected an integer >= 1, got {max_steps!r}")
-    check_positive(eps, "eps")
-    o = jnp.asarray(o)
-    if not jnp.issubdtype(o.dtype, jnp.floating):
-        o = o.astype(jnp.float32)
-    d = jnp.asarray(d, o.dtype)
-    if o.shape[-1:] != (3,) or d.shape[-1:] != (3,):
-        raise ValueError(f"o, d: expected shape (..., 3), got {o.shape} and {d.shape}")
-    o, d = jnp.broadcast_arrays(o, d)
-    batch = o.shape[:-1]
-    tmin = jnp.broadcast_to(jnp.asarray(tmin, o.dtype), batch)
-    tmax = jnp.broadcast_to(jnp.asarray(tmax, o.dtype), batch)
-    sg = jax.lax.stop_gradient
-    f_sg, o_sg, d_sg = sg(sdf), sg(o), sg(d)
-
-    def step(_, s):
-        t, hit, alive = s
-        dist = f_sg(o_sg + t[..., None] * d_sg)
-        close = jnp.abs(dist) < eps * jnp.maximum(1.0, jnp.abs(t))
-        hit = hit | (alive & close)
-        t_new = jnp.where(alive & ~close, t + dist, t)
-        alive = alive & ~close & (t_new < tmax) & (t_new >= tmin - 1e3 * eps)
-        return t_new, hit, alive
-
-    init = (tmin, jnp.zeros(batch, bool), jnp.ones(batch, bool))
-    t, hit, _ = jax.lax.fori_loop(0, max_steps, step, init)
-    hit = hit & (t < tmax) & jnp.isfinite(t)
-    t = jnp.where(hit, t, 0.0)
-    p0 = o_sg + t[..., None] * d_sg
-    g = sg(jax.grad(lambda q: jnp.sum(f_sg(q)))(p0))
-    gd = sum_last(g * d_sg)
-    f_live = sdf(o + t[..., None] * d)
-    t = t - safe_div(f_live - sg(f_live), gd)
-    p = o + t[..., None] * d
-    n = sdf_normal(sdf, p)
-    v3 = hit[..., None]
-    zero3 = jnp.zeros_like(p)
-    return Hit(
-        t=jnp.where(hit, t, jnp.inf),
-        valid=hit,
-        p=jnp.where(v3, p, zero3),
-        ng=jnp.where(v3, n, zero3),
-        ns=jnp.where(v3, n, zero3),
-        uv=jnp.zeros((*batch, 2), o.dtype),
-        prim_id=jnp.where(hit, 0, -1).astype(jnp.int32),
-        shape_id=jnp.where(hit, 0, -1).astype(jnp.int32),
-    )

@@ -19,7 +19,15 @@ from jaxtyping import Array, Bool, Float, Int
 
 from jaxgfx._math import sum_last
 
-__all__ = ["Hit", "empty_hit", "merge_hits", "offset_ray_origin", "spawn_ray"]
+__all__ = [
+    "Hit",
+    "hit_record",
+    "empty_hit",
+    "merge_hits",
+    "prepare_rays",
+    "offset_ray_origin",
+    "spawn_ray",
+]
 
 
 class Hit(eqx.Module):
@@ -50,6 +58,36 @@ class Hit(eqx.Module):
     uv: Float[Array, "*b 2"]
     prim_id: Int[Array, "*b"]
     shape_id: Int[Array, "*b"]
+
+
+def prepare_rays(o, d, tmin, tmax):
+    """Rays at the Python boundary: ``o`` as a float array (float32 for integers), ``d`` in its
+    dtype, both ``(..., 3)`` and broadcast together; ``tmin``, ``tmax`` as arrays of that dtype.
+    ``ValueError`` naming ``o, d`` for other shapes."""
+    o = jnp.asarray(o)
+    if not jnp.issubdtype(o.dtype, jnp.floating):
+        o = o.astype(jnp.float32)
+    d = jnp.asarray(d, o.dtype)
+    if o.shape[-1:] != (3,) or d.shape[-1:] != (3,):
+        raise ValueError(f"o, d: expected shape (..., 3), got {o.shape} and {d.shape}")
+    o, d = jnp.broadcast_arrays(o, d)
+    return o, d, jnp.asarray(tmin, o.dtype), jnp.asarray(tmax, o.dtype)
+
+
+def hit_record(valid, t, p, ng, ns, uv, prim_id, shape_id) -> Hit:
+    """A :class:`Hit` from per-ray values, with the no-hit convention applied where ``valid`` is
+    False (``t = inf``, zero vectors, ``prim_id = shape_id = -1``)."""
+    v3 = valid[..., None]
+    return Hit(
+        t=jnp.where(valid, t, jnp.inf),
+        valid=valid,
+        p=jnp.where(v3, p, 0.0),
+        ng=jnp.where(v3, ng, 0.0),
+        ns=jnp.where(v3, ns, 0.0),
+        uv=jnp.where(v3, uv, 0.0),
+        prim_id=jnp.where(valid, prim_id, -1).astype(jnp.int32),
+        shape_id=jnp.where(valid, shape_id, -1).astype(jnp.int32),
+    )
 
 
 def empty_hit(batch_shape, dtype=jnp.float32) -> Hit:

@@ -1,7 +1,7 @@
 """Host-side mesh I/O (Wavefront OBJ, PLY) and procedural meshes for tests and benchmarks.
 
 Everything here runs in NumPy on the host and returns a
-:class:`jaxgfx.render.shapes.TriangleMesh`. Malformed files raise ``ValueError`` naming the
+:class:`jaxgfx.render.geometry.TriangleMesh`. Malformed files raise ``ValueError`` naming the
 file and line.
 """
 
@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 
-from jaxgfx.render.shapes import TriangleMesh
+from jaxgfx.render.geometry.mesh import TriangleMesh
 
 __all__ = [
     "load_obj",
@@ -39,6 +39,15 @@ def _fix_index(i, n, path, lineno):
     if i == 0 or not 0 <= j < n:
         raise ValueError(f"{path}:{lineno}: index {i} out of range (1..{n} or -{n}..-1)")
     return j
+
+
+def _check_finite_vertices(path, v: np.ndarray) -> None:
+    bad = np.flatnonzero(~np.all(np.isfinite(v), axis=-1))
+    if bad.size:
+        raise ValueError(
+            f"{path}: {bad.size} vertices have NaN/Inf coordinates (first: vertex {bad[0]} "
+            f"= {v[bad[0]].tolist()}, 0-based)"
+        )
 
 
 def load_obj(path) -> TriangleMesh:
@@ -112,6 +121,7 @@ def load_obj(path) -> TriangleMesh:
     if not faces:
         raise ValueError(f"{path}: no faces found")
     V = np.asarray(vs, np.float64)[out_v]
+    _check_finite_vertices(path, np.asarray(vs, np.float64))
     out_t, out_n = np.asarray(out_t), np.asarray(out_n)
     uv = np.asarray(vts)[out_t] if vts and np.all(out_t >= 0) else None
     nn = np.asarray(vns)[out_n] if vns and np.all(out_n >= 0) else None
@@ -237,6 +247,7 @@ def load_ply(path) -> TriangleMesh:
         for k in range(1, len(poly) - 1):
             faces.append([poly[0], poly[k], poly[k + 1]])
     faces = np.asarray(faces, np.int64)
+    _check_finite_vertices(path, np.asarray(V, np.float64))
     if faces.min() < 0 or faces.max() >= len(V):
         raise ValueError(f"{path}: PLY face index out of range [0, {len(V) - 1}]")
     nn = np.stack([np.asarray(vert[c]) for c in ("nx", "ny", "nz")], -1) if "nx" in vert else None

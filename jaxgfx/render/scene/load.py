@@ -1,0 +1,226 @@
+"""``load_scene``: a scene description (mapping or YAML file) -> :class:`Scene`."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+
+import jax.numpy as jnp
+
+from jaxgfx.render.bsdf import make_bsdf
+from jaxgfx.render.bsdf.textured import (
+    Textured,
+    is_texture_desc,
+    texturable_paths,
+    texture_from_dict,
+    texture_min,
+)
+from jaxgfx.render.emitters import AreaLight, ConstantEnvironment, EnvironmentMap, PointLights
+from jaxgfx.render.film import make_filter
+from jaxgfx.render.geometry import Rectangles, SDFShape, Spheres, area
+from jaxgfx.render.parameters import get_path
+from jaxgfx.render.scene.scene import Scene
+from jaxgfx.render.scene.schema import (
+    EMITTER_TYPES,
+    SCENE_KEYS,
+    build_camera,
+    envmap_image,
+    expect_keys,
+    rgb,
+    shape_from_desc,
+    vec,
+)
+
+__all__ = ["load_scene", "material_from_desc", "BVH_MIN_TRIANGLES"]
+
+BVH_MIN_TRIANGLES = 64
+
+
+def material_from_desc(desc, *, where="material", base_dir=None):
+    """A BSDF from a material description whose parameters may be textures.
+
+    Texture-valued keys are replaced by a neutral constant for :func:`make_bsdf` (which
+    validates everything else), then wrapped in :class:`Textured` (the keys resolve to BSDF
+    fields through the class's ``PARAMETER_ALIASES``). Without texture keys the plain BSDF is
+    returned (no wrapper, no cost). Roughness / exponent / eta textures must be positive,
+    colour textures non-negative.
+    """
+    desc = dict(desc)
+    tex_keys = [k for k, v in desc.items() if k != "type" and is_texture_desc(v)]
+    pre = f"{where}." if where else ""
+    if not tex_keys:
+        return make_bsdf(desc)
+    plain = dict(desc)
+    for k in tex_keys:
+        plain[k] = 0.5
+    bsdf = make_bsdf(plain)
+    textures = {}
+    for k in tex_keys:
+        try:
+            paths = texturable_paths(bsdf, k)
+        except ValueError as e:
+            raise ValueError(f"{pre}{k}: {e}") from None
+        old = get_path(bsdf, paths[0])
+        rgb = old.ndim >= 1 and old.shape[-1] == 3
+        tex = texture_from_dict(desc[k], f"{pre}{k}", base_dir=base_dir, channels=3 if rgb else 1)
+        lo = texture_min(tex)
+        positive = k.startswith("alpha") or k in ("exponent", "eta")
+        if (positive and not lo > 0) or lo < 0:
+            need = "positive" if positive else "non-negative"
+            raise ValueError(f"{pre}{k}: texture values must be {need}, got min {lo}")
+        textures[k] = tex
+    return Textured(bsdf, textures)
+
+
+def _concat(shapes):
+    first = shapes[0]
+    if isinstance(first, Spheres):
+        return Spheres(
+            jnp.concatenate([s.centers for s in shapes]), jnp.concatenate([s.radii for s in shapes])
+        )
+    return Rectangles(
+        jnp.concatenate([s.centers for s in shapes]),
+        jnp.concatenate([s.edge_u for s in shapes]),
+        jnp.concatenate([s.edge_v for s in shapes]),
+    )
+
+
+def load_scene(desc, *, base_dir: str | None = None) -> Scene:
+    """Build a :class:`Scene` from a description mapping or a YAML file path."""
+    if isinstance(desc, (str, os.PathLike)):
+        from jaxgfx.config import read_yaml
+
+        base_dir = base_dir or os.path.dirname(os.path.abspath(os.fspath(desc)))
+        desc = read_yaml(desc)
+    expect_keys(desc, "scene", *SCENE_KEYS)
+    camera = build_camera(desc["camera"])
+    film = desc.get("film", {}) or {}
+    expect_keys(film, "film", (), ("filter", "stddev", "radius"))
+    fopts = {k: v for k, v in film.items() if k != "filter"}
+    rfilter = make_filter(film.get("filter", "box"), **fopts)
+
+    mats_desc = desc.get("materials", {}) or {}
+    if not isinstance(mats_desc, Mapping):
+        raise ValueError("materials: expected a mapping from names to material descriptions")
+    names, materials = [], []
+    for name, md in mats_desc.items():
+        try:
+            materials.append(material_from_desc(md, where="", base_dir=base_dir))
+        except (ValueError, TypeError) as e:
+            raise ValueError(f"materials.{name}: {e}") from None
+        names.append(str(name))
+
+    def material_index(d, where):
+        m = d.get("material")
+        if m is None:
+            if "__default__" not in names:
+                names.append("__default__")
+                materials.append(make_bsdf({"type": "diffuse", "reflectance": 0.5}))
+            return names.index("__default__")
+        if m not in names:
+            raise ValueError(f"{where}.material: unknown material {m!r}; have {names}")
+        return names.index(m)
+
+    shapes_desc = desc["shapes"]
+    if not isinstance(shapes_desc, (list, tuple)):
+        raise ValueError("shapes: expected a list")
+    groups: dict[str, list] = {"sphere": [], "rectangle": []}
+    group_mats: dict[str, list] = {"sphere": [], "rectangle": []}
+    meshes = []
+    for i, sd in enumerate(shapes_desc):
+        where = f"shapes[{i}]"
+        kind, shape = shape_from_desc(sd, where, base_dir)
+        mi = material_index(sd, where)
+        if kind in ("mesh", "sdf"):
+            meshes.append((shape, mi))
+        else:
+            groups[kind].append(shape)
+            group_mats[kind].append(mi)
+
+    shapes, shape_mats = [], []
+    for kind in ("sphere", "rectangle"):
+        if groups[kind]:
+            shapes.append(_concat(groups[kind]))
+            shape_mats.append(jnp.asarray(group_mats[kind], jnp.int32))
+    for m, mi in meshes:
+        if isinstance(m, SDFShape):
+            shapes.append(m)
+            shape_mats.append(jnp.full((1,), mi, jnp.int32))
+            continue
+        if m.faces.shape[0] >= BVH_MIN_TRIANGLES:
+            from jaxgfx.render.geometry.accel.bvh_sah import build_bvh
+
+            shapes.append(build_bvh(m))
+        else:
+            shapes.append(m)
+        shape_mats.append(jnp.full((m.faces.shape[0],), mi, jnp.int32))
+
+    points_pos, points_int, area_lights, emitter_shapes = [], [], [], []
+    environment = None
+    em_desc = desc.get("emitters", []) or []
+    if not isinstance(em_desc, (list, tuple)):
+        raise ValueError("emitters: expected a list")
+    for i, ed in enumerate(em_desc):
+        where = f"emitters[{i}]"
+        if not isinstance(ed, Mapping) or "type" not in ed:
+            raise ValueError(f"{where}: expected a mapping with a 'type' key")
+        kind = ed["type"]
+        if kind == "point":
+            expect_keys(ed, where, ("type", "position", "intensity"))
+            points_pos.append(vec(ed["position"], f"{where}.position"))
+            points_int.append(rgb(ed["intensity"], f"{where}.intensity"))
+        elif kind == "area":
+            expect_keys(ed, where, ("type", "shape", "radiance"), ("material",))
+            sk, shape = shape_from_desc(ed["shape"], f"{where}.shape", base_dir)
+            if sk == "sdf":
+                raise ValueError(f"{where}.shape: SDF shapes cannot be area lights (no area)")
+            if "material" in ed["shape"]:
+                raise ValueError(f"{where}.shape.material: put 'material' on the emitter")
+            if ed.get("material"):
+                mi = material_index(ed, where)
+            else:
+                mi = _black_material(names, materials)
+            shapes.append(shape)
+            n_prims = shape.faces.shape[0] if sk == "mesh" else 1
+            shape_mats.append(jnp.full((n_prims,), mi, jnp.int32))
+            area_lights.append(AreaLight(rgb(ed["radiance"], f"{where}.radiance"), len(shapes) - 1))
+            emitter_shapes.append(shape)
+        elif kind in ("constant", "envmap"):
+            if environment is not None:
+                raise ValueError(f"{where}: only one environment emitter is supported")
+            if kind == "constant":
+                expect_keys(ed, where, ("type", "radiance"))
+                environment = ConstantEnvironment(rgb(ed["radiance"], f"{where}.radiance"))
+            else:
+                environment = EnvironmentMap.create(
+                    envmap_image(ed, where, base_dir), ed.get("scale", 1.0)
+                )
+        else:
+            raise ValueError(f"{where}.type: expected one of {EMITTER_TYPES}, got {kind!r}")
+    if not shapes:
+        raise ValueError("shapes: the scene has no geometry")
+    point_lights = (
+        PointLights.create(jnp.stack(points_pos), jnp.stack(points_int)) if points_pos else None
+    )
+    for i, sh in enumerate(emitter_shapes):
+        if float(area(sh)) <= 0:
+            raise ValueError(f"emitters: area light {i} has zero area")
+    return Scene(
+        camera=camera,
+        shapes=tuple(shapes),
+        shape_materials=tuple(shape_mats),
+        materials=tuple(materials),
+        point_lights=point_lights,
+        area_lights=tuple(area_lights),
+        emitter_shapes=tuple(emitter_shapes),
+        environment=environment,
+        material_names=tuple(names),
+        rfilter=rfilter,
+    )
+
+
+def _black_material(names, materials):
+    if "__black__" not in names:
+        names.append("__black__")
+        materials.append(make_bsdf({"type": "diffuse", "reflectance": 0.0}))
+    return names.index("__black__")

@@ -1,0 +1,183 @@
+"""Scenes: a pytree of camera, shapes, materials and emitters, built from a dict or YAML file.
+
+``load_scene(desc)`` accepts a mapping or a path to a YAML file with the sections ``camera``,
+``shapes``, ``materials``, ``emitters`` (and optional ``film``), e.g.::
+
+    camera: {origin: [0, 1.5, 5], target: [0, 1, 0], fov: 45, width: 128, height: 128}
+    shapes:
+      - {type: sphere, center: [0, 1, 0], radius: 1, material: metal}
+      - {type: rectangle, center: [0, 0, 0], normal: [0, 1, 0], size: [10, 10], material: floor}
+      - {type: mesh, file: bunny.obj, material: floor}
+      - {type: sdf, expr: {op: sphere, center: [2, 1, 0], radius: 0.5}, material: floor,
+         max_steps: 128, eps: 1e-4}                    # sphere traced (SDFShape)
+    materials:
+      metal: {type: roughconductor, distribution: ggx, alpha: 0.3}
+      floor: {type: diffuse, reflectance: {type: checkerboard, color0: 0.8, color1: 0.2, scale: 8}}
+    emitters:
+      - {type: area, shape: {type: rectangle, center: [0, 4, 0], normal: [0, -1, 0], size: [2, 2]},
+         radiance: [10, 10, 10]}
+      - {type: point, position: [2, 3, 1], intensity: [50, 50, 50]}
+      - {type: constant, radiance: [1, 1, 1]}          # or {type: envmap, file: sky.exr}
+
+Every float is a differentiable leaf. Unknown keys, missing materials, NaN parameters raise
+``ValueError`` naming the field (``shapes[1].radius``). Only what a scene uses is built: no
+acceleration structure without meshes, no environment without an environment emitter, and the
+integrators evaluate only the material types present.
+
+``scene.replace("materials.metal.alpha", 0.2)`` returns a copy with one parameter changed
+(also ``camera.fov``, ``emitters.point.intensities``, ``emitters.area.0.radiance``, nested
+fields such as ``materials.metal.distribution.alpha_u``; ``alpha`` of a microfacet material
+sets both ``alpha_u`` and ``alpha_v``).
+``scene.get(path)`` reads one. Any RGB / float material parameter may be a texture
+(``{type: bitmap, file|image, wrap, filter, raw}`` or ``{type: checkerboard, ...}``, see
+:mod:`jaxgfx.render.bsdf.textured`); texels are leaves (``materials.floor.reflectance.image``,
+``materials.floor.reflectance.color0``). SDF parameters: ``shapes.I.sdf.radius`` (``I`` indexes
+``scene.shapes``). Details and measurements: docs/render_scenes.md.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from jaxgfx._checks import is_concrete
+from jaxgfx.render.bsdf.textured import Textured
+from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera
+from jaxgfx.render.emitters import ConstantEnvironment, EnvironmentMap, PointLights
+from jaxgfx.render.parameters import array_fields, get_path, parameter_paths, revalidate
+
+__all__ = ["Scene"]
+
+
+class Scene(eqx.Module):
+    """A renderable scene (pytree). Build with :func:`load_scene`.
+
+    Fields: ``camera``; ``shapes`` (tuple of Spheres / Rectangles / TriangleMesh / BVH);
+    ``shape_materials`` (tuple of int32 arrays, material index per primitive of each shape);
+    ``materials`` (tuple of BSDFs) named by the static ``material_names``; ``point_lights``
+    (PointLights or None); ``area_lights`` (tuple of AreaLight); ``environment``
+    (ConstantEnvironment / EnvironmentMap / None); ``emitter_shapes`` (tuple: the raw shape of each
+    area light, for sampling); ``rfilter`` (reconstruction filter, static).
+    """
+
+    camera: PerspectiveCamera | MatrixCamera
+    shapes: tuple
+    shape_materials: tuple
+    materials: tuple
+    point_lights: PointLights | None
+    area_lights: tuple
+    emitter_shapes: tuple
+    environment: ConstantEnvironment | EnvironmentMap | None
+    material_names: tuple = eqx.field(static=True)
+    rfilter: object = eqx.field(static=True)
+
+    @property
+    def width(self) -> int:
+        return self.camera.width
+
+    @property
+    def height(self) -> int:
+        return self.camera.height
+
+    @property
+    def n_lights(self) -> int:
+        n = len(self.area_lights) + (self.environment is not None)
+        return n + (self.point_lights.count if self.point_lights is not None else 0)
+
+    # -- parameter access by name ------------------------------------------------------------
+    def _locate(self, path: str):
+        parts = path.split(".")
+        head = parts[0]
+        if head == "materials":
+            if len(parts) < 2 or parts[1] not in self.material_names:
+                raise ValueError(f"{path}: unknown material; have {list(self.material_names)}")
+            idx = self.material_names.index(parts[1])
+            getter = lambda s: s.materials[idx]  # noqa: E731
+            rest = parts[2:]
+        elif head == "camera":
+            getter = lambda s: s.camera  # noqa: E731
+            rest = parts[1:]
+        elif head == "emitters" and len(parts) >= 2 and parts[1] == "point":
+            if self.point_lights is None:
+                raise ValueError(f"{path}: the scene has no point lights")
+            getter = lambda s: s.point_lights  # noqa: E731
+            rest = parts[2:]
+        elif head == "emitters" and len(parts) >= 3 and parts[1] == "area":
+            i = int(parts[2])
+            if not 0 <= i < len(self.area_lights):
+                raise ValueError(f"{path}: area light index out of range")
+            getter = lambda s: s.area_lights[i]  # noqa: E731
+            rest = parts[3:]
+        elif head == "emitters" and len(parts) >= 2 and parts[1] == "environment":
+            if self.environment is None:
+                raise ValueError(f"{path}: the scene has no environment emitter")
+            getter = lambda s: s.environment  # noqa: E731
+            rest = parts[2:]
+        elif head == "shapes" and len(parts) >= 2:
+            i = int(parts[1])
+            getter = lambda s: s.shapes[i]  # noqa: E731
+            rest = parts[2:]
+        else:
+            raise ValueError(
+                f"{path}: expected materials.NAME.FIELD, camera.FIELD, emitters.point.FIELD, "
+                "emitters.area.I.FIELD, emitters.environment.FIELD or shapes.I.FIELD"
+            )
+        if not rest:
+            raise ValueError(f"{path}: expected a field name after the object")
+        obj = getter(self)
+        prefix = []
+        if isinstance(obj, Textured):
+            # textured parameter: materials.NAME.FIELD.image / .color0; others: the BSDF's
+            if rest[0] in obj.textures:
+                if len(rest) < 2:
+                    raise ValueError(f"{path}: {rest[0]!r} is a texture; name its parameter")
+                prefix = [("textures", rest[0])]
+                obj, rest = obj.textures[rest[0]], rest[1:]
+            else:
+                prefix = ["bsdf"]
+                obj = obj.bsdf
+        # aliases (e.g. isotropic `alpha` sets both microfacet alphas): the class's table
+        aliases = getattr(type(obj), "PARAMETER_ALIASES", {})
+        if len(rest) == 1 and rest[0] in aliases:
+            rest_list = [list(p) for p in parameter_paths(obj, rest[0])]
+        else:
+            rest_list = [rest]
+        getters = []
+        for fields in rest_list:
+            o = obj
+            for field in fields:
+                if not hasattr(o, field):
+                    raise ValueError(f"{path}: no parameter {field!r}; have {array_fields(o)}")
+                o = getattr(o, field)
+            if not eqx.is_array(o):
+                raise ValueError(f"{path}: {fields[-1]!r} is not an array parameter")
+
+            def where(s, fields=(*prefix, *fields)):
+                return get_path(getter(s), fields)
+
+            getters.append(where)
+        return getters, getter
+
+    def get(self, path: str):
+        """The array at a dotted parameter path (see :meth:`replace`)."""
+        return self._locate(path)[0][0](self)
+
+    def replace(self, path: str, value):
+        """Copy of the scene with the parameter at ``path`` set to ``value`` (same shape).
+
+        The changed object is checked as its constructor checks it (``__check_init__``), so a
+        concrete value the loader would refuse raises the same ``ValueError`` here (e.g.
+        ``materials.metal.alpha`` = 0); traced values (inside ``jit`` / ``grad``) pass.
+        """
+        wheres, owner = self._locate(path)
+        out = self
+        for where in wheres:
+            old = where(out)
+            new = jnp.broadcast_to(jnp.asarray(value, old.dtype), old.shape)
+            out = eqx.tree_at(where, out, new)
+        if is_concrete(value):
+            try:
+                revalidate(owner(out))
+            except (ValueError, TypeError) as e:
+                raise type(e)(f"{path}: {e}") from None
+        return out

@@ -1,0 +1,191 @@
+"""The scene description's schema: validators and the builders of cameras and shapes from their
+description mappings (``ValueError`` naming the field, e.g. ``shapes[1].radius``).
+
+Shared by :func:`jaxgfx.render.scene.load_scene` and the Mitsuba exporter, so both accept and
+refuse exactly the same descriptions.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgfx._checks import as_float_array, check_finite
+from jaxgfx._math import safe_normalize
+from jaxgfx.render.bsdf import rgb_param
+from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera
+from jaxgfx.render.geometry import Rectangles, SDFShape, Spheres, TriangleMesh, sdf_from_dict
+from jaxgfx.render.geometry.frame import frame_from_normal
+
+__all__ = [
+    "SHAPE_TYPES",
+    "EMITTER_TYPES",
+    "SCENE_KEYS",
+    "expect_keys",
+    "vec",
+    "num",
+    "rgb",
+    "envmap_image",
+    "build_camera",
+    "rectangle_from_desc",
+    "mesh_from_desc",
+    "shape_from_desc",
+]
+
+SHAPE_TYPES = ("sphere", "rectangle", "mesh", "sdf")
+EMITTER_TYPES = ("area", "point", "constant", "envmap")
+SCENE_KEYS = (("camera", "shapes"), ("materials", "emitters", "film"))
+"""(required, optional) top-level keys of a scene description."""
+
+
+def envmap_image(ed, where, base_dir=None) -> np.ndarray:
+    """The lat-long image of an ``envmap`` emitter description (``file`` relative to
+    ``base_dir``, or an inline ``image``), validated to ``(H, W, >=3)``."""
+    expect_keys(ed, where, ("type",), ("file", "image", "scale"))
+    if "file" in ed:
+        from jaxgfx import io
+
+        path = os.fspath(ed["file"])
+        if not os.path.isabs(path) and base_dir:
+            path = os.path.join(base_dir, path)
+        img = io.read_any(path)
+    elif "image" in ed:
+        img = np.asarray(ed["image"], np.float32)
+    else:
+        raise ValueError(f"{where}: expected 'file' or 'image'")
+    if img.ndim != 3 or img.shape[-1] < 3:
+        raise ValueError(f"{where}.image: expected (H, W, 3), got shape {img.shape}")
+    return img
+
+
+def expect_keys(d, where, required=(), optional=()):
+    if not isinstance(d, Mapping):
+        raise ValueError(f"{where}: expected a mapping, got {type(d).__name__}")
+    unknown = sorted(set(d) - set(required) - set(optional))
+    if unknown:
+        raise ValueError(
+            f"{where}: unknown key(s) {unknown}; expected {sorted(set(required) | set(optional))}"
+        )
+    missing = [k for k in required if k not in d]
+    if missing:
+        raise ValueError(f"{where}: missing key(s) {missing}")
+
+
+def vec(x, where, n=3):
+    a = as_float_array(x, where)
+    check_finite(a, where)
+    if a.shape != (n,):
+        raise ValueError(f"{where}: expected {n} numbers, got shape {a.shape}")
+    return a
+
+
+def num(x, where, *, positive=False):
+    a = as_float_array(x, where)
+    check_finite(a, where)
+    if a.shape != ():
+        raise ValueError(f"{where}: expected a number, got shape {a.shape}")
+    if positive and not float(a) > 0:
+        raise ValueError(f"{where}: expected a positive number, got {float(a)}")
+    return a
+
+
+def rgb(x, where):
+    a = rgb_param(x, where)
+    if a.shape != (3,):
+        raise ValueError(f"{where}: expected a number or an RGB triple, got shape {a.shape}")
+    return a
+
+
+def build_camera(d, where="camera"):
+    if "view_proj_inverse" in d:
+        expect_keys(d, where, ("view_proj_inverse", "width", "height"))
+        return MatrixCamera.from_matrix(d["view_proj_inverse"], d["width"], d["height"])
+    expect_keys(d, where, ("origin", "target", "fov", "width", "height"), ("up", "fov_axis"))
+    return PerspectiveCamera.look_at(
+        vec(d["origin"], f"{where}.origin"),
+        vec(d["target"], f"{where}.target"),
+        vec(d.get("up", [0.0, 1.0, 0.0]), f"{where}.up"),
+        num(d["fov"], f"{where}.fov"),
+        d["width"],
+        d["height"],
+        fov_axis=d.get("fov_axis", "x"),
+    )
+
+
+def rectangle_from_desc(d, where):
+    n = vec(d["normal"], f"{where}.normal")
+    nn = float(jnp.linalg.norm(n))
+    if nn == 0:
+        raise ValueError(f"{where}.normal: expected a non-zero vector")
+    size = as_float_array(d.get("size", [2.0, 2.0]), f"{where}.size")
+    if size.shape != (2,) or bool(jnp.any(size <= 0)):
+        raise ValueError(f"{where}.size: expected two positive numbers")
+    fr = frame_from_normal(n / nn)
+    return Rectangles(
+        vec(d["center"], f"{where}.center")[None], (fr.s * size[0])[None], (fr.t * size[1])[None]
+    )
+
+
+def mesh_from_desc(d, where, base_dir):
+    from jaxgfx.render.geometry import mesh_io
+
+    if "file" in d:
+        path = d["file"]
+        if not os.path.isabs(path) and base_dir:
+            path = os.path.join(base_dir, path)
+        ext = os.path.splitext(path)[1].lower()
+        if ext not in (".obj", ".ply"):
+            raise ValueError(f"{where}.file: expected an .obj or .ply file, got {path!r}")
+        try:
+            m = (mesh_io.load_obj if ext == ".obj" else mesh_io.load_ply)(path)
+        except ValueError as e:  # name the shape as well as the file
+            raise ValueError(f"{where}.file: {e}") from None
+    elif "vertices" in d and "faces" in d:
+        v = check_finite(as_float_array(d["vertices"], f"{where}.vertices"), f"{where}.vertices")
+        f = np.asarray(d["faces"])
+        if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
+            raise ValueError(f"{where}: expected vertices (V, 3) and faces (F, 3)")
+        if f.min() < 0 or f.max() >= v.shape[0]:
+            raise ValueError(f"{where}.faces: vertex index out of range")
+        m = TriangleMesh(v, jnp.asarray(f, jnp.int32))
+    else:
+        raise ValueError(f"{where}: expected 'file' or 'vertices' + 'faces'")
+    if "translate" in d or "scale" in d:
+        s = as_float_array(d.get("scale", 1.0), f"{where}.scale")
+        t = vec(d.get("translate", [0.0, 0.0, 0.0]), f"{where}.translate")
+        normals = m.normals
+        if normals is not None:  # normals transform with the inverse transpose: n / s
+            normals = safe_normalize(normals / s)
+        m = TriangleMesh(m.vertices * s + t, m.faces, normals, m.uvs)
+    return m
+
+
+def shape_from_desc(d, where, base_dir):
+    if not isinstance(d, Mapping) or "type" not in d:
+        raise ValueError(f"{where}: expected a mapping with a 'type' key")
+    kind = d["type"]
+    common = ("type", "material")
+    if kind == "sphere":
+        expect_keys(d, where, ("type", "center", "radius"), common)
+        r = num(d["radius"], f"{where}.radius", positive=True)
+        return "sphere", Spheres(vec(d["center"], f"{where}.center")[None], r[None])
+    if kind == "rectangle":
+        expect_keys(d, where, ("type", "center", "normal"), (*common, "size"))
+        return "rectangle", rectangle_from_desc(d, where)
+    if kind == "mesh":
+        expect_keys(
+            d, where, ("type",), (*common, "file", "vertices", "faces", "translate", "scale")
+        )
+        return "mesh", mesh_from_desc(d, where, base_dir)
+    if kind == "sdf":
+        expect_keys(d, where, ("type", "expr"), (*common, "max_steps", "eps"))
+        expr = d["expr"]
+        sdf = sdf_from_dict(dict(expr) if isinstance(expr, Mapping) else expr, path=f"{where}.expr")
+        try:
+            return "sdf", SDFShape(sdf, d.get("max_steps", 128), d.get("eps", 1e-4))
+        except ValueError as e:
+            raise ValueError(f"{where}.{e}") from None
+    raise ValueError(f"{where}.type: expected one of {SHAPE_TYPES}, got {kind!r}")

@@ -1,0 +1,472 @@
+"""The defects of issue 12, one test each (every one failed before its fix).
+
+References: scikit-image (``canny``, ``equalize_hist``), SciPy (``gaussian_laplace``), the
+closed-form derivative of the LoG kernel at a vanishing sigma, the project's own readers for
+files written by the CLI (format by content, not by name).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import re
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxgfx import hdr, image, io
+from jaxgfx.config import load_config
+from jaxgfx.pipelines import calibrate as calibrate_mod
+from jaxgfx.pipelines.calibrate import CalibrateConfig
+
+from ._util import assert_one_line_error, no_partial_files, read_only_sys, run_cli, snapshot
+
+READ_ONLY = "/sys/jaxgfx-reliability"  # sysfs: not writable, even by root
+
+
+def _read_only_available() -> bool:
+    return read_only_sys()
+
+
+# --------------------------------------------------------------- D1 all-clipped bracket
+
+
+@pytest.mark.parametrize("level", [255, 0], ids=["saturated", "black"])
+@pytest.mark.parametrize("method", sorted(hdr.RESPONSE_METHODS))
+def test_d01_clipped_bracket_is_an_error(method, level):
+    stack = np.full((3, 16, 16, 3), level, np.uint8)
+    with pytest.raises(ValueError, match=r"too few usable pixels.*at least 16"):
+        hdr.recover_response(stack, [1.0, 2.0, 4.0], method=method)
+
+
+def test_d01_cli_clipped_bracket_fails_and_writes_nothing(files, tmp_path):
+    out = tmp_path / "out"
+    code, _, err = run_cli(["calibrate", files["saturated"], "--out", out, "--quiet"])
+    assert_one_line_error(code, err, "too few usable pixels")
+    assert not out.exists() and no_partial_files(tmp_path)
+
+
+def test_d01_threshold_is_the_stated_one():
+    # 16 usable pixels pass the check, 15 do not (the rest of the frame clipped)
+    stack = np.full((3, 16, 16, 1), 255, np.uint8)
+    stack[:, 0, :16, 0] = np.array([[40], [80], [160]], np.uint8)
+    hdr.response._check_usable(stack, 255.0)
+    stack[:, 0, 15, 0] = 255
+    with pytest.raises(ValueError, match="15 per channel"):
+        hdr.response._check_usable(stack, 255.0)
+    assert hdr.MIN_USABLE_PIXELS == 16
+
+
+# --------------------------------------------------------------- D2 canny on a flat image
+
+
+@functools.cache
+def _canny_quantiles():
+    return jax.jit(lambda x, lo, hi: image.canny(x, 1.0, lo, hi, use_quantiles=True))
+
+
+def test_d02_canny_flat_image_has_no_edges():
+    from skimage.feature import canny as sk_canny
+
+    flat = np.full((32, 32), 0.5, np.float32)
+    ours = np.asarray(_canny_quantiles()(flat, 0.1, 0.2))
+    # float64 for scikit-image: its float32 blur leaves rounding noise that it marks as edges
+    ref = sk_canny(flat.astype(np.float64), 1.0, 0.1, 0.2, use_quantiles=True)
+    assert ours.sum() == ref.sum() == 0
+    # thresholds 0 (the quantile-0 of a flat magnitude is 0: the same comparisons as the
+    # CLI's --low 0 --high 0): still no edges
+    assert int(np.asarray(_canny_quantiles()(flat, 0.0, 0.0)).sum()) == 0
+
+
+@pytest.mark.slow  # ~13 s: canny runs op by op in the CLI
+def test_d02_cli_canny_flat_image(files, tmp_path):
+    out = tmp_path / "edges.png"
+    code, _, err = run_cli(
+        ["filter", files["const_png"], out, "--op", "canny", "--low", "0", "--high", "0"]
+    )
+    assert code == 0, err
+    assert int(io.read_image(str(out)).sum()) == 0
+
+
+# --------------------------------------------------------------- D3 equalize a flat image
+
+
+@pytest.mark.parametrize("value", [0.5, 0.0, -1.0])
+def test_d03_equalize_flat_image_like_skimage(value):
+    from skimage.exposure import equalize_hist
+
+    flat = np.full((8, 8), value, np.float32)
+    ours = np.asarray(image.equalize_histogram(flat))
+    np.testing.assert_array_equal(ours, equalize_hist(flat).astype(np.float32))
+    assert np.all(ours == 0.5)
+
+
+# --------------------------------------------------------------- D4 config values checked
+
+
+@pytest.mark.parametrize(
+    "data, needle",
+    [
+        ({"demosaic": "fancy"}, "demosaic: expected one of malvar, bilinear"),
+        ({"preview_key": -1.0}, "preview_key: expected a finite value > 0"),
+        ({"preview_key": 0.0}, "preview_key"),
+        ({"response": {"options": {"n_samples": 0}}}, "n_samples: expected an integer >= 32"),
+        ({"response": {"options": {"n_samples": 31}}}, "n_samples"),
+        ({"response": {"options": {"smoothness": 50.0}}}, "has no option 'smoothness'"),
+        ({"align": {"method": "sift"}}, "align.method: expected one of phase, mtb"),
+        ({"merge": {"weighting": "box"}}, "merge.weighting"),
+        ({"response": {"method": "magic"}}, "response.method"),
+        ({"response": {"compare": ["debevec", "nope"]}}, "response.compare[1]"),
+        ({"exposure_times": [1.0, 0.0]}, "exposure_times[1]"),
+    ],
+)
+def test_d04_config_values_are_checked(data, needle):
+    with pytest.raises(ValueError) as e:
+        load_config(CalibrateConfig, data)
+    assert needle in str(e.value)
+
+
+def test_d04_the_config_comment_example_loads():
+    # the example in configs/calibrate.yaml's comment must be a valid options mapping
+    with open("configs/calibrate.yaml", encoding="utf-8") as f:
+        text = f.read()
+    example = re.search(r"options: \{\}.*e\.g\. (\{.*\})", text).group(1)
+    import yaml
+
+    opts = yaml.safe_load(example)
+    cfg = load_config(CalibrateConfig, {"response": {"options": opts}})
+    assert cfg.response.options == opts and "lam" in opts
+
+
+# --------------------------------------------------------------- D5 checks under tracing
+
+
+def _merge_inputs():
+    imgs = (np.random.default_rng(0).random((3, 8, 8, 3)) * 255).astype(np.uint8)
+    return imgs, hdr.CameraResponse.gamma(1.0, anchor="unit")
+
+
+@pytest.mark.parametrize("transform", ["jit", "grad"])
+def test_d05_merge_zero_time_under_tracing_raises(transform):
+    imgs, resp = _merge_inputs()
+    f = lambda t: hdr.merge_radiance(imgs, t, resp).sum()  # noqa: E731
+    f = jax.jit(f) if transform == "jit" else jax.grad(f)
+    with pytest.raises(RuntimeError, match="exposure_times: expected finite values > 0"):
+        jax.block_until_ready(f(jnp.array([0.0, 1.0, 2.0])))
+    # valid times still work under the same transformation and agree with eager
+    good = jnp.array([0.5, 1.0, 2.0])
+    eager = hdr.merge_radiance(imgs, good, resp).sum()
+    if transform == "jit":
+        np.testing.assert_allclose(float(f(good)), float(eager), rtol=1e-6)
+    else:
+        assert np.all(np.isfinite(np.asarray(f(good))))
+
+
+def test_d05_gamma_fit_zero_time_under_jit_raises():
+    imgs, _ = _merge_inputs()
+    f = jax.jit(lambda t: hdr.recover_response(imgs, t, method="gamma").params)
+    with pytest.raises(RuntimeError, match="exposure_times: expected finite values > 0"):
+        jax.block_until_ready(f(jnp.array([0.0, 1.0, 2.0])))
+
+
+# --------------------------------------------------------------- D6 LoG at a tiny sigma
+
+
+def test_d06_log_sigma_gradient_at_1e_8_is_finite_and_exact():
+    # at sigma << 1 the kernel is -2/sigma^2 at the centre, 0 elsewhere: d/dsigma = 4/sigma^3
+    x = jnp.ones((5, 5))
+    s = 1e-8
+    g = jax.jit(jax.grad(lambda s: image.laplacian_of_gaussian(x, s, radius=1).sum()))(
+        jnp.float32(s)
+    )
+    assert np.isfinite(float(g))
+    np.testing.assert_allclose(float(g), 25 * 4 / s**3, rtol=1e-5)
+
+
+def test_d06_log_unchanged_at_ordinary_sigma():
+    from scipy.ndimage import gaussian_laplace
+
+    x = np.random.default_rng(1).random((12, 13)).astype(np.float32)
+    ours = np.asarray(image.laplacian_of_gaussian(x, 0.3))  # the log-space tail matters here
+    np.testing.assert_allclose(ours, gaussian_laplace(x, 0.3, mode="mirror"), atol=2e-5)
+
+
+def test_d06_log_tiny_sigma_error_names_sigma():
+    with pytest.raises(ValueError, match=r"^sigma: expected >= "):
+        image.laplacian_of_gaussian(jnp.ones((5, 5)), 1e-20)
+
+
+# --------------------------------------------------------------- D7 render output formats
+
+
+@pytest.fixture
+def fake_render(monkeypatch):
+    """Replace the renderer by a known HDR image (values up to 4): these tests are about what
+    the job writes, not about rendering."""
+    import jaxgfx.render
+
+    calls = []
+    img = np.linspace(0.0, 4.0, 6 * 8 * 3, dtype=np.float32).reshape(6, 8, 3)
+
+    def render(scene, key, **kw):
+        calls.append(kw)
+        return jnp.asarray(img)
+
+    monkeypatch.setattr(jaxgfx.render, "render", render)
+    return img, calls
+
+
+def test_d07_hdr_output_is_radiance_rgbe(files, tmp_path, fake_render):
+    img, _ = fake_render
+    code, out, err = run_cli(["render", files["scene"], tmp_path / "out.hdr"])
+    assert code == 0, err
+    back = io.read_hdr(str(tmp_path / "out.hdr"))  # would fail on EXR bytes
+    np.testing.assert_allclose(back, img, rtol=2e-2, atol=2e-2)  # RGBE: 8-bit mantissa
+    assert sorted(os.listdir(tmp_path)) == ["out.hdr", "out.png"]
+
+
+def test_d07_png_output_never_collides(files, tmp_path, fake_render):
+    from jaxgfx.color import linear_to_srgb
+
+    img, _ = fake_render
+    code, out, err = run_cli(["render", files["scene"], tmp_path / "out.png"])
+    assert code == 0, err
+    assert sorted(os.listdir(tmp_path)) == ["out.png"]
+    assert out.count("out.png") == 1
+    want = np.round(np.asarray(linear_to_srgb(np.clip(img, 0, 1))) * 255)
+    np.testing.assert_array_equal(io.read_image(str(tmp_path / "out.png")), want)
+
+
+def test_d07_preview_equal_to_output_is_refused_before_rendering(files, tmp_path, fake_render):
+    _, calls = fake_render
+    out = tmp_path / "x.png"
+    code, _, err = run_cli(["render", files["scene"], out, "--preview", out])
+    assert_one_line_error(code, err, "same file")
+    assert calls == [] and os.listdir(tmp_path) == []
+
+
+# --------------------------------------------------------------- D8 failed runs leave nothing
+
+
+SMALL = "synthetic: {height: 16, width: 16}\nresponse: {method: debevec, compare: []}\n"
+
+
+@pytest.fixture
+def small_config(tmp_path, monkeypatch):
+    """A config, and the job's computation replaced by a fixed result: D8/D9 test what
+    ``run_calibrate`` does with its outputs (the science is tested in
+    tests/test_pipeline_calibrate.py); writing, the plot and the report stay real."""
+    p = tmp_path / "small.yaml"
+    p.write_text(SMALL)
+    rad = np.linspace(0.01, 2.0, 16 * 16 * 3, dtype=np.float32).reshape(16, 16, 3)
+    resp = hdr.CameraResponse.gamma(2.2)
+
+    def load(cfg, files, sidecar, steps, result_kw):
+        result_kw.update(times=np.array([1.0, 4.0]), image_shape=(2, 16, 16, 3))
+        return None, None, None
+
+    def fit(cfg, images, times, truth, steps, result_kw):
+        return calibrate_mod.CalibrateResult(
+            radiance=rad, variance=0.01 * rad, response=resp, curves={"debevec": resp},
+            **result_kw,
+        )  # fmt: skip
+
+    monkeypatch.setattr(calibrate_mod, "_load_ldr", load)
+    monkeypatch.setattr(calibrate_mod, "_fit_ldr", fit)
+    return p
+
+
+def _fail_late(monkeypatch):
+    """Make the last step (the response plot) fail, after the images were written."""
+
+    def boom(*a, **k):
+        raise OSError(28, "No space left on device", "response.png")
+
+    monkeypatch.setattr(calibrate_mod, "_plot_response", boom)
+
+
+def test_d08_failed_calibrate_creates_no_out(tmp_path, small_config, monkeypatch):
+    _fail_late(monkeypatch)
+    out = tmp_path / "new" / "out"
+    code, _, err = run_cli(["calibrate", "--config", small_config, "--out", out, "--quiet"])
+    assert_one_line_error(code, err, "No space left on device", "response.png")
+    assert not (tmp_path / "new").exists()  # not even the parent the job would have created
+    assert no_partial_files(tmp_path)
+
+
+def test_d08_failed_calibrate_leaves_previous_run_untouched(tmp_path, small_config, monkeypatch):
+    out = tmp_path / "out"
+    out.mkdir()
+    for name in ("report.json", "preview.png", "response.png"):
+        (out / name).write_text(f"previous run: {name}")
+    before = snapshot(tmp_path)
+    _fail_late(monkeypatch)
+    argv = ["calibrate", "--config", small_config, "--out", out, "--quiet", "--overwrite"]
+    code, _, err = run_cli(argv)
+    assert code == 1
+    assert snapshot(tmp_path) == before
+
+
+# --------------------------------------------------------------- D9 rerun into a full --out
+
+
+def test_d09_rerun_refused_without_overwrite_then_replaced(tmp_path, small_config):
+    out = tmp_path / "out"
+    argv = ["calibrate", "--config", small_config, "--out", out, "--quiet"]
+    code, _, err = run_cli(argv)
+    assert code == 0, err
+    first = snapshot(tmp_path)
+    code, _, err = run_cli(argv)
+    assert_one_line_error(code, err, "holds the results of a previous run", "--overwrite")
+    assert snapshot(tmp_path) == first
+    (out / "radiance.exr").write_bytes(b"stale")
+    code, stdout, err = run_cli([*argv, "--overwrite"])
+    assert code == 0, err
+    assert "replaced the previous results" in stdout
+    np.testing.assert_array_equal(
+        io.read_exr(str(out / "radiance.exr")),
+        np.linspace(0.01, 2.0, 16 * 16 * 3, dtype=np.float32).reshape(16, 16, 3),
+    )
+    rep = json.loads((out / "report.json").read_text())
+    assert set(os.listdir(out)) == {os.path.basename(p) for p in rep["outputs"].values()}
+
+
+def test_d09_overwrite_removes_stale_outputs_of_the_previous_run(tmp_path):
+    from jaxgfx.pipelines._output import StagedDir
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "response.png").write_text("from an older LDR run")
+    (out / "notes.txt").write_text("the user's file")  # not ours: kept
+    with StagedDir(out, calibrate_mod.OUTPUT_NAMES, overwrite=True) as st:
+        (open(os.path.join(st.path, "radiance.exr"), "w")).close()
+    assert sorted(os.listdir(out)) == ["notes.txt", "radiance.exr"]
+    assert st.replaced == ["response.png"]
+
+
+# --------------------------------------------------------------- D10 outputs checked first
+
+
+def test_d10_render_checks_output_before_rendering(files, tmp_path, fake_render):
+    _, calls = fake_render
+    for target, needle in [
+        (tmp_path / "out.bmp", "unsupported extension '.bmp'"),
+        (files["a_file"] / "out.exr", "a_file"),
+        (tmp_path / "out.hdr", None),  # fine, rendered below
+    ]:
+        code, _, err = run_cli(["render", files["scene"], target])
+        if needle is None:
+            assert code == 0, err
+            assert len(calls) == 1
+        else:
+            assert_one_line_error(code, err, needle)
+            assert calls == []
+
+
+def test_d10_filter_checks_extension_before_creating_folders(files, tmp_path):
+    code, _, err = run_cli(["filter", files["png"], tmp_path / "new" / "sub" / "x.bmp"])
+    assert_one_line_error(code, err, "x.bmp", "unsupported extension")
+    assert os.listdir(tmp_path) == []
+
+
+# --------------------------------------------------------------- D11 no raw tracebacks
+
+
+def test_d11_os_errors_are_one_line(files, tmp_path):
+    cases = [
+        (["calibrate", "--out", files["a_file"]], "a_file"),  # NotADirectoryError
+        (["filter", files["png"], files["a_file"] / "x.png"], "a_file"),
+        (["filter", files["png"], files["dir_png"]], "folder.png"),  # IsADirectoryError
+        (["calibrate", "--times", "1/0,1,4"], "--times [0]"),  # was ZeroDivisionError
+        (["filter", files["dir_png"], tmp_path / "o.png"], "folder.png"),
+    ]
+    if _read_only_available():
+        cases.append((["filter", files["png"], f"{READ_ONLY}/x.png"], READ_ONLY))
+        cases.append((["calibrate", "--out", f"{READ_ONLY}/out"], READ_ONLY))
+    for argv, needle in cases:
+        code, _, err = run_cli(argv)
+        assert_one_line_error(code, err, needle)
+    assert os.listdir(tmp_path) == []
+
+
+def test_d11_debug_shows_the_traceback(files):
+    code, _, err = run_cli(["filter", files["png"], files["dir_png"], "--debug"])
+    assert code == 1 and "Traceback (most recent call last)" in err
+    code, _, err = run_cli(["--debug", "calibrate", "--times", "1/0"])
+    assert code == 1 and "Traceback (most recent call last)" in err
+
+
+def test_d11_unexpected_errors_are_one_line_too(files, tmp_path, monkeypatch):
+    import jaxgfx.pipelines.filter_ops as fo
+
+    def broken(*a, **k):
+        raise KeyError("internal")
+
+    monkeypatch.setattr(fo, "run_filter", broken)
+    code, _, err = run_cli(["filter", files["png"], tmp_path / "o.png"])
+    assert_one_line_error(code, err, "KeyError", "--debug")
+
+
+# --------------------------------------------------------------- D12 writers fail alike
+
+
+@pytest.mark.parametrize("ext", [".png", ".hdr", ".exr", ".tif"])
+def test_d12_writers_raise_the_same_os_errors(ext, files, tmp_path):
+    img = np.zeros((2, 2, 3), np.float32)
+    writers = {".png": io.write_png, ".hdr": io.write_hdr, ".exr": io.write_exr}
+    fns = [io.write_any] + ([writers[ext]] if ext in writers else [])
+    for fn in fns:
+        target = tmp_path / f"folder{ext}"
+        target.mkdir(exist_ok=True)
+        with pytest.raises(IsADirectoryError, match=f"folder{ext}"):
+            fn(str(target), img)
+        with pytest.raises(NotADirectoryError, match="a_file"):
+            fn(str(files["a_file"] / f"x{ext}"), img)
+        if _read_only_available():
+            with pytest.raises(PermissionError, match=READ_ONLY):
+                fn(f"{READ_ONLY}{ext}", img)
+
+
+# --------------------------------------------------------------- D13 messages that mislead
+
+
+def test_d13_exif_exposure_time_zero_is_not_missing(files):
+    paths = sorted(str(p) for p in files["exif_zero"].iterdir())
+    with pytest.raises(ValueError, match=r"EXIF ExposureTime is 0 s") as e:
+        io.read_ldr_stack(paths)
+    assert "no EXIF" not in str(e.value)
+
+
+def test_d13_box_radius_names_the_option(files, tmp_path):
+    code, _, err = run_cli(
+        ["filter", files["png"], tmp_path / "o.png", "--op", "box", "--radius", "-3"]
+    )
+    assert_one_line_error(code, err, "--radius: expected an integer >= 0, got -3")
+    assert "size" not in err
+
+
+def test_d13_bmp_is_not_listed_as_writable(tmp_path):
+    with pytest.raises(ValueError) as e:
+        io.write_any(str(tmp_path / "x.bmp"), np.zeros((2, 2, 3), np.float32))
+    msg = str(e.value)
+    assert "cannot write '.bmp'" in msg and ".bmp" not in msg.split("writable:")[1]
+
+
+def test_d13_nan_mesh_vertex_names_file_and_shape(files, tmp_path):
+    from jaxgfx.render import load_obj, load_scene
+
+    with pytest.raises(ValueError, match=r"nan\.obj: 1 vertices have NaN/Inf.*vertex 1"):
+        load_obj(str(files["nan_obj"]))
+    desc = {
+        "camera": {"origin": [0, 0, 3], "target": [0, 0, 0], "fov": 40, "width": 4, "height": 4},
+        "shapes": [{"type": "mesh", "file": str(files["nan_obj"])}],
+    }
+    with pytest.raises(ValueError, match=r"shapes\[0\]\.file: .*nan\.obj"):
+        load_scene(desc)
+    desc["shapes"] = [{"type": "mesh", "vertices": [[0, 0, 0], [1, 0, np.nan], [0, 1, 0]],
+                       "faces": [[0, 1, 2]]}]  # fmt: skip
+    with pytest.raises(ValueError, match=r"shapes\[0\]\.vertices: expected finite"):
+        load_scene(desc)

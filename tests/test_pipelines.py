@@ -1,0 +1,66 @@
+"""Jobs live in jaxgfx/pipelines (issue 9, part 3): cli.py and experiments/*.py are thin
+argument -> job layers; one exposure-time parser and one place that orders a bracket."""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import inspect
+
+import numpy as np
+
+import jaxgfx.pipelines.calibrate as calibrate_mod
+import jaxgfx.pipelines.render as render_mod
+from jaxgfx import io
+from jaxgfx.cli import COMMANDS, add_command_arguments, build_parser
+
+
+def _read(path):
+    with open(path, encoding="utf-8") as f:
+        return f.read()
+
+
+def _imports(path):
+    tree = ast.parse(_read(path))
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            names.add(node.module)
+        elif isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+    return names
+
+
+def test_demo_does_not_call_the_cli():
+    assert "jaxgfx.cli" not in _imports("experiments/demo.py")
+    assert {"jaxgfx.pipelines.render", "jaxgfx.pipelines.calibrate"} <= _imports(
+        "experiments/demo.py"
+    )
+
+
+def _options(parser):
+    return {s for a in parser._actions for s in a.option_strings} - {"-h", "--help"}
+
+
+def test_experiment_offers_exactly_the_cli_options():
+    cli = build_parser()._subparsers._group_actions[0].choices["calibrate"]
+    p = argparse.ArgumentParser()
+    add_command_arguments(p, "calibrate")
+    assert _options(p) == _options(cli) and "--overwrite" in _options(p)
+    assert "add_argument" not in _read("experiments/calibrate.py")
+
+
+def test_pipelines_hold_no_parser_or_sort_of_their_own():
+    for mod in (calibrate_mod, render_mod):
+        src = inspect.getsource(mod)
+        assert "argparse" not in src and "Namespace" not in src
+        assert "argsort" not in src and "Fraction" not in src and "eval_fraction" not in src
+    assert set(COMMANDS) >= {"filter", "calibrate", "render"}
+
+
+def test_the_one_parser_and_sorter():
+    assert [io.parse_exposure_time(t) for t in ("1/250", "0.5", 2)] == [0.004, 0.5, 2.0]
+    t = np.array([4.0, 1.0, 4.0, 0.5])
+    order = io.exposure_order(t)
+    np.testing.assert_array_equal(order, [3, 1, 0, 2])  # stable for equal times
+    np.testing.assert_array_equal(t[order], np.sort(t))
