@@ -226,17 +226,34 @@ def _mesh_scene():
 
     ico = M.make_icosphere(3, radius=0.7, center=(0.0, 0.7, 0.0))  # 1280 triangles
     desc = {
-        "camera": {"origin": [0, 1.5, 4], "target": [0, 0.6, 0], "fov": 40,
-                   "width": 20, "height": 20},  # fmt: skip
+        "camera": {
+            "origin": [0, 1.5, 4],
+            "target": [0, 0.6, 0],
+            "fov": 40,
+            "width": 20,
+            "height": 20,
+        },  # fmt: skip
         "shapes": [
-            {"type": "mesh", "vertices": np.asarray(ico.vertices).tolist(),
-             "faces": np.asarray(ico.faces).tolist(), "material": "red"},  # fmt: skip
+            {
+                "type": "mesh",
+                "vertices": np.asarray(ico.vertices).tolist(),
+                "faces": np.asarray(ico.faces).tolist(),
+                "material": "red",
+            },  # fmt: skip
             {"type": "rectangle", "center": [0, 0, 0], "normal": [0, 1, 0], "size": [6, 6]},
         ],
         "materials": {"red": {"type": "diffuse", "reflectance": [0.8, 0.2, 0.2]}},
         "emitters": [
-            {"type": "area", "radiance": [8, 8, 8], "shape": {"type": "rectangle",
-             "center": [0.5, 3, 0.5], "normal": [0, -1, 0], "size": [1.5, 1.5]}},  # fmt: skip
+            {
+                "type": "area",
+                "radiance": [8, 8, 8],
+                "shape": {
+                    "type": "rectangle",
+                    "center": [0.5, 3, 0.5],
+                    "normal": [0, -1, 0],
+                    "size": [1.5, 1.5],
+                },
+            },  # fmt: skip
             {"type": "constant", "radiance": [0.1, 0.1, 0.1]},
         ],
     }
