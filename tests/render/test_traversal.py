@@ -374,6 +374,10 @@ def test_load_scene_accel_choice_and_cache():
         )
     with pytest.raises(ValueError, match="accel"):
         load_scene(desc, accel="optix")
+    from jaxgfx.render.render import render
+
+    with pytest.raises(ValueError, match="accel"):  # checked before anything is traced
+        render(jx, jax.random.key(0), spp=1, accel="optix")
     bad = {**desc, "shapes": [{"type": "mesh", "generator": {"name": "bunny"}}]}
     with pytest.raises(ValueError, match=r"shapes\[0\]\.generator\.name"):
         load_scene(bad)
