@@ -210,8 +210,8 @@ def _mitsuba_trace(mi, scene, o, d, threads):
 
 
 def run_backends(n_rings=(36, 144), n_side=256, jax_rays=4096):
-    from jaxgfx.render import traversal as T
-    from jaxgfx.render.mesh import make_uv_sphere, save_ply
+    from jaxgfx.render.geometry import accel as T
+    from jaxgfx.render.geometry.mesh_io import make_uv_sphere, save_ply
 
     mi, variant = _mitsuba_setup()
     rows = []
@@ -284,16 +284,14 @@ def run_backends(n_rings=(36, 144), n_side=256, jax_rays=4096):
 # samples/s against the triangle count, per backend and Mitsuba 3
 
 
-def run_scaling(n_rings, *, res=64, spp=4, jax_max_tris=300_000, repeat=2):
+def run_scaling(n_rings, *, res=64, spp=4, jax_max_tris=300_000, repeat=4):
     import copy
     import tempfile
 
-    import equinox as eqx
-
     from benchmarks.render import EXAMPLE, bench_mitsuba
     from jaxgfx.config import read_yaml
-    from jaxgfx.render import traversal as T
-    from jaxgfx.render.mesh import make_uv_sphere, save_ply
+    from jaxgfx.render.geometry import accel as T
+    from jaxgfx.render.geometry.mesh_io import make_uv_sphere, save_ply
     from jaxgfx.render.render import render
     from jaxgfx.render.scene import load_scene
 
@@ -311,18 +309,18 @@ def run_scaling(n_rings, *, res=64, spp=4, jax_max_tris=300_000, repeat=2):
             desc["shapes"][0] = {"type": "mesh", "file": path, "material": "metal"}
             n_tris = int(m.faces.shape[0])
             row = dict(n_tris=n_tris, res=res, spp=spp, integrator="path", max_depth=3)
+            first_backend = T.resolve_backend("auto")
             t0 = time.perf_counter()
-            scene = load_scene(desc)  # the loader builds the JAX BVH
-            row["load_s_with_jax_bvh"] = time.perf_counter() - t0
-            idx = next(i for i, s in enumerate(scene.shapes) if hasattr(s, "mesh"))
-            mesh = scene.shapes[idx].mesh
+            scene = load_scene(desc, accel=first_backend)
+            row[f"load_s_with_{first_backend}"] = time.perf_counter() - t0
             for name in T.available_backends():
                 if name == "jax" and n_tris > jax_max_tris:
                     continue
+                mesh = next(s.mesh for s in scene.shapes if T.accel_of(s) is not None)
                 t0 = time.perf_counter()
-                acc = scene.shapes[idx] if name == "jax" else T.build_traversal(mesh, name)
-                build = 0.0 if name == "jax" else time.perf_counter() - t0
-                sc = eqx.tree_at(lambda s, i=idx: s.shapes[i], scene, acc)
+                jax.block_until_ready(T.build_traversal(mesh, name))
+                build = time.perf_counter() - t0  # host build of the backend's structure
+                sc = scene.with_accel(name)
 
                 def run(sc=sc):
                     return jax.block_until_ready(

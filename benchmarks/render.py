@@ -97,6 +97,7 @@ def bench_jaxgfx(desc, *, spp, integrator, max_depth, repeat):
     med = _median_time(lambda: run().block_until_ready(), repeat)
     w, h = scene.width, scene.height
     return {
+        "accel": scene.accel,  # mesh traversal backend (load_scene's "auto"), None without meshes
         "load_s": round(build, 3),
         "first_call_s": round(first, 3),
         "compile_s": round(max(first - med, 0.0), 3),

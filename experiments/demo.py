@@ -40,8 +40,9 @@ def main(argv=None) -> int:
     res = run_image_demo(img_dir)
     print(f"[image] {len(res['paths'])} outputs in {os.path.abspath(img_dir)}")
 
-    # the example scene of issue 5, and the textured-materials example (bitmap/checkerboard)
-    for name in ("example", "textured"):
+    # the example scene of issue 5, the textured-materials example (bitmap/checkerboard) and
+    # the mesh scene (20k triangles, traced by Embree when installed)
+    for name in ("example", "textured", "mesh"):
         scene_path = os.path.join("configs", "scenes", f"{name}.yaml")
         if os.path.exists(scene_path):
             out = os.path.join(args.out, "render", f"{name}.exr")

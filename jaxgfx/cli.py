@@ -174,6 +174,7 @@ def _render_arguments(p):
     p.add_argument(
         "--preview", default=None, help="preview .png path, or 'none' (default: OUT's stem.png)"
     )
+    p.add_argument("--accel", default="auto", help="mesh traversal: auto | embree | warp | jax")
 
 
 def _render_run(args) -> int:
@@ -188,6 +189,7 @@ def _render_run(args) -> int:
         seed=args.seed,
         preview=args.preview,
         overwrite=args.overwrite,
+        accel=args.accel,
     )
     res = run_render(job)
     print(

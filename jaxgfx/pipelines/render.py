@@ -44,6 +44,7 @@ class RenderJob:
     seed: int = 0
     preview: str | None = None
     overwrite: bool = False
+    accel: str = "auto"  # mesh traversal backend (docs/render_backends.md)
 
     def validate(self):
         from jaxgfx.render import INTEGRATORS
@@ -58,6 +59,9 @@ class RenderJob:
             raise ValueError(
                 f"integrator: expected one of {', '.join(INTEGRATORS)}, got {self.integrator!r}"
             )
+        from jaxgfx.render.geometry.accel import resolve_backend
+
+        resolve_backend(self.accel)  # ValueError / ImportError naming `accel`
         if not os.path.isfile(self.scene):
             what = "is a directory" if os.path.isdir(self.scene) else "no such file"
             raise FileNotFoundError(2, f"scene: {what}", self.scene)
@@ -106,7 +110,7 @@ def run_render(job: RenderJob) -> dict:
     job.validate()
     paths = render_output_paths(job)
     with StagedFiles(paths, overwrite=job.overwrite) as stage:
-        scene = load_scene(job.scene)
+        scene = load_scene(job.scene, accel=job.accel)
         t0 = time.perf_counter()
         img = render(
             scene,

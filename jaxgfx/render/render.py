@@ -27,6 +27,7 @@ def render(
     rr_depth: int | None = None,
     strategy: str | None = None,
     sampling: str | None = None,
+    accel: str | None = None,
 ):
     """Render ``scene`` to an ``(H, W, 3)`` float32 linear radiance image.
 
@@ -46,7 +47,13 @@ def render(
     ``key`` is a JAX PRNG key; the same key gives the same image. Differentiable w.r.t. every
     float leaf of ``scene`` (see ``Scene.replace``); jittable (``spp`` and the integrator are
     static).
+    ``accel``: traversal backend of the scene's triangle meshes, ``"auto"`` | ``"embree"`` |
+    ``"warp"`` | ``"jax"`` (docs/render_backends.md); ``None`` (default) keeps the scene's
+    (``load_scene(..., accel="auto")``). A different backend is built on the host (cached per
+    mesh), so pass ``accel`` outside ``jax.jit`` or use :meth:`Scene.with_accel` once.
     """
+    if accel is not None:
+        scene = scene.with_accel(accel)
     if isinstance(spp, bool) or not isinstance(spp, int) or spp < 1:
         raise ValueError(f"spp: expected a positive integer, got {spp!r}")
     options = {

@@ -14,9 +14,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgfx.render import mesh as M
-from jaxgfx.render import shapes as S
-from jaxgfx.render import traversal as T
+from jaxgfx.render import geometry as S
+from jaxgfx.render.geometry import accel as T
+from jaxgfx.render.geometry import mesh_io as M
 
 BACKENDS = [
     pytest.param(
@@ -226,17 +226,34 @@ def _mesh_scene():
 
     ico = M.make_icosphere(3, radius=0.7, center=(0.0, 0.7, 0.0))  # 1280 triangles
     desc = {
-        "camera": {"origin": [0, 1.5, 4], "target": [0, 0.6, 0], "fov": 40,
-                   "width": 20, "height": 20},  # fmt: skip
+        "camera": {
+            "origin": [0, 1.5, 4],
+            "target": [0, 0.6, 0],
+            "fov": 40,
+            "width": 20,
+            "height": 20,
+        },  # fmt: skip
         "shapes": [
-            {"type": "mesh", "vertices": np.asarray(ico.vertices).tolist(),
-             "faces": np.asarray(ico.faces).tolist(), "material": "red"},  # fmt: skip
+            {
+                "type": "mesh",
+                "vertices": np.asarray(ico.vertices).tolist(),
+                "faces": np.asarray(ico.faces).tolist(),
+                "material": "red",
+            },  # fmt: skip
             {"type": "rectangle", "center": [0, 0, 0], "normal": [0, 1, 0], "size": [6, 6]},
         ],
         "materials": {"red": {"type": "diffuse", "reflectance": [0.8, 0.2, 0.2]}},
         "emitters": [
-            {"type": "area", "radiance": [8, 8, 8], "shape": {"type": "rectangle",
-             "center": [0.5, 3, 0.5], "normal": [0, -1, 0], "size": [1.5, 1.5]}},  # fmt: skip
+            {
+                "type": "area",
+                "radiance": [8, 8, 8],
+                "shape": {
+                    "type": "rectangle",
+                    "center": [0.5, 3, 0.5],
+                    "normal": [0, -1, 0],
+                    "size": [1.5, 1.5],
+                },
+            },  # fmt: skip
             {"type": "constant", "radiance": [0.1, 0.1, 0.1]},
         ],
     }
@@ -331,3 +348,60 @@ def test_backend_render_and_gradient_equal_reference(render_ref, name):
     assert close.mean() > 0.99
     assert np.abs(g_ref).max() > 1e-3
     np.testing.assert_allclose(g, g_ref, rtol=1e-3, atol=1e-3 * np.abs(g_ref).max())
+
+
+# ---------------------------------------------------------------------------------------------
+# scene loading, backend choice, procedural meshes
+
+
+def test_load_scene_accel_choice_and_cache():
+    from jaxgfx.render.scene import load_scene
+
+    desc = {
+        "camera": {"origin": [0, 0, 4], "target": [0, 0, 0], "fov": 30, "width": 4, "height": 4},
+        "shapes": [{"type": "mesh", "generator": {"name": "icosphere", "level": 2}}],
+    }
+    jx = load_scene(desc, accel="jax")
+    assert jx.accel == "jax" and jx.shapes[0].mesh.faces.shape == (320, 3)
+    auto = load_scene(desc)
+    assert auto.accel == T.resolve_backend("auto")
+    for name in T.available_backends():
+        a, b = jx.with_accel(name), jx.with_accel(name)
+        assert a.accel == name
+        # built once per mesh: the second conversion reuses the native scene / BVH
+        assert jax.tree_util.tree_all(
+            jax.tree_util.tree_map(lambda x, y: x is y, a.shapes[0], b.shapes[0])
+        )
+    with pytest.raises(ValueError, match="accel"):
+        load_scene(desc, accel="optix")
+    from jaxgfx.render.render import render
+
+    with pytest.raises(ValueError, match="accel"):  # checked before anything is traced
+        render(jx, jax.random.key(0), spp=1, accel="optix")
+    bad = {**desc, "shapes": [{"type": "mesh", "generator": {"name": "bunny"}}]}
+    with pytest.raises(ValueError, match=r"shapes\[0\]\.generator\.name"):
+        load_scene(bad)
+    bad = {**desc, "shapes": [{"type": "mesh", "generator": {"name": "blob", "levels": 2}}]}
+    with pytest.raises(ValueError, match=r"shapes\[0\]\.generator"):
+        load_scene(bad)
+
+
+def test_make_blob_is_star_shaped_and_closed():
+    """Rays from the centre through each face's centroid hit that face first, at the centroid's
+    distance (a star-shaped, closed surface; brute-force JAX intersection), vertex normals point
+    outwards, and the triangle count is 20 * 4**level."""
+    c = np.array([0.2, -0.1, 0.3])
+    blob = M.make_blob(2, seed=1, radius=0.7, center=c)
+    assert blob.faces.shape == (320, 3)
+    v = np.asarray(blob.vertices, np.float64)
+    r = np.linalg.norm(v - c, axis=1)
+    assert r.max() / r.min() > 1.3  # visibly bumpy, not a sphere
+    cen = v[np.asarray(blob.faces)].mean(axis=1) - c
+    dist = np.linalg.norm(cen, axis=1)
+    d = (cen / dist[:, None]).astype(np.float32)
+    o = np.broadcast_to(c, d.shape).astype(np.float32)
+    h = jax.jit(lambda m, o, d: S.intersect(m, o, d))(blob, o, d)
+    np.testing.assert_array_equal(np.asarray(h.prim_id), np.arange(320))
+    np.testing.assert_allclose(np.asarray(h.t), dist, rtol=1e-5)
+    assert np.all(np.sum(np.asarray(blob.normals) * (v - c), axis=1) > 0)
+    np.testing.assert_array_equal(M.make_blob(2, seed=1).vertices, M.make_blob(2, seed=1).vertices)

@@ -85,8 +85,18 @@ def _concat(shapes):
     )
 
 
-def load_scene(desc, *, base_dir: str | None = None) -> Scene:
-    """Build a :class:`Scene` from a description mapping or a YAML file path."""
+def load_scene(desc, *, base_dir: str | None = None, accel: str = "auto") -> Scene:
+    """Build a :class:`Scene` from a description mapping or a YAML file path.
+
+    ``accel`` selects the traversal backend of meshes with at least ``BVH_MIN_TRIANGLES``
+    triangles (smaller ones are tested by brute force in JAX): ``"auto"`` (the fastest
+    installed for JAX's device: Embree on CPU, Warp on GPU, else the JAX BVH), ``"embree"``,
+    ``"warp"`` or ``"jax"``; see docs/render_backends.md. Images and gradients do not depend on
+    it (the hit record is recomputed in JAX); change it later with :meth:`Scene.with_accel`.
+    """
+    from jaxgfx.render.geometry.accel import build_traversal, resolve_backend
+
+    accel = resolve_backend(accel)  # ValueError / ImportError before any work
     if isinstance(desc, (str, os.PathLike)):
         from jaxgfx.config import read_yaml
 
@@ -148,9 +158,7 @@ def load_scene(desc, *, base_dir: str | None = None) -> Scene:
             shape_mats.append(jnp.full((1,), mi, jnp.int32))
             continue
         if m.faces.shape[0] >= BVH_MIN_TRIANGLES:
-            from jaxgfx.render.geometry.accel.bvh_sah import build_bvh
-
-            shapes.append(build_bvh(m))
+            shapes.append(build_traversal(m, accel))
         else:
             shapes.append(m)
         shape_mats.append(jnp.full((m.faces.shape[0],), mi, jnp.int32))

@@ -274,7 +274,10 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
         return {"type": "rectangle", "to_world": _transform(m, mi)}
     if kind == "mesh":
         S.expect_keys(
-            d, where, ("type",), (*common, "file", "vertices", "faces", "translate", "scale")
+            d,
+            where,
+            ("type",),
+            (*common, "file", "vertices", "faces", "generator", "translate", "scale"),
         )
         from jaxgfx.render.geometry import mesh_io
 
@@ -289,9 +292,10 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
                 raise ValueError(f"{where}.file: no such file {path!r}")
             m = (mesh_io.load_obj if ext == ".obj" else mesh_io.load_ply)(path)
             out = {"type": ext[1:], "filename": os.path.abspath(path)}
-        elif "vertices" in d and "faces" in d:
-            # validated exactly as load_scene does, then written as a PLY for Mitsuba
-            m = S.mesh_from_desc({k: d[k] for k in ("vertices", "faces")}, where, base_dir)
+        elif ("vertices" in d and "faces" in d) or "generator" in d:
+            # validated (or generated) exactly as load_scene does, then written as a PLY
+            keys = ("generator",) if "generator" in d else ("vertices", "faces")
+            m = S.mesh_from_desc({k: d[k] for k in keys}, where, base_dir)
             name = re.sub(r"[^A-Za-z0-9]+", "_", where).strip("_")
             path = os.path.join(work_dir(), f"{name}.ply")
             mesh_io.save_ply(path, m)

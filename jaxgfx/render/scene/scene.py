@@ -52,7 +52,8 @@ __all__ = ["Scene"]
 class Scene(eqx.Module):
     """A renderable scene (pytree). Build with :func:`load_scene`.
 
-    Fields: ``camera``; ``shapes`` (tuple of Spheres / Rectangles / TriangleMesh / BVH);
+    Fields: ``camera``; ``shapes`` (tuple of Spheres / Rectangles / TriangleMesh / SDFShape / a
+    mesh traversal object: BVH, EmbreeMesh, WarpMesh, see :attr:`accel`);
     ``shape_materials`` (tuple of int32 arrays, material index per primitive of each shape);
     ``materials`` (tuple of BSDFs) named by the static ``material_names``; ``point_lights``
     (PointLights or None); ``area_lights`` (tuple of AreaLight); ``environment``
@@ -78,6 +79,22 @@ class Scene(eqx.Module):
     @property
     def height(self) -> int:
         return self.camera.height
+
+    @property
+    def accel(self) -> str | None:
+        """Traversal backend of the scene's meshes (``"embree"``, ``"warp"``, ``"jax"``;
+        ``None`` when no shape needs one); see docs/render_backends.md."""
+        from jaxgfx.render.geometry.accel import accel_of
+
+        names = {accel_of(s) for s in self.shapes} - {None}
+        return names.pop() if len(names) == 1 else (None if not names else "mixed")
+
+    def with_accel(self, accel: str = "auto") -> Scene:
+        """Copy whose meshes are traced by backend ``accel`` (host build, cached per mesh; call
+        outside ``jax.jit``). Images and gradients are unchanged up to ties."""
+        from jaxgfx.render.geometry.accel import scene_with_accel
+
+        return scene_with_accel(self, accel)
 
     @property
     def n_lights(self) -> int:

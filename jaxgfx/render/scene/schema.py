@@ -151,8 +151,10 @@ def mesh_from_desc(d, where, base_dir):
         if f.min() < 0 or f.max() >= v.shape[0]:
             raise ValueError(f"{where}.faces: vertex index out of range")
         m = TriangleMesh(v, jnp.asarray(f, jnp.int32))
+    elif "generator" in d:  # procedural (jaxgfx.render.geometry.mesh_io.MESH_GENERATORS)
+        m = mesh_io.mesh_from_generator(d["generator"], f"{where}.generator")
     else:
-        raise ValueError(f"{where}: expected 'file' or 'vertices' + 'faces'")
+        raise ValueError(f"{where}: expected 'file', 'vertices' + 'faces' or 'generator'")
     if "translate" in d or "scale" in d:
         s = as_float_array(d.get("scale", 1.0), f"{where}.scale")
         t = vec(d.get("translate", [0.0, 0.0, 0.0]), f"{where}.translate")
@@ -177,7 +179,10 @@ def shape_from_desc(d, where, base_dir):
         return "rectangle", rectangle_from_desc(d, where)
     if kind == "mesh":
         expect_keys(
-            d, where, ("type",), (*common, "file", "vertices", "faces", "translate", "scale")
+            d,
+            where,
+            ("type",),
+            (*common, "file", "vertices", "faces", "generator", "translate", "scale"),
         )
         return "mesh", mesh_from_desc(d, where, base_dir)
     if kind == "sdf":

@@ -5,7 +5,7 @@ The Embree scene is built and committed once per mesh on the host (:func:`build_
 reused by every render; traced code reaches it through ``jax.pure_callback`` (one host call per
 ray batch, ~0.1-0.2 ms of overhead, the rays copied to float32). ``embreex`` traces the batch
 with ``rtcIntersect1``/``rtcOccluded1`` in a compiled loop (one thread, GIL held). The hit
-record is then recomputed in JAX from the primitive id (see :mod:`._base`).
+record is then recomputed in JAX from the primitive id (see :mod:`._host`).
 
 Reference: Wald et al. 2014, "Embree: a kernel framework for efficient CPU ray tracing", ACM
 TOG 33(4).
@@ -19,14 +19,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Int
 
-from jaxgfx.render.shapes import TriangleMesh
-from jaxgfx.render.traversal._base import (
+from jaxgfx.render.geometry.accel._host import (
     HostTraversal,
     KeepAlive,
     host_rays,
     lookup_native,
     register_native,
 )
+from jaxgfx.render.geometry.mesh import TriangleMesh
 
 __all__ = ["EmbreeMesh", "build_embree", "embree_available"]
 

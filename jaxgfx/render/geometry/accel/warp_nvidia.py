@@ -7,7 +7,7 @@ built once per mesh (:func:`build_warp`); traced code launches one Warp kernel p
 through Warp's JAX FFI interop (``wp.jax_kernel``: no Python call and, on a GPU, no copy). The
 64-bit mesh id travels as a ``uint32[2]`` leaf (a uint64 does not exist in JAX without x64).
 Warp's barycentrics weight vertices 0 and 1; only the face index is used here, the hit record
-is recomputed in JAX (see :mod:`._base`).
+is recomputed in JAX (see :mod:`._host`).
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, UInt32
 
-from jaxgfx.render.shapes import TriangleMesh
-from jaxgfx.render.traversal._base import HostTraversal, KeepAlive
+from jaxgfx.render.geometry.accel._host import HostTraversal, KeepAlive
+from jaxgfx.render.geometry.mesh import TriangleMesh
 
 __all__ = ["WarpMesh", "build_warp", "warp_available"]
 
