@@ -1,12 +1,29 @@
-"""Acceleration-structure benchmark: host build time and jitted trace throughput.
+"""Acceleration-structure and traversal-backend benchmark.
 
     python -m benchmarks.accel [--quick] [--max-exp 5] [--full] [--rays 4096] [--out FILE]
+                               [--sections structures,backends,scaling] [--plot DIR]
 
-Scenes are random triangle soups (``make_triangle_soup``) of 1e2 ... 1e5 triangles (1e6 with
-``--full``) whose triangle size shrinks like N^(-1/3) so the depth complexity stays similar.
+``structures``: the pure-JAX BVH, grid and kd-tree. Scenes are random triangle soups
+(``make_triangle_soup``) of 1e2 ... 1e5 triangles (1e6 with ``--full``) whose triangle size
+shrinks like N^(-1/3) so the depth complexity stays similar.
 For each structure: build seconds (NumPy, host), compile seconds (first call minus a warm call)
 and trace time (best of 3 warm calls) -> rays/s. Brute force (JAX, and NumPy as the host peer)
-runs up to 1e3 triangles. Prints one JSON document (progress rows go to stderr).
+runs up to 1e3 triangles.
+
+``backends``: closest-hit rays/s of the traversal backends (``jaxgfx.render.traversal``) against
+Mitsuba 3 ``ray_intersect_preliminary`` (``llvm_ad_rgb`` on one thread and on all threads;
+``scalar_rgb`` if LLVM is missing) on UV spheres of 5 040 and 82 368 triangles, 65 536 primary
+rays (256^2 pinhole) and 65 536 random rays. jaxgfx rows are end to end from jitted JAX code:
+the backend's search plus the differentiable hit record (t, p, normals, uv) recomputed in JAX;
+``embree_host`` is embreex alone on NumPy arrays. The JAX BVH traces 4 096 of the rays. Also
+reports build seconds and the fraction of rays whose hit and triangle id agree with Embree.
+
+``scaling``: path-traced samples/s (depth 3, 64^2, 4 spp) of the example scene with its sphere
+replaced by a UV-sphere mesh of 1k ... 1M triangles (``--quick``: up to 16k) for each backend and
+Mitsuba 3 (same scene through ``to_mitsuba_dict``), with load/build and compile seconds;
+``--plot DIR`` writes ``samples_vs_triangles.png``.
+
+Prints one JSON document (progress rows go to stderr).
 """
 
 from __future__ import annotations
@@ -134,6 +151,235 @@ def run(sizes, n_rays, brute_max=1000):
     return results
 
 
+# ---------------------------------------------------------------------------------------------
+# traversal backends vs Mitsuba 3
+
+
+def _primary_rays(n_side, eye=(0.0, 0.0, 3.0), half=0.45):
+    y, x = np.meshgrid(np.linspace(-half, half, n_side), np.linspace(-half, half, n_side),
+                       indexing="ij")  # fmt: skip
+    d = np.stack([x, y, -np.ones_like(x)], -1).reshape(-1, 3)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    o = np.broadcast_to(np.asarray(eye), d.shape)
+    return np.ascontiguousarray(o, np.float32), d.astype(np.float32)
+
+
+def _best_time(fn, repeats=3):
+    best = np.inf
+    out = None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, out
+
+
+@jax.jit
+def _e2e(acc, o, d):
+    h = acc.intersect(o, d)
+    return h.t, h.prim_id, h.p, h.ng, h.uv
+
+
+def _mitsuba_setup():
+    from benchmarks.render import _mitsuba
+
+    return _mitsuba(["llvm_ad_rgb", "scalar_rgb"])
+
+
+def _mitsuba_trace(mi, scene, o, d, threads):
+    import drjit as dr
+
+    ray = mi.Ray3f(o=mi.Point3f(*(o[:, k] for k in range(3))),
+                   d=mi.Vector3f(*(d[:, k] for k in range(3))))  # fmt: skip
+    prev = dr.thread_count()
+    if threads:
+        dr.set_thread_count(threads)
+    try:
+
+        def run():
+            pi = scene.ray_intersect_preliminary(ray)
+            t = np.array(pi.t)
+            return t, np.array(pi.prim_index)
+
+        run()  # JIT compilation of the kernel
+        sec, (t, prim) = _best_time(run)
+    finally:
+        dr.set_thread_count(prev)
+    prim = prim.astype(np.int64)
+    return sec, np.where(np.isfinite(t) & (prim != 0xFFFFFFFF), prim, -1)
+
+
+def run_backends(n_rings=(36, 144), n_side=256, jax_rays=4096):
+    from jaxgfx.render import traversal as T
+    from jaxgfx.render.mesh import make_uv_sphere, save_ply
+
+    mi, variant = _mitsuba_setup()
+    rows = []
+    rng = np.random.default_rng(0)
+    n = n_side * n_side
+    ro = rng.uniform(-1.5, 1.5, (n, 3))
+    rd = rng.uniform(-1, 1, (n, 3)) - ro
+    rd /= np.linalg.norm(rd, axis=1, keepdims=True)
+    ray_sets = {"primary": _primary_rays(n_side), "random": (ro.astype(np.float32),
+                                                              rd.astype(np.float32))}  # fmt: skip
+    import tempfile
+
+    for nr in n_rings:
+        mesh = make_uv_sphere(nr)
+        n_tris = int(mesh.faces.shape[0])
+        accs, builds = {}, {}
+        for name in T.available_backends():
+            t0 = time.perf_counter()
+            accs[name] = jax.block_until_ready(T.build_traversal(mesh, name))
+            builds[name] = time.perf_counter() - t0
+        msc = None
+        if mi is not None:
+            with tempfile.TemporaryDirectory() as tmp:
+                path = os.path.join(tmp, "m.ply")
+                save_ply(path, mesh)
+                t0 = time.perf_counter()
+                msc = mi.load_dict({"type": "scene", "m": {"type": "ply", "filename": path}})
+                builds["mitsuba"] = time.perf_counter() - t0
+        for rname, (o, d) in ray_sets.items():
+            row = dict(n_tris=n_tris, rays=rname, n_rays=n, build_s=builds, mrays_per_s={},
+                       compile_s={}, agree_with_embree={})  # fmt: skip
+            ref = None
+            if "embree" in accs:
+                host = accs["embree"].keep.obj
+                sec, (t_ref, ref) = _best_time(
+                    lambda host=host, o=o, d=d: host.query(o, d, 0.0, np.inf, False)
+                )
+                row["mrays_per_s"]["embree_host"] = n / sec / 1e6
+            for name, acc in accs.items():
+                m = jax_rays if name == "jax" else n
+                oj, dj = jnp.asarray(o[:m]), jnp.asarray(d[:m])
+                t0 = time.perf_counter()
+                jax.block_until_ready(_e2e(acc, oj, dj))
+                first = time.perf_counter() - t0
+                sec, out = _best_time(lambda acc=acc, oj=oj, dj=dj: jax.block_until_ready(
+                    _e2e(acc, oj, dj)))  # fmt: skip
+                row["mrays_per_s"][name] = m / sec / 1e6
+                row["compile_s"][name] = max(first - sec, 0.0)
+                prim = np.where(np.isfinite(np.asarray(out[0])), np.asarray(out[1]), -1)
+                if ref is not None:
+                    row["agree_with_embree"][name] = float(np.mean(prim == ref[:m]))
+            if msc is not None:
+                for threads in (1, None):
+                    sec, prim = _mitsuba_trace(mi, msc, o, d, threads)
+                    key = f"mitsuba_{variant}_" + ("1thread" if threads else "all_threads")
+                    row["mrays_per_s"][key] = n / sec / 1e6
+                    if ref is not None:
+                        row["agree_with_embree"][key] = float(np.mean(prim == ref))
+                m1 = row["mrays_per_s"][f"mitsuba_{variant}_1thread"]
+                row["mitsuba_1thread_over"] = {
+                    k: round(m1 / v, 2) for k, v in row["mrays_per_s"].items()
+                    if not k.startswith("mitsuba")
+                }  # fmt: skip
+            rows.append(row)
+            print(json.dumps(row), flush=True, file=sys.stderr)
+    return dict(mitsuba_variant=variant, rows=rows)
+
+
+# ---------------------------------------------------------------------------------------------
+# samples/s against the triangle count, per backend and Mitsuba 3
+
+
+def run_scaling(n_rings, *, res=64, spp=4, jax_max_tris=300_000, repeat=2):
+    import copy
+    import tempfile
+
+    import equinox as eqx
+
+    from benchmarks.render import EXAMPLE, bench_mitsuba
+    from jaxgfx.config import read_yaml
+    from jaxgfx.render import traversal as T
+    from jaxgfx.render.mesh import make_uv_sphere, save_ply
+    from jaxgfx.render.render import render
+    from jaxgfx.render.scene import load_scene
+
+    mi, variant = _mitsuba_setup()
+    base = read_yaml(EXAMPLE)
+    base["camera"]["width"] = base["camera"]["height"] = res
+    key = jax.random.key(0)
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="jaxgfx_bench_accel_") as tmp:
+        for nr in n_rings:
+            m = make_uv_sphere(nr, radius=1.0, center=(0.0, 1.0, 0.0))
+            path = os.path.join(tmp, f"sphere_{nr}.ply")
+            save_ply(path, m)
+            desc = copy.deepcopy(base)
+            desc["shapes"][0] = {"type": "mesh", "file": path, "material": "metal"}
+            n_tris = int(m.faces.shape[0])
+            row = dict(n_tris=n_tris, res=res, spp=spp, integrator="path", max_depth=3)
+            t0 = time.perf_counter()
+            scene = load_scene(desc)  # the loader builds the JAX BVH
+            row["load_s_with_jax_bvh"] = time.perf_counter() - t0
+            idx = next(i for i, s in enumerate(scene.shapes) if hasattr(s, "mesh"))
+            mesh = scene.shapes[idx].mesh
+            for name in T.available_backends():
+                if name == "jax" and n_tris > jax_max_tris:
+                    continue
+                t0 = time.perf_counter()
+                acc = scene.shapes[idx] if name == "jax" else T.build_traversal(mesh, name)
+                build = 0.0 if name == "jax" else time.perf_counter() - t0
+                sc = eqx.tree_at(lambda s, i=idx: s.shapes[i], scene, acc)
+
+                def run(sc=sc):
+                    return jax.block_until_ready(
+                        render(sc, key, spp=spp, integrator="path", max_depth=3)
+                    )
+
+                t0, c0 = time.perf_counter(), time.process_time()
+                img = run()
+                first, first_cpu = time.perf_counter() - t0, time.process_time() - c0
+                c0 = time.process_time()
+                sec, _ = _best_time(run, repeat)
+                run_cpu = (time.process_time() - c0) / repeat
+                # compile_cpu_s: CPU seconds of the first call minus a warm call's; robust to
+                # the load of a shared machine (XLA compiles on one thread)
+                row[name] = dict(build_s=build, compile_s=max(first - sec, 0.0),
+                                 compile_cpu_s=max(first_cpu - run_cpu, 0.0), time_s=sec,
+                                 samples_per_s=res * res * spp / sec,
+                                 mean=float(np.asarray(img).mean()))  # fmt: skip
+            if mi is not None:
+                row["mitsuba"] = bench_mitsuba(
+                    mi, desc, spp=spp, integrator="path", max_depth=3, repeat=repeat
+                )
+                for name in T.ACCEL_BACKENDS:
+                    if name in row:
+                        row[f"mitsuba_over_{name}"] = round(
+                            row["mitsuba"]["samples_per_s"] / row[name]["samples_per_s"], 2
+                        )
+            rows.append(row)
+            print(json.dumps(row), flush=True, file=sys.stderr)
+    return dict(mitsuba_variant=variant, rows=rows)
+
+
+def plot_scaling(res, out_dir):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    os.makedirs(out_dir, exist_ok=True)
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for name, style in (("embree", "o-"), ("warp", "s-"), ("jax", "^-"), ("mitsuba", "k--")):
+        pts = [(r["n_tris"], r[name]["samples_per_s"]) for r in res["rows"] if name in r]
+        if pts:
+            x, y = zip(*pts, strict=True)
+            label = f"Mitsuba 3 ({res['mitsuba_variant']})" if name == "mitsuba" else name
+            ax.loglog(x, y, style, label=label)
+    ax.set_xlabel("triangles")
+    ax.set_ylabel("path samples / s (depth 3, 64², 4 spp)")
+    ax.set_title("Path tracing a mesh: samples/s per traversal backend")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    path = os.path.join(out_dir, "samples_vs_triangles.png")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    return path
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="1e2..1e3 triangles, 1024 rays")
@@ -141,11 +387,24 @@ def main(argv=None):
     ap.add_argument("--full", action="store_true", help="include 1e6 triangles (slow build)")
     ap.add_argument("--rays", type=int, default=4096)
     ap.add_argument("--out", default=None, help="also write the JSON here")
+    ap.add_argument("--sections", default="structures,backends,scaling")
+    ap.add_argument("--plot", default=None, help="write samples_vs_triangles.png here")
     a = ap.parse_args(argv)
+    sections = set(a.sections.split(","))
     max_exp = 3 if a.quick else (6 if a.full else a.max_exp)
     n_rays = 1024 if a.quick else a.rays
     sizes = [10**k for k in range(2, max_exp + 1)]
-    res = run(sizes, n_rays)
+    res = run(sizes, n_rays) if "structures" in sections else []
+    extra = {}
+    if "backends" in sections:
+        extra["backends"] = run_backends(n_rings=(36,) if a.quick else (36, 144),
+                                         n_side=64 if a.quick else 256)  # fmt: skip
+    if "scaling" in sections:
+        # 4n(n-1) triangles: 1 012, 4 032, 16 512, 65 280, 262 656, 1 001 000 (n = 501)
+        rings = (17, 33, 65) if a.quick else (17, 33, 65, 129, 257, 501)
+        extra["scaling"] = run_scaling(rings)
+        if a.plot:
+            extra["scaling"]["plot"] = plot_scaling(extra["scaling"], a.plot)
     doc = dict(
         benchmark="accel",
         jax=jax.__version__,
@@ -155,6 +414,7 @@ def main(argv=None):
         load_avg=os.getloadavg(),
         n_rays=n_rays,
         results=res,
+        **extra,
     )
     text = json.dumps(doc, indent=1)
     print(text)

@@ -5,8 +5,11 @@
 A 5-frame 8-bit stack (exposures x4 apart, sRGB response, shot + read noise) of the
 synthetic scene; jaxgfx ``recover_response`` (Debevec, default options) + ``merge_radiance``
 timed after a warm-up call (compile time reported separately), OpenCV's
-CalibrateDebevec + MergeDebevec and CalibrateRobertson + MergeRobertson in the same run.
-Prints one JSON object.
+CalibrateDebevec + MergeDebevec and CalibrateRobertson + MergeRobertson in the same run;
+``speed_ratio_vs_opencv_debevec`` = jaxgfx time / OpenCV time (< 1: jaxgfx faster).
+``--cold`` also times a fresh Python process doing recover + merge once on the first size,
+twice: with an empty persistent compilation cache (cold: compiling) and again with the cache
+it filled (warm start, what a second ``jaxgfx calibrate`` sees). Prints one JSON object.
 """
 
 from __future__ import annotations
@@ -43,7 +46,7 @@ def _cv_resp(crv):
     return hdr.CameraResponse(jnp.asarray(tab), "table", "opencv", 255.0, 0.5)
 
 
-def run(h, w, repeat):
+def run(h, w, repeat, robertson=True):
     times = jnp.asarray([1.0, 4.0, 16.0, 64.0, 256.0])
     rad = hdr.synthetic_radiance(jax.random.key(1), h, w, dynamic_range=1e4)
     st = hdr.make_bracketed_stack(jax.random.key(2), rad, times, hdr.synthetic_response("srgb"))
@@ -73,10 +76,10 @@ def run(h, w, repeat):
         },
     }
     bgr = [np.ascontiguousarray(im[..., ::-1]) for im in imgs_np]
-    for name, cal, mer in (
-        ("opencv_debevec", cv2.createCalibrateDebevec, cv2.createMergeDebevec),
-        ("opencv_robertson", cv2.createCalibrateRobertson, cv2.createMergeRobertson),
-    ):
+    peers = [("opencv_debevec", cv2.createCalibrateDebevec, cv2.createMergeDebevec)]
+    if robertson:
+        peers.append(("opencv_robertson", cv2.createCalibrateRobertson, cv2.createMergeRobertson))
+    for name, cal, mer in peers:
 
         def peer(cal=cal, mer=mer):
             crv = cal().process(bgr, t_np)
@@ -84,6 +87,11 @@ def run(h, w, repeat):
 
         t_cv, (crv, e_cv) = _best(peer, repeat)
         t_cal, _ = _best(lambda cal=cal: cal().process(bgr, t_np), repeat)
+        if name == "opencv_debevec":
+            res["speed_ratio_vs_opencv_debevec"] = round(t_ours / t_cv, 3)
+            t_m, _ = _best(lambda: jax.block_until_ready(hdr.merge_radiance(images, times, r)), 2)
+            t_mcv, _ = _best(lambda crv=crv, mer=mer: mer().process(bgr, t_np, crv), 2)
+            res["merge_ratio_vs_opencv_debevec"] = round(t_m / t_mcv, 3)
         res[name] = {
             "seconds": round(t_cv, 4),
             "recover_seconds": round(t_cal, 4),
@@ -95,11 +103,54 @@ def run(h, w, repeat):
     return res
 
 
+_COLD = """
+import sys, time
+t0 = time.perf_counter()
+from jaxgfx._jaxcache import enable_compilation_cache
+enable_compilation_cache()
+import jax, jax.numpy as jnp
+from jaxgfx import hdr
+h, w = int(sys.argv[1]), int(sys.argv[2])
+times = jnp.asarray([1.0, 4.0, 16.0, 64.0, 256.0])
+rad = hdr.synthetic_radiance(jax.random.key(1), h, w, dynamic_range=1e4)
+st = hdr.make_bracketed_stack(jax.random.key(2), rad, times, hdr.synthetic_response("srgb"))
+images = jax.block_until_ready(st.images)
+t1 = time.perf_counter()
+r = hdr.recover_response(images, times)
+jax.block_until_ready(hdr.merge_radiance(images, times, r))
+print(time.perf_counter() - t1)
+"""
+
+
+def cold_warm(h, w):
+    """Seconds for recover + merge in a fresh process: empty cache, then the filled cache."""
+    import subprocess
+    import tempfile
+
+    out = {}
+    with tempfile.TemporaryDirectory() as d:
+        env = {**os.environ, "JAXGFX_CACHE_DIR": d}
+        root = os.path.join(os.path.dirname(__file__), "..")
+        env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
+        for label in ("cold_process_seconds", "cached_process_seconds"):
+            p = subprocess.run(
+                [sys.executable, "-c", _COLD, str(h), str(w)],
+                env=env,
+                capture_output=True,
+                text=True,
+                check=True,
+            )
+            out[label] = round(float(p.stdout.strip().splitlines()[-1]), 3)
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true", help="256x256 only, 1 repeat")
     ap.add_argument("--sizes", nargs="*", default=["1024x1024", "3000x2000"])
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--cold", action="store_true", help="cold vs cached-process times")
+    ap.add_argument("--no-robertson", action="store_true", help="skip OpenCV Robertson (slow)")
     a = ap.parse_args(argv)
     sizes = ["256x256"] if a.quick else a.sizes
     repeat = 1 if a.quick else a.repeat
@@ -116,9 +167,12 @@ def main(argv=None):
         },
         "runs": [],
     }
-    for s in sizes:
+    for k, s in enumerate(sizes):
         w, h = (int(v) for v in s.split("x"))
-        out["runs"].append(run(h, w, repeat))
+        out["runs"].append(run(h, w, repeat, robertson=not a.no_robertson))
+        if a.cold and k == 0:
+            out["runs"][-1]["jaxgfx_process"] = cold_warm(h, w)
+        print(json.dumps(out["runs"][-1]), file=sys.stderr, flush=True)  # partial results
     print(json.dumps(out, indent=1))
 
 

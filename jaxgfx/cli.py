@@ -9,6 +9,10 @@ function in :mod:`jaxgfx.pipelines`)
     The main job: fit a camera response from a bracketed stack and merge a radiance map.
 ``jaxgfx render SCENE.yaml OUT.exr --spp 64 --integrator path``
     Render a scene description with the Monte Carlo renderer.
+``jaxgfx fit CONFIG --out out/fit``
+    Inverse rendering: fit scene (and camera) parameters to a target (docs/inverse.md).
+``jaxgfx tonemap IN.exr OUT.png --op drago --bias 0.85``
+    Tone map an HDR image for display (see ``jaxgfx tonemap --list``).
 
 Every subcommand takes ``--overwrite`` (replace existing results; without it an output that
 already exists is refused before any work) and ``--debug`` (show the traceback of an error).
@@ -96,6 +100,11 @@ def _calibrate_arguments(p):
     p.add_argument("--times", default=None, help="comma-separated exposure times (seconds)")
     p.add_argument("--method", default=None, help="response method (overrides the config)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--tonemap",
+        default=None,
+        help="comma-separated tone-mapping operators; writes tonemap_<op>.png per operator",
+    )
 
 
 def calibrate_job(args):
@@ -114,7 +123,11 @@ def calibrate_job(args):
         from jaxgfx.config import read_yaml
 
         base = read_yaml(args.config) if args.config else {}
-        overrides["response"] = {**base.get("response", {}), "method": args.method}
+        section = base.get("response", {})
+        if isinstance(section, dict):  # else load_config reports the malformed section
+            overrides["response"] = {**section, "method": args.method}
+    if getattr(args, "tonemap", None):
+        overrides["tonemap"] = [t.strip() for t in args.tonemap.split(",") if t.strip()]
     cfg = load_config(CalibrateConfig, args.config, **overrides)
     return CalibrateJob(
         config=cfg,
@@ -184,6 +197,89 @@ def _render_run(args) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- tonemap
+
+
+# every name in jaxgfx.tonemap.TONEMAP_PARAMETERS (kept here so --help needs no jax import;
+# tests/tonemap/test_pipeline_tonemap.py checks the two agree)
+TONEMAP_CLI_PARAMS = (
+    "alpha beta bias color_adapt contrast exposure gamma intensity k key ld_max "
+    "light_adapt saturation shoulder sigma sigma_range white"
+).split()
+
+
+def _tonemap_arguments(p):
+    p.add_argument("input", nargs="?", help="linear HDR image (.exr or .hdr)")
+    p.add_argument("output", nargs="?", help="display image (.png .jpg .tif), sRGB")
+    p.add_argument("--op", default="drago", help="operator name (see --list)")
+    p.add_argument("--list", action="store_true", help="list operators and their parameters")
+    for name in TONEMAP_CLI_PARAMS:
+        p.add_argument(f"--{name.replace('_', '-')}", type=float, default=None, dest=name)
+
+
+def _tonemap_run(args) -> int:
+    from jaxgfx.pipelines.tonemap import TonemapJob, operator_help, run_tonemap
+
+    if args.list:
+        print("\n".join(operator_help()))
+        return 0
+    if not args.input or not args.output:
+        raise _UsageError("INPUT and OUTPUT are required")
+    params = {
+        k: getattr(args, k) for k in TONEMAP_CLI_PARAMS if getattr(args, k) is not None
+    }
+    job = TonemapJob(args.input, args.output, args.op, params, overwrite=args.overwrite)
+    res = run_tonemap(job)
+    print(f"wrote {res['outputs']['output']} ({args.op}, {res['seconds']:.2f} s incl. compile)")
+    return 0
+
+
+# ----------------------------------------------------------------------------- fit
+def _fit_arguments(p):
+    p.add_argument("config", help="YAML config (configs/inverse_material.yaml, docs/inverse.md)")
+    p.add_argument("--out", default="out/fit", help="output directory")
+    p.add_argument("--steps", type=int, default=None, help="override optimizer.steps")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def fit_job(args):
+    """``argparse`` namespace of ``jaxgfx fit`` → :class:`~jaxgfx.pipelines.fit.FitJob`."""
+    from jaxgfx.config import load_config, read_yaml
+    from jaxgfx.pipelines.fit import FitConfig, FitJob
+
+    data = read_yaml(args.config)
+    if args.steps is not None:
+        data["optimizer"] = {**(data.get("optimizer") or {}), "steps": args.steps}
+    if args.quiet:
+        data["progress"] = False
+    return FitJob(
+        config=load_config(FitConfig, data),
+        out=args.out,
+        overwrite=args.overwrite,
+        base_dir=os.path.dirname(os.path.abspath(args.config)),
+    )
+
+
+def _fit_run(args) -> int:
+    from jaxgfx.pipelines.fit import enable_compilation_cache, run_fit
+
+    job = fit_job(args)
+    enable_compilation_cache()
+    out = run_fit(job)
+    for k, v in out["params"].items():
+        err = out.get("errors", {}).get(k)
+        extra = f"  (truth {out['truth'][k]}, max error {err:.4g})" if err is not None else ""
+        print(f"{k} = {v}{extra}")
+    if out["camera"]:
+        print(f"camera = {out['camera']}")
+    print(
+        f"loss {out['loss'][0]:.4g} -> {out['loss'][-1]:.4g} in {out['n_steps']} steps, "
+        f"{out['seconds']:.1f} s (+{out['compile_seconds']:.1f} s compile); "
+        f"outputs in {os.path.abspath(job.out)}"
+    )
+    return 0
+
+
 COMMANDS: dict[str, Command] = {
     "filter": Command(
         "apply an image operation to a file",
@@ -204,6 +300,20 @@ COMMANDS: dict[str, Command] = {
         "Render a scene (see docs/render.md) with the Monte Carlo renderer.",
         _render_arguments,
         _render_run,
+    ),
+    "tonemap": Command(
+        "tone map an HDR image (EXR/HDR) to a display PNG",
+        "Tone map linear radiance for display with a jaxgfx.tonemap operator "
+        "(docs/tonemap.md); every continuous parameter is an option.",
+        _tonemap_arguments,
+        _tonemap_run,
+    ),
+    "fit": Command(
+        "fit scene (and camera) parameters to a target image (inverse rendering)",
+        "Fit material / light / texture parameters of a scene, and for 8-bit targets the "
+        "camera response and exposure, to a target image (see docs/inverse.md).",
+        _fit_arguments,
+        _fit_run,
     ),
 }
 
@@ -306,6 +416,9 @@ def main(argv=None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    from jaxgfx._jaxcache import enable_compilation_cache  # persistent compile cache (calib)
+
+    enable_compilation_cache()
     return run_command(args)
 
 

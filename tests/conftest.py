@@ -4,6 +4,8 @@ turn it on locally with the ``x64`` fixture, which restores the previous setting
 import os
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
+# the CLI turns on JAX's persistent compilation cache (jaxgfx/_jaxcache.py); not in tests
+os.environ.setdefault("JAXGFX_CACHE_DIR", "off")
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402

@@ -33,8 +33,11 @@ def test_synthetic_default_job(tmp_path):
     var = io.read_exr(rep["outputs"]["variance"])
     assert rad.shape == (48, 64, 3) and np.all(np.isfinite(rad)) and np.all(rad > 0)
     assert np.all(var >= 0)
-    for key in ("confidence", "preview", "response_plot", "report"):
+    for key in ("confidence", "preview", "response_plot", "report", "loo_plot"):
         assert os.path.getsize(rep["outputs"][key]) > 0
+    # the self-check is reported next to the ground-truth errors
+    loo = rep["leave_one_out"]
+    assert 0 < loo["mean_abs_error"] < 10 and len(loo["per_frame"]) == 5
     with open(rep["outputs"]["report"]) as f:
         saved = json.load(f)
     assert saved["timings_s"]["total"] > 0 and saved["response"]["method"] == "debevec"
@@ -64,6 +67,9 @@ def test_ldr_directory_with_sidecar_via_cli(tmp_path, capsys):
     assert float(hdr.radiance_error(rad, e_true)) < 0.1
     rep = json.loads((out / "report.json").read_text())
     assert rep["exposure_times"] == [1.0, 8.0, 64.0, 512.0]
+    # real input: no ground truth, the leave-one-out self-check instead
+    assert "errors_vs_ground_truth" not in rep
+    assert rep["leave_one_out"]["mean_abs_error"] < 10 and (out / "loo.png").stat().st_size
 
 
 def test_raw_dng_stack(tmp_path):
@@ -89,6 +95,11 @@ def test_raw_dng_stack(tmp_path):
     np.testing.assert_allclose(measured, true_t / true_t[ref], rtol=0.01)
     rad = io.read_exr(rep["outputs"]["radiance"])
     assert rad.shape == (h, w, 3) and np.all(np.isfinite(rad))
+    # linearity ran on pixels, or the report says why not; the noise model says its source
+    rc = rep["raw_calibration"]
+    lin = rc["linearity"]
+    assert (lin is not None and min(lin["n_pixels"]) > 0) or rc["linearity_note"]
+    assert rc["noise"] is None or rc["noise"]["method"]
 
 
 def test_bad_inputs(tmp_path):

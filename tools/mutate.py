@@ -5,6 +5,7 @@ Usage (from the repository root; ``make mutate`` runs the first form):
     python tools/mutate.py                      # all mutants, fail if any survives
     python tools/mutate.py --only delta_e       # mutants whose name contains a substring
     python tools/mutate.py --list               # print the list and exit
+    python tools/mutate.py --check              # only check that every patch still applies
     python tools/mutate.py --json out/mutate.json
 
 Each mutant in ``tools/mutants.py`` is an explicit patch (file, exact old text, new text) and
@@ -68,7 +69,10 @@ def _pytest(tree: Path, node_ids, timeout: float):
         p = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
         return "timeout", time.perf_counter() - t0, ""
-    tail = "\n".join((p.stdout + p.stderr).strip().splitlines()[-3:])
+    lines = (p.stdout + p.stderr).strip().splitlines()
+    # the failing assertion (how far the mutant landed outside the tolerance), else the tail
+    evidence = [ln[1:].strip() for ln in lines if ln.startswith("E ") and ln[1:].strip()]
+    tail = "\n".join(evidence[:8] if p.returncode == 1 and evidence else lines[-3:])
     return p.returncode, time.perf_counter() - t0, tail
 
 
@@ -80,6 +84,9 @@ def _check_list(mutants) -> list[str]:
         if name in names:
             errors.append(f"{name}: duplicate name")
         names.add(name)
+        if not (ROOT / m["file"]).is_file():
+            errors.append(f"{name}: no file {m['file']}")
+            continue
         text = (ROOT / m["file"]).read_text()
         n = text.count(m["old"])
         if n != 1:
@@ -96,9 +103,13 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", default="", help="run mutants whose name contains this")
     ap.add_argument("--list", action="store_true", help="print the mutants and exit")
+    ap.add_argument(
+        "--check", action="store_true", help="only check that every patch applies, then exit"
+    )
     ap.add_argument("--timeout", type=float, default=300.0, help="seconds per pytest run")
     ap.add_argument("--json", default=None, help="also write the summary to this file")
     ap.add_argument("--no-baseline", action="store_true", help="skip the unmutated run")
+    ap.add_argument("-v", "--verbose", action="store_true", help="print each failed assertion")
     args = ap.parse_args(argv)
 
     mutants = [m for m in MUTANTS if args.only in m["name"]]
@@ -110,6 +121,9 @@ def main(argv=None) -> int:
     if errors:
         print("mutant list is stale:\n  " + "\n  ".join(errors), file=sys.stderr)
         return 2
+    if args.check:
+        print(f"{len(mutants)} mutants apply cleanly")
+        return 0
 
     t_start = time.perf_counter()
     results = []
@@ -150,10 +164,11 @@ def main(argv=None) -> int:
                     "seconds": round(dt, 1),
                     "tests": m["tests"],
                     "why": m["why"],
+                    "evidence": tail,
                 }
             )
             print(f"{status:10s} {dt:6.1f} s  {m['name']}", flush=True)
-            if status != "killed":
+            if status != "killed" or args.verbose:
                 print("    " + tail.replace("\n", "\n    "), flush=True)
     total = time.perf_counter() - t_start
     bad = [r for r in results if r["status"] != "killed"]

@@ -14,7 +14,9 @@ from .response import recover_response as recover_response
 from .synthetic import SYNTHETIC_RESPONSES as SYNTHETIC_RESPONSES
 from .synthetic import BracketedStack as BracketedStack
 from .synthetic import NoiseParams as NoiseParams
+from .synthetic import jpeg_roundtrip as jpeg_roundtrip
 from .synthetic import make_bracketed_stack as make_bracketed_stack
+from .synthetic import make_jpeg_stack as make_jpeg_stack
 from .synthetic import synthetic_radiance as synthetic_radiance
 from .synthetic import synthetic_response as synthetic_response
 from .weighting import WEIGHTINGS as WEIGHTINGS
@@ -38,6 +40,8 @@ __all__ = [
     "synthetic_radiance",
     "synthetic_response",
     "make_bracketed_stack",
+    "make_jpeg_stack",
+    "jpeg_roundtrip",
     "weight_hat",
     "weight_gaussian",
     "weight_linear",
@@ -66,6 +70,9 @@ from .raw_calibration import estimate_black_level as estimate_black_level
 from .raw_calibration import estimate_exposure_ratios as estimate_exposure_ratios
 from .raw_calibration import estimate_white_level as estimate_white_level
 from .raw_calibration import linearity_check as linearity_check
+from .selfcheck import LOO_BANDS as LOO_BANDS
+from .selfcheck import LeaveOneOut as LeaveOneOut
+from .selfcheck import leave_one_out as leave_one_out
 
 __all__ += [
     "ALIGN_METHODS",
@@ -91,3 +98,10 @@ __all__ += [
     "estimate_white_level",
     "linearity_check",
 ]
+
+__all__ += ["LOO_BANDS", "LeaveOneOut", "leave_one_out"]
+
+# --- exposure fusion (docs/tonemap.md; owner: tonemap)
+from .fusion import exposure_fusion as exposure_fusion  # noqa: E402
+
+__all__ += ["exposure_fusion"]

@@ -89,8 +89,48 @@ def _log_inv(z):
     return jnp.expm1(z * jnp.log1p(_LOG_A)) / _LOG_A
 
 
+# "camera": a JPEG-like in-camera curve: a toe (x^2 (1+c) / (x + c), shadows compressed), a
+# Reinhard-style shoulder (x (1+k) / (x + k), highlights rolled off), then the sRGB encoding;
+# "camera-offset" adds a lifted black (level _CAM_B at zero exposure). c, k chosen so that the
+# relative exposure x(z) / x(128/255) is 0.009 at z = 2/255 and 6.5 at z = 250/255, close to a
+# measured Canon JPEG curve (0.010 and 6.0, OpenCV CalibrateDebevec; jaxgfx issue 16).
+_CAM_C, _CAM_K, _CAM_B = 0.003, 1.5, 0.03
+
+
+def _camera_fwd_b(x, b):
+    x = jnp.maximum(x, 0.0)
+    xt = x * x * (1.0 + _CAM_C) / (x + _CAM_C)
+    xs = xt * (1.0 + _CAM_K) / (xt + _CAM_K)
+    return b + (1.0 - b) * _srgb_fwd(xs)
+
+
+def _camera_inv_b(z, b):
+    s = jnp.clip((z - b) / (1.0 - b), 0.0, 1.0)
+    xs = _srgb_inv(s)
+    xt = _CAM_K * xs / (1.0 + _CAM_K - xs)
+    return (xt + safe_sqrt(xt * xt + 4.0 * (1.0 + _CAM_C) * _CAM_C * xt)) / (2.0 * (1.0 + _CAM_C))
+
+
+def _camera_fwd(x):
+    return _camera_fwd_b(x, 0.0)
+
+
+def _camera_inv(z):
+    return _camera_inv_b(z, 0.0)
+
+
+def _camera_offset_fwd(x):
+    return _camera_fwd_b(x, _CAM_B)
+
+
+def _camera_offset_inv(z):
+    return _camera_inv_b(z, _CAM_B)
+
+
 ANALYTIC_KINDS = {
     "srgb": (_srgb_inv, _srgb_fwd),
+    "camera": (_camera_inv, _camera_fwd),
+    "camera-offset": (_camera_offset_inv, _camera_offset_fwd),
     "s-curve": (_scurve_inv, _scurve_fwd),
     "filmic": (_filmic_inv, _filmic_fwd),
     "log": (_log_inv, _log_fwd),

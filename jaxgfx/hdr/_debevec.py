@@ -10,6 +10,8 @@ from ._model import CameraResponse, resolve_anchor
 from ._sampling import level_index, monotone_repair, select_samples
 from .weighting import get_weighting
 
+DEBEVEC_MAX_CANDIDATES = 1 << 14
+
 __all__ = ["recover_debevec", "default_levels", "debevec_solve"]
 
 
@@ -94,6 +96,8 @@ def recover_debevec(
     n_levels: int | None = None,
     weighting: str = "hat",
     anchor="mid",
+    end_weight: float = 0.2,
+    max_candidates: int = None,
 ):
     """Debevec & Malik (1997) response recovery (method ``"debevec"``).
 
@@ -101,21 +105,35 @@ def recover_debevec(
     ``n_samples`` pixels per channel with :func:`select_samples` (stratified over intensity,
     away from edges, deterministic for a ``key``), bins levels to ``n_levels`` (256 for 8-bit
     16-bit and float input by default), solves the least-squares system with
-    ``weighting`` (Debevec's hat) and smoothness ``lam``, then makes the table strictly
-    increasing with :func:`monotone_repair` (OpenCV's ``CalibrateDebevec`` does not).
+    ``weighting`` (Debevec's hat) plus ``end_weight`` on every level except the first and
+    last (black and clipped values are censored: weight 0), and smoothness ``lam``, then makes
+    the table strictly increasing with :func:`monotone_repair` (OpenCV's ``CalibrateDebevec``
+    does not). ``end_weight`` keeps the toe and shoulder driven by the data there rather than
+    extrapolated by the smoothness term: with the plain hat (``end_weight=0``) the curve of a
+    JPEG-like stack had its toe too high and its shoulder too low, as on real photographs
+    (docs/hdr.md, "JPEG-like stacks"). Samples are picked away from edges by central
+    differences that skip the pixel itself, so they are not selected on their own noise.
+    Candidates: a regular grid of at most ``max_candidates`` pixels (default
+    ``DEBEVEC_MAX_CANDIDATES`` = 16 384, cut out by one strided slice before anything else:
+    at 1 MP recovery takes 0.15 s instead of 0.63 s with 65 536, same curve error).
     Returns a ``"table"`` :class:`CameraResponse`; ``diagnostics["residual_rms"]`` is the
     weighted RMS of the data equations per channel (in ln units).
     """
     check_nonnegative(lam, "lam")
+    check_nonnegative(end_weight, "end_weight")
     anchor_z = resolve_anchor(anchor)
     n_lev = default_levels(code_max, n_levels)
     wfun = get_weighting(weighting)
     if key is None:
         key = jax.random.key(0)
-    samples, valid = select_samples(key, z, n_samples=n_samples)
+    mc = DEBEVEC_MAX_CANDIDATES if max_candidates is None else int(max_candidates)
+    samples, valid = select_samples(
+        key, z, n_samples=n_samples, flat_reach=2, max_candidates=max(mc, n_samples)
+    )
     lev = level_index(samples, n_lev)  # (C, P, N)
     zq = lev.astype(z.dtype) / (n_lev - 1)
-    w = wfun(zq) * valid[..., None].astype(z.dtype)
+    interior = (lev > 0) & (lev < n_lev - 1)  # black and clipped levels are censored
+    w = jnp.where(interior, wfun(zq) + end_weight, 0.0) * valid[..., None].astype(z.dtype)
     log_t = jnp.log(t)
     m = (n_lev - 1) // 2
     g = jax.vmap(lambda lv, ww: debevec_solve(lv, ww, log_t, n_lev, lam, m))(lev, w)  # (C, L)

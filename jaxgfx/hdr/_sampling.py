@@ -16,7 +16,17 @@ def _stride_for(h, w, max_candidates):
     return s
 
 
-def select_samples(key, z, *, n_samples=2048, n_bins=32, max_candidates=1 << 16, border=2):
+def select_samples(
+    key,
+    z,
+    *,
+    n_samples=2048,
+    n_bins=32,
+    max_candidates=1 << 16,
+    border=2,
+    flat_weight=1.0,
+    flat_reach=0,
+):
     """Pick ``P = n_bins * (n_samples // n_bins)`` pixels per channel for calibration.
 
     ``z``: ``(N, H, W, C)`` normalised stack. Pixels are stratified by the stack sum
@@ -24,8 +34,11 @@ def select_samples(key, z, *, n_samples=2048, n_bins=32, max_candidates=1 << 16,
     equal-width bins over ``[0, N]``; within each bin the pixels with the smallest local
     gradient of ``s`` (max abs difference to the 4 neighbours, so edges and misregistered
     pixels are avoided) are taken, ties broken by a small uniform jitter from ``key``;
-    ``border`` pixels at the image edge are never taken. Candidates are a regular sub-grid
-    with at most ``max_candidates`` pixels (cheap on large images).
+    ``border`` pixels at the image edge are never taken. ``flat_reach > 0`` measures the
+    gradient by central differences ``s(p + d) − s(p − d)`` at that distance, which skip the
+    pixel itself (so the choice does not favour pixels by their own noise); ``flat_weight``
+    scales the gradient against the jitter (0: random within the bin). Candidates are a
+    regular sub-grid with at most ``max_candidates`` pixels (cheap on large images).
 
     Returns ``(samples, valid)``: ``samples`` ``(C, P, N)`` levels and ``valid`` ``(C, P)``
     bool (False where a bin had fewer pixels than its quota).
@@ -43,20 +56,38 @@ def select_samples(key, z, *, n_samples=2048, n_bins=32, max_candidates=1 << 16,
         return jnp.sum(z[:, yy[:, None], xx[None, :], :], axis=0)
 
     s_c = at(0, 0)  # (h', w', C)
-    g_c = (
-        jnp.max(
-            jnp.stack([jnp.abs(at(dy, dx) - s_c) for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0))]),
-            axis=0,
+    if flat_reach == 0:
+        g_c = (
+            jnp.max(
+                jnp.stack(
+                    [jnp.abs(at(dy, dx) - s_c) for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0))]
+                ),
+                axis=0,
+            )
+            / n
         )
-        / n
-    )
+    else:  # central differences that skip the pixel itself: no selection on its own noise
+        d = flat_reach
+        g_c = (
+            jnp.max(
+                jnp.stack(
+                    [
+                        jnp.abs(at(dy, dx) - at(-dy, -dx))
+                        for dy, dx in ((0, d), (d, 0), (d, d), (d, -d))
+                    ]
+                ),
+                axis=0,
+            )
+            / n
+        )
     b = min(border, (h - 1) // 2, (w - 1) // 2)
     inner = ((ys >= b) & (ys < h - b))[:, None] & ((xs >= b) & (xs < w - b))[None, :]
     in_c = jnp.broadcast_to(jnp.asarray(inner)[..., None], s_c.shape)
     zc = z[:, ys[:, None], xs[None, :], :]  # (N, h', w', C)
     m = s_c.shape[0] * s_c.shape[1]
     jitter = jax.random.uniform(key, (m, c), dtype=z.dtype)
-    score = g_c.reshape(m, c) + 1e-3 * jitter + jnp.where(in_c.reshape(m, c), 0.0, 10.0)
+    score = flat_weight * g_c.reshape(m, c) + 1e-3 * jitter
+    score = score + jnp.where(in_c.reshape(m, c), 0.0, 10.0)
     bins = jnp.clip(jnp.floor(s_c.reshape(m, c) / n * n_bins), 0, n_bins - 1).astype(jnp.int32)
     per_bin = max(n_samples // n_bins, 1)
 

@@ -40,6 +40,7 @@ def merge_radiance(
     noise=None,
     return_variance: bool = False,
     domain: str = "linear",
+    time_power: float = 2.0,
 ):
     """Merge ``N`` differently exposed frames into one relative radiance map.
 
@@ -51,7 +52,14 @@ def merge_radiance(
     they are averaged with per-pixel weights ``w_j``:
 
     * ``"hat"``, ``"gaussian"``, ``"linear"`` (:data:`WEIGHTINGS`): functions of the level,
-      zero at 0 and at saturation (Debevec & Malik 1997 use the hat);
+      zero at 0 and at saturation (Debevec & Malik 1997 use the hat), multiplied by
+      ``(t_j / t_max)^time_power``. The default ``time_power=2`` makes the weight the inverse
+      variance of ``E_j = x_j / t_j`` when the noise of ``x`` does not depend on the exposure
+      (quantisation, JPEG and read noise: ``Var E_j ∝ 1 / t_j²``), tapered by the level
+      weight — as in Robertson et al. (2003) and Granados et al. (2010). ``time_power=0`` is
+      Debevec & Malik's plain level weight, which lets a short frame's near-black level (a
+      censored, noisy value magnified by ``1 / t_j``) pull dark pixels far too bright
+      (measured on JPEG-like stacks: leave-one-out error 14.1 → 3.5 levels, docs/hdr.md);
     * ``"noise"``: inverse variance of ``E_j`` (Granados et al. 2010): ``w_j = t_j² /
       (gain · x̂ + read_variance + (dx̂/dz)² Δ²/12)`` with ``x̂ = x / x(z=1)`` the exposure
       in units of the clipping level, ``Δ = 1 / code_max`` the quantisation step; levels 0
@@ -78,6 +86,10 @@ def merge_radiance(
         raise TypeError(f"response: expected a CameraResponse, got {type(response).__name__}")
     if weighting == "noise" and noise is None:
         raise ValueError('noise: weighting="noise" needs a noise model (.gain, .read_variance)')
+    if isinstance(time_power, bool) or not isinstance(time_power, (int, float)):
+        raise TypeError(f"time_power: expected a number, got {time_power!r}")
+    if not 0.0 <= float(time_power) <= 4.0:
+        raise ValueError(f"time_power: expected a value in [0, 4], got {time_power}")
     z, t, code_max, squeeze = prepare_stack(images, exposure_times, min_frames=1, raw=True)
     c = z.shape[-1]
     if response.channels not in (1, c):
@@ -97,21 +109,21 @@ def merge_radiance(
         domain=domain,
         code_max=code_max,
         return_variance=return_variance,
+        time_power=float(time_power),
     )
     if squeeze:
         out = jax.tree_util.tree_map(lambda a: a[..., 0], out)
     return out
 
 
-@functools.partial(jax.jit, static_argnames=("weighting", "domain", "code_max", "return_variance"))
-def _merge(z, t, response, noise, *, weighting, domain, code_max, return_variance):
-    """``z``: normalised float levels, or integer codes (then every per-level quantity is
-    computed once on the ``code_max + 1`` levels and gathered: a lookup table)."""
+def _frame_terms(z, t, response, noise, *, weighting, code_max, need_var, time_power):
+    """Per-frame ``x_j`` (to_linear), weights ``w_j``, ``Var x_j`` (or None) and the
+    "bright" flag ``z_j >= 1/2`` used by the fallback, all ``(N, H, W, C)``."""
     c = z.shape[-1]
     dt = t.dtype
     tb = t[:, None, None, None]
     step = 1.0 / code_max if code_max > 1.0 else 1.0 / 255.0
-    need_deriv = weighting == "noise" or return_variance
+    need_deriv = weighting == "noise" or need_var
     x1 = response.to_linear_normalized(jnp.ones((c,), dt))
 
     def per_level(zz):
@@ -150,12 +162,37 @@ def _merge(z, t, response, noise, *, weighting, domain, code_max, return_varianc
         w = jnp.where((q["valid"] > 0) & ok_var, tb * tb / jnp.where(ok_var, var_x, 1.0), 0.0)
     else:
         w = q["w"]
+        if time_power != 0.0:
+            w = w * (tb / jnp.max(t)) ** time_power
+    if z_lo is None:
+        bright = z.astype(jnp.int32) * 2 >= int(code_max)
+    else:
+        bright = z >= 0.5
+    return x, w, var_x, bright
+
+
+@functools.partial(
+    jax.jit, static_argnames=("weighting", "domain", "code_max", "return_variance", "time_power")
+)
+def _merge(z, t, response, noise, *, weighting, domain, code_max, return_variance, time_power=2.0):
+    """``z``: normalised float levels, or integer codes (then every per-level quantity is
+    computed once on the ``code_max + 1`` levels and gathered: a lookup table)."""
+    if not jnp.issubdtype(z.dtype, jnp.floating) and not return_variance and domain == "linear":
+        return _merge_codes(z, t, response, noise, weighting, code_max, time_power)
+    tb = t[:, None, None, None]
+    x, w, var_x, use_short = _frame_terms(
+        z,
+        t,
+        response,
+        noise,
+        weighting=weighting,
+        code_max=code_max,
+        need_var=return_variance,
+        time_power=time_power,
+    )
     i_short = jnp.argmin(t)
     i_long = jnp.argmax(t)
-    if z_lo is None:
-        use_short = z[i_short].astype(jnp.int32) * 2 >= int(code_max)
-    else:
-        use_short = z[i_short] >= 0.5
+    use_short = use_short[i_short]
     e_j = x / tb
     wsum = jnp.sum(w, axis=0)
     ok = wsum > 0
@@ -177,3 +214,53 @@ def _merge(z, t, response, noise, *, weighting, domain, code_max, return_varianc
         var = jnp.sum(w * w * rel, axis=0) / (den * den) * e * e
     var = jnp.where(ok, var, fallback * fallback)
     return e, var
+
+
+def _merge_codes(z, t, response, noise, weighting, code_max, time_power):
+    """Integer codes, linear domain, no variance: per frame ``j`` two tables over the levels,
+    ``a_j = w_j x / t_j`` and ``b_j = w_j`` (``(N, L, C)``, tiny), gathered with one flat
+    index per pixel and summed over frames in the same pass: ``E = Σ a / Σ b``. The same
+    numbers as the general path with 2 lookups per pixel and frame and no per-pixel weight
+    arithmetic, one frame at a time (the merge was 3x slower than OpenCV's ``MergeDebevec``
+    before)."""
+    n, c = z.shape[0], z.shape[-1]
+    dt = t.dtype
+    nl = int(code_max) + 1
+    levels = jnp.broadcast_to(jnp.linspace(0.0, 1.0, nl, dtype=dt)[:, None], (nl, c))
+    x = response.to_linear_normalized(levels)  # (L, C)
+    tcol = t[:, None, None]
+    if weighting == "noise":
+        step = 1.0 / code_max
+        dxdz = response.derivative_normalized(levels)
+        var_x = dxdz * dxdz * (step * step / 12.0)
+        gain, read = noise
+        x1 = response.to_linear_normalized(jnp.ones((c,), dt))
+        var_x = var_x + (gain * jnp.maximum(x / x1, 0.0) + read) * x1 * x1
+        valid = (levels > 0.5 * step) & (levels < 1.0 - 0.5 * step) & (var_x > 0)
+        b = jnp.where(valid, 1.0 / jnp.where(valid, var_x, 1.0), 0.0)[None] * tcol * tcol
+    else:
+        b = WEIGHTINGS[weighting](levels)[None] * jnp.ones_like(tcol)
+        if time_power != 0.0:
+            b = b * (tcol / jnp.max(t)) ** time_power
+    a = b * x[None] / tcol  # (N, L, C)
+    e_all = x[None] / tcol
+    ch = jnp.arange(c, dtype=jnp.int32)
+    shape = z.shape[1:]
+    # one frame at a time, flat 1-d lookups into that frame's (L*C,) table: XLA's CPU
+    # reduction over a leading frame axis and its n-d gathers were 15x slower than this
+    num = den = None
+    for j in range(n):
+        idx = (z[j].astype(jnp.int32) * c + ch).reshape(-1)
+        aj = a[j].reshape(-1).at[idx].get(mode="promise_in_bounds").reshape(shape)
+        bj = b[j].reshape(-1).at[idx].get(mode="promise_in_bounds").reshape(shape)
+        num = aj if num is None else num + aj
+        den = bj if den is None else den + bj
+    i_short = jnp.argmin(t)
+    i_long = jnp.argmax(t)
+    cs = z[i_short].astype(jnp.int32)
+    cl = z[i_long].astype(jnp.int32)
+    e_s = e_all[i_short].reshape(-1).at[(cs * c + ch).reshape(-1)].get(mode="promise_in_bounds")
+    e_l = e_all[i_long].reshape(-1).at[(cl * c + ch).reshape(-1)].get(mode="promise_in_bounds")
+    fallback = jnp.where(cs * 2 >= int(code_max), e_s.reshape(shape), e_l.reshape(shape))
+    ok = den > 0
+    return jnp.where(ok, num / jnp.where(ok, den, 1.0), fallback)

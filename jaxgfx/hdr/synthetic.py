@@ -24,9 +24,11 @@ __all__ = [
     "BracketedStack",
     "NoiseParams",
     "SYNTHETIC_RESPONSES",
+    "jpeg_roundtrip",
+    "make_jpeg_stack",
 ]
 
-SYNTHETIC_RESPONSES = ("gamma2.2", "srgb", "s-curve", "filmic", "log")
+SYNTHETIC_RESPONSES = ("gamma2.2", "srgb", "s-curve", "filmic", "log", "camera", "camera-offset")
 
 
 class NoiseParams(NamedTuple):
@@ -110,7 +112,11 @@ def _radiance_jit(key, dynamic_range, height, width, channels):
 
 def synthetic_response(name: str, *, channels: int = 3) -> CameraResponse:
     """A ground-truth response curve: ``"gamma2.2"``, ``"srgb"``, ``"s-curve"``,
-    ``"filmic"`` (ACES-like shoulder), ``"log"`` (log encoding, ``ln(1 + 100x)``).
+    ``"filmic"`` (ACES-like shoulder), ``"log"`` (log encoding, ``ln(1 + 100x)``),
+    ``"camera"`` (a JPEG-like in-camera curve: a toe ``x² (1+c) / (x+c)``, ``c = 0.003``, a
+    shoulder ``x (1+k) / (x+k)``, ``k = 1.5``, then sRGB; relative exposure
+    ``x(z)/x(128/255)`` = 0.009 at z = 2/255 and 6.5 at 250/255, close to a measured Canon JPEG)
+    and ``"camera-offset"`` (the same with a lifted black: level 0.03 at zero exposure).
 
     All map linear ``x ∈ [0, 1]`` (1 = clipping) to normalised levels with ``f(1) = 1``,
     anchored like every response (``to_linear(0.5) = 1``). Example:
@@ -200,3 +206,96 @@ def _stack_jit(key, radiance, t, response, gain, read_sigma, *, bits, clip):
         jnp.full((c,), gain, radiance.dtype), jnp.full((c,), read_sigma**2, radiance.dtype)
     )
     return BracketedStack(img, t, radiance, response, noise, lin)
+
+
+def jpeg_roundtrip(images, *, quality: int = 90, subsampling: str = "4:2:0"):
+    """Encode and decode 8-bit frames with Pillow's JPEG codec (host-only NumPy, not traced).
+
+    ``images``: ``(N, H, W, 3)`` or ``(H, W, 3)`` uint8 (or ``(..., H, W)`` grey). Returns the
+    decoded uint8 frames, same shape: 8×8 DCT block artefacts and, for colour with
+    ``subsampling="4:2:0"`` (the camera default), half-resolution chroma. ``quality``: 1–100
+    (90: a typical in-camera "fine" setting).
+    """
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    check_choice(subsampling, "subsampling", ("4:4:4", "4:2:2", "4:2:0"))
+    if isinstance(quality, bool) or not isinstance(quality, int) or not 1 <= quality <= 100:
+        raise ValueError(f"quality: expected an integer in 1..100, got {quality!r}")
+    a = np.asarray(images)
+    if a.dtype != np.uint8:
+        raise TypeError(f"images: expected uint8 frames, got dtype {a.dtype}")
+    grey = a.ndim in (2, 3) and not (a.ndim == 3 and a.shape[-1] == 3)
+    frames = a.reshape((-1,) + a.shape[-2:]) if grey else a.reshape((-1,) + a.shape[-3:])
+    sub = {"4:4:4": 0, "4:2:2": 1, "4:2:0": 2}[subsampling]
+    out = []
+    for f in frames:
+        buf = io.BytesIO()
+        Image.fromarray(np.ascontiguousarray(f)).save(
+            buf, format="JPEG", quality=quality, subsampling=sub
+        )
+        buf.seek(0)
+        out.append(np.asarray(Image.open(buf).convert("L" if grey else "RGB")))
+    return np.stack(out).reshape(a.shape)
+
+
+def make_jpeg_stack(
+    key,
+    radiance,
+    exposure_times,
+    response,
+    *,
+    gain: float = 1e-4,
+    read_sigma: float = 1e-3,
+    quality: int = 90,
+    subsampling: str = "4:2:0",
+    max_shift: float = 0.0,
+) -> BracketedStack:
+    """A bracketed stack as hostile as real camera JPEGs (host-side; not jittable).
+
+    Like :func:`make_bracketed_stack` with ``bits=8`` (shot + read noise, clipping, the
+    response: use ``"camera"`` / ``"camera-offset"`` for a toe, a shoulder and a black offset),
+    then every frame goes through :func:`jpeg_roundtrip` (Pillow, ``quality``, ``subsampling``).
+    ``max_shift > 0`` misaligns the frames: frame ``j`` sees the radiance translated by a
+    uniform random ``(dy, dx)`` in ``[-max_shift, max_shift]`` pixels (bilinear,
+    :func:`jaxgfx.hdr.shift_image`), as from a handheld bracket; the first frame is unshifted.
+    ``radiance`` in the result is the unshifted ground truth.
+    """
+    if isinstance(response, str):
+        response = synthetic_response(response, channels=jnp.asarray(radiance).shape[-1])
+    check_nonnegative(max_shift, "max_shift")
+    t = jnp.asarray(exposure_times, jnp.float32)
+    k_noise, k_shift = jax.random.split(key)
+    if max_shift > 0:
+        from .align import shift_image
+
+        rad = jnp.asarray(radiance)
+        shifts = jax.random.uniform(k_shift, (t.shape[0], 2), minval=-max_shift, maxval=max_shift)
+        shifts = shifts.at[0].set(0.0)
+        keys = jax.random.split(k_noise, t.shape[0])
+        parts = [
+            make_bracketed_stack(
+                keys[j],
+                shift_image(rad, shifts[j]),
+                t[j : j + 1],
+                response,
+                bits=8,
+                gain=gain,
+                read_sigma=read_sigma,
+            )
+            for j in range(t.shape[0])
+        ]
+        st = parts[0]._replace(
+            images=jnp.concatenate([p.images for p in parts]),
+            exposure_times=t,
+            radiance=rad,
+            linear=jnp.concatenate([p.linear for p in parts]),
+        )
+    else:
+        st = make_bracketed_stack(
+            k_noise, radiance, t, response, bits=8, gain=gain, read_sigma=read_sigma
+        )
+    imgs = jpeg_roundtrip(st.images, quality=quality, subsampling=subsampling)
+    return st._replace(images=jnp.asarray(imgs))

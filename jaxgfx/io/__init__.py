@@ -22,6 +22,7 @@ from .ldr import read_ldr_stack as read_ldr_stack
 from .ldr import write_png as write_png
 from .raw import RawImage as RawImage
 from .raw import read_raw as read_raw
+from .raw import read_raw_exif as read_raw_exif
 from .raw import read_raw_linear_rgb as read_raw_linear_rgb
 from .raw import read_raw_stack as read_raw_stack
 
@@ -35,6 +36,7 @@ __all__ = [
     "RawImage",
     "read_raw",
     "read_raw_linear_rgb",
+    "read_raw_exif",
     "read_raw_stack",
     "write_dng",
     "read_image",

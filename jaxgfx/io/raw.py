@@ -4,8 +4,8 @@
 frozen :class:`RawImage`; :func:`read_raw_linear_rgb` demosaics with LibRaw in linear camera
 space. Exposure time, ISO and aperture are read from the TIFF/EXIF tags of TIFF-based raws
 (DNG, NEF, CR2, ARW, PEF, ...; tags 33434 ExposureTime, 33437 FNumber, 34855 ISOSpeedRatings,
-in IFD0 or the EXIF sub-IFD) with ``tifffile``; for other containers they are ``None`` and
-``RawImage.exif_fields`` says which were found.
+in IFD0, the EXIF IFD or SubIFDs) with ``tifffile`` and :func:`read_raw_exif` (also Canon
+CR3); when absent they are ``None`` and ``RawImage.exif_fields`` says which were found.
 """
 
 from __future__ import annotations
@@ -18,8 +18,9 @@ import rawpy
 import tifffile
 
 from ._common import existing_file
+from ._exif import read_raw_exif
 
-__all__ = ["RawImage", "read_raw", "read_raw_linear_rgb", "read_raw_stack"]
+__all__ = ["RawImage", "read_raw", "read_raw_linear_rgb", "read_raw_stack", "read_raw_exif"]
 
 _EXIF_TAGS = {
     "exposure_time": (33434, ("ExposureTime",)),
@@ -159,6 +160,10 @@ def read_raw(path) -> RawImage:
     """
     p = existing_file(path)
     meta = _tiff_metadata(p)
+    if any(meta.get(k) is None for k in ("exposure_time", "iso", "f_number")):
+        # NEF / CR2 / ARW sub-IFDs that tifffile did not reach, and CR3 (not TIFF)
+        for k, v in read_raw_exif(p).items():
+            meta.setdefault(k, v)
     if meta.get("truncated"):
         raise ValueError(f"'{p}': truncated RAW file (image data extends past end of file)")
     raw = _open_raw(p)

@@ -155,7 +155,7 @@ def fit(
     *,
     optimizer="adam",
     steps: int,
-    learning_rate: float = 1e-2,
+    learning_rate: float | Callable[[int], float] = 1e-2,
     key=None,
     args=None,
     bounds=None,
@@ -174,9 +174,11 @@ def fit(
     over them, so they are not baked into the compiled program) it gets ``args`` as the last
     argument. It must return a scalar.
 
-    ``optimizer``: a name in :data:`OPTIMIZERS` (built with ``learning_rate`` and
-    ``optimizer_options``), an ``optax.GradientTransformation``, or ``"lm"`` /
-    ``"gauss_newton"`` / ``"dogleg"``: then ``loss`` is a *residual* function and the call is
+    ``optimizer``: a name in :data:`OPTIMIZERS` (built with ``learning_rate`` — a number, or a
+    schedule ``step -> rate`` evaluated on the host and written into the optimiser state, so it
+    does not recompile — and ``optimizer_options``), an ``optax.GradientTransformation``, or
+    ``"lm"`` / ``"gauss_newton"`` / ``"dogleg"``: then ``loss`` is a *residual* function and the
+    call is
     forwarded to :func:`fit_least_squares` with ``max_steps=steps``.
     ``bounds``: pytree prefix of ``params`` with ``None`` / ``(lo, hi)`` / ``Interval`` leaves;
     bounded parameters are optimised through smooth bijections (:mod:`.transforms`), so they
@@ -235,7 +237,15 @@ def fit(
         # the learning rate lives in the optimiser state (optax.inject_hyperparams), so fits that
         # differ only in it share one compiled step
         lr0 = opt_state.hyperparams["learning_rate"]
-        opt_state.hyperparams["learning_rate"] = jnp.asarray(learning_rate, lr0.dtype)
+        lr_dtype = lr0.dtype
+        schedule = learning_rate if callable(learning_rate) else None
+        opt_state.hyperparams["learning_rate"] = jnp.asarray(
+            schedule(0) if schedule else learning_rate, lr_dtype
+        )
+    elif callable(learning_rate):
+        raise TypeError("learning_rate: a schedule needs a named optimizer (optax: build it in)")
+    else:
+        schedule = None
     step_key = jax.random.key(0) if key is None else key
     static = dict(loss=loss, tx=tx, spec=spec, use_key=key is not None)
 
@@ -258,6 +268,8 @@ def fit(
     reason = "steps"
     try:
         for i in range(steps):
+            if schedule is not None and i > 0:
+                opt_state.hyperparams["learning_rate"] = jnp.asarray(schedule(i), lr_dtype)
             t = time.perf_counter()
             u_new, opt_state, val, gfin, p = compiled(u, opt_state, step_key, np.int32(i), args)
             val = float(val)

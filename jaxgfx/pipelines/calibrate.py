@@ -12,7 +12,9 @@ writes::
     variance.exr        per-pixel variance of the radiance estimate
     confidence.png      per-pixel confidence (relative standard error mapped to [0, 1])
     response.png        fitted response curves (and the ground truth for synthetic stacks)
+    loo.png             leave-one-out self-check per level band and held frame (LDR)
     preview.png         exposure-normalised sRGB preview of the radiance map
+    tonemap_<op>.png    one display image per operator of ``config.tonemap`` (jaxgfx.tonemap)
     report.json         fitted parameters, uncertainties, residuals, errors, timings
 
 Only when the whole run succeeded do they appear in ``out`` (staged next to it, then moved
@@ -157,9 +159,17 @@ class CalibrateConfig:
     align: AlignConfig = AlignConfig()
     demosaic: str = "malvar"
     preview_key: float = 0.18
+    tonemap: tuple[str, ...] = ()
 
     def validate(self):
         _check_choice(self.demosaic, "demosaic")
+        from jaxgfx.tonemap import TONEMAP_METHODS
+
+        for i, op in enumerate(self.tonemap):
+            if op not in TONEMAP_METHODS:
+                raise ValueError(
+                    f"tonemap[{i}]: expected one of {', '.join(TONEMAP_METHODS)}, got {op!r}"
+                )
         if not (np.isfinite(self.preview_key) and self.preview_key > 0):
             raise ValueError(
                 f"preview_key: expected a finite value > 0 (log-average maps to it), "
@@ -183,7 +193,14 @@ OUTPUT_NAMES = (
     "confidence.png",
     "preview.png",
     "response.png",
+    "loo.png",
     "report.json",
+) + tuple(
+    f"tonemap_{op}.png"
+    for op in (
+        "exposure drago reinhard reinhard_devlin filmic hable reinhard_local "
+        "contrast_inversion durand fattal"
+    ).split()
 )
 """Every file a calibration run may write into ``out`` (a RAW run writes no response.png)."""
 
@@ -309,6 +326,41 @@ def _plot_response(path, responses: dict, truth=None, title="camera response"):
     plt.close(fig)
 
 
+def _plot_loo(path, loo):
+    """Leave-one-out self-check: mean |error| and bias per level band, and per held frame."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    d = loo.to_dict()
+    edges = d["band_edges"]
+    labels = [f"{edges[i]:g}-{edges[i + 1]:g}" for i in range(len(edges) - 1)]
+    nan = float("nan")
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.6))
+    x = np.arange(len(labels))
+    band = [nan if v is None else v for v in d["per_band"]]
+    bias = [nan if v is None else v for v in d["per_band_bias"]]
+    a1.bar(x - 0.2, band, 0.4, label="mean |error|")
+    a1.bar(x + 0.2, bias, 0.4, label="mean error (bias)")
+    a1.axhline(0, color="k", lw=0.8)
+    a1.set_xticks(x, labels, fontsize=8)
+    a1.set_xlabel("level of the held-out frame (of 255)")
+    a1.set_ylabel("predicted - actual (levels)")
+    a1.legend(fontsize=8)
+    a1.set_title(f"leave-one-out: {d['mean_abs_error']:.2f} levels overall")
+    pf = [nan if v is None else v for v in d["per_frame"]]
+    a2.bar(np.arange(len(pf)), pf)
+    a2.set_xticks(np.arange(len(pf)), [f"{t:.3g} s" for t in d["exposure_times"]], fontsize=8)
+    a2.set_xlabel("held-out frame (exposure time)")
+    a2.set_ylabel("mean |error| (levels)")
+    for a in (a1, a2):
+        a.grid(alpha=0.3, axis="y")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def _response_summary(resp) -> dict:
     out = {}
     for name, value in vars(resp).items():
@@ -320,13 +372,10 @@ def _response_summary(resp) -> dict:
 
 
 def _preview(radiance: np.ndarray, key: float) -> np.ndarray:
-    from jaxgfx import color
+    """Global Reinhard (2002) with key ``key``, L_white = the maximum (jaxgfx.tonemap)."""
+    from jaxgfx.pipelines.tonemap import tonemap_image
 
-    lum = np.asarray(color.luminance(np.maximum(radiance, 0)))
-    logavg = float(np.exp(np.mean(np.log(lum[lum > 0] + 1e-9)))) if np.any(lum > 0) else 1.0
-    scaled = radiance * (key / max(logavg, 1e-12))
-    mapped = scaled / (1.0 + scaled)  # global Reinhard curve for the preview only
-    return np.asarray(color.linear_to_srgb(np.clip(mapped, 0.0, 1.0)))
+    return tonemap_image(radiance, "reinhard", key=key)
 
 
 def _to_float01(images: np.ndarray) -> np.ndarray:
@@ -363,6 +412,7 @@ class CalibrateResult:
     truth: tuple | None = None  # (true response, true radiance) of a synthetic stack
     errors: dict | None = None  # method -> errors vs the ground truth
     raw_calibration: Any = None  # RawCalibration (RAW)
+    loo: Any = None  # hdr.LeaveOneOut self-check (LDR)
     alignment_shifts: Any = None
     synthetic: dict | None = None
 
@@ -379,6 +429,15 @@ def _write_outputs(folder, result: CalibrateResult, cfg: CalibrateConfig) -> lis
     io.write_png(os.path.join(folder, "confidence.png"), conf.astype(np.float32))
     io.write_png(os.path.join(folder, "preview.png"), _preview(radiance, cfg.preview_key))
     names = ["radiance.exr", "variance.exr", "confidence.png", "preview.png"]
+    if cfg.tonemap:
+        from jaxgfx.pipelines.tonemap import tonemap_image
+
+        for op in dict.fromkeys(cfg.tonemap):
+            io.write_png(os.path.join(folder, f"tonemap_{op}.png"), tonemap_image(radiance, op))
+            names.append(f"tonemap_{op}.png")
+    if result.loo is not None:
+        _plot_loo(os.path.join(folder, "loo.png"), result.loo)
+        names.append("loo.png")
     if result.curves:
         _plot_response(
             os.path.join(folder, "response.png"),
@@ -395,7 +454,9 @@ _OUTPUT_KEYS = {
     "confidence.png": "confidence",
     "preview.png": "preview",
     "response.png": "response_plot",
+    "loo.png": "loo_plot",
     "report.json": "report",
+    **{n: n[: -len(".png")] for n in OUTPUT_NAMES if n.startswith("tonemap_")},
 }
 
 
@@ -419,6 +480,8 @@ def build_report(job: CalibrateJob, files, result: CalibrateResult, timings: dic
             "method": cfg.response.method,
             "summary": _response_summary(result.response),
         }
+    if result.loo is not None:  # the self-check: no ground truth needed (docs/hdr.md)
+        report["leave_one_out"] = result.loo.to_dict()
     if result.errors is not None:
         report["errors_vs_ground_truth"] = result.errors
     report["timings_s"] = timings
@@ -474,6 +537,8 @@ def _fit_ldr(cfg: CalibrateConfig, images, times, truth, steps, result_kw) -> Ca
         images, times, resp, weighting=cfg.merge.weighting, return_variance=True
     )
     steps.start("evaluate")
+    loo = hdr.leave_one_out(images, times, resp, weighting=cfg.merge.weighting)
+    result_kw["loo"] = loo
     curves = {cfg.response.method: resp}
     errors = None
     if truth is not None:
@@ -500,7 +565,6 @@ def _fit_ldr(cfg: CalibrateConfig, images, times, truth, steps, result_kw) -> Ca
 
 def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
     from jaxgfx import hdr, image, io
-    from jaxgfx.hdr.raw_calibration import calibrate_raw_stack
 
     steps.start("read raw")
     raws, times = io.read_raw_stack(files, exposure_times=cfg.exposure_times)
@@ -509,7 +573,7 @@ def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
     black = np.asarray(raws[0].black_level, np.float32)
     white = float(raws[0].white_level)
     steps.start("raw calibration")
-    cal = calibrate_raw_stack(mosaics, times, cfa_pattern=pattern, black=black, white=white)
+    cal = hdr.calibrate_raw_stack(mosaics, times, cfa_pattern=pattern, black=black, white=white)
     steps.start("merge")
     norm = np.stack([r.normalized() for r in raws])[..., None]
     ratios = np.asarray(cal.ratios.ratios, np.float64)
@@ -518,12 +582,18 @@ def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
     eff_times = times[ref] * ratios if good else times
     resp = hdr.CameraResponse.gamma(1.0, channels=1, anchor="unit")
     weighting = "noise" if cal.noise is not None else "hat"
+    noise = None  # the mosaic is merged as one channel: the CFA channels' model, pooled
+    if cal.noise is not None:
+        noise = hdr.NoiseParams(
+            np.mean(np.asarray(cal.noise.gain), keepdims=True),
+            np.mean(np.asarray(cal.noise.read_variance), keepdims=True),
+        )
     rad, var = hdr.merge_radiance(
         np.clip(norm, 0.0, 1.0),
         eff_times,
         resp,
         weighting=weighting,
-        noise=cal.noise,
+        noise=noise,
         return_variance=True,
     )
     steps.start("demosaic")

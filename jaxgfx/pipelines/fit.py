@@ -5,7 +5,8 @@ PNG/JPEG "photo", or a synthetic target rendered here at known parameter values)
 parameter path, size and bound *before* rendering, fits with :func:`jaxgfx.optim.fit` and
 writes::
 
-    result.json   fitted params {path: value}, camera, loss per step, seconds, truth and errors
+    result.json   fitted params {path: value}, camera, loss per step, seconds, truth and errors,
+                  the parameter history per step (parameters of <= 16 values)
     curves.png    loss and each parameter against steps and against seconds
     before.png    the initial scene (through the fitted camera for LDR targets)
     after.png     the fitted scene
@@ -32,9 +33,11 @@ clipping, quantisation); ``result.json`` then reports the parameter errors.
 
 The camera model for LDR targets: ``v = response(exposure · L)`` with a
 :class:`jaxgfx.hdr.CameraResponse` (anchor ``"unit"``, so ``response(1) = 1``: ``gamma`` is
-``v = x^(1/γ)``, ``srgb`` the sRGB OETF), compared with the 8-bit codes by
-:func:`jaxgfx.optim.censored_l2_loss` (clipped highlights only bound the prediction). The
-render, the camera and the loss are one jitted program.
+``v = x^(1/γ)``, ``srgb`` the sRGB OETF). ``camera.space: linear`` (default) linearises the
+8-bit codes through the current camera and compares radiance (censored at the clip levels:
+clipped highlights only bound the prediction); ``camera.space: code`` compares display values
+with :func:`jaxgfx.optim.censored_l2_loss`, which is biased for low-spp renders (the response
+is curved: ``E f(Î) ≠ f(E Î)``). The render, the camera and the loss are one jitted program.
 
 Monte Carlo gradients: ``render.estimator: independent`` (default) renders two half-spp images
 with independent keys and takes the primal from one and the adjoint from the other, so the
@@ -52,9 +55,11 @@ from typing import Any
 
 import numpy as np
 
+from jaxgfx._jaxcache import enable_compilation_cache
 from jaxgfx.config import config_to_dict, load_config, read_yaml
 
 __all__ = [
+    "FitJob",
     "FitConfig",
     "ParamSpec",
     "CameraConfig",
@@ -63,8 +68,10 @@ __all__ = [
     "LossConfig",
     "RESPONSE_MODELS",
     "apply_camera",
+    "camera_to_linear",
     "prepare_fit",
     "run_fit",
+    "enable_compilation_cache",
 ]
 
 RESPONSE_MODELS = ("gamma", "srgb", "linear", "s-curve", "filmic", "log")
@@ -129,10 +136,13 @@ class CameraConfig:
     response: ResponseSpec = ResponseSpec()
     exposure: ExposureSpec = ExposureSpec()
     bits: int = 8
+    space: str = "linear"  # where the loss compares: linear (unbiased) | code (see module doc)
 
     def validate(self):
         if self.bits not in (8, 16):
             raise ValueError(f"camera.bits: expected 8 or 16, got {self.bits}")
+        if self.space not in ("linear", "code"):
+            raise ValueError(f"camera.space: expected 'linear' or 'code', got {self.space!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -141,6 +151,20 @@ class OptimizerConfig:
     lr: float = 0.02
     steps: int = 200
     tol: float | None = None
+    lr_final: float | None = None  # exponential decay from lr to lr_final over the steps
+
+    def validate(self):
+        if not self.lr > 0 or (self.lr_final is not None and not self.lr_final > 0):
+            raise ValueError("optimizer.lr / lr_final: expected positive numbers")
+        if self.steps < 1:
+            raise ValueError(f"optimizer.steps: expected >= 1, got {self.steps}")
+
+    def schedule(self):
+        """The learning rate: a number, or ``k -> lr · (lr_final / lr)^(k / (steps - 1))``."""
+        if self.lr_final is None:
+            return self.lr
+        lr, ratio, n = self.lr, self.lr_final / self.lr, max(self.steps - 1, 1)
+        return lambda k: lr * ratio ** (min(k, n) / n)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -392,47 +416,110 @@ def _build_scene(scene, paths, scene_params):
     return scene
 
 
-def make_loss(cfg: FitConfig, paths, ldr: bool):
-    """The fit's loss ``loss(params, key, (scene, target))`` for :func:`jaxgfx.optim.fit`.
+def _camera_blend(img, exposure, gamma, weights):
+    """``Σ_m weights[m] · apply_camera(img, exposure, gamma, model=m)`` over
+    :data:`RESPONSE_MODELS` (a one-hot ``weights`` selects a model without recompiling)."""
+    out = 0.0
+    for i, m in enumerate(RESPONSE_MODELS):
+        out = out + weights[i] * apply_camera(img, exposure, gamma, model=m)
+    return out
 
-    ``params = {"scene": {path: value}, "camera": {"exposure": e, "gamma": g}}`` (camera
-    entries only when fitted; fixed camera values come from the config)."""
+
+def camera_to_linear(z, exposure, gamma, *, model: str):
+    """Inverse of :func:`apply_camera`: linear radiance for display values ``z`` in [0, 1]."""
+    import jax.numpy as jnp
+
+    from jaxgfx.hdr import CameraResponse
+
+    z = jnp.clip(jnp.asarray(z), 0.0, 1.0)
+    if model == "linear":
+        return z / exposure
+    if model == "gamma":
+        resp = CameraResponse.gamma(jnp.reshape(gamma, (1,)), anchor="unit")
+    else:
+        resp = CameraResponse.analytic(model, anchor="unit")
+    return resp.to_linear_normalized(z) / exposure
+
+
+def _censored_linear_loss(img, codes, exposure, gamma, weights, code_max):
+    """Censored L2 in linear radiance: each code ``q`` is linearised through the current camera
+    (``T = f⁻¹(q / c) / exposure``, a blend over :data:`RESPONSE_MODELS` by ``weights``) and
+    compared with the *linear* render, so the loss is quadratic in the Monte Carlo image and its
+    expectation is unbiased (in code space, ``E f(Î) ≠ f(E Î)`` for a curved response: a
+    noisy render through a concave response is darker on average, and the camera parameters
+    absorb that). Clipped codes bound the radiance from one side (``q = c``: ``Î ≥
+    f⁻¹((c - ½)/c)/e``; ``q = 0``: ``Î ≤ f⁻¹(½/c)/e``). Normalised by the mean linearised
+    target so that its scale does not drift with the exposure."""
     import jax
     import jax.numpy as jnp
 
-    from jaxgfx.optim import censored_l2_loss, image_loss
+    def inv(z):
+        out = 0.0
+        for i, m in enumerate(RESPONSE_MODELS):
+            out = out + weights[i] * camera_to_linear(z, exposure, gamma, model=m)
+        return out
+
+    c = code_max
+    t_mid = inv(codes / c)
+    t_lo = inv((c - 0.5) / c)
+    t_hi = inv(0.5 / c)
+    e = jnp.where(
+        codes >= c,
+        jnp.maximum(t_lo - img, 0.0),
+        jnp.where(codes <= 0, jnp.maximum(img - t_hi, 0.0), img - t_mid),
+    )
+    scale = jax.lax.stop_gradient(jnp.mean(t_mid)) + 1e-6
+    return jnp.mean(e * e) / (scale * scale)
+
+
+def _freeze(x, free):
+    """``x`` with its gradient kept where ``free`` (1.0) and removed where 0.0."""
+    import jax
+
+    return free * x + (1.0 - free) * jax.lax.stop_gradient(x)
+
+
+def make_loss(cfg: FitConfig, paths, ldr: bool):
+    """The fit's loss ``loss(params, key, (scene, target, camera_args))`` for
+    :func:`jaxgfx.optim.fit`.
+
+    ``params = {"scene": {path: value}, "camera": {"exposure": e, "gamma": g}}``; for LDR
+    targets ``camera_args = {"weights": one-hot over RESPONSE_MODELS, "free": [exposure free,
+    gamma free]}`` (arrays, so that every camera variant of a scene shares one compiled
+    program; a frozen camera parameter has a zero gradient and Adam leaves it unchanged)."""
+
+    from jaxgfx.optim import censored_l2_loss, decorrelated_loss, image_loss
     from jaxgfx.render import render
 
     r = cfg.render
-    cam = cfg.camera
-    code_max = float(2 ** (cam.bits if cam else 8) - 1)
+    code_max = float(2 ** (cfg.camera.bits if cfg.camera else 8) - 1)
     paths = tuple(paths)
+    kind, space = cfg.loss.kind, cfg.loss.space
+    code_space = cfg.camera is not None and cfg.camera.space == "code"
 
     def image(scene, p, key, spp):
         s = _build_scene(scene, paths, p["scene"])
         return render(s, key, spp=spp, integrator=r.integrator, max_depth=r.max_depth)
 
-    def per_image_loss(img, target, p):
+    def per_image_loss(img, target, p, cam_args):
         if not ldr:
-            return image_loss(img, target, kind=cfg.loss.kind, space=cfg.loss.space)
-        e = p["camera"].get("exposure", jnp.asarray(cam.exposure.init, img.dtype))
-        g = p["camera"].get("gamma", jnp.asarray(cam.response.init, img.dtype))
-        v = apply_camera(img, e, g, model=cam.response.model)
-        return censored_l2_loss(v, target, code_max=code_max)
+            return image_loss(img, target, kind=kind, space=space)
+        e = _freeze(p["camera"]["exposure"], cam_args["free"][0])
+        g = _freeze(p["camera"]["gamma"], cam_args["free"][1])
+        if code_space:
+            v = _camera_blend(img, e, g, cam_args["weights"])
+            return censored_l2_loss(v, target, code_max=code_max)
+        return _censored_linear_loss(img, target, e, g, cam_args["weights"], code_max)
 
     def loss(p, key, args):
-        scene, target = args
+        scene, target, cam_args = args
         if r.estimator == "correlated":
-            return per_image_loss(image(scene, p, key, r.spp), target, p)
-        # primal from image A, adjoint from the independent image B (both spp/2)
-        keys = jax.random.split(key)
-        imgs = jax.vmap(lambda k: image(scene, p, k, r.spp // 2))(keys)
-        a = jax.lax.stop_gradient(imgs[0])
-        b = imgs[1]
-        val, dl_da = jax.value_and_grad(per_image_loss)(a, target, p)
-        surrogate = jnp.sum(jax.lax.stop_gradient(dl_da) * (b - jax.lax.stop_gradient(b)))
-        # camera parameters: their gradient comes from image A directly
-        return val + surrogate
+            return per_image_loss(image(scene, p, key, r.spp), target, p, cam_args)
+        return decorrelated_loss(
+            lambda k: image(scene, p, k, r.spp // 2),
+            lambda im: per_image_loss(im, target, p, cam_args),
+            key,
+        )
 
     return loss
 
@@ -441,8 +528,10 @@ _LOSS_CACHE: dict = {}
 
 
 def _cached_loss(cfg, paths, ldr):
-    """One loss object (hence one compiled fit step) per render/camera/loss configuration."""
-    key = (cfg.render, cfg.camera, cfg.loss, tuple(paths), ldr)
+    """One loss object (hence one compiled fit step) per render / loss configuration and
+    parameter set; camera choices are arguments, not part of the program."""
+    cam = (cfg.camera.bits, cfg.camera.space) if cfg.camera else None
+    key = (cfg.render, cfg.loss, cam, tuple(paths), ldr)
     if key not in _LOSS_CACHE:
         _LOSS_CACHE[key] = make_loss(cfg, paths, ldr)
     return _LOSS_CACHE[key]
@@ -476,7 +565,7 @@ def _plot_curves(path, res, names, truth):
     t = np.concatenate([[0.0], np.cumsum(res.seconds)])
     for col, (xs, xl) in enumerate(((steps, "step"), (t, "seconds (after compilation)"))):
         ax = axes[0, col]
-        ax.semilogy(xs[1:], np.maximum(res.loss, 1e-30), color="k", lw=1)
+        ax.semilogy(xs[:-1], np.maximum(res.loss, 1e-30), color="k", lw=1)
         ax.set_ylabel("loss")
         ax.grid(alpha=0.3)
         for row, (group, name) in enumerate(names, start=1):
@@ -488,8 +577,9 @@ def _plot_curves(path, res, names, truth):
                 if truth is not None and name in truth:
                     tv = np.asarray(truth[name], np.float64).reshape(-1)
                     ax.axhline(tv[min(c, tv.size - 1)], color=colors[c] or "k", ls="--", lw=0.8)
-            ax.set_ylabel(name.split(".")[-2] + "." + name.split(".")[-1] if "." in name else name,
-                          fontsize=8)
+            ax.set_ylabel(
+                name.split(".")[-2] + "." + name.split(".")[-1] if "." in name else name, fontsize=8
+            )
             ax.grid(alpha=0.3)
         axes[-1, col].set_xlabel(xl)
     fig.suptitle("fit: loss and parameters (dashed: truth)", fontsize=10)
@@ -502,22 +592,66 @@ def _plot_curves(path, res, names, truth):
 # the job
 
 
-def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir=None) -> dict:
-    """Run the fit described by ``cfg`` (a :class:`FitConfig`, a mapping or a YAML path) and
-    write the outputs (module doc) to ``out_dir`` (None: nothing written). Returns the
-    ``result.json`` dictionary."""
+OUTPUT_NAMES = ("result.json", "curves.png", "before.png", "after.png", "target.png")
+
+
+@dataclasses.dataclass(frozen=True)
+class FitJob:
+    """A fit job: the config, the output folder (None: write nothing), ``overwrite`` and the
+    folder relative config paths are also looked up in (``base_dir``, e.g. the config's)."""
+
+    config: FitConfig
+    out: str | None = "out/fit"
+    overwrite: bool = False
+    base_dir: str | None = None
+
+
+def run_fit(
+    cfg: FitJob | FitConfig | dict | str,
+    out_dir: str | None = None,
+    *,
+    base_dir: str | None = None,
+    overwrite: bool = False,
+) -> dict:
+    """Run the fit described by ``cfg`` (a :class:`FitJob`, or a :class:`FitConfig`, a mapping
+    or a YAML path with ``out_dir``, ``base_dir``, ``overwrite``) and
+    write the outputs (module doc) to ``out_dir`` (None: nothing written). Everything is checked
+    before rendering (:func:`prepare_fit`); an ``out_dir`` that holds a previous run's results
+    is refused unless ``overwrite`` (outputs are staged and moved into place only when the job
+    succeeded, :mod:`jaxgfx.pipelines._output`). Relative paths in the config (scene, target)
+    are looked up in the working directory, then in ``base_dir``. Returns the ``result.json``
+    dictionary (plus ``"outputs"``: ``{name: path}`` when written)."""
+    import contextlib
+
+    from jaxgfx.pipelines._output import StagedDir
+
+    if isinstance(cfg, FitJob):
+        cfg, out_dir, overwrite, base_dir = cfg.config, cfg.out, cfg.overwrite, cfg.base_dir
+    if isinstance(cfg, (str, os.PathLike)):
+        base_dir = base_dir or os.path.dirname(os.path.abspath(cfg))
+        cfg = load_config(FitConfig, cfg)
+    elif not isinstance(cfg, FitConfig):
+        cfg = load_config(FitConfig, cfg)
+    stage = (
+        StagedDir(out_dir, OUTPUT_NAMES, overwrite=overwrite)
+        if out_dir is not None
+        else contextlib.nullcontext()
+    )
+    prep = prepare_fit(cfg, base_dir=base_dir)
+    with stage:
+        out = _fit_and_write(cfg, prep, None if out_dir is None else stage.path)
+    if out_dir is not None:
+        out["outputs"] = {n: os.path.join(os.fspath(out_dir), n) for n in OUTPUT_NAMES}
+    return out
+
+
+def _fit_and_write(cfg: FitConfig, prep: _Prepared, out_dir: str | None) -> dict:
     import jax
     import jax.numpy as jnp
 
     from jaxgfx.optim import fit
     from jaxgfx.render import render
 
-    if isinstance(cfg, (str, os.PathLike)):
-        base_dir = base_dir or os.path.dirname(os.path.abspath(cfg))
-        cfg = load_config(FitConfig, cfg)
-    elif not isinstance(cfg, FitConfig):
-        cfg = load_config(FitConfig, cfg)
-    prep = prepare_fit(cfg, base_dir=base_dir)
     cam = cfg.camera
     r = cfg.render
     key = jax.random.key(cfg.seed)
@@ -531,13 +665,22 @@ def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir
         tscene = _build_scene(prep.scene, list(prep.truth), prep.truth)
         tkey = jax.random.key(int(t.get("seed", 1)))
         target_linear = np.asarray(
-            render(tscene, tkey, spp=int(t.get("spp", 256)), integrator=r.integrator,
-                   max_depth=r.max_depth)
+            render(
+                tscene,
+                tkey,
+                spp=int(t.get("spp", 256)),
+                integrator=r.integrator,
+                max_depth=r.max_depth,
+            )
         )
         if prep.ldr:
             tc = t["camera"]
-            v = apply_camera(target_linear, float(tc.get("exposure", 1.0)),
-                             float(tc.get("gamma", 2.2)), model=tc.get("response", "gamma"))
+            v = apply_camera(
+                target_linear,
+                float(tc.get("exposure", 1.0)),
+                float(tc.get("gamma", 2.2)),
+                model=tc.get("response", "gamma"),
+            )
             target = _quantise(v, int(tc.get("bits", 8))).astype(np.float32)
         else:
             target = target_linear
@@ -558,12 +701,27 @@ def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir
 
     params = {"scene": {p: jnp.asarray(prep.init[p]) for p in prep.paths}, "camera": {}}
     bounds = {"scene": {p: prep.bounds[p] for p in prep.paths}, "camera": {}}
-    if cam is not None and cam.exposure.fit:
-        params["camera"]["exposure"] = jnp.asarray(cam.exposure.init, jnp.float32)
-        bounds["camera"]["exposure"] = (cam.exposure.min, cam.exposure.max)
-    if cam is not None and cam.response.fit:
-        params["camera"]["gamma"] = jnp.asarray(cam.response.init, jnp.float32)
-        bounds["camera"]["gamma"] = (cam.response.min, cam.response.max)
+    cam_args = None
+    if cam is not None:
+        params["camera"] = {
+            "exposure": jnp.asarray(cam.exposure.init, jnp.float32),
+            "gamma": jnp.asarray(cam.response.init, jnp.float32),
+        }
+        bounds["camera"] = {
+            "exposure": (cam.exposure.min, cam.exposure.max),
+            "gamma": (cam.response.min, cam.response.max),
+        }
+        cam_args = {
+            "weights": jnp.asarray(
+                [float(m == cam.response.model) for m in RESPONSE_MODELS], jnp.float32
+            ),
+            "free": jnp.asarray([float(cam.exposure.fit), float(cam.response.fit)], jnp.float32),
+        }
+    fitted_camera = (
+        []
+        if cam is None
+        else [n for n, f in (("exposure", cam.exposure.fit), ("gamma", cam.response.fit)) if f]
+    )
 
     loss = _cached_loss(cfg, prep.paths, prep.ldr)
     o = cfg.optimizer
@@ -571,10 +729,10 @@ def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir
         loss,
         params,
         optimizer=o.name,
-        learning_rate=o.lr,
+        learning_rate=o.schedule(),
         steps=o.steps,
         key=k_fit,
-        args=(prep.scene, jnp.asarray(target)),
+        args=(prep.scene, jnp.asarray(target), cam_args),
         bounds=bounds,
         progress=cfg.progress,
         tol=o.tol,
@@ -585,11 +743,11 @@ def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir
     if cam is not None:
         camera_out = {
             "model": cam.response.model,
-            "exposure": _plain(res.params["camera"].get("exposure", cam.exposure.init)),
-            "gamma": _plain(res.params["camera"].get("gamma", cam.response.init))
+            "exposure": _plain(res.params["camera"]["exposure"]),
+            "gamma": _plain(res.params["camera"]["gamma"])
             if cam.response.model == "gamma"
             else None,
-            "fitted": sorted(res.params["camera"]),
+            "fitted": fitted_camera,
         }
     out = {
         "params": fitted,
@@ -602,6 +760,12 @@ def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir
         "target_seconds": float(target_seconds),
         "n_steps": int(res.n_steps),
         "stop_reason": res.stop_reason,
+        "history": {
+            p: np.asarray(res.history["scene"][p], np.float64).tolist()
+            for p in prep.paths
+            if np.size(prep.init[p]) <= 16
+        },
+        "seconds_history": [float(v) for v in res.seconds],
         "config": config_to_dict(cfg),
     }
     if prep.truth is not None:
@@ -620,19 +784,19 @@ def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir
             }
 
     if out_dir is not None:
-        os.makedirs(out_dir, exist_ok=True)
         from jaxgfx.io import write_png
 
         show_spp = max(r.spp, 64)
 
         def show(scene_params, cam_params):
             s = _build_scene(prep.scene, prep.paths, scene_params)
-            img = np.asarray(render(s, k_show, spp=show_spp, integrator=r.integrator,
-                                    max_depth=r.max_depth))
+            img = np.asarray(
+                render(s, k_show, spp=show_spp, integrator=r.integrator, max_depth=r.max_depth)
+            )
             if cam is None:
                 return img
-            e = float(cam_params.get("exposure", cam.exposure.init))
-            g = float(cam_params.get("gamma", cam.response.init))
+            e = float(cam_params["exposure"])
+            g = float(cam_params["gamma"])
             return _quantise(apply_camera(img, e, g, model=cam.response.model), 8) / 255.0
 
         before = show(params["scene"], params["camera"])
@@ -646,52 +810,11 @@ def run_fit(cfg: FitConfig | dict | str, out_dir: str | None = None, *, base_dir
             write_png(os.path.join(out_dir, "before.png"), before)
             write_png(os.path.join(out_dir, "after.png"), after)
             write_png(os.path.join(out_dir, "target.png"), target / (2**cam.bits - 1))
-        names = [("scene", p) for p in prep.paths] + [("camera", c) for c in res.params["camera"]]
+        names = [("scene", p) for p in prep.paths] + [("camera", c) for c in fitted_camera]
         truth_named = dict(prep.truth or {})
         if prep.ldr and prep.truth is not None:
-            truth_named.update(
-                {k: out["truth_camera"][k] for k in ("exposure", "gamma")}
-            )
+            truth_named.update({k: out["truth_camera"][k] for k in ("exposure", "gamma")})
         _plot_curves(os.path.join(out_dir, "curves.png"), res, names, truth_named)
         with open(os.path.join(out_dir, "result.json"), "w", encoding="utf-8") as f:
             json.dump(out, f, indent=1)
     return out
-
-
-def run_fit_cli(argv=None, prog="jaxgfx fit") -> int:
-    """``CONFIG [--out DIR] [--steps N] [--quiet]`` → run :func:`run_fit` and print a summary."""
-    import argparse
-
-    p = argparse.ArgumentParser(prog=prog, description="Fit scene parameters to a target image.")
-    p.add_argument("config", help="YAML config (see configs/inverse_material.yaml)")
-    p.add_argument("--out", default="out/fit", help="output directory")
-    p.add_argument("--steps", type=int, default=None, help="override optimizer.steps")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    args = p.parse_args(argv)
-    return _cli_main(args)
-
-
-def _cli_main(args) -> int:
-    import sys
-
-    data = read_yaml(args.config)
-    if args.steps is not None:
-        data.setdefault("optimizer", {})
-        data["optimizer"] = {**data["optimizer"], "steps": args.steps}
-    if args.quiet:
-        data["progress"] = False
-    try:
-        cfg = load_config(FitConfig, data)
-        out = run_fit(cfg, args.out, base_dir=os.path.dirname(os.path.abspath(args.config)))
-    except (ValueError, FileNotFoundError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    for k, v in out["params"].items():
-        err = out.get("errors", {}).get(k)
-        extra = f"  (truth {out['truth'][k]}, max error {err:.4g})" if err is not None else ""
-        print(f"{k} = {v}{extra}")
-    if out["camera"]:
-        print(f"camera = {out['camera']}")
-    print(f"loss {out['loss'][0]:.4g} -> {out['loss'][-1]:.4g} in {out['n_steps']} steps, "
-          f"{out['seconds']:.1f} s (+{out['compile_seconds']:.1f} s compile); wrote {args.out}")
-    return 0

@@ -86,10 +86,11 @@ def render_output_paths(job: RenderJob) -> dict[str, str]:
 
 
 def _display(img: np.ndarray) -> np.ndarray:
-    from jaxgfx.color import linear_to_srgb
+    from jaxgfx.pipelines.tonemap import tonemap_image
 
-    # AOV images: the display image shows the albedo channels
-    return np.asarray(linear_to_srgb(np.clip(img[..., :3], 0.0, 1.0)), np.float32)
+    # AOV images: the display image shows the albedo channels. Exposure 0, per-channel clip,
+    # sRGB (jaxgfx.tonemap.tonemap_exposure)
+    return tonemap_image(img[..., :3], "exposure", per_channel=True)
 
 
 def run_render(job: RenderJob) -> dict:

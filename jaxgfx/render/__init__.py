@@ -30,6 +30,9 @@ from jaxgfx.render.geometry import intersect_scene as intersect_scene
 from jaxgfx.render.geometry import spawn_ray as spawn_ray
 from jaxgfx.render.geometry.mesh_io import load_obj as load_obj
 from jaxgfx.render.geometry.mesh_io import load_ply as load_ply
+from jaxgfx.render.gradients import GradStats as GradStats
+from jaxgfx.render.gradients import decorrelated as decorrelated
+from jaxgfx.render.gradients import grad_stats as grad_stats
 from jaxgfx.render.integrators import AOV_CHANNELS as AOV_CHANNELS
 from jaxgfx.render.integrators import INTEGRATORS as INTEGRATORS
 from jaxgfx.render.integrators import AOVIntegrator as AOVIntegrator
@@ -38,6 +41,7 @@ from jaxgfx.render.integrators import Integrator as Integrator
 from jaxgfx.render.integrators import PathIntegrator as PathIntegrator
 from jaxgfx.render.integrators import WhittedIntegrator as WhittedIntegrator
 from jaxgfx.render.render import render as render
+from jaxgfx.render.distributed import render_sharded as render_sharded
 from jaxgfx.render.scene import Scene as Scene
 from jaxgfx.render.scene import load_scene as load_scene
 
@@ -45,6 +49,10 @@ __all__ = [
     "accel",
     "bsdf",
     "render",
+    "render_sharded",
+    "grad_stats",
+    "GradStats",
+    "decorrelated",
     "load_scene",
     "Scene",
     "INTEGRATORS",

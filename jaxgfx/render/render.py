@@ -10,6 +10,7 @@ from jaxgfx._checks import check_choice
 from jaxgfx._math import fusion_barrier
 from jaxgfx.render.film import pixel_samples
 from jaxgfx.render.integrators import INTEGRATORS, Integrator, make_integrator
+from jaxgfx.render.integrators._common import SAMPLING
 from jaxgfx.render.integrators.path import STRATEGIES
 from jaxgfx.render.sampler import uniform
 
@@ -25,6 +26,7 @@ def render(
     max_depth: int | None = None,
     rr_depth: int | None = None,
     strategy: str | None = None,
+    sampling: str | None = None,
 ):
     """Render ``scene`` to an ``(H, W, 3)`` float32 linear radiance image.
 
@@ -38,6 +40,8 @@ def render(
     ``AOV_CHANNELS``). With a name, ``max_depth`` (default 3), ``rr_depth`` (5) and ``strategy``
     (``"mis"``, ``"light"`` or ``"bsdf"``) configure it; options the named integrator does not
     use are ignored. With an object, set them on the object (``TypeError`` here).
+    ``sampling`` (``path``, ``direct``, ``whitted``): ``"detached"`` (default; unbiased
+    derivatives, docs/render_gradients.md) or ``"attached"`` (plain AD through the samplers).
     ``max_depth`` follows Mitsuba 3 (1: emitters only, 2: direct light, 3: one indirect bounce).
     ``key`` is a JAX PRNG key; the same key gives the same image. Differentiable w.r.t. every
     float leaf of ``scene`` (see ``Scene.replace``); jittable (``spp`` and the integrator are
@@ -45,7 +49,12 @@ def render(
     """
     if isinstance(spp, bool) or not isinstance(spp, int) or spp < 1:
         raise ValueError(f"spp: expected a positive integer, got {spp!r}")
-    options = {"max_depth": max_depth, "rr_depth": rr_depth, "strategy": strategy}
+    options = {
+        "max_depth": max_depth,
+        "rr_depth": rr_depth,
+        "strategy": strategy,
+        "sampling": sampling,
+    }
     if isinstance(integrator, Integrator):
         given = [k for k, v in options.items() if v is not None]
         if given:
@@ -60,8 +69,10 @@ def render(
             "max_depth": 3 if max_depth is None else max_depth,
             "rr_depth": 5 if rr_depth is None else rr_depth,
             "strategy": "mis" if strategy is None else strategy,
+            "sampling": "detached" if sampling is None else sampling,
         }
         check_choice(options["strategy"], "strategy", STRATEGIES)
+        check_choice(options["sampling"], "sampling", SAMPLING)
         for name in ("max_depth", "rr_depth"):
             v = options[name]
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
@@ -78,14 +89,23 @@ def _render(scene, key, spp, integrator):
     dtype = px.dtype
     shape_u = integrator.random_shape
 
-    def one_pass(s, acc):
+    def one_pass(s):
         o, d = scene.camera.generate_ray(px[:, :, s, :])
         o, d = o.astype(dtype), d.astype(dtype)
         o, d = fusion_barrier((o, d))  # measured 635 -> 518 ns/sample (direct, one core)
         u = None
         if shape_u is not None:
             u = uniform(jax.random.fold_in(ku, s), (h, w, *shape_u), dtype)
-        return acc + integrator(scene, o, d, u)
+        return integrator(scene, o, d, u)
 
-    acc = jax.lax.fori_loop(0, spp, one_pass, jnp.zeros((h, w, integrator.n_channels), dtype))
+    # Reverse mode: a checkpointed pass is recomputed in the backward sweep, so only the
+    # pass index is stored per sample pass and the memory of jax.grad does not grow with spp
+    # (a plain loop stores every intermediate of every pass; docs/render_gradients.md).
+    one_pass = jax.checkpoint(one_pass, prevent_cse=False)
+
+    def body(acc, s):
+        return acc + one_pass(s), None
+
+    acc0 = jnp.zeros((h, w, integrator.n_channels), dtype)
+    acc, _ = jax.lax.scan(body, acc0, jnp.arange(spp))
     return acc / spp

@@ -45,10 +45,18 @@ def test_noise_free_merge_is_exact(x64):
     st = stack("filmic", bits=None, gain=0.0, read_sigma=0.0, size=32)
     z = st.images.astype(jnp.float64)
     for w in ("hat", "gaussian", "linear"):
-        e = np.asarray(hdr.merge_radiance(z, st.exposure_times, st.response, weighting=w))
+        e = np.asarray(
+            hdr.merge_radiance(z, st.exposure_times, st.response, weighting=w, time_power=0)
+        )
         ratio = e / np.asarray(st.radiance)
         # inputs are float32-rounded (radiance, levels), hence 3e-6 and not 1e-12
         np.testing.assert_allclose(ratio, np.median(ratio), rtol=3e-6, err_msg=w)
+        # the default t² weights lean on the long frames, up to their shoulder, where the
+        # float32 rounding of a level (6e-8) is amplified by d ln x / dz (~3e3 for filmic at
+        # z = 0.999): 2e-4
+        e = np.asarray(hdr.merge_radiance(z, st.exposure_times, st.response, weighting=w))
+        ratio = e / np.asarray(st.radiance)
+        np.testing.assert_allclose(ratio, np.median(ratio), rtol=4e-4, err_msg=w)
 
 
 def test_no_dark_sun_and_no_nan():
@@ -61,8 +69,9 @@ def test_no_dark_sun_and_no_nan():
     # the sun (radiance 1) is clipped in every frame, even the shortest (t = 1): it gets the
     # shortest frame's lower bound to_linear(255) / 1, and stays the brightest thing
     bound = np.asarray(resp.to_linear(jnp.full((3,), 255.0)))
-    # (a few read 254 in the shortest frame, from noise: tiny weight, value within 1e-3)
-    np.testing.assert_allclose(e[sun], np.broadcast_to(bound, e[sun].shape), rtol=1e-3)
+    # (a few read 254 in the shortest frame, from noise: x(254), within 2 % of the bound with
+    # the data-driven shoulder of the recovered curve)
+    np.testing.assert_allclose(e[sun], np.broadcast_to(bound, e[sun].shape), rtol=2e-2)
     assert e[sun].min() >= e[~sun].max()
 
 
@@ -79,10 +88,11 @@ def test_noise_weighting_variance_matches_monte_carlo():
         e_n, v_n = hdr.merge_radiance(
             st.images, t, resp, weighting="noise", noise=st.noise, return_variance=True
         )
-        e_h = hdr.merge_radiance(st.images, t, resp)
-        return e_n, v_n, e_h
+        e_h = hdr.merge_radiance(st.images, t, resp, time_power=0)
+        e_t = hdr.merge_radiance(st.images, t, resp)
+        return e_n, v_n, e_h, e_t
 
-    e_n, v_n, e_h = jax.jit(jax.vmap(one))(jax.random.split(jax.random.key(3), 48))
+    e_n, v_n, e_h, e_t = jax.jit(jax.vmap(one))(jax.random.split(jax.random.key(3), 48))
     emp = np.var(np.asarray(e_n), axis=0, ddof=1)
     pred = np.mean(np.asarray(v_n), axis=0)
     ok = np.asarray(rad) < 0.9  # not clipped in the shortest frame
@@ -97,7 +107,10 @@ def test_noise_weighting_variance_matches_monte_carlo():
     assert abs(np.std(ratio) - np.sqrt(2 / 47)) < 0.2 * np.sqrt(2 / 47), np.std(ratio)
     mse_n = np.mean((np.asarray(e_n) - np.asarray(rad)) ** 2 / np.asarray(rad) ** 2)
     mse_h = np.mean((np.asarray(e_h) - np.asarray(rad)) ** 2 / np.asarray(rad) ** 2)
+    mse_t = np.mean((np.asarray(e_t) - np.asarray(rad)) ** 2 / np.asarray(rad) ** 2)
     assert mse_n < 0.8 * mse_h
+    # the default hat x t² weights sit between Debevec's plain hat and the optimum
+    assert mse_n <= mse_t < mse_h
 
 
 def test_merge_gradients(x64):

@@ -190,3 +190,19 @@ def test_exponential_fit_float32_under_lm():
         lambda p, a: p[0] * jnp.exp(p[1] * a[0]) - a[1], jnp.asarray([1.0, 0.0]), args=(t, y)
     )
     np.testing.assert_allclose(np.asarray(res.params), [0.7, -1.3], rtol=1e-4)
+
+
+def test_learning_rate_schedule_on_the_host():
+    # SGD on 0.5 x^2 with rate r_k: x_{k+1} = (1 - r_k) x_k, so x_n = prod(1 - r_k) x_0
+    rates = [0.5, 0.25, 0.125, 0.0625]
+    res = fit(
+        lambda p: 0.5 * p["x"] ** 2,
+        {"x": 2.0},
+        optimizer="sgd",
+        steps=4,
+        learning_rate=lambda k: rates[k],
+        progress=False,
+    )
+    np.testing.assert_allclose(
+        float(res.params["x"]), 2.0 * np.prod([1 - r for r in rates]), rtol=1e-6
+    )

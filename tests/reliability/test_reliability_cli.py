@@ -327,6 +327,64 @@ for name, (text, needle) in SCENES.items():
     add(f"render-scene-{name}", lambda f, t: ["render", t / "s.yaml", t / "o.exr"], [needle],
         setup={"s.yaml": text, "bad.obj": "v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n"})  # fmt: skip
 
+# ----------------------------------------------------------------------------- tonemap
+
+add(
+    "tonemap-op-unknown",
+    lambda f, t: ["tonemap", f["exr"], t / "o.png", "--op", "magic"],
+    ["op: expected one of"],
+)
+add(
+    "tonemap-param-other-op",
+    lambda f, t: ["tonemap", f["exr"], t / "o.png", "--op", "exposure", "--bias", "0.8"],
+    ["--bias"],
+)
+add(
+    "tonemap-param-nan",
+    lambda f, t: ["tonemap", f["exr"], t / "o.png", "--bias", "nan"],
+    ["--bias"],
+)
+add(
+    "tonemap-param-text",
+    lambda f, t: ["tonemap", f["exr"], t / "o.png", "--bias", "strong"],
+    ["--bias"],
+    status=2,
+)
+add(
+    "tonemap-in-missing",
+    lambda f, t: ["tonemap", t / "nope.exr", t / "o.png"],
+    ["input", "nope.exr"],
+)
+add(
+    "tonemap-in-ldr",
+    lambda f, t: ["tonemap", f["png"], t / "o.png"],
+    ["input", "unsupported extension"],
+)
+add("tonemap-in-dir", lambda f, t: ["tonemap", t, t / "o.png"], ["input: is a directory"])
+add("tonemap-in-garbage", lambda f, t: ["tonemap", f["garbage.exr"], t / "o.png"], ["garbage.exr"])
+add("tonemap-in-empty-hdr", lambda f, t: ["tonemap", f["empty.hdr"], t / "o.png"], ["empty.hdr"])
+add(
+    "tonemap-out-exr",
+    lambda f, t: ["tonemap", f["exr"], t / "o.exr"],
+    ["output", "unsupported extension"],
+)
+add(
+    "tonemap-out-exists",
+    lambda f, t: ["tonemap", f["exr"], t / "o.png"],
+    ["already exists"],
+    setup={"o.png": "mine"},
+)
+add(
+    "tonemap-out-parent-file", lambda f, t: ["tonemap", f["exr"], f["a_file"] / "o.png"], ["a_file"]
+)
+add("tonemap-out-read-only", lambda f, t: ["tonemap", f["exr"], f"{RO}/o.png"], [RO])
+add(
+    "tonemap-missing-args",
+    lambda f, t: ["tonemap", f["exr"]],
+    ["INPUT and OUTPUT are required"],
+    status=2,
+)
+
 
 def _setup(tmp, spec):
     for rel, content in spec.items():

@@ -94,6 +94,13 @@ def test_grazing_and_parallel_finite_with_gradients(case):
     img, ga, gb = _img_grads(jnp.float32(0.3), R0, _metal_scene(ROUGH, **kw))
     assert np.all(np.isfinite(img)) and np.all(img >= 0)
     assert np.isfinite(ga) and np.all(np.isfinite(gb)), (ga, gb)
+    # values, not only finiteness: the image is affine in the reflectance (the lamp may be in
+    # view), so a central difference with the same key is exact up to rounding; same compile
+    h = 0.05
+    hi, _, _ = _img_grads(jnp.float32(0.3), R0 + h, _metal_scene(ROUGH, **kw))
+    lo, _, _ = _img_grads(jnp.float32(0.3), R0 - h, _metal_scene(ROUGH, **kw))
+    fd = (float(jnp.mean(hi)) - float(jnp.mean(lo))) / (2 * h)
+    np.testing.assert_allclose(float(jnp.sum(gb)), fd, rtol=1e-3, atol=1e-5)
 
 
 @eqx.filter_jit

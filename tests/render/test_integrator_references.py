@@ -65,3 +65,36 @@ def test_path_integrating_sphere_three_bounces_value_and_gradient():
 def test_whitted_integrating_sphere_direct_light():
     img = np.asarray(render(_integrating_sphere(), KEY, spp=1, integrator="whitted", max_depth=1))
     np.testing.assert_allclose(img, L1, rtol=2e-5)
+
+
+def test_aov_plane_closed_form():
+    # a camera 3 units in front of a plane, 1 degree field of view: every sample hits the plane
+    # at depth 3 / cos(theta), theta < 0.71 deg (so depth within 8e-5 of 3), with shading normal
+    # +z (towards the camera) and the material's albedo
+    scene = load_scene(
+        {
+            "camera": {
+                "origin": [0, 0, 3],
+                "target": [0, 0, 0],
+                "up": [0, 1, 0],
+                "fov": 1.0,
+                "width": 4,
+                "height": 4,
+            },
+            "shapes": [
+                {
+                    "type": "rectangle",
+                    "center": [0, 0, 0],
+                    "normal": [0, 0, 1],
+                    "size": [2, 2],
+                    "material": "m",
+                }
+            ],
+            "materials": {"m": {"type": "diffuse", "reflectance": [0.2, 0.4, 0.6]}},
+            "emitters": [{"type": "constant", "radiance": 1.0}],
+        }
+    )
+    img = np.asarray(render(scene, KEY, spp=1, integrator="aov"))
+    np.testing.assert_allclose(img[..., :3], np.broadcast_to([0.2, 0.4, 0.6], (4, 4, 3)), rtol=1e-6)
+    np.testing.assert_allclose(img[..., 3:6], np.broadcast_to([0, 0, 1.0], (4, 4, 3)), atol=1e-6)
+    np.testing.assert_allclose(img[..., 6], 3.0, rtol=1e-4)

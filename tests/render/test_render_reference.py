@@ -2,6 +2,12 @@
 integrator (Mitsuba 3's render regression practice), with negative controls showing the test
 can fail.
 
+These are NOISE-CONSISTENCY tests, not references: both sides are jaxgfx renders (other keys,
+other light-sampling strategies, an envmap vs the equivalent constant emitter), so a bias
+shared by both sides passes. Bias is caught by the closed forms (test_integrators.py,
+test_integrator_references.py, test_hard_cases.py) and the Mitsuba 3 comparisons
+(test_mitsuba.py); see docs/testing.md.
+
 Each side renders ``K`` independent images of ``spp`` samples with different keys; per pixel the
 mean ``m`` and the sample variance ``s²`` over the ``K`` images give
 ``z = (m_test - m_ref) / sqrt(s²_test / K_test + s²_ref / K_ref)``. With ``K = 32`` both

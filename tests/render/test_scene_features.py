@@ -257,7 +257,9 @@ def test_sdf_radius_gradient_matches_finite_differences():
     """Implicit differentiation of the sphere-traced hit vs central differences (same key)."""
     g, fd = _radius_grad_fd("sdf")
     assert np.isfinite(g) and abs(g) > 1e-2
-    np.testing.assert_allclose(g, fd, rtol=0.05)
+    # measured |g / fd - 1| = 0.30 % at h = 0.01 and 0.06 % at h = 0.005: the central
+    # difference's O(h^2) error, so AD is right; rtol 1 % is 3x the measured error
+    np.testing.assert_allclose(g, fd, rtol=0.01)
 
 
 @pytest.mark.slow

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
+from jaxgfx._math import safe_div
 from jaxgfx.render.bsdf._base import (
     BSDF,
     BSDFSample,
@@ -74,7 +76,11 @@ class SmoothDielectric(BSDF):
         wi = jnp.where(refl[..., None], wi_r, wi_t)
         pdf = jnp.where(refl, r, 1.0 - r)
         w_t = self.specular_transmittance * (fr.eta_ti * fr.eta_ti)[..., None]
-        weight = jnp.where(refl[..., None], self.specular_reflectance, w_t)
+        # the lobe is chosen with probability R: the weight's value is ks (kt/η²) but its
+        # derivative is that of ks R / stop_gradient(R) (resp. T), the discrete choice's
+        # contribution to d/dη (Mitsuba 3 dielectric.cpp does the same in AD variants)
+        w_sel = safe_div(pdf, jax.lax.stop_gradient(pdf), fill=1.0)  # p / p = 1 exactly
+        weight = jnp.where(refl[..., None], self.specular_reflectance, w_t) * w_sel[..., None]
         valid = (co != 0) & (pdf > 0)
         return BSDFSample(
             wi=wi,

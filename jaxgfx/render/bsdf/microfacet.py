@@ -27,6 +27,7 @@ __all__ = ["MicrofacetDistribution", "MICROFACET_TYPES"]
 
 MICROFACET_TYPES = ("ggx", "beckmann")
 _INV_SQRT_PI = 1.0 / math.sqrt(math.pi)
+ALPHA_MIN = 1e-4  # smallest roughness used (Mitsuba 3 clamps alpha the same way)
 
 
 class MicrofacetDistribution(eqx.Module):
@@ -63,10 +64,21 @@ class MicrofacetDistribution(eqx.Module):
         check_positive(self.alpha_u, "alpha")
         check_positive(self.alpha_v, "alpha_v")
 
+    # The roughness used is max(alpha, ALPHA_MIN), as Mitsuba 3 (microfacet.h ``configure``):
+    # below 1e-4 the lobe is a mirror at any image resolution, and the derivative of the image
+    # w.r.t. alpha there is 0 (finite differences agree) instead of growing like 1/alpha.
+    @property
+    def _au(self):
+        return jnp.where(self.alpha_u >= ALPHA_MIN, self.alpha_u, ALPHA_MIN)
+
+    @property
+    def _av(self):
+        return jnp.where(self.alpha_v >= ALPHA_MIN, self.alpha_v, ALPHA_MIN)
+
     # ------------------------------------------------------------------ D
     def eval(self, m):
         """Normal distribution ``D(m)`` (sr⁻¹), normalised so that ``∫ D(m) cos θ_m dω_m = 1``."""
-        au, av = self.alpha_u, self.alpha_v
+        au, av = self._au, self._av
         cz = m[..., 2]
         up = cz > 0
         cz_s = jnp.where(up, cz, 1.0)
@@ -91,7 +103,7 @@ class MicrofacetDistribution(eqx.Module):
     # ------------------------------------------------------------------ masking
     def smith_lambda(self, v):
         """Smith's auxiliary function ``Λ(v)`` (Heitz 2014, eqs. 72 and 86); 0 at the pole."""
-        xy = (self.alpha_u * v[..., 0]) ** 2 + (self.alpha_v * v[..., 1]) ** 2
+        xy = (self._au * v[..., 0]) ** 2 + (self._av * v[..., 1]) ** 2
         cz2 = v[..., 2] * v[..., 2]
         # tan²θ_α = xy / cos²θ  (α-scaled tangent); infinite at grazing -> guard
         if self.type == "ggx":
@@ -157,7 +169,7 @@ class MicrofacetDistribution(eqx.Module):
     def _sample_ggx_vndf(self, wi, u):
         # Heitz 2018, written per component: XLA fuses it into one loop (the vector form with
         # stack/cross was split into several kernels that each recomputed the shared terms).
-        au, av = self.alpha_u, self.alpha_v
+        au, av = self._au, self._av
         hx, hy, hz = au * wi[..., 0], av * wi[..., 1], wi[..., 2]
         n = safe_sqrt(hx * hx + hy * hy + hz * hz)
         inv_n = safe_div(1.0, n)
@@ -190,8 +202,8 @@ class MicrofacetDistribution(eqx.Module):
         phi = 2.0 * math.pi * u[..., 1]
         t = safe_sqrt(u[..., 0] / jnp.maximum(1.0 - u[..., 0], 1e-12))
         sp, cp = sincos(phi)
-        sx = self.alpha_u * t * cp
-        sy = self.alpha_v * t * sp
+        sx = self._au * t * cp
+        sy = self._av * t * sp
         return safe_normalize(jnp.stack([-sx, -sy, jnp.ones_like(sx)], axis=-1))
 
     def _sample_beckmann_full(self, u):
@@ -199,8 +211,8 @@ class MicrofacetDistribution(eqx.Module):
         phi = 2.0 * math.pi * u[..., 1]
         t = safe_sqrt(-jnp.log(jnp.maximum(1.0 - u[..., 0], 1e-30)))
         sp, cp = sincos(phi)
-        sx = self.alpha_u * t * cp
-        sy = self.alpha_v * t * sp
+        sx = self._au * t * cp
+        sy = self._av * t * sp
         return safe_normalize(jnp.stack([-sx, -sy, jnp.ones_like(sx)], axis=-1))
 
 

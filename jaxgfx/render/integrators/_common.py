@@ -25,7 +25,60 @@ __all__ = [
     "spawn_ray",
     "to_local",
     "to_world",
+    "SAMPLING",
+    "check_sampling",
+    "replace_grad",
+    "detach_bsdf_sample",
 ]
+
+SAMPLING = ("detached", "attached")
+"""How sampled quantities enter derivatives (docs/render_gradients.md): ``"detached"``
+(default; Zeltner et al. 2021, Mitsuba 3 ``prb``) or ``"attached"`` (plain AD through the
+samplers; biased where a sampled ray crosses a discontinuity)."""
+
+
+def check_sampling(sampling) -> None:
+    if sampling not in SAMPLING:
+        raise ValueError(f"sampling: expected one of {SAMPLING}, got {sampling!r}")
+
+
+@jax.custom_jvp
+def replace_grad(x, y):
+    """Value of ``x`` with the derivative of ``y`` (Dr.Jit's ``replace_grad``).
+
+    A ``custom_jvp`` rather than ``x + (y - stop_gradient(y))``: without a derivative the
+    primal never computes ``y`` (XLA removes it), so detached sampling costs nothing in a
+    forward render; the tangent rule is linear, so reverse mode works too.
+    """
+    return x
+
+
+@replace_grad.defjvp
+def _replace_grad_jvp(primals, tangents):
+    x, y = primals
+    _, ty = tangents
+    return x, jnp.broadcast_to(ty, jnp.shape(x)).astype(jnp.result_type(x))
+
+
+def detach_bsdf_sample(scene, mat, wo, s, uv):
+    """Detached BSDF sample ``(wi, weight)`` for the next path segment.
+
+    Non-delta lobes: the direction carries no derivative and the weight has the value of the
+    sampler's ``s.weight`` but the derivative of ``f(wo, wi; θ) |cos θ_i| / stop_gradient(pdf)``
+    (the sampling density is frozen at the current parameters, so the estimator's expectation is
+    differentiated: Zeltner et al. 2021, "Monte Carlo Estimators for Differential Light
+    Transport", §4). Delta lobes keep their direction (a deterministic function of ``wo`` and the
+    parameters, e.g. refraction through ``eta``) and weight; a discrete lobe choice is made
+    unbiased inside the BSDF (``SmoothDielectric``: ``R / stop_gradient(R)``).
+    """
+    sg = jax.lax.stop_gradient
+    wi_d = sg(s.wi)
+    f = dispatch(scene, mat, lambda m: m.eval(wo, wi_d), uv=uv)
+    y = safe_div(f, sg(s.pdf)[..., None])
+    delta = s.is_delta[..., None]
+    wi = jnp.where(delta, s.wi, wi_d)
+    weight = jnp.where(delta, s.weight, replace_grad(s.weight, y))
+    return wi, weight
 
 
 def intersect(scene, o, d, *, tmax=jnp.inf):
@@ -144,9 +197,14 @@ def env_pdf(scene, d):
     return scene.environment.pdf(d) * _selection_prob(scene, d.dtype)
 
 
-def sample_light(scene, p, u_sel, u2):
+def sample_light(scene, p, u_sel, u2, *, detached=False):
     """Pick a light uniformly and sample it from points ``p``.
 
+    ``detached``: the environment sample's direction and density carry no derivative and its
+    radiance is re-evaluated at the detached direction (an environment map is importance
+    sampled by its own texels). Area-light samples stay attached: the point moves with the
+    emitter shape and the density is the area measure's (the correct derivative w.r.t. the
+    emitter's geometry, as Mitsuba 3 ``prb`` re-attaches its emitter sample).
     Returns ``(wi, dist, Li, pdf, is_delta)``: world direction towards the light, distance
     (inf for the environment), unoccluded incident radiance, solid-angle density including the
     selection probability (1 x selection for point lights), and whether it is a delta light.
@@ -174,6 +232,9 @@ def sample_light(scene, p, u_sel, u2):
         cands.append((wi, dist, li, ones, jnp.ones(p.shape[:-1], bool)))
     if scene.environment is not None:
         wi, pdf, li = scene.environment.sample(u2)
+        if detached:
+            wi, pdf = jax.lax.stop_gradient((wi, pdf))
+            li = scene.environment.eval(wi)
         dist = jnp.full(p.shape[:-1], jnp.inf, dtype)
         cands.append((wi, dist, li, pdf, jnp.zeros(p.shape[:-1], bool)))
     # map light index -> candidate index

@@ -21,7 +21,11 @@ __all__ = ["PathIntegrator", "DirectIntegrator", "path_radiance", "N_RANDOM", "S
 STRATEGIES = ("mis", "light", "bsdf")
 
 
-def _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy):
+def _identity(x):
+    return x
+
+
+def _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy, detach=_identity):
     le = C.emitted(scene, hit, d)
     if scene.environment is not None:
         miss = ~hit.valid
@@ -33,11 +37,21 @@ def _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy):
     lpdf = C.light_pdf_hit(scene, p_prev, hit, d)
     if scene.environment is not None:
         lpdf = jnp.where(~hit.valid, C.env_pdf(scene, d), lpdf)
-    w = jnp.where(prev_delta, 1.0, C.mis_power(prev_pdf, lpdf))
+    w = jnp.where(prev_delta, 1.0, C.mis_power(detach(prev_pdf), detach(lpdf)))
     return le * w[..., None]
 
 
-def path_radiance(scene, o, d, u, *, max_depth: int, rr_depth: int = 5, strategy: str = "mis"):
+def path_radiance(
+    scene,
+    o,
+    d,
+    u,
+    *,
+    max_depth: int,
+    rr_depth: int = 5,
+    strategy: str = "mis",
+    sampling: str = "detached",
+):
     """Radiance along rays ``o, d (..., 3)`` with uniform numbers ``u (..., max_depth, 7)``.
 
     ``strategy`` selects how direct light is estimated at each vertex: ``"mis"`` (light
@@ -45,9 +59,21 @@ def path_radiance(scene, o, d, u, *, max_depth: int, rr_depth: int = 5, strategy
     (light sampling only; emitters hit by BSDF-sampled rays count only after specular
     bounces) or ``"bsdf"`` (BSDF sampling only, no shadow rays; point lights are then never
     found). All three are unbiased for area and environment lights; they differ in variance.
+
+    ``sampling="detached"`` (default) makes derivatives unbiased (docs/render_gradients.md):
+    BSDF-sampled directions, the environment's light samples, both MIS weights and the
+    Russian-roulette survival probability carry no derivative, and the BSDF sample's weight
+    has the derivative of ``f(wo, wi; θ) |cos| / stop_gradient(pdf)``
+    (:func:`~jaxgfx.render.integrators._common.detach_bsdf_sample`). ``"attached"``
+    differentiates through the samplers (pathwise): unbiased only where no sampled ray crosses
+    a discontinuity of the integrand as the parameter moves and no sampling decision depends
+    on the parameter. The image is identical in both modes.
     """
     if strategy not in STRATEGIES:
         raise ValueError(f"strategy: expected one of {STRATEGIES}, got {strategy!r}")
+    C.check_sampling(sampling)
+    detached = sampling == "detached"
+    detach = jax.lax.stop_gradient if detached else _identity
     dtype = o.dtype
     batch = o.shape[:-1]
     has_lights = scene.n_lights > 0 and strategy != "bsdf"
@@ -58,7 +84,7 @@ def path_radiance(scene, o, d, u, *, max_depth: int, rr_depth: int = 5, strategy
         hit = C.intersect(scene, o, d)
         L = L + jnp.where(
             alive[..., None],
-            beta * _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy),
+            beta * _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy, detach),
             0,
         )
         alive = alive & hit.valid
@@ -67,7 +93,7 @@ def path_radiance(scene, o, d, u, *, max_depth: int, rr_depth: int = 5, strategy
 
         if has_lights:
             wi, dist, li, lpdf, l_delta = fusion_barrier(
-                C.sample_light(scene, hit.p, ub[..., 0], ub[..., 1:3])
+                C.sample_light(scene, hit.p, ub[..., 0], ub[..., 1:3], detached=detached)
             )
             so, sd = C.spawn_ray(hit.p, ng, wi)
             shadow_tmax = jnp.where(jnp.isfinite(dist), dist * (1 - 1e-4), jnp.inf)
@@ -79,7 +105,7 @@ def path_radiance(scene, o, d, u, *, max_depth: int, rr_depth: int = 5, strategy
                 )
             )
             if strategy == "mis":
-                w = jnp.where(l_delta, 1.0, C.mis_power(lpdf, bpdf))
+                w = jnp.where(l_delta, 1.0, C.mis_power(detach(lpdf), detach(bpdf)))
             else:
                 w = jnp.ones_like(lpdf)
             contrib = f * li * safe_div(w, lpdf)[..., None]
@@ -89,12 +115,18 @@ def path_radiance(scene, o, d, u, *, max_depth: int, rr_depth: int = 5, strategy
         s = fusion_barrier(
             C.dispatch(scene, mat, lambda m: m.sample(wo, ub[..., 3], ub[..., 4:6]), uv=hit.uv)
         )
-        wi_world = C.to_world(frame, s.wi)
-        beta = beta * s.weight
-        alive = alive & (s.pdf > 0) & (max_last(s.weight) > 0)
+        if detached:
+            wi_s, weight = C.detach_bsdf_sample(scene, mat, wo, s, hit.uv)
+            # a zero weight (e.g. reflectance 0) still has a derivative: keep the path
+            alive = alive & (s.pdf > 0)
+        else:
+            wi_s, weight = s.wi, s.weight
+            alive = alive & (s.pdf > 0) & (max_last(s.weight) > 0)
+        wi_world = C.to_world(frame, wi_s)
+        beta = beta * weight
         o_next, d_next = C.spawn_ray(hit.p, ng, wi_world)
         # Russian roulette (Mitsuba: after rr_depth bounces, survival = min(max(beta), 0.95))
-        q = jnp.clip(max_last(beta), 0.0, 0.95)
+        q = detach(jnp.clip(max_last(beta), 0.0, 0.95))
         rr = depth >= rr_depth - 1
         survive = jnp.where(rr, ub[..., 6] < q, True)
         beta = jnp.where(rr, safe_div(beta, q[..., None]), beta)
@@ -119,7 +151,7 @@ def path_radiance(scene, o, d, u, *, max_depth: int, rr_depth: int = 5, strategy
     # last vertex: emission only
     o, d, beta, L, alive, prev_pdf, prev_delta, p_prev = carry
     hit = C.intersect(scene, o, d)
-    term = _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy)
+    term = _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy, detach)
     return L + jnp.where(alive[..., None], beta * term, 0.0)
 
 
@@ -142,11 +174,13 @@ class PathIntegrator(Integrator):
     max_depth: int = eqx.field(static=True, default=3)
     rr_depth: int = eqx.field(static=True, default=5)
     strategy: str = eqx.field(static=True, default="mis")
+    sampling: str = eqx.field(static=True, default="detached")
 
     def __check_init__(self):
         check_depth("max_depth", self.max_depth)
         check_depth("rr_depth", self.rr_depth)
         _check_strategy(self.strategy)
+        C.check_sampling(self.sampling)
 
     @property
     def random_shape(self):
@@ -161,6 +195,7 @@ class PathIntegrator(Integrator):
             max_depth=self.max_depth,
             rr_depth=self.rr_depth,
             strategy=self.strategy,
+            sampling=self.sampling,
         )
 
 
@@ -174,10 +209,12 @@ class DirectIntegrator(Integrator):
 
     rr_depth: int = eqx.field(static=True, default=5)
     strategy: str = eqx.field(static=True, default="mis")
+    sampling: str = eqx.field(static=True, default="detached")
 
     def __check_init__(self):
         check_depth("rr_depth", self.rr_depth)
         _check_strategy(self.strategy)
+        C.check_sampling(self.sampling)
 
     @property
     def max_depth(self) -> int:
@@ -189,5 +226,12 @@ class DirectIntegrator(Integrator):
 
     def __call__(self, scene, o, d, u):
         return path_radiance(
-            scene, o, d, u, max_depth=2, rr_depth=self.rr_depth, strategy=self.strategy
+            scene,
+            o,
+            d,
+            u,
+            max_depth=2,
+            rr_depth=self.rr_depth,
+            strategy=self.strategy,
+            sampling=self.sampling,
         )

@@ -6,11 +6,18 @@ in Whitted (1980). The recursion is evaluated breadth-first on a batch whose bra
 per level, so the compiled program grows linearly with depth; scenes without transmissive
 specular materials keep a single branch. Area and environment lights are sampled once per
 camera sample (light sampling only), point lights exactly.
+
+Derivatives (``sampling="detached"``, default): the environment's light sample carries no
+derivative (see :func:`~jaxgfx.render.integrators._common.sample_light`); the specular branches
+are deterministic functions of the parameters (a reflected / refracted direction, a Fresnel
+weight), so they are differentiated as they are, and a branch's Fresnel factor is taken from
+the weight ``R / stop_gradient(R)`` times the frozen lobe probability.
 """
 
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from jaxgfx._math import safe_div
@@ -20,7 +27,7 @@ from jaxgfx.render.integrators.base import N_RANDOM, Integrator, check_depth
 __all__ = ["WhittedIntegrator", "whitted_radiance"]
 
 
-def _direct(scene, hit, frame, ng, wo, mat, alive, u):
+def _direct(scene, hit, frame, ng, wo, mat, alive, u, detached):
     L = jnp.zeros(hit.p.shape, hit.p.dtype)
     if scene.n_lights == 0:
         return L
@@ -40,7 +47,7 @@ def _direct(scene, hit, frame, ng, wo, mat, alive, u):
     if scene.area_lights or scene.environment is not None:
         # sample the non-delta lights with a uniform choice among them
         sub = _nondelta_scene(scene)
-        wi, dist, li, pdf, _ = C.sample_light(sub, hit.p, u[..., 0], u[..., 1:3])
+        wi, dist, li, pdf, _ = C.sample_light(sub, hit.p, u[..., 0], u[..., 1:3], detached=detached)
         L = L + one(wi, dist, li, pdf)
     return L
 
@@ -51,8 +58,13 @@ def _nondelta_scene(scene):
     return eqx.tree_at(lambda s: s.point_lights, scene, None, is_leaf=lambda x: x is None)
 
 
-def whitted_radiance(scene, o, d, u, *, max_depth: int):
-    """Radiance along rays ``o, d (..., 3)``; ``u (..., max_depth, 7)`` uniform numbers."""
+def whitted_radiance(scene, o, d, u, *, max_depth: int, sampling: str = "detached"):
+    """Radiance along rays ``o, d (..., 3)``; ``u (..., max_depth, 7)`` uniform numbers.
+
+    ``sampling``: ``"detached"`` (default) or ``"attached"``, see the module docstring.
+    """
+    C.check_sampling(sampling)
+    detached = sampling == "detached"
     split = any(m.has_delta and m.is_transmissive for m in scene.materials)
     # branch axis at -2: (..., B, 3)
     o, d = o[..., None, :], d[..., None, :]
@@ -68,7 +80,7 @@ def whitted_radiance(scene, o, d, u, *, max_depth: int):
         mat = C.hit_material(scene, hit)
         frame, ng, wo = C.shading_frame(scene, hit, d, mat)
         delta = C.material_flag(scene, mat, "has_delta") & hit.valid
-        direct = _direct(scene, hit, frame, ng, wo, mat, hit.valid & ~delta, ub)
+        direct = _direct(scene, hit, frame, ng, wo, mat, hit.valid & ~delta, ub, detached)
         L = L + jnp.sum(beta * direct, -2)
         if level == max_depth - 1:
             break
@@ -85,7 +97,10 @@ def whitted_radiance(scene, o, d, u, *, max_depth: int):
             )
             reflected = s.wi[..., 2] * wo[..., 2] > 0
             ok = delta & s.is_delta & (reflected if want_reflect else ~reflected)
-            w = jnp.where(ok[..., None], s.weight * s.pdf[..., None], 0.0)
+            # both branches are followed: weight x lobe probability. The weight carries the
+            # lobe choice's derivative (R / stop_gradient(R)), so the probability is frozen
+            p_lobe = jax.lax.stop_gradient(s.pdf)
+            w = jnp.where(ok[..., None], s.weight * p_lobe[..., None], 0.0)
             oo, dd = C.spawn_ray(hit.p, ng, C.to_world(frame, s.wi))
             new_o.append(oo)
             new_d.append(dd)
@@ -105,12 +120,15 @@ class WhittedIntegrator(Integrator):
 
     max_depth: int = eqx.field(static=True, default=3)
 
+    sampling: str = eqx.field(static=True, default="detached")
+
     def __check_init__(self):
         check_depth("max_depth", self.max_depth)
+        C.check_sampling(self.sampling)
 
     @property
     def random_shape(self):
         return (self.max_depth, N_RANDOM)
 
     def __call__(self, scene, o, d, u):
-        return whitted_radiance(scene, o, d, u, max_depth=self.max_depth)
+        return whitted_radiance(scene, o, d, u, max_depth=self.max_depth, sampling=self.sampling)

@@ -1,0 +1,264 @@
+"""Gradient benchmark: cost of a gradient vs a forward render, memory vs spp and depth, bias.
+
+    python -m benchmarks.gradients [--quick] [--out FILE]
+
+1. Speed: seconds per ``jax.grad`` of an L2 image loss (w.r.t. every material and emitter
+   parameter of the scene) vs one forward render at the same spp, on
+   ``configs/scenes/example.yaml`` (path, depth 3) and a mesh scene (the example with its metal
+   sphere replaced by a 6 240-triangle UV-sphere mesh); also the decorrelated gradient
+   (``jaxgfx.render.gradients.decorrelated``: one extra forward pass). One warm-up call, then
+   the median of ``repeat`` calls (the machine may be shared: compare ratios within one run).
+2. Memory: XLA's temporary buffer size (``jit(grad).lower().compile().memory_analysis()``) of
+   the gradient vs spp (depth 3) and vs depth (spp 4) on the example scene at 32².
+3. Statistics (``grad_stats``): mean, standard error, SNR, work-normalised variance and bias
+   against same-key central finite differences for d(image mean)/dα on the glossy scene of
+   issue 10, ``sampling="detached"`` (default) vs ``"attached"``.
+4. Visibility: d(image mean)/d(x of an occluder sphere between a diffuse floor and an area
+   light) by AD and by central FD of the same key: AD misses the moving shadow boundary.
+
+Prints one JSON document (progress to stderr).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgfx.config import read_yaml
+from jaxgfx.render.geometry.mesh_io import make_uv_sphere
+from jaxgfx.render.gradients import grad_stats
+from jaxgfx.render.render import render
+from jaxgfx.render.scene import load_scene
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+EXAMPLE = os.path.join(ROOT, "configs", "scenes", "example.yaml")
+sys.path.insert(0, os.path.join(ROOT, "tests", "render"))
+
+
+def _log(*a):
+    print(*a, file=sys.stderr, flush=True)
+
+
+def _with_res(desc, w):
+    d = copy.deepcopy(desc)
+    d["camera"]["width"] = d["camera"]["height"] = int(w)
+    return d
+
+
+def _median(fn, repeat):
+    ts = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        jax.block_until_ready(fn())
+        ts.append(time.perf_counter() - t)
+    return statistics.median(ts)
+
+
+PARAMS = [
+    "materials.metal.alpha",
+    "materials.floor.reflectance",
+    "emitters.area.0.radiance",
+    "emitters.point.intensities",
+    "emitters.environment.radiance",
+]
+
+
+def _params(scene):
+    return {p: scene.get(p) for p in PARAMS}
+
+
+def _apply(scene, params):
+    for p, v in params.items():
+        scene = scene.replace(p, v)
+    return scene
+
+
+def speed(desc, *, spp, depth, repeat):
+    from jaxgfx.render.gradients import decorrelated
+
+    scene = load_scene(desc)
+    key = jax.random.key(0)
+    params = _params(scene)
+    target = render(scene, jax.random.key(99), spp=spp, integrator="path", max_depth=depth)
+
+    @jax.jit
+    def fwd(params, key):
+        return render(_apply(scene, params), key, spp=spp, integrator="path", max_depth=depth)
+
+    def loss(params, key):
+        return jnp.mean((fwd(params, key) - target) ** 2)
+
+    @jax.jit
+    def fwd_attached(params, key):
+        s = _apply(scene, params)
+        return render(s, key, spp=spp, integrator="path", max_depth=depth, sampling="attached")
+
+    grad = jax.jit(jax.grad(loss))
+    dfwd = decorrelated(fwd)
+    dgrad = jax.jit(jax.grad(lambda p, k: jnp.mean((dfwd(p, k) - target) ** 2)))
+    out = {}
+    runs = (
+        ("forward", fwd),
+        ("forward_attached", fwd_attached),
+        ("grad", grad),
+        ("grad_decorrelated", dgrad),
+    )
+    for name, fn in runs:
+        t = time.perf_counter()
+        jax.block_until_ready(fn(params, key))
+        first = time.perf_counter() - t
+        med = _median(lambda fn=fn: fn(params, key), repeat)
+        out[name] = {"time_s": round(med, 4), "compile_s": round(max(first - med, 0), 2)}
+        _log(name, out[name])
+    out["grad_over_forward"] = round(out["grad"]["time_s"] / out["forward"]["time_s"], 2)
+    out["decorrelated_over_forward"] = round(
+        out["grad_decorrelated"]["time_s"] / out["forward"]["time_s"], 2
+    )
+    return out
+
+
+def memory(desc, *, spps, depths):
+    scene = load_scene(desc)
+    params = _params(scene)
+
+    def temp_mb(spp, depth):
+        def loss(p):
+            img = render(_apply(scene, p), jax.random.key(0), spp=spp, max_depth=depth)
+            return jnp.mean(img**2)
+
+        c = jax.jit(jax.grad(loss)).lower(params).compile()
+        return round(c.memory_analysis().temp_size_in_bytes / 2**20, 3)
+
+    out = {"vs_spp_depth3": {}, "vs_depth_spp4": {}}
+    for spp in spps:
+        out["vs_spp_depth3"][spp] = temp_mb(spp, 3)
+        _log("memory spp", spp, out["vs_spp_depth3"][spp])
+    for d in depths:
+        out["vs_depth_spp4"][d] = temp_mb(4, d)
+        _log("memory depth", d, out["vs_depth_spp4"][d])
+    return out
+
+
+def statistics_alpha(*, spp, n):
+    import _gradient_scenes as G
+
+    scene = G.make_scene(G.glossy_scene(0.15, 8))
+    out = {}
+    for sampling in ("detached", "attached"):
+
+        def loss(a, k, sampling=sampling):
+            s = scene.replace("materials.metal.alpha", a)
+            img = render(s, k, spp=spp, integrator="path", max_depth=4, sampling=sampling)
+            return jnp.mean(img)
+
+        st = grad_stats(loss, jnp.float32(0.15), jax.random.key(1), n, fd_step=0.0075)
+        out[sampling] = {
+            k: float(v) for k, v in st._asdict().items() if v is not None and np.ndim(v) == 0
+        }
+        _log("grad_stats", sampling, out[sampling])
+    return out
+
+
+def visibility(*, spp, n):
+    desc = {
+        "camera": {"origin": [0, 3, 3], "target": [0, 0, 0], "fov": 50, "width": 8, "height": 8},
+        "shapes": [
+            {"type": "sphere", "center": [0.2, 0.8, 0], "radius": 0.3, "material": "floor"},
+            {
+                "type": "rectangle",
+                "center": [0, 0, 0],
+                "normal": [0, 1, 0],
+                "size": [4, 4],
+                "material": "floor",
+            },
+        ],
+        "materials": {"floor": {"type": "diffuse", "reflectance": 0.6}},
+        "emitters": [
+            {
+                "type": "area",
+                "radiance": 10.0,
+                "shape": {
+                    "type": "rectangle",
+                    "center": [0, 2.0, 0],
+                    "normal": [0, -1, 0],
+                    "size": [0.6, 0.6],
+                },
+            },
+            {"type": "constant", "radiance": 0.1},
+        ],
+    }
+    scene = load_scene(desc)
+    c0 = scene.get("shapes.0.center")
+
+    def loss(x, k):
+        s = scene.replace("shapes.0.center", c0.at[0].set(x))
+        return jnp.mean(render(s, k, spp=spp, integrator="direct"))
+
+    st = grad_stats(loss, jnp.float32(0.2), jax.random.key(2), n, fd_step=0.02)
+    out = {k: float(v) for k, v in st._asdict().items() if v is not None and np.ndim(v) == 0}
+    _log("visibility", out)
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--out")
+    ap.add_argument(
+        "--sections",
+        default="speed,memory,stats,visibility",
+        help="comma-separated subset of speed,memory,stats,visibility",
+    )
+    a = ap.parse_args(argv)
+    sections = set(a.sections.split(","))
+    q = a.quick
+    example = read_yaml(EXAMPLE)
+    mesh = copy.deepcopy(example)
+    m = make_uv_sphere(40, radius=1.0, center=(0.0, 1.0, 0.0))
+    mesh["shapes"][0] = {
+        "type": "mesh",
+        "vertices": np.asarray(m.vertices).tolist(),
+        "faces": np.asarray(m.faces).tolist(),
+        "material": "metal",
+    }
+    res = 32 if q else 64
+    spp = 4 if q else 16
+    result = {
+        "machine": platform.processor() or platform.machine(),
+        "jax": jax.__version__,
+        "devices": [str(d) for d in jax.devices()],
+    }
+    if "memory" in sections:
+        result["memory_MB"] = memory(
+            _with_res(example, 32),
+            spps=[1, 4, 16] if q else [1, 4, 16, 64, 256],
+            depths=[2, 3, 4] if q else [2, 3, 4, 6, 8],
+        )
+    if "speed" in sections:
+        result["speed"] = {
+            "example": speed(_with_res(example, res), spp=spp, depth=3, repeat=3),
+            "mesh": speed(_with_res(mesh, res // 2), spp=spp, depth=3, repeat=3),
+        }
+    if "stats" in sections:
+        result["grad_stats_alpha"] = statistics_alpha(spp=32 if q else 128, n=4 if q else 16)
+    if "visibility" in sections:
+        result["visibility"] = visibility(spp=32 if q else 128, n=4 if q else 16)
+    js = json.dumps(result, indent=1)
+    print(js)
+    if a.out:
+        with open(a.out, "w") as f:
+            f.write(js)
+
+
+if __name__ == "__main__":
+    main()

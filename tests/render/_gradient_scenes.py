@@ -1,0 +1,265 @@
+"""Small lit scenes and a shared AD-vs-finite-difference driver for the gradient tests.
+
+Each scene has area lights and an environment (the boundaries that bias gradients through
+sampled directions) and a list of continuous parameters. A parameter is a pair
+``(path, base)``: the scene is evaluated at ``replace(path, base * x)`` and the derivative is
+taken w.r.t. the scalar ``x`` at 1 (a directional derivative along ``base``, so RGB and texture
+parameters are covered by one scalar each).
+
+:func:`ad_fd` compiles ONE program per scene structure that returns, per key, the AD gradient
+(reverse mode) of the image mean and the central finite differences of the same renderer with
+the same key (common random numbers), so the paired difference ``AD - FD`` has a standard error
+estimated from the keys.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgfx.render.render import render
+from jaxgfx.render.scene import load_scene
+
+ENV = {"type": "constant", "radiance": 0.3}
+
+
+def _camera(w=8, origin=(0, 1.0, 4.0), target=(0, 0.6, 0), fov=40):
+    return {"origin": list(origin), "target": list(target), "fov": fov, "width": w, "height": w}
+
+
+def _floor(material="floor"):
+    return {
+        "type": "rectangle",
+        "center": [0, 0, 0],
+        "normal": [0, 1, 0],
+        "size": [6, 6],
+        "material": material,
+    }
+
+
+def _light(radiance=8.0, center=(0, 3.0, 1.0), normal=(0, -1, -0.3), size=(1.2, 1.2)):
+    return {
+        "type": "area",
+        "shape": {
+            "type": "rectangle",
+            "center": list(center),
+            "normal": list(normal),
+            "size": list(size),
+        },
+        "radiance": radiance,
+    }
+
+
+def glossy_scene(alpha=0.15, w=8):
+    """The scene of issue 10: GGX rough-conductor sphere, textured diffuse floor, area light,
+    constant environment."""
+    texels = [[[0.7, 0.5, 0.3], [0.2, 0.4, 0.6]], [[0.5, 0.5, 0.5], [0.8, 0.3, 0.2]]]
+    return {
+        "camera": _camera(w),
+        "shapes": [
+            {"type": "sphere", "center": [0, 0.8, 0], "radius": 0.8, "material": "metal"},
+            _floor(),
+        ],
+        "materials": {
+            "metal": {"type": "roughconductor", "alpha": alpha, "reflectance": [0.9, 0.8, 0.7]},
+            "floor": {
+                "type": "diffuse",
+                "reflectance": {"type": "bitmap", "image": texels, "filter": "nearest"},
+            },
+        },
+        "emitters": [_light(), ENV],
+    }
+
+
+GLOSSY_PARAMS = [
+    ("materials.metal.alpha", 0.15),
+    ("materials.metal.reflectance", np.array([0.9, 0.8, 0.7])),
+    ("materials.floor.reflectance.image", None),  # base = the texture itself
+    ("emitters.area.0.radiance", np.array([8.0, 8.0, 8.0])),
+    ("emitters.environment.radiance", np.array([0.3, 0.3, 0.3])),
+]
+
+
+def materials_scene(w=8):
+    """Direct lighting of every non-delta BSDF: rough plastic and (modified) Phong spheres on an
+    anisotropic rough-conductor floor with a complex IOR, lit by an area light, a point light
+    and a constant environment."""
+    return {
+        "camera": _camera(w, origin=(0, 1.6, 4.0), target=(0, 0.5, 0), fov=50),
+        "shapes": [
+            {"type": "sphere", "center": [-0.7, 0.6, 0], "radius": 0.6, "material": "plastic"},
+            {"type": "sphere", "center": [0.7, 0.6, 0], "radius": 0.6, "material": "phong"},
+            _floor("metal"),
+        ],
+        "materials": {
+            "plastic": {
+                "type": "roughplastic",
+                "alpha": 0.2,
+                "diffuse_reflectance": [0.6, 0.3, 0.2],
+                "specular_reflectance": 0.8,
+                "eta": 1.5,
+            },
+            "phong": {"type": "phong", "kd": [0.3, 0.5, 0.4], "ks": 0.4, "exponent": 20.0},
+            "metal": {
+                "type": "roughconductor",
+                "alpha": 0.15,
+                "alpha_v": 0.35,
+                "eta": [0.2, 0.9, 1.1],
+                "k": [3.9, 2.4, 2.2],
+            },
+        },
+        "emitters": [
+            _light(radiance=6.0, center=(0.5, 2.8, 1.5), normal=(0, -1, -0.4)),
+            {"type": "point", "position": [-1.5, 2.0, 1.5], "intensity": 4.0},
+            ENV,
+        ],
+    }
+
+
+MATERIALS_PARAMS = [
+    ("materials.plastic.alpha", 0.2),
+    ("materials.plastic.diffuse_reflectance", np.array([0.6, 0.3, 0.2])),
+    ("materials.plastic.specular_reflectance", np.array([0.8, 0.8, 0.8])),
+    ("materials.plastic.eta", 1.5),
+    ("materials.phong.kd", np.array([0.3, 0.5, 0.4])),
+    ("materials.phong.ks", np.array([0.4, 0.4, 0.4])),
+    ("materials.phong.exponent", 20.0),
+    ("materials.metal.alpha_u", 0.15),
+    ("materials.metal.alpha_v", 0.35),
+    ("materials.metal.eta", np.array([0.2, 0.9, 1.1])),
+    ("materials.metal.k", np.array([3.9, 2.4, 2.2])),
+    ("emitters.point.intensities", None),
+    ("emitters.area.0.radiance", np.array([6.0, 6.0, 6.0])),
+]
+
+
+def glass_scene(w=8):
+    """Delta BSDFs: a glass sphere and a coloured mirror (complex-IOR conductor) over a diffuse
+    floor, area light and constant environment."""
+    return {
+        "camera": _camera(w, origin=(0, 1.4, 4.0), target=(0, 0.5, 0), fov=50),
+        "shapes": [
+            {"type": "sphere", "center": [-0.65, 0.6, 0.3], "radius": 0.6, "material": "glass"},
+            {"type": "sphere", "center": [0.75, 0.6, -0.3], "radius": 0.6, "material": "mirror"},
+            _floor(),
+        ],
+        "materials": {
+            "glass": {"type": "dielectric", "eta": 1.5},
+            "mirror": {"type": "conductor", "eta": [0.2, 0.9, 1.1], "k": [3.9, 2.4, 2.2]},
+            "floor": {"type": "diffuse", "reflectance": [0.6, 0.5, 0.4]},
+        },
+        "emitters": [_light(radiance=6.0), ENV],
+    }
+
+
+GLASS_PARAMS = [
+    ("materials.glass.eta", 1.5),
+    ("materials.mirror.eta", np.array([0.2, 0.9, 1.1])),
+    ("materials.mirror.k", np.array([3.9, 2.4, 2.2])),
+    ("materials.floor.reflectance", np.array([0.6, 0.5, 0.4])),
+    ("emitters.area.0.radiance", np.array([6.0, 6.0, 6.0])),
+    ("emitters.environment.radiance", np.array([0.3, 0.3, 0.3])),
+]
+
+
+def envmap_scene(w=8):
+    """An importance-sampled environment map (its texels set the light-sampling density) over
+    a rough-conductor sphere and a diffuse floor, plus an area light."""
+    rng = np.random.default_rng(5)
+    env = (0.2 + rng.random((4, 8, 3)) * np.array([1.0, 0.8, 0.6])).tolist()
+    return {
+        "camera": _camera(w),
+        "shapes": [
+            {"type": "sphere", "center": [0, 0.8, 0], "radius": 0.8, "material": "metal"},
+            _floor(),
+        ],
+        "materials": {
+            "metal": {"type": "roughconductor", "alpha": 0.3, "reflectance": 0.9},
+            "floor": {"type": "diffuse", "reflectance": 0.5},
+        },
+        "emitters": [_light(radiance=4.0), {"type": "envmap", "image": env}],
+    }
+
+
+ENVMAP_PARAMS = [
+    ("emitters.environment.image", None),
+    ("materials.metal.alpha", 0.3),
+    ("materials.floor.reflectance", np.array([0.5, 0.5, 0.5])),
+]
+
+
+def make_scene(desc):
+    return load_scene(desc)
+
+
+def resolve(scene, params):
+    """``[(path, base array)]`` with ``None`` bases filled from the scene."""
+    out = []
+    for path, base in params:
+        b = scene.get(path) if base is None else jnp.asarray(base, scene.get(path).dtype)
+        out.append((path, b))
+    return out
+
+
+def apply(scene, params, x):
+    for i, (path, base) in enumerate(params):
+        scene = scene.replace(path, base * x[i])
+    return scene
+
+
+@eqx.filter_jit
+def _value_and_grads(scene, bases, x, keys, opts):
+    """Per key: image mean at ``x`` and its reverse-mode gradient w.r.t. ``x`` (P,)."""
+
+    def loss(x, key):
+        return jnp.mean(render(apply(scene, bases, x), key, **dict(opts)))
+
+    return jax.vmap(lambda k: jax.value_and_grad(loss)(x, k))(keys)
+
+
+def ad_fd(
+    scene, bases, keys, h, *, spp, integrator, max_depth, strategy="mis", sampling="detached"
+):
+    """Per key: image mean, AD gradient (reverse mode) and central FD w.r.t. each scale.
+
+    Returns ``(values (K,), ad (K, P), fd (K, P))``. ``bases``: list of ``(path, base)``.
+    ONE compiled program (value and gradient, vmapped over the keys) serves the AD gradient at
+    ``x = 1`` and the ``2P`` perturbed values of the central differences (``x`` is traced).
+    """
+    opts = (
+        ("spp", spp),
+        ("integrator", integrator),
+        ("max_depth", max_depth),
+        ("strategy", strategy),
+        ("sampling", sampling),
+    )
+    P = len(bases)
+    x0 = np.ones((P,), np.float32)
+    vals, grads = _value_and_grads(scene, bases, jnp.asarray(x0), keys, opts)
+    fd = []
+    for i in range(P):
+        e = np.zeros((P,), np.float32)
+        e[i] = h
+        vp, _ = _value_and_grads(scene, bases, jnp.asarray(x0 + e), keys, opts)
+        vm, _ = _value_and_grads(scene, bases, jnp.asarray(x0 - e), keys, opts)
+        # the step actually taken in float32
+        step = float(np.float32(1 + h) - np.float32(1 - h))
+        fd.append((np.asarray(vp, np.float64) - np.asarray(vm, np.float64)) / step)
+    return vals, grads, np.stack(fd, axis=1)
+
+
+def summary(vals, ad, fd):
+    ad, fd = np.asarray(ad, np.float64), np.asarray(fd, np.float64)
+    k = ad.shape[0]
+    d = ad - fd
+    return dict(
+        value=float(np.mean(vals)),
+        ad=ad.mean(0),
+        ad_se=ad.std(0, ddof=1) / np.sqrt(k),
+        fd=fd.mean(0),
+        fd_se=fd.std(0, ddof=1) / np.sqrt(k),
+        diff=d.mean(0),
+        diff_se=d.std(0, ddof=1) / np.sqrt(k),
+    )
