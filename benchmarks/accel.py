@@ -211,7 +211,7 @@ def _mitsuba_trace(mi, scene, o, d, threads):
 
 def run_backends(n_rings=(36, 144), n_side=256, jax_rays=4096):
     from jaxgfx.render import traversal as T
-    from jaxgfx.render.mesh import make_uv_sphere, save_ply
+    from jaxgfx.render.geometry.mesh_io import make_uv_sphere, save_ply
 
     mi, variant = _mitsuba_setup()
     rows = []
@@ -293,7 +293,7 @@ def run_scaling(n_rings, *, res=64, spp=4, jax_max_tris=300_000, repeat=2):
     from benchmarks.render import EXAMPLE, bench_mitsuba
     from jaxgfx.config import read_yaml
     from jaxgfx.render import traversal as T
-    from jaxgfx.render.mesh import make_uv_sphere, save_ply
+    from jaxgfx.render.geometry.mesh_io import make_uv_sphere, save_ply
     from jaxgfx.render.render import render
     from jaxgfx.render.scene import load_scene
 

@@ -14,9 +14,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgfx.render import mesh as M
-from jaxgfx.render import shapes as S
+from jaxgfx.render import geometry as S
 from jaxgfx.render import traversal as T
+from jaxgfx.render.geometry import mesh_io as M
 
 BACKENDS = [
     pytest.param(

@@ -10,7 +10,7 @@ name       engine                                          install
 ``embree`` Embree 4 (CPU) via ``embreex``, ``pure_callback``  ``pip install jaxgfx[embree]``
 ``warp``   NVIDIA Warp ``mesh_query_ray`` (CPU or CUDA),    ``pip install jaxgfx[warp]``
            ``wp.jax_kernel`` (XLA FFI)
-``jax``    the pure-JAX BVH (:mod:`jaxgfx.render.accel`),   always available (the reference)
+``jax``    the pure-JAX BVH (:mod:`~.geometry.accel`),      always available (the reference)
            portable, vmappable, slow on large meshes
 =========  ==============================================  ===================================
 
@@ -51,7 +51,7 @@ __all__ = [
 
 
 def _build_jax(mesh):
-    from jaxgfx.render.accel.bvh import build_bvh
+    from jaxgfx.render.geometry.accel.bvh_sah import build_bvh
 
     return build_bvh(mesh)
 
@@ -93,7 +93,7 @@ def build_traversal(mesh, accel: str = "auto"):
 
 def accel_of(shape) -> str | None:
     """Backend name of a traversal object (``None`` for anything else)."""
-    from jaxgfx.render.accel.bvh import BVH
+    from jaxgfx.render.geometry.accel.bvh_sah import BVH
 
     if isinstance(shape, EmbreeMesh):
         return "embree"
@@ -110,7 +110,7 @@ _BUILT: dict = {}
 
 
 def _cached_build(mesh, name):
-    from jaxgfx.render.shapes import TriangleMesh
+    from jaxgfx.render.geometry import TriangleMesh
 
     key = (id(mesh.vertices), id(mesh.faces), name)
     hit = _BUILT.get(key)

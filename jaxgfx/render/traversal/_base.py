@@ -1,6 +1,6 @@
 """The traversal-backend interface shared by the Embree, Warp and pure-JAX backends.
 
-A backend object wraps ONE :class:`~jaxgfx.render.shapes.TriangleMesh` (the differentiable
+A backend object wraps ONE :class:`~jaxgfx.render.geometry.TriangleMesh` (the differentiable
 leaves) and answers two non-differentiable queries on a batch of rays ``o, d (..., 3)``:
 
 * ``closest_t(o, d, *, tmin, tmax) -> (t, prim_id)``: nearest hit in ``(tmin, tmax)``
@@ -8,9 +8,9 @@ leaves) and answers two non-differentiable queries on a batch of rays ``o, d (..
 * ``occluded(o, d, tmax, *, tmin) -> bool``: any hit in ``(tmin, tmax)``.
 
 ``intersect(o, d, *, tmin, tmax, shape_id) -> Hit`` then recomputes the hit record in JAX from
-the primitive id (:func:`jaxgfx.render.shapes.primitive_hit`), so ``t``, ``p``, normals and uvs
+the primitive id (:func:`jaxgfx.render.geometry.primitive_hit`), so ``t``, ``p``, normals and uvs
 are differentiable w.r.t. the mesh vertices exactly as with the JAX BVH, whatever engine found
-the primitive. This is the protocol :func:`jaxgfx.render.shapes.intersect_scene` and
+the primitive. This is the protocol :func:`jaxgfx.render.geometry.intersect_scene` and
 ``occluded_scene`` already use for acceleration structures (an object with ``closest_t`` and a
 ``mesh``), so a backend object can stand in a scene's shape list unchanged.
 
@@ -30,8 +30,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgfx.render.ray import Hit
-from jaxgfx.render.shapes import TriangleMesh, _rays, primitive_hit
+from jaxgfx.render.geometry import TriangleMesh, prepare_rays, primitive_hit
+from jaxgfx.render.geometry.ray import Hit
 
 __all__ = ["HostTraversal", "KeepAlive", "register_native", "lookup_native", "host_rays"]
 
@@ -114,7 +114,7 @@ class HostTraversal(eqx.Module):
         raise NotImplementedError
 
     def _run(self, o, d, tmin, tmax, any_hit):
-        o, d, tmin, tmax = _rays(o, d, tmin, tmax)
+        o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
         sg = jax.lax.stop_gradient
         batch = o.shape[:-1]
         tmin_b = jnp.broadcast_to(sg(tmin), batch)
@@ -124,7 +124,7 @@ class HostTraversal(eqx.Module):
 
     def closest_t(self, o, d, *, tmin=0.0, tmax=jnp.inf):
         """Nearest ``(t, prim_id)`` per ray (``t = inf`` where nothing is hit); not
-        differentiable (see :func:`jaxgfx.render.shapes.intersect_scene`)."""
+        differentiable (see :func:`jaxgfx.render.geometry.intersect_scene`)."""
         _, _, t, prim = self._run(o, d, tmin, tmax, False)
         return jnp.where(prim >= 0, t, jnp.inf), jnp.maximum(prim, 0)
 
@@ -134,7 +134,7 @@ class HostTraversal(eqx.Module):
         return prim >= 0
 
     def intersect(self, o, d, *, tmin=0.0, tmax=jnp.inf, shape_id=0) -> Hit:
-        """Closest hit as a :class:`~jaxgfx.render.ray.Hit` whose ``t``, ``p``, normals and
+        """Closest hit as a :class:`~jaxgfx.render.geometry.ray.Hit` whose ``t``, ``p``, normals and
         uvs are recomputed in JAX for the found triangle (differentiable w.r.t.
         ``mesh.vertices``)."""
         o, d, _, prim = self._run(o, d, tmin, tmax, False)

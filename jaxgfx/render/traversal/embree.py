@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Int
 
-from jaxgfx.render.shapes import TriangleMesh
+from jaxgfx.render.geometry import TriangleMesh
 from jaxgfx.render.traversal._base import (
     HostTraversal,
     KeepAlive,

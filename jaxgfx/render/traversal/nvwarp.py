@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, UInt32
 
-from jaxgfx.render.shapes import TriangleMesh
+from jaxgfx.render.geometry import TriangleMesh
 from jaxgfx.render.traversal._base import HostTraversal, KeepAlive
 
 __all__ = ["WarpMesh", "build_warp", "warp_available"]
