@@ -88,7 +88,7 @@ def run_jaxgfx(cfg: dict) -> dict:
 def run_mitsuba(cfg: dict, steps: int, spp: int, lr: float) -> dict:
     if os.path.exists(LLVM19):
         os.environ.setdefault("DRJIT_LIBLLVM_PATH", LLVM19)
-    from jaxgfx.render.mitsuba import import_mitsuba, to_mitsuba_dict
+    from jaxgfx.render.scene.mitsuba import import_mitsuba, to_mitsuba_dict
 
     variant = "llvm_ad_rgb"
     mi = import_mitsuba(variant)

@@ -14,6 +14,7 @@ from jaxgfx.render.bsdf.textured import Checkerboard as Checkerboard
 from jaxgfx.render.bsdf.textured import Textured as Textured
 from jaxgfx.render.camera import MatrixCamera as MatrixCamera
 from jaxgfx.render.camera import PerspectiveCamera as PerspectiveCamera
+from jaxgfx.render.distributed import render_sharded as render_sharded
 from jaxgfx.render.emitters import AreaLight as AreaLight
 from jaxgfx.render.emitters import ConstantEnvironment as ConstantEnvironment
 from jaxgfx.render.emitters import EnvironmentMap as EnvironmentMap
@@ -41,7 +42,6 @@ from jaxgfx.render.integrators import Integrator as Integrator
 from jaxgfx.render.integrators import PathIntegrator as PathIntegrator
 from jaxgfx.render.integrators import WhittedIntegrator as WhittedIntegrator
 from jaxgfx.render.render import render as render
-from jaxgfx.render.distributed import render_sharded as render_sharded
 from jaxgfx.render.scene import Scene as Scene
 from jaxgfx.render.scene import load_scene as load_scene
 

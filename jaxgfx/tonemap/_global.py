@@ -145,7 +145,7 @@ def tonemap_exposure(
 
     Example:
         >>> tonemap_exposure(jnp.full((1, 1), 0.25), exposure=1.0, encode="linear")
-        Array([[0.5]], dtype=float32)
+        Array([[0.5]], dtype=float32...)
     """
     x = _prepare(hdr, saturation, encode, weights)
     saturation = static_saturation(saturation)

@@ -239,7 +239,7 @@ def test_recover_from_a_mitsuba_target(ggx_problem):
     # the target comes from Mitsuba 3 (same scene via to_mitsuba_dict, 256 spp): conventions
     # (alpha, albedo, light, camera) must agree for the fit to land on the Mitsuba values
     pytest.importorskip("mitsuba")
-    from jaxgfx.render.mitsuba import render_mitsuba
+    from jaxgfx.render.scene.mitsuba import render_mitsuba
 
     with open(SCENE) as f:
         d = yaml.safe_load(f)

@@ -165,6 +165,9 @@ def _inside_sphere(albedo=0.5, radius=2.0, intensity=10.0):
     return load_scene(inside_sphere_scene(albedo, radius, intensity))
 
 
+# 7 s of compilation: the default suite checks the same closed form (camera inside the
+# integrating sphere: path values and gradients exactly) in test_integrator_references.py
+@pytest.mark.slow
 def test_camera_inside_sphere_closed_form():
     a, r, intensity = 0.5, 2.0, 10.0
     scene = _inside_sphere(a, r, intensity)

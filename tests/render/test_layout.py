@@ -35,12 +35,13 @@ def _plane(material, emitters=({"type": "constant", "radiance": [1.0, 2.0, 0.5]}
 
 @pytest.fixture(scope="module")
 def plane():
-    return load_scene(_plane({"type": "diffuse", "reflectance": 0.5}))
+    # the scene, integrator and spp of test_integrators' constant-sky plane: one shared program
+    return load_scene(plane_scene([{"type": "constant", "radiance": [1.0, 2.0, 0.5]}]))
 
 
 def test_integrator_object_matches_name_and_closed_form(plane):
-    a = np.asarray(render(plane, KEY, spp=4, integrator="direct"), np.float64)
-    b = np.asarray(render(plane, KEY, spp=4, integrator=DirectIntegrator()), np.float64)
+    a = np.asarray(render(plane, KEY, spp=16, integrator="path", max_depth=2), np.float64)
+    b = np.asarray(render(plane, KEY, spp=16, integrator=PathIntegrator(max_depth=2)), np.float64)
     np.testing.assert_array_equal(a, b)  # same static options -> the same compiled program
     x = b.reshape(-1, 3)
     se = x.std(0, ddof=1) / np.sqrt(x.shape[0])
