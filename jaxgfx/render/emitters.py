@@ -21,7 +21,7 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 
-from jaxgfx._checks import as_float_array, check_finite
+from jaxgfx._checks import as_float_array, check_finite, check_nonnegative
 from jaxgfx._math import safe_arccos, safe_atan2, safe_div, safe_sqrt, sincos, sum_last, take_rows
 from jaxgfx.render.bsdf import rgb_param
 from jaxgfx.render.warp import Distribution2D
@@ -41,6 +41,10 @@ class PointLights(eqx.Module):
 
     positions: jnp.ndarray
     intensities: jnp.ndarray
+
+    def __check_init__(self):  # also runs on Scene.replace (concrete values only)
+        check_finite(self.positions, "position")
+        check_nonnegative(self.intensities, "intensities")
 
     @classmethod
     def create(cls, positions, intensities):
@@ -76,11 +80,17 @@ class AreaLight(eqx.Module):
     radiance: jnp.ndarray
     shape_index: int = eqx.field(static=True)
 
+    def __check_init__(self):  # also runs on Scene.replace (concrete values only)
+        check_nonnegative(self.radiance, "radiance")
+
 
 class ConstantEnvironment(eqx.Module):
     """Uniform radiance from all directions; sampled uniformly over the sphere."""
 
     radiance: jnp.ndarray
+
+    def __check_init__(self):  # also runs on Scene.replace (concrete values only)
+        check_nonnegative(self.radiance, "radiance")
 
     def eval(self, d):
         return jnp.broadcast_to(self.radiance, d.shape)
