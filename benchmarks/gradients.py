@@ -198,10 +198,10 @@ def visibility(*, spp, n):
         ],
     }
     scene = load_scene(desc)
-    c0 = scene.get("shapes.0.center")
+    c0 = scene.get("shapes.0.centers")
 
     def loss(x, k):
-        s = scene.replace("shapes.0.center", c0.at[0].set(x))
+        s = scene.replace("shapes.0.centers", c0.at[0, 0].set(x))
         return jnp.mean(render(s, k, spp=spp, integrator="direct"))
 
     st = grad_stats(loss, jnp.float32(0.2), jax.random.key(2), n, fd_step=0.02)
