@@ -85,6 +85,7 @@ def glossy():
     return _run(G.glossy_scene(), G.GLOSSY_PARAMS, spp=128, keys=32, integrator="path", max_depth=4)
 
 
+@pytest.mark.slow  # ~100 s of compile + 32 keys x 128 spp on 2 cores: too long for make test
 def test_glossy_scene_ad_matches_fd(glossy):
     """Issue 10's scene: α of the GGX sphere (attached: AD 2.3x FD), reflectance, texels,
     area and environment radiance."""
