@@ -22,7 +22,7 @@ import numpy as np
 from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
 
-ENV = {"type": "constant", "radiance": 0.3}
+ENV = {"type": "constant", "radiance": 0.3}  # copied into each scene: tests edit their descriptions
 
 
 def _camera(w=8, origin=(0, 1.0, 4.0), target=(0, 0.6, 0), fov=40):
@@ -69,7 +69,7 @@ def glossy_scene(alpha=0.15, w=8):
                 "reflectance": {"type": "bitmap", "image": texels, "filter": "nearest"},
             },
         },
-        "emitters": [_light(), ENV],
+        "emitters": [_light(), dict(ENV)],
     }
 
 
@@ -113,7 +113,7 @@ def materials_scene(w=8):
         "emitters": [
             _light(radiance=6.0, center=(0.5, 2.8, 1.5), normal=(0, -1, -0.4)),
             {"type": "point", "position": [-1.5, 2.0, 1.5], "intensity": 4.0},
-            ENV,
+            dict(ENV),
         ],
     }
 
@@ -150,7 +150,7 @@ def glass_scene(w=8):
             "mirror": {"type": "conductor", "eta": [0.2, 0.9, 1.1], "k": [3.9, 2.4, 2.2]},
             "floor": {"type": "diffuse", "reflectance": [0.6, 0.5, 0.4]},
         },
-        "emitters": [_light(radiance=6.0), ENV],
+        "emitters": [_light(radiance=6.0), dict(ENV)],
     }
 
 
