@@ -26,14 +26,13 @@ import copy
 import json
 import os
 import platform
-import statistics
 import sys
-import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from benchmarks._timing import first_and_median
 from jaxgfx.config import read_yaml
 from jaxgfx.render.geometry.mesh_io import make_uv_sphere
 from jaxgfx.render.gradients import grad_stats
@@ -53,15 +52,6 @@ def _with_res(desc, w):
     d = copy.deepcopy(desc)
     d["camera"]["width"] = d["camera"]["height"] = int(w)
     return d
-
-
-def _median(fn, repeat):
-    ts = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        jax.block_until_ready(fn())
-        ts.append(time.perf_counter() - t)
-    return statistics.median(ts)
 
 
 PARAMS = [
@@ -114,10 +104,7 @@ def speed(desc, *, spp, depth, repeat):
         ("grad_decorrelated", dgrad),
     )
     for name, fn in runs:
-        t = time.perf_counter()
-        jax.block_until_ready(fn(params, key))
-        first = time.perf_counter() - t
-        med = _median(lambda fn=fn: fn(params, key), repeat)
+        first, med = first_and_median(lambda fn=fn: fn(params, key), repeat)
         out[name] = {"time_s": round(med, 4), "compile_s": round(max(first - med, 0), 2)}
         _log(name, out[name])
     out["grad_over_forward"] = round(out["grad"]["time_s"] / out["forward"]["time_s"], 2)
