@@ -13,7 +13,7 @@ import time
 import jax
 import numpy as np
 
-__all__ = ["median_time", "first_and_median", "time_jax", "time_np"]
+__all__ = ["median_time", "first_and_median", "interleaved_times", "time_jax", "time_np"]
 
 
 def median_time(fn, repeats: int) -> float:
@@ -33,6 +33,23 @@ def first_and_median(fn, repeats: int) -> tuple[float, float]:
     jax.block_until_ready(fn())
     first = time.perf_counter() - t0
     return first, median_time(fn, repeats)
+
+
+def interleaved_times(fns: dict, repeats: int) -> dict:
+    """``{name: (first_s, median_s)}`` for zero-argument callables ``fns``: one first call each,
+    then ``repeats`` rounds that call every function once in turn, so a change of the machine's
+    load during the run affects all of them alike (use it for ratios on a shared machine)."""
+    first, ts = {}, {name: [] for name in fns}
+    for name, fn in fns.items():
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn())
+        first[name] = time.perf_counter() - t0
+    for _ in range(repeats):
+        for name, fn in fns.items():
+            t0 = time.perf_counter()
+            jax.block_until_ready(fn())
+            ts[name].append(time.perf_counter() - t0)
+    return {name: (first[name], float(np.median(ts[name]))) for name in fns}
 
 
 def time_jax(f, *args, repeats: int = 5) -> tuple[float, float]:
