@@ -122,7 +122,7 @@ def _render_sharded(scene, key, spp, integrator, mesh, shard):
             scene = eqx.combine(dyn, static)
             d = jax.lax.axis_index(axes)
             rows = d + n * jnp.arange(r, dtype=jnp.int32)
-            acc, _ = render_partial(scene, key, integrator, spp=spp, rows=rows)  # weight: spp
+            acc = render_partial(scene, key, integrator, spp=spp, rows=rows)
             return jax.lax.all_gather(acc, axes)  # (n, r, W, C): tiles[d][i] = row d + n i
 
         tiles = jax.shard_map(
@@ -139,10 +139,10 @@ def _render_sharded(scene, key, spp, integrator, mesh, shard):
         s = d + n * jnp.arange(q, dtype=jnp.int32)
         weights = (s < spp).astype(jnp.float32)
         s = jnp.minimum(s, spp - 1)
-        acc, weight = render_partial(scene, key, integrator, spp=spp, passes=s, weights=weights)
-        return jax.lax.psum((acc, weight), axes)
+        acc = render_partial(scene, key, integrator, spp=spp, passes=s, weights=weights)
+        return jax.lax.psum(acc, axes)
 
-    acc, weight = jax.shard_map(
-        local, mesh=mesh, in_specs=(P(), P()), out_specs=P(), check_vma=False
-    )(dyn, key)
-    return acc / weight
+    acc = jax.shard_map(local, mesh=mesh, in_specs=(P(), P()), out_specs=P(), check_vma=False)(
+        dyn, key
+    )
+    return acc / spp  # the weights of the passes sum to spp

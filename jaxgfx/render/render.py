@@ -118,11 +118,10 @@ def resolve_integrator(
 def render_partial(
     scene, key, integrator: Integrator, *, spp: int, rows=None, passes=None, weights=None
 ):
-    """UNNORMALISED sum over sample passes of the radiance of some rows, and its weight.
+    """UNNORMALISED sum ``(R, W, C)`` over sample passes of the radiance of some image rows.
 
-    Returns ``(acc (R, W, C), weight ())``: ``acc / weight`` is the rows' estimate. The single
-    definition of the sample layout of :func:`render` (which returns ``acc / weight`` of
-    ``render_partial(scene, key, integrator, spp=spp)``, weight ``spp``):
+    The single definition of the sample layout of :func:`render`, which returns
+    ``render_partial(scene, key, integrator, spp=spp) / spp``:
     ``key`` splits into a camera key (``film.pixel_samples``: stratified when ``spp`` is a
     square, ``(H, W, spp, 2)``) and a key into which pass ``s`` is folded for the integrator's
     uniform numbers of shape ``(H, W, *integrator.random_shape)``; pass ``s`` traces one ray per
@@ -134,7 +133,8 @@ def render_partial(
     samples and numbers are those of the whole image's row, so the pixel is computed by the same
     operations. ``passes``: ``None`` (``0 .. spp - 1``) or pass indices ``(P,)`` in
     ``[0, spp)`` (may be traced); ``weights``: ``None`` (1 each) or ``(P,)`` factors per pass
-    (0 for padding passes); ``weight`` is their sum (``spp`` when ``None``: every pass once).
+    (0 for padding passes). The estimate is the sum divided by the total weight of the passes
+    (``spp`` once every pass is summed, on one device or over several);
     :mod:`jaxgfx.render.distributed` splits the rows or the passes over devices with it.
     Package-internal (not in ``__all__``); jittable, differentiable.
     """
@@ -176,11 +176,9 @@ def render_partial(
 
     acc0 = jnp.zeros((px.shape[0], w, integrator.n_channels), dtype)
     acc, _ = jax.lax.scan(body, acc0, xs)
-    weight = jnp.asarray(spp if weights is None else jnp.sum(weights), dtype)
-    return acc, weight
+    return acc
 
 
 @eqx.filter_jit
 def _render(scene, key, spp, integrator):
-    acc, weight = render_partial(scene, key, integrator, spp=spp)
-    return acc / weight
+    return render_partial(scene, key, integrator, spp=spp) / spp
