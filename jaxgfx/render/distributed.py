@@ -44,9 +44,8 @@ import numpy as np
 from jax.sharding import Mesh
 from jax.sharding import PartitionSpec as P
 
-from jaxgfx._checks import check_choice
+from jaxgfx._checks import check_choice, check_positive_int
 from jaxgfx.render.integrators import Integrator
-from jaxgfx.render.integrators.base import check_depth
 from jaxgfx.render.render import render_partial, resolve_integrator
 
 __all__ = ["render_sharded", "SHARDS", "default_mesh"]
@@ -90,7 +89,7 @@ def render_sharded(
         g = jax.grad(lambda a: render_sharded(
             scene.replace("materials.metal.alpha", a), key, spp=16).mean())(0.2)
     """
-    check_depth("spp", spp)  # a positive Python int
+    check_positive_int(spp, "spp")
     check_choice(shard, "shard", SHARDS)
     if mesh is None:
         mesh = default_mesh()

@@ -6,12 +6,11 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from jaxgfx._checks import check_choice
+from jaxgfx._checks import check_choice, check_positive_int
 from jaxgfx._math import fusion_barrier
 from jaxgfx.render.film import _pixel_samples
 from jaxgfx.render.integrators import INTEGRATORS, Integrator, make_integrator
 from jaxgfx.render.integrators._common import SAMPLING
-from jaxgfx.render.integrators.base import check_depth
 from jaxgfx.render.integrators.path import STRATEGIES
 from jaxgfx.render.sampler import _uniform
 
@@ -55,7 +54,7 @@ def render(
     """
     if accel is not None:
         scene = scene.with_accel(accel)
-    check_depth("spp", spp)  # a positive Python int
+    check_positive_int(spp, "spp")
     integ = resolve_integrator(
         integrator,
         max_depth=max_depth,
@@ -111,7 +110,7 @@ def resolve_integrator(
     check_choice(options["strategy"], "strategy", STRATEGIES)
     check_choice(options["sampling"], "sampling", SAMPLING)
     for name in ("max_depth", "rr_depth"):
-        check_depth(name, options[name])
+        check_positive_int(options[name], name)
     return make_integrator(integrator, **options)
 
 
