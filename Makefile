@@ -23,7 +23,7 @@ demo: $(STAMP)
 	$(PY) -m experiments.demo --out out
 
 test: $(STAMP)
-	$(PY) -m pytest -q --durations=15
+	$(PY) -m pytest -q -n 2 --dist loadfile --durations=15
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m 'slow and not mitsuba'

@@ -122,6 +122,7 @@ def test_canny_quantiles_vs_skimage():
     assert f1_with_tolerance(mine, ref) >= 0.95
 
 
+@pytest.mark.slow  # issue 9: ~7 s of a loaded 2-core run; out of make test
 def test_canny_vmap_batch_and_channels():
     ims = np.stack([shapes_image(0), shapes_image(1)])[:, :40, :40, None]
     f = jax.jit(lambda im: canny(im, 1.0, 0.1, 0.3))

@@ -9,6 +9,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from jaxgfx import image, io
 
@@ -23,6 +24,7 @@ def _start(args, cwd=ROOT):
     )  # fmt: skip
 
 
+@pytest.mark.slow  # issue 9: ~9 s of a loaded 2-core run; out of make test
 def test_cli_subprocesses(files, tmp_path):
     cli = ["-m", "jaxgfx.cli"]
     runs = {

@@ -18,6 +18,7 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from jaxgfx.render import load_scene, render
 
@@ -44,6 +45,7 @@ def _integrating_sphere():
     )
 
 
+@pytest.mark.slow  # issue 9: ~8 s of a loaded 2-core run; out of make test
 def test_path_integrating_sphere_three_bounces_value_and_gradient():
     scene = _integrating_sphere()
 

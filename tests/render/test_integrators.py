@@ -30,6 +30,7 @@ def _assert_mean(img, expected, *, n_sigma=5.0, floor=2e-3):
     assert np.all(np.abs(mean - expected) <= tol), (mean, expected, tol)
 
 
+@pytest.mark.slow  # issue 9: ~10 s of a loaded 2-core run; out of make test
 def test_white_furnace_sphere():
     desc = {
         "camera": camera([0, 0, 4], [0, 0, 0], fov=20, width=16, up=[0, 1, 0]),
@@ -52,6 +53,7 @@ def test_diffuse_plane_under_constant_sky():
 POINT_SPP = 4  # one spp for every direct render of the plane + point light: one program
 
 
+@pytest.mark.slow  # issue 9: ~10 s of a loaded 2-core run; out of make test
 def test_point_light_inverse_square_cosine():
     # light at height 2 above the plane centre, offset 0 -> E = I / r^2 ; L = rho / pi * E
     scene = load_scene(plane_scene([{"type": "point", "position": [0, 2, 0], "intensity": 10.0}]))
@@ -100,6 +102,7 @@ def _lamp_over_plane(center, size, radiance, res):
     return scene, np.full(3, 0.5 / math.pi * radiance * e)
 
 
+@pytest.mark.slow  # issue 9: ~6 s of a loaded 2-core run; out of make test
 def test_rectangular_area_light_irradiance():
     # 8 x 8 pixels x 64 spp (as the strategy test below: the same compiled program)
     scene, expected = _lamp_over_plane([0.3, 1.0, 0.2], [1.0, 0.6], 3.0, 8)
@@ -107,6 +110,7 @@ def test_rectangular_area_light_irradiance():
     _assert_mean(img, expected)
 
 
+@pytest.mark.slow  # issue 9: ~6 s of a loaded 2-core run; out of make test
 def test_light_bsdf_and_mis_strategies_agree_with_polygon_formula():
     """All three direct-light strategies are unbiased; BSDF sampling is the noisiest for a
     small light and MIS is close to the better single strategy (Veach 1997)."""
@@ -122,6 +126,7 @@ def test_light_bsdf_and_mis_strategies_agree_with_polygon_formula():
         render(scene, KEY, spp=1, strategy="bidir")
 
 
+@pytest.mark.slow  # issue 9: ~8 s of a loaded 2-core run; out of make test
 def test_whitted_direct_path_agree_on_direct_light():
     # a noise-consistency test (the integrators against each other); each integrator's
     # independent closed forms are in this file and in test_integrator_references.py
@@ -134,6 +139,7 @@ def test_whitted_direct_path_agree_on_direct_light():
     np.testing.assert_allclose(b, c, rtol=1e-5, atol=1e-7)  # convex scene: no indirect light
 
 
+@pytest.mark.slow  # issue 9: ~9 s of a loaded 2-core run; out of make test
 def test_mirror_sphere_reflects_sky():
     desc = {
         "camera": camera([0, 0, 4], [0, 0, 0], fov=10, width=8, up=[0, 1, 0]),

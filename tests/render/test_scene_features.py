@@ -139,6 +139,7 @@ def _weighted(img, w):
     return float(np.sum(np.asarray(img, np.float64).mean((0, 1)) * np.asarray(w)))
 
 
+@pytest.mark.slow  # issue 9: ~15 s of a loaded 2-core run; out of make test
 def test_constant_texture_renders_like_plain_material_and_texel_gradient():
     path = "materials.m.reflectance.image"
     w = jnp.linspace(0.5, 1.5, 3)
@@ -177,6 +178,7 @@ def test_checkerboard_albedo_aov():
 # SDF shapes
 
 
+@pytest.mark.slow  # issue 9: ~9 s of a loaded 2-core run; out of make test
 def test_sdf_shape_closest_t_matches_analytic_sphere(rng):
     c, r = np.array([0.2, -0.1, 0.3]), 0.8
     shape = SDFShape(SDFSphere(c, r), max_steps=256, eps=1e-5)
@@ -196,6 +198,7 @@ def test_sdf_shape_closest_t_matches_analytic_sphere(rng):
     np.testing.assert_allclose(np.asarray(h.ng)[v], np.asarray(ref.ng)[v], atol=3e-3)
 
 
+@pytest.mark.slow  # issue 9: ~6 s of a loaded 2-core run; out of make test
 def test_sdf_shape_from_inside_and_from_its_surface():
     shape = SDFShape(SDFSphere([0.0, 0.0, 0.0], 1.0))
     # camera inside: hits the far wall at t = 1
@@ -234,6 +237,7 @@ def _radius(kind):
     return "shapes.0.sdf.radius" if kind == "sdf" else "shapes.0.radii"
 
 
+@pytest.mark.slow  # issue 9: ~23 s of a loaded 2-core run; out of make test
 def test_sdf_sphere_renders_like_analytic_sphere():
     a, _ = _img_and_grad(_sphere_scene("sdf"), _radius("sdf"), jnp.float32(1.0), W3)
     b = render(_sphere_scene("analytic"), KEY, spp=4, integrator="direct")

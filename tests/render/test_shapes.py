@@ -187,6 +187,7 @@ def test_degenerate_triangles_never_hit():
     assert np.isfinite(S.area(S.TriangleMesh(v, f)))
 
 
+@pytest.mark.slow  # issue 9: ~7 s of a loaded 2-core run; out of make test
 def test_triangle_grads(x64, rng):
     v = jnp.array([[0, 0, 0], [1.2, 0.1, 0], [0.1, 0.9, 0.2], [1, 1, 1.0]])
     n = jnp.asarray(unit(rng.normal(size=(4, 3))))
@@ -361,6 +362,7 @@ def test_bad_inputs():
         S.intersect("sphere", jnp.zeros(3), jnp.ones(3))
 
 
+@pytest.mark.slow  # issue 9: ~16 s of a loaded 2-core run; out of make test
 def test_two_phase_scene_intersection_matches_per_shape_merge(key):
     """intersect_scene groups shapes by type; the records must equal a per-shape merge."""
     from jaxgfx.render.geometry.ray import empty_hit, merge_hits
