@@ -26,7 +26,7 @@ test: $(STAMP)
 	$(PY) -m pytest -q -n 2 --dist loadfile --durations=15
 
 test-slow: $(STAMP)
-	$(PY) -m pytest -q -m 'slow and not mitsuba'
+	$(PY) -m pytest -q -n 2 --dist loadfile --durations=25 -m 'slow and not mitsuba'
 
 # Mitsuba 3 comparison renders (scalar_rgb variant: needs only the PyPI wheel)
 test-mitsuba: $(STAMP)

@@ -63,7 +63,10 @@ def _pytest(tree: Path, node_ids, timeout: float):
     env = dict(os.environ)
     env["PYTHONPATH"] = str(tree)
     env.setdefault("JAX_PLATFORMS", "cpu")
-    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *node_ids]
+    # the named tests run whatever their markers (pyproject's addopts deselect `slow`; the
+    # last -m wins)
+    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider"]
+    cmd += ["-m", "slow or not slow", *node_ids]
     t0 = time.perf_counter()
     try:
         p = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True, timeout=timeout)
