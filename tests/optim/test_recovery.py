@@ -155,10 +155,18 @@ def test_recover_emitter_radiance():
         np.testing.assert_allclose(out["params"]["emitters.area.0.radiance"], 6.0, rtol=0.05)
 
 
-@pytest.mark.xfail(strict=False, reason="issue 14: texels missed atol 0.06 (unresolved)")
-@pytest.mark.slow
+@pytest.mark.slow  # ~80 s: compile 60 s, 100 steps
 def test_recover_a_texture(tmp_path):
-    # a 2x2 bitmap albedo on the floor (16x16 image): each texel within 0.06
+    # a 2x2 bitmap albedo on the floor (16x16 image, nearest filter). All four texels are seen
+    # (the near two by ~40 pixels each, the far two by ~18, partly in the spheres' shadows).
+    # Tolerance 0.03 per texel, derived from the noise (measured, issue 14): the exact
+    # least-squares optimum for a 256-spp target scatters around the truth with std
+    # (0.002, 0.006, 0.005, 0.007) over 16 target seeds (pixel errors are correlated, so
+    # this is larger than an independent-pixel estimate), and the fit ends within 0.005 of
+    # that optimum (Adam's noise ball at lr 0.01): 3.5 sigma of the sum is 0.03. Measured with
+    # this key: max error 0.012 (tail mean 0.194, 0.790, 0.612, 0.414).
+    # With lr 0.05 -> 0.005 the 0.2 / 0.8 texels were still moving after 100 steps (0.223 /
+    # 0.770): logit(0.8) = 1.39 is about the whole path that schedule allows.
     with open(SCENE) as f:
         d = yaml.safe_load(f)
     d["materials"]["floor"]["reflectance"] = {
@@ -168,17 +176,20 @@ def test_recover_a_texture(tmp_path):
     }
     path = tmp_path / "textured.yaml"
     path.write_text(yaml.safe_dump(d))
-    truth = [[0.2, 0.8], [0.6, 0.4]]
+    truth = np.array([[0.2, 0.8], [0.6, 0.4]])
+    texels = truth[..., None].tolist()
     out = _run(
         {
             "scene": str(path),
-            "target": {"synthetic": {"materials.floor.reflectance.image": truth}},
+            # the texture holds (H, W, C) = (2, 2, 1) texels (an inline (H, W) image gets C = 1)
+            "target": {"synthetic": {"materials.floor.reflectance.image": texels}},
             "params": {"materials.floor.reflectance.image": {"init": 0.5, "min": 0.0, "max": 1.0}},
-            "optimizer": {"lr": 0.05, "steps": 100},
+            "optimizer": {"lr": 0.1, "lr_final": 0.01, "steps": 100},
         }
     )
-    got = np.asarray(out["params"]["materials.floor.reflectance.image"]).reshape(2, 2, -1)
-    np.testing.assert_allclose(got[..., 0], truth, atol=0.06)
+    hist = np.asarray(out["history"]["materials.floor.reflectance.image"], np.float64)
+    got = hist[-15:].mean(axis=0).reshape(2, 2)
+    np.testing.assert_allclose(got, truth, atol=0.03)
 
 
 @pytest.mark.slow
