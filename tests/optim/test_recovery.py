@@ -250,11 +250,16 @@ def test_saturated_target_with_the_censored_loss():
     assert out["errors"]["materials.clay.reflectance"] < 0.08
 
 
-@pytest.mark.xfail(strict=False, reason="issue 14: not yet run against Mitsuba 3")
 @pytest.mark.mitsuba
+@pytest.mark.slow  # ~110 s: the fit's compile dominates
 def test_recover_from_a_mitsuba_target(ggx_problem):
     # the target comes from Mitsuba 3 (same scene via to_mitsuba_dict, 256 spp): conventions
-    # (alpha, albedo, light, camera) must agree for the fit to land on the Mitsuba values
+    # (alpha, albedo, light, camera) must agree for the fit to land on the Mitsuba values.
+    # Measured (issue 14): the Mitsuba image differs from a 1024-spp jaxgfx render by RMS
+    # 0.0063 per pixel, an independent 256-spp jaxgfx render by 0.0057 (noise, ratio 1.1);
+    # the clay sphere's pixel sum agrees to 0.997 +- 0.003 (8 Mitsuba seeds). Fits from both
+    # starts: alpha 0.277 / 0.260, albedo red 0.728 / 0.731 (against a jaxgfx target: 0.271 /
+    # 0.255, 0.707 / 0.709), inside the tolerances of the jaxgfx-target test (0.06).
     pytest.importorskip("mitsuba")
     from jaxgfx.render.scene.mitsuba import render_mitsuba
 
@@ -267,7 +272,14 @@ def test_recover_from_a_mitsuba_target(ggx_problem):
         target = render_mitsuba(d, spp=256, integrator="direct", base_dir=os.path.dirname(SCENE))
     except ImportError as e:
         pytest.skip(str(e))
-    scene, _ = ggx_problem
-    res = _fit(scene, jnp.asarray(target), 0.6, 0.4)
-    assert abs(_tail_mean(res, "alpha") - TRUE_ALPHA) < 0.06
-    np.testing.assert_allclose(_tail_mean(res, "albedo"), TRUE_ALBEDO, atol=0.06)
+    scene, jx_target = ggx_problem
+    # conventions image by image: the Mitsuba render is as far from a 1024-spp jaxgfx render
+    # as an independent 256-spp jaxgfx render is (1.5x allows for Mitsuba's own sampler)
+    ref = np.asarray(_target(scene, TRUE_ALPHA, TRUE_ALBEDO, spp=1024))
+    rms_mi = np.sqrt(np.mean((target - ref) ** 2))
+    rms_jx = np.sqrt(np.mean((np.asarray(jx_target) - ref) ** 2))
+    assert rms_mi < 1.5 * rms_jx, (rms_mi, rms_jx)
+    for alpha0, albedo0 in ((0.6, 0.4), (0.08, 0.9)):
+        res = _fit(scene, jnp.asarray(target), alpha0, albedo0)
+        assert abs(_tail_mean(res, "alpha") - TRUE_ALPHA) < 0.06, alpha0
+        np.testing.assert_allclose(_tail_mean(res, "albedo"), TRUE_ALBEDO, atol=0.06)
