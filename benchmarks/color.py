@@ -15,15 +15,6 @@ import time
 import numpy as np
 
 
-def _time(fn, repeat):
-    ts = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return 1e3 * float(np.median(ts))
-
-
 def main(argv=None):
     p = argparse.ArgumentParser()
     p.add_argument("--size", type=int, default=512)
@@ -37,6 +28,7 @@ def main(argv=None):
     from colour.difference import delta_E_CIE2000
 
     import jaxgfx.color as jc
+    from benchmarks._timing import median_time
 
     rng = np.random.default_rng(0)
     n = args.size
@@ -50,7 +42,7 @@ def main(argv=None):
             t0 = time.perf_counter()
             y = np.asarray(jax.block_until_ready(fn()))
             first = 1e3 * (time.perf_counter() - t0)
-            ms = _time(lambda fn=fn: jax.block_until_ready(fn()), args.repeat)
+            ms = 1e3 * median_time(fn, args.repeat)
             err = float(np.max(np.abs(y.astype(np.float64) - ref)))
             out[name] = {"ms": round(ms, 3), "first_call_ms": round(first, 1), "max_abs_err": err}
         results["tasks"][task] = out

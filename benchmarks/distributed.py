@@ -6,7 +6,8 @@ For each device count n, a subprocess with ``XLA_FLAGS=--xla_force_host_platform
 (the flag must be set before jax is imported) renders ``configs/scenes/example.yaml`` at
 ``size``² with the ``direct`` integrator: the single-device ``render`` (the peer, in the same
 process) and ``render_sharded`` with ``shard="rows"`` and ``"samples"`` over all n devices.
-Timing: one warm-up call (compilation), then the median of ``repeat`` calls; samples/s =
+Timing: one warm-up call each (compilation), then the medians of ``repeat`` rounds that call the
+three in turn (``benchmarks._timing.interleaved_times``); samples/s =
 W·H·spp / median. Host "devices" are threads of one CPU process, so the speed-up is bounded by
 the free cores: on a shared machine the numbers depend on the other load (compare the ratios
 within one run). Prints one JSON document.
@@ -18,10 +19,8 @@ import argparse
 import json
 import os
 import pathlib
-import statistics
 import subprocess
 import sys
-import time
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -30,6 +29,7 @@ def _child(size: int, spp: int, repeat: int) -> dict:
     import jax
     import numpy as np
 
+    from benchmarks._timing import interleaved_times
     from jaxgfx.config import read_yaml
     from jaxgfx.render import load_scene, render, render_sharded
 
@@ -45,17 +45,9 @@ def _child(size: int, spp: int, repeat: int) -> dict:
         ),
     }
     out = {"devices": jax.device_count()}
-    images = {}
-    for name, f in runs.items():
-        t0 = time.perf_counter()
-        images[name] = np.asarray(jax.block_until_ready(f()))
-        first = time.perf_counter() - t0
-        ts = []
-        for _ in range(repeat):
-            t0 = time.perf_counter()
-            jax.block_until_ready(f())
-            ts.append(time.perf_counter() - t0)
-        med = statistics.median(ts)
+    times = interleaved_times(runs, repeat)
+    images = {name: np.asarray(f()) for name, f in runs.items()}
+    for name, (first, med) in times.items():
         out[name] = {
             "median_s": med,
             "compile_s": first - med,

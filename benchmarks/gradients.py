@@ -1,19 +1,24 @@
 """Gradient benchmark: cost of a gradient vs a forward render, memory vs spp and depth, bias.
 
-    python -m benchmarks.gradients [--quick] [--out FILE]
+    python -m benchmarks.gradients [--quick] [--sections speed,glossy,...] [--out FILE]
 
 1. Speed: seconds per ``jax.grad`` of an L2 image loss (w.r.t. every material and emitter
    parameter of the scene) vs one forward render at the same spp, on
    ``configs/scenes/example.yaml`` (path, depth 3) and a mesh scene (the example with its metal
    sphere replaced by a 6 240-triangle UV-sphere mesh); also the decorrelated gradient
-   (``jaxgfx.render.gradients.decorrelated``: one extra forward pass). One warm-up call, then
-   the median of ``repeat`` calls (the machine may be shared: compare ratios within one run).
+   (``jaxgfx.render.gradients.decorrelated``: one extra forward pass). One warm-up call each,
+   then the medians of ``repeat`` rounds calling each in turn (the machine may be shared:
+   compare ratios within one run).
 2. Memory: XLA's temporary buffer size (``jit(grad).lower().compile().memory_analysis()``) of
    the gradient vs spp (depth 3) and vs depth (spp 4) on the example scene at 32².
 3. Statistics (``grad_stats``): mean, standard error, SNR, work-normalised variance and bias
    against same-key central finite differences for d(image mean)/dα on the glossy scene of
    issue 10, ``sampling="detached"`` (default) vs ``"attached"``.
-4. Visibility: d(image mean)/d(x of an occluder sphere between a diffuse floor and an area
+4. Gradient vs forward on the glossy scene of issue 10 (path, depth 4): seconds of
+   ``jit(grad)`` of the image mean w.r.t. α vs ``jit(render)`` at the same spp (both take α and
+   the scene as arguments; one warm-up call each, then the medians of ``repeat`` rounds that
+   call both in turn, so load changes on a shared machine affect both alike).
+5. Visibility: d(image mean)/d(x of an occluder sphere between a diffuse floor and an area
    light) by AD and by central FD of the same key: AD misses the moving shadow boundary.
 
 Prints one JSON document (progress to stderr).
@@ -26,14 +31,14 @@ import copy
 import json
 import os
 import platform
-import statistics
 import sys
-import time
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from benchmarks._timing import interleaved_times
 from jaxgfx.config import read_yaml
 from jaxgfx.render.geometry.mesh_io import make_uv_sphere
 from jaxgfx.render.gradients import grad_stats
@@ -53,15 +58,6 @@ def _with_res(desc, w):
     d = copy.deepcopy(desc)
     d["camera"]["width"] = d["camera"]["height"] = int(w)
     return d
-
-
-def _median(fn, repeat):
-    ts = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        jax.block_until_ready(fn())
-        ts.append(time.perf_counter() - t)
-    return statistics.median(ts)
 
 
 PARAMS = [
@@ -113,11 +109,8 @@ def speed(desc, *, spp, depth, repeat):
         ("grad", grad),
         ("grad_decorrelated", dgrad),
     )
-    for name, fn in runs:
-        t = time.perf_counter()
-        jax.block_until_ready(fn(params, key))
-        first = time.perf_counter() - t
-        med = _median(lambda fn=fn: fn(params, key), repeat)
+    times = interleaved_times({k: (lambda f=f: f(params, key)) for k, f in runs}, repeat)
+    for name, (first, med) in times.items():
         out[name] = {"time_s": round(med, 4), "compile_s": round(max(first - med, 0), 2)}
         _log(name, out[name])
     out["grad_over_forward"] = round(out["grad"]["time_s"] / out["forward"]["time_s"], 2)
@@ -146,6 +139,31 @@ def memory(desc, *, spps, depths):
     for d in depths:
         out["vs_depth_spp4"][d] = temp_mb(4, d)
         _log("memory depth", d, out["vs_depth_spp4"][d])
+    return out
+
+
+def glossy_ratio(*, w, spp, repeat):
+    """Seconds of ``jit(grad(mean(render)))`` w.r.t. α vs ``jit(render)``, glossy scene."""
+    import _gradient_scenes as G
+
+    scene = G.make_scene(G.glossy_scene(0.15, w))
+    key = jax.random.key(0)
+    alpha = jnp.float32(0.15)
+
+    def image(a, s, k):
+        return render(s.replace("materials.metal.alpha", a), k, spp=spp, max_depth=4)
+
+    fwd = eqx.filter_jit(image)
+    grad = eqx.filter_jit(jax.grad(lambda a, s, k: jnp.mean(image(a, s, k))))
+    out = {"res": w, "spp": spp, "integrator": "path", "max_depth": 4, "repeat": repeat}
+    fns = {"forward": fwd, "grad_mean": grad}
+    times = interleaved_times(
+        {k: (lambda f=f: f(alpha, scene, key)) for k, f in fns.items()}, repeat
+    )
+    for name, (first, med) in times.items():
+        out[name] = {"time_s": round(med, 4), "compile_s": round(max(first - med, 0), 2)}
+        _log("glossy", name, out[name])
+    out["grad_over_forward"] = round(out["grad_mean"]["time_s"] / out["forward"]["time_s"], 2)
     return out
 
 
@@ -216,8 +234,8 @@ def main(argv=None):
     ap.add_argument("--out")
     ap.add_argument(
         "--sections",
-        default="speed,memory,stats,visibility",
-        help="comma-separated subset of speed,memory,stats,visibility",
+        default="speed,glossy,memory,stats,visibility",
+        help="comma-separated subset of speed,glossy,memory,stats,visibility",
     )
     a = ap.parse_args(argv)
     sections = set(a.sections.split(","))
@@ -249,6 +267,10 @@ def main(argv=None):
             "example": speed(_with_res(example, res), spp=spp, depth=3, repeat=3),
             "mesh": speed(_with_res(mesh, res // 2), spp=spp, depth=3, repeat=3),
         }
+    if "glossy" in sections:
+        result["glossy_grad_vs_forward"] = glossy_ratio(
+            w=16 if q else 32, spp=spp, repeat=3 if q else 15
+        )
     if "stats" in sections:
         result["grad_stats_alpha"] = statistics_alpha(spp=32 if q else 128, n=4 if q else 16)
     if "visibility" in sections:

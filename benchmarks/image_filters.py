@@ -17,7 +17,6 @@ import argparse
 import json
 import os
 import platform
-import time
 
 import cv2
 import jax
@@ -29,35 +28,8 @@ import skimage.feature
 import skimage.filters
 import skimage.restoration
 
+from benchmarks._timing import time_jax, time_np
 from jaxgfx import image as jimg
-
-
-def _median_time(fn, repeats):
-    ts = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return float(np.median(ts))
-
-
-def time_jax(f, *args, repeats=5):
-    jf = jax.jit(f)
-    t0 = time.perf_counter()
-    compiled = jf.lower(*args).compile()
-    compile_s = time.perf_counter() - t0
-    jax.block_until_ready(compiled(*args))  # warm-up
-    run_s = _median_time(lambda: jax.block_until_ready(compiled(*args)), repeats)
-    return compile_s, run_s
-
-
-def time_np(f, repeats=5, max_repeats_s=20.0):
-    t0 = time.perf_counter()
-    f()
-    first = time.perf_counter() - t0
-    if first * repeats > max_repeats_s:
-        return first
-    return _median_time(f, repeats)
 
 
 def bench_filters(n, repeats):

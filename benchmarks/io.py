@@ -10,7 +10,6 @@ import argparse
 import json
 import os
 import tempfile
-import time
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 
@@ -19,6 +18,7 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
+from benchmarks._timing import first_and_median  # noqa: E402
 from jaxgfx.hdr.encodings import (  # noqa: E402
     half_roundtrip,
     logluv24_decode,
@@ -32,13 +32,7 @@ from jaxgfx.io import read_exr, read_hdr, write_exr, write_hdr  # noqa: E402
 
 
 def _time(fn, repeat):
-    fn()  # warm-up (compilation, caches)
-    ts = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return float(np.median(ts))
+    return first_and_median(fn, repeat)[1]  # after a warm-up call (compilation, caches)
 
 
 def _uv(XYZ):

@@ -29,7 +29,6 @@ import copy
 import json
 import os
 import platform
-import statistics
 import sys
 import tempfile
 import time
@@ -37,6 +36,7 @@ import time
 import jax
 import numpy as np
 
+from benchmarks._timing import median_time
 from jaxgfx.config import read_yaml
 from jaxgfx.render.geometry.mesh_io import make_uv_sphere, save_ply
 from jaxgfx.render.render import render
@@ -72,15 +72,6 @@ def mesh_scene(tmp_dir, n_rings=158, res=128):
 # speed
 
 
-def _median_time(fn, repeat):
-    ts = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t)
-    return statistics.median(ts)
-
-
 def bench_jaxgfx(desc, *, spp, integrator, max_depth, repeat):
     t = time.perf_counter()
     scene = load_scene(desc)
@@ -94,7 +85,7 @@ def bench_jaxgfx(desc, *, spp, integrator, max_depth, repeat):
     t = time.perf_counter()
     img = run().block_until_ready()
     first = time.perf_counter() - t
-    med = _median_time(lambda: run().block_until_ready(), repeat)
+    med = median_time(run, repeat)
     w, h = scene.width, scene.height
     return {
         "accel": scene.accel,  # mesh traversal backend (load_scene's "auto"), None without meshes
@@ -148,7 +139,7 @@ def bench_mitsuba(mi, desc, *, spp, integrator, max_depth, repeat):
     t = time.perf_counter()
     img = run()
     first = time.perf_counter() - t
-    med = _median_time(lambda: run(1), repeat)
+    med = median_time(lambda: run(1), repeat)
     w, h = desc["camera"]["width"], desc["camera"]["height"]
     return {
         "load_s": round(build, 3),
@@ -270,7 +261,7 @@ def equal_time(*, res, max_depth, ref_spp, spp_steps, base_spp, cache_dir):
         t = time.perf_counter()
         f(scene, jax.random.key(0)).block_until_ready()
         compile_s = time.perf_counter() - t
-        t1 = _median_time(lambda f=f: f(scene, jax.random.key(1)).block_until_ready(), 3)
+        t1 = median_time(lambda f=f: f(scene, jax.random.key(1)), 3)
         rows = []
         for m in spp_steps:
             # error of the mean of m independent calls; cost = m x the median call time

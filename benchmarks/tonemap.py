@@ -23,32 +23,14 @@ import platform
 import shutil
 import subprocess
 import tempfile
-import time
 
 import cv2
 import jax
 import numpy as np
 
+from benchmarks._timing import median_time, time_jax
 from jaxgfx import tonemap as tm
 from jaxgfx.hdr import exposure_fusion
-
-
-def _median_time(fn, repeats):
-    ts = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return float(np.median(ts))
-
-
-def time_jax(f, *args, repeats=5):
-    jf = jax.jit(f)
-    t0 = time.perf_counter()
-    compiled = jf.lower(*args).compile()
-    compile_s = time.perf_counter() - t0
-    jax.block_until_ready(compiled(*args))
-    return compile_s, _median_time(lambda: jax.block_until_ready(compiled(*args)), repeats)
 
 
 def hdr_scene(H, W, seed=0):
@@ -120,8 +102,8 @@ def time_pfs(img, cmd, repeats):
                 capture_output=True,
             )
 
-        io_s = _median_time(lambda: run(["pfscat"]), repeats)
-        total = _median_time(lambda: run(cmd), repeats)
+        io_s = median_time(lambda: run(["pfscat"]), repeats)
+        total = median_time(lambda: run(cmd), repeats)
         return max(total - io_s, 1e-6), io_s
 
 
@@ -138,7 +120,7 @@ def bench(H, W, repeats):
         if name in CV_CASES:
             f = CV_CASES[name]
             f(img)
-            row["cv2_s"] = _median_time(lambda f=f: f(img), repeats)
+            row["cv2_s"] = median_time(lambda f=f: f(img), repeats)
             row["ratio_cv2"] = jax_s / row["cv2_s"]
         if have_pfs and name in PFS_CASES:
             row["pfstmo_s"], row["pfs_io_s"] = time_pfs(img, PFS_CASES[name], max(1, repeats // 2))
@@ -153,7 +135,7 @@ def bench(H, W, repeats):
     compile_s, jax_s = time_jax(lambda a: exposure_fusion(a), jax.numpy.asarray(frames))
     merge = cv2.createMergeMertens(1.0, 1.0, 1.0)
     merge.process(f8)
-    cv_s = _median_time(lambda: merge.process(f8), repeats)
+    cv_s = median_time(lambda: merge.process(f8), repeats)
     rows["exposure_fusion"] = {
         "compile_s": compile_s,
         "jax_s": jax_s,

@@ -22,6 +22,7 @@ __all__ = [
     "check_nonnegative",
     "check_finite",
     "check_odd_int",
+    "check_positive_int",
     "is_concrete",
 ]
 
@@ -117,6 +118,13 @@ def check_positive(x, name: str):
 def check_nonnegative(x, name: str):
     """Raise ``ValueError`` unless a concrete ``x`` is finite and >= 0 (tracers pass)."""
     return _check_sign(x, name, lambda a: a >= 0, "a finite value >= 0")
+
+
+def check_positive_int(x, name: str):
+    """Raise ``ValueError`` unless ``x`` is a positive Python ``int`` (``bool`` refused)."""
+    if isinstance(x, bool) or not isinstance(x, int) or x < 1:
+        raise ValueError(f"{name}: expected a positive integer, got {x!r}")
+    return x
 
 
 def check_odd_int(x, name: str, *, minimum: int = 1):

@@ -7,7 +7,13 @@ import pytest
 from jax.test_util import check_grads
 
 from jaxgfx import _math
-from jaxgfx._checks import check_choice, check_image, check_odd_int, check_positive
+from jaxgfx._checks import (
+    check_choice,
+    check_image,
+    check_odd_int,
+    check_positive,
+    check_positive_int,
+)
 
 
 @pytest.mark.parametrize(
@@ -92,6 +98,10 @@ def test_checks_raise_with_names():
         check_odd_int(4, "size")
     with pytest.raises(TypeError, match="size"):
         check_odd_int(3.0, "size")
+    for bad in (0, -2, True, 2.0, "3"):
+        with pytest.raises(ValueError, match="spp: expected a positive integer"):
+            check_positive_int(bad, "spp")
+    assert check_positive_int(3, "spp") == 3
     # tracers are let through
     jax.jit(lambda s: check_positive(s, "sigma") * 2)(1.0)
     assert check_image(np.ones((3, 3), np.uint8)).dtype == jnp.float32

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 from jax.scipy.special import erf, erfinv
 
 from jaxgfx._checks import check_positive
-from jaxgfx.render.sampler import uniform
+from jaxgfx.render.sampler import _uniform
 
 __all__ = ["BoxFilter", "GaussianFilter", "make_filter", "pixel_samples", "FILTERS"]
 
@@ -64,13 +64,23 @@ def pixel_samples(key, width: int, height: int, spp: int, rfilter=None):
     Stratified per pixel when ``spp`` is a perfect square (jittered grid), otherwise
     independent uniform samples; offsets then warped by the reconstruction filter.
     """
+    return _pixel_samples(key, width, height, spp, rfilter)
+
+
+def _pixel_samples(key, width: int, height: int, spp: int, rfilter=None, *, rows=None):
+    """``pixel_samples(key, width, height, spp, rfilter)[rows]`` (package-internal).
+
+    ``rows``: ``None`` (the whole image) or global row indices ``(R,)`` (may be traced): only
+    those rows' samples are drawn (``sampler._uniform(..., rows=rows)``), and they equal the
+    whole image's. :func:`jaxgfx.render.render.render_partial` draws its samples here.
+    """
     rfilter = rfilter or BoxFilter()
     n = int(round(spp**0.5))
-    u = uniform(key, (height, width, spp, 2))
+    u = _uniform(key, (height, width, spp, 2), rows=rows)
     if n * n == spp and spp > 1:
         iy, ix = jnp.divmod(jnp.arange(spp), n)
         u = (jnp.stack([ix, iy], -1) + u) / n
     off = rfilter.sample(u)
-    jj, ii = jnp.meshgrid(jnp.arange(width), jnp.arange(height))
+    jj, ii = jnp.meshgrid(jnp.arange(width), jnp.arange(height) if rows is None else rows)
     centre = jnp.stack([jj, ii], -1).astype(u.dtype) + 0.5
     return centre[:, :, None, :] + off

@@ -36,11 +36,29 @@ def uniform(key, shape, dtype=jnp.float32):
     Float32 numbers have 24 random bits (multiples of 2^-24, max ``1 - 2^-24``); float64 numbers
     32 bits. At most 2^32 numbers per key (split or ``fold_in`` the key for more).
     """
+    return _uniform(key, shape, dtype)
+
+
+def _uniform(key, shape, dtype=jnp.float32, *, rows=None):
+    """``uniform(key, shape, dtype)[rows]`` without drawing the other rows (package-internal).
+
+    ``rows``: ``None`` (every row: ``uniform`` itself) or global indices ``(R,)`` into the first
+    axis of ``shape`` (integer, may be traced; indices ``>= shape[0]`` continue the counter, as
+    if ``shape`` had more rows). Each number hashes its flat index in ``shape``; the flat index
+    of entry ``(r, *t)`` is ``r * prod(shape[1:]) + flat(t)``, so a row's numbers depend only on
+    its global index (``render_sharded`` draws a device's rows this way).
+    """
     size = int(np.prod(shape)) if len(shape) else 1
     if size > 2**32:
         raise ValueError(f"shape: at most 2**32 numbers per key, got {size}")
     seed = pcg_hash(jax.random.bits(key, (), jnp.uint32))
-    counter = jax.lax.iota(jnp.uint32, size).reshape(shape)
+    if rows is None:
+        counter = jax.lax.iota(jnp.uint32, size).reshape(shape)
+    else:
+        k = size // shape[0]  # numbers per row
+        base = jnp.asarray(rows).astype(jnp.uint32)[:, None] * jnp.uint32(k)
+        local = jax.lax.iota(jnp.uint32, k).reshape(1, k)
+        counter = (base + local).reshape(base.shape[0], *shape[1:])
     bits = pcg_hash(counter + seed)
     if jnp.dtype(dtype) == jnp.float64:
         return bits.astype(jnp.float64) * (2.0**-32)

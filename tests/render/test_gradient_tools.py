@@ -18,6 +18,8 @@ from jaxgfx.render.gradients import decorrelated, grad_stats
 from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
 
+from ._scenes import area_light, camera, diffuse, rectangle
+
 M = 64  # uniform samples per loss evaluation
 
 
@@ -71,35 +73,10 @@ def test_grad_stats_rejects(bad):
 def _lit_plane():
     return load_scene(
         {
-            "camera": {
-                "origin": [0, 2, 2],
-                "target": [0, 0, 0],
-                "fov": 40,
-                "width": 1,
-                "height": 1,
-            },
-            "shapes": [
-                {
-                    "type": "rectangle",
-                    "center": [0, 0, 0],
-                    "normal": [0, 1, 0],
-                    "size": [4, 4],
-                    "material": "m",
-                }
-            ],
-            "materials": {"m": {"type": "diffuse", "reflectance": 0.8}},
-            "emitters": [
-                {
-                    "type": "area",
-                    "radiance": 2.0,
-                    "shape": {
-                        "type": "rectangle",
-                        "center": [0.3, 1.0, 0],
-                        "normal": [0, -1, 0],
-                        "size": [0.5, 0.5],
-                    },
-                }
-            ],
+            "camera": camera([0, 2, 2], [0, 0, 0], fov=40, width=1),
+            "shapes": [rectangle(size=(4, 4), material="m")],
+            "materials": {"m": diffuse(0.8)},
+            "emitters": [area_light((0.3, 1.0, 0), (0, -1, 0), (0.5, 0.5), 2.0)],
         }
     )
 

@@ -7,6 +7,8 @@ from typing import ClassVar
 
 import equinox as eqx
 
+from jaxgfx._checks import check_positive_int
+
 __all__ = ["Integrator", "N_RANDOM", "check_depth"]
 
 N_RANDOM = 7  # uniform numbers per bounce: light select, light (2), bsdf lobe, bsdf (2), RR
@@ -14,8 +16,7 @@ N_RANDOM = 7  # uniform numbers per bounce: light select, light (2), bsdf lobe, 
 
 def check_depth(name: str, v) -> None:
     """``ValueError`` naming ``name`` unless ``v`` is a positive Python integer."""
-    if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-        raise ValueError(f"{name}: expected a positive integer, got {v!r}")
+    check_positive_int(v, name)
 
 
 class Integrator(eqx.Module):
