@@ -6,6 +6,7 @@ This package never imports :mod:`jaxgfx.render`; losses that render are written 
 """
 
 from ._estimators import decorrelated_loss as decorrelated_loss
+from ._estimators import decorrelated_residuals as decorrelated_residuals
 from ._loop import LEAST_SQUARES_SOLVERS as LEAST_SQUARES_SOLVERS
 from ._loop import OPTIMIZERS as OPTIMIZERS
 from ._loop import FitResult as FitResult
@@ -26,6 +27,7 @@ __all__ = [
     "fit",
     "fit_least_squares",
     "decorrelated_loss",
+    "decorrelated_residuals",
     "FitResult",
     "OPTIMIZERS",
     "LEAST_SQUARES_SOLVERS",

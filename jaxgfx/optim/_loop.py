@@ -313,6 +313,27 @@ def fit(
     )
 
 
+def _ls_residuals(u, a, residuals, spec, has_args):
+    p = _unconstrained_to_params(u, spec)
+    return residuals(p, a) if has_args else residuals(p)
+
+
+def _half_sq(r):
+    return 0.5 * sum(jnp.sum(jnp.abs(x) ** 2) for x in jax.tree_util.tree_leaves(r))
+
+
+@functools.partial(
+    jax.jit, static_argnames=("residuals", "solver", "spec", "max_steps", "has_args")
+)
+def _solve_ls(u0, a, *, residuals, solver, spec, max_steps, has_args):
+    def fn(u, a):
+        return _ls_residuals(u, a, residuals, spec, has_args)
+
+    sol = optx.least_squares(fn, solver, u0, args=a, max_steps=max_steps, throw=False)
+    l0, l1 = _half_sq(fn(u0, a)), _half_sq(fn(sol.value, a))
+    return sol.value, sol.result, sol.stats["num_steps"], l0, l1
+
+
 def fit_least_squares(
     residuals: Callable,
     params,
@@ -354,22 +375,24 @@ def fit_least_squares(
     else:
         solver_obj = solver
 
-    def fn(u, a):
-        p = from_unconstrained(u, bounds)
-        return residuals(p) if args is None else residuals(p, a)
-
-    def half_sq(u, a):
-        r = fn(u, a)
-        return 0.5 * sum(jnp.sum(jnp.abs(x) ** 2) for x in jax.tree_util.tree_leaves(r))
-
-    @jax.jit
-    def solve(u0, a):
-        sol = optx.least_squares(fn, solver_obj, u0, args=a, max_steps=max_steps, throw=False)
-        return sol.value, sol.result, sol.stats["num_steps"], half_sq(u0, a), half_sq(sol.value, a)
-
+    static = dict(
+        residuals=residuals,
+        solver=solver_obj,
+        spec=_bound_spec(params, bounds),
+        max_steps=max_steps,
+        has_args=args is not None,
+    )
     u0 = to_unconstrained(params, bounds)
     t0 = time.perf_counter()
-    compiled = solve.lower(u0, args).compile()
+    try:
+        hash(tuple(static.values()))
+    except TypeError:  # an unhashable solver object: compile for this call only
+        lowered = jax.jit(functools.partial(_solve_ls.__wrapped__, **static)).lower(u0, args)
+    else:
+        # one compiled solve per (residuals, solver, bounds, max_steps): later calls with other
+        # starts, targets or keys (passed in args) reuse it
+        lowered = _solve_ls.lower(u0, args, **static)
+    compiled = lowered.compile()
     compile_seconds = time.perf_counter() - t0
     t = time.perf_counter()
     u, result, n, l0, l1 = compiled(u0, args)

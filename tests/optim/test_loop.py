@@ -156,6 +156,30 @@ def test_linear_least_squares_matches_lstsq(x64, solver):
     np.testing.assert_allclose(res.loss[1], 0.5 * np.sum((a @ ref - y) ** 2), rtol=1e-10)
 
 
+def _traced_linear_residuals(p, args):
+    _TRACES.append(1)  # runs once per trace, not per call
+    return args[0] @ p - args[1]
+
+
+_TRACES = []
+
+
+def test_least_squares_solve_is_compiled_once_for_new_data_and_starts(x64):
+    # a second fit with other data and another start reuses the compiled solve (no retrace)
+    # and both still match numpy.linalg.lstsq
+    rng = np.random.default_rng(5)
+    _TRACES.clear()
+    for k in range(2):
+        a = rng.normal(size=(20, 3))
+        y = rng.normal(size=20)
+        res = fit_least_squares(_traced_linear_residuals, np.full(3, float(k)), args=(a, y))
+        ref = np.linalg.lstsq(a, y, rcond=None)[0]
+        np.testing.assert_allclose(np.asarray(res.params), ref, rtol=1e-8, atol=1e-10)
+        if k == 0:
+            n_first = len(_TRACES)
+    assert n_first > 0 and len(_TRACES) == n_first
+
+
 def test_logistic_fit_matches_scipy_least_squares(x64):
     # noisy logistic data; both solvers minimise the same sum of squares
     rng = np.random.default_rng(4)
