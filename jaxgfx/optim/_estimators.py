@@ -11,6 +11,13 @@ import jax.numpy as jnp
 __all__ = ["decorrelated_loss", "decorrelated_residuals"]
 
 
+def _two_images(image_fn: Callable, key):
+    """Images ``A`` (no derivative) and ``B`` of ``image_fn`` with independent keys: one
+    compiled render, ``jax.vmap`` over ``jax.random.split(key)``."""
+    imgs = jax.vmap(image_fn)(jax.random.split(key))
+    return jax.lax.stop_gradient(imgs[0]), imgs[1]
+
+
 def decorrelated_loss(image_fn: Callable, loss_fn: Callable, key):
     """``loss_fn(image)`` of a Monte Carlo ``image_fn(key)`` with an unbiased gradient.
 
@@ -32,10 +39,7 @@ def decorrelated_loss(image_fn: Callable, loss_fn: Callable, key):
     Example (``tests/optim/test_estimators.py``): for ``I = θ (1 + σ z)`` and the loss
     ``(I - T)²`` the mean gradient is ``2 (θ - T)``, not ``2 (θ (1 + σ²) - T)``.
     """
-    keys = jax.random.split(key)
-    imgs = jax.vmap(image_fn)(keys)
-    a = jax.lax.stop_gradient(imgs[0])
-    b = imgs[1]
+    a, b = _two_images(image_fn, key)
     val, dl_da = jax.value_and_grad(loss_fn)(a)
     return val + jnp.sum(jax.lax.stop_gradient(dl_da) * (b - jax.lax.stop_gradient(b)))
 
@@ -55,8 +59,5 @@ def decorrelated_residuals(image_fn: Callable, target, key):
     Example (``tests/optim/test_estimators.py``): for ``I = θ (1 + σ z)`` and target ``T``, LM
     on one image ends on average at ``T / (1 + σ²)``, on these residuals at ``T``.
     """
-    keys = jax.random.split(key)
-    imgs = jax.vmap(image_fn)(keys)
-    a = jax.lax.stop_gradient(imgs[0])
-    b = imgs[1]
+    a, b = _two_images(image_fn, key)
     return a + (b - jax.lax.stop_gradient(b)) - target

@@ -160,21 +160,14 @@ def render_partial(
     if passes is None:
         passes = jnp.arange(spp)
     if weights is None:
+        weights = jnp.ones(passes.shape, dtype)  # x * 1 is exact: the sum is unchanged
 
-        def body(acc, s):
-            return acc + one_pass(s), None
-
-        xs = passes
-    else:
-
-        def body(acc, sw):
-            s, wt = sw
-            return acc + wt.astype(dtype) * one_pass(s), None
-
-        xs = (passes, weights)
+    def body(acc, sw):
+        s, wt = sw
+        return acc + wt.astype(dtype) * one_pass(s), None
 
     acc0 = jnp.zeros((px.shape[0], w, integrator.n_channels), dtype)
-    acc, _ = jax.lax.scan(body, acc0, xs)
+    acc, _ = jax.lax.scan(body, acc0, (passes, weights))
     return acc
 
 

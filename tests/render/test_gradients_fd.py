@@ -40,36 +40,35 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 import _gradient_scenes as G  # noqa: E402
 
-run, check = G.run, G.check
-
-
 # ------------------------------------------------------------------ default (fast) tests
 
 
 @pytest.fixture(scope="module")
 def glossy():
-    return run(G.glossy_scene(), G.GLOSSY_PARAMS, spp=128, keys=32, integrator="path", max_depth=4)
+    return G.run(
+        G.glossy_scene(), G.GLOSSY_PARAMS, spp=128, keys=32, integrator="path", max_depth=4
+    )
 
 
 @pytest.mark.slow  # ~100 s of compile + 32 keys x 128 spp on 2 cores: too long for make test
 def test_glossy_scene_ad_matches_fd(glossy):
     """Issue 10's scene: α of the GGX sphere (attached: AD 2.3x FD), reflectance, texels,
     area and environment radiance."""
-    check(G.GLOSSY_PARAMS, glossy)
+    G.check(G.GLOSSY_PARAMS, glossy)
     # the α derivative is resolved: FD error bar below 1/3 of its value at this cost
     assert glossy["fd_se"][0] < abs(glossy["fd"][0]) / 3
 
 
 @pytest.fixture(scope="module")
 def materials():
-    return run(G.materials_scene(), G.MATERIALS_PARAMS, spp=64, keys=8, integrator="direct")
+    return G.run(G.materials_scene(), G.MATERIALS_PARAMS, spp=64, keys=8, integrator="direct")
 
 
 @pytest.mark.slow  # issue 9: ~210 s of a loaded 2-core run; out of make test
 def test_materials_direct_ad_matches_fd(materials):
     """Every parameter of rough plastic, Phong, an anisotropic complex-IOR conductor, point
     intensity and area radiance under MIS direct lighting."""
-    check(G.MATERIALS_PARAMS, materials)
+    G.check(G.MATERIALS_PARAMS, materials)
 
 
 @pytest.mark.slow  # issue 9: ~71 s of a loaded 2-core run; out of make test
@@ -78,7 +77,7 @@ def test_tiny_alpha_gradient_is_finite_and_zero(materials):
     max(α, 1e-4), the image is flat in α there and FD of the same key is exactly 0; AD must
     agree, not explode. Same program as ``materials`` (only the base values differ)."""
     params = [(p, 1e-6 if "alpha" in p else b) for p, b in G.MATERIALS_PARAMS]
-    s = run(G.materials_scene(), params, spp=64, keys=8, integrator="direct")
+    s = G.run(G.materials_scene(), params, spp=64, keys=8, integrator="direct")
     for i, (p, _) in enumerate(params):
         assert np.isfinite(s["ad"][i]) and np.isfinite(s["fd"][i]), p
         if "alpha" in p:
