@@ -22,7 +22,8 @@ reach alpha within 2 % of the truth (``time_to_2pct_alpha``: from when on the me
 iterates stays within 2 % until the end, null if it does not settle; ``time_to_first_2pct_alpha``:
 the first iterate within 2 %, a noisy Adam iterate passes through), and the final errors (mean
 of the last 10 iterates). ``jaxgfx_lm``: jaxgfx's route to 2 % on a fixed key
-(``experiments.alpha_precision``: Levenberg-Marquardt at 128 spp, then at 4096 spp from its
+(``experiments.alpha_precision``: Levenberg-Marquardt at 128 spp, then 3 Gauss-Newton steps
+at 4096 spp from its
 solution; ``time_to_2pct_alpha`` = compile + solve seconds of both when the result is within
 2 %); Mitsuba 3 has no least-squares solver, so this row has no peer. Also the relative RMSE between
 the two targets (conventions check). Prints JSON; ``--plot DIR`` writes ``inverse_speed.png``
@@ -107,7 +108,7 @@ def run_jaxgfx_lm(coarse: int, fine: int, seed: int = 0) -> dict:
     r = run_lm_polish(with_params, target, coarse, fine, [seed])[0]
     total = r["route_seconds"] + r["compile_seconds"] + r["coarse"]["compile_seconds"]
     return {
-        "route": f"LM {coarse} spp, then {fine} spp",
+        "route": f"LM {coarse} spp, then 3 Gauss-Newton steps at {fine} spp",
         "final_alpha": r["alpha"],
         "alpha_error": abs(r["alpha"] - TRUE_ALPHA),
         "albedo_error": float(np.max(np.abs(np.asarray(r["albedo"]) - np.asarray(TRUE_ALBEDO)))),

@@ -12,9 +12,9 @@ albedo at 32x32, direct lighting, the 256-spp target of seed 7). Three measureme
   where the least-squares optimum of *this* target lies (the target's own Monte Carlo noise).
 * ``adam``: the example as configured (Adam, 8 spp per step = 2 x 4, 150 steps, lr 0.05 ->
   0.005) with fit keys ``--adam-seeds``: final alpha per key (its spread is the noise ball).
-* ``lm_polish``: LM at ``COARSE`` spp from the start, then at ``FINE`` spp from there (the
-  route that gets within 2 % on every key: the iterations from far away are cheap, the
-  solution's noise is that of the ``FINE`` image).
+* ``lm_polish``: LM at ``COARSE`` spp from the start, then ``--polish-steps`` Gauss–Newton
+  iterations at ``FINE`` spp from there (the route that gets within 2 % on every key: the
+  iterations from far away are cheap, the solution's noise is that of the ``FINE`` image).
 * ``lm``: Levenberg–Marquardt (:func:`jaxgfx.optim.fit_least_squares`) on a fixed key with
   :func:`jaxgfx.optim.decorrelated_residuals` (value from one ``spp`` image, Jacobian from an
   independent one), for each of ``--lm-spp`` and ``--lm-seeds``; the same start (alpha 0.5,
@@ -138,7 +138,7 @@ def _residuals(with_params, spp):
     return _RESIDUALS[spp]
 
 
-def _lm(with_params, target, spp, seed, start):
+def _lm(with_params, target, spp, seed, start, *, solver="lm", max_steps=40):
     import jax
 
     from jaxgfx.optim import fit_least_squares
@@ -146,14 +146,16 @@ def _lm(with_params, target, spp, seed, start):
     res = fit_least_squares(
         _residuals(with_params, spp),
         start,
+        solver=solver,
         args=(target, jax.random.key(seed)),
         bounds={"alpha": (0.01, 1.0), "albedo": (0.0, 1.0)},
-        max_steps=40,
+        max_steps=max_steps,
     )
     a = float(res.params["alpha"])
     rec = {
         "spp": spp,
         "seed": seed,
+        "solver": solver,
         "alpha": a,
         "rel_error": abs(a - TRUE_ALPHA) / TRUE_ALPHA,
         "albedo": np.asarray(res.params["albedo"]).tolist(),
@@ -181,13 +183,17 @@ def run_lm(with_params, target, spps, seeds):
     return out
 
 
-def run_lm_polish(with_params, target, coarse, fine, seeds):
-    """LM at ``coarse`` spp from the start, then LM at ``fine`` spp from its solution (another
-    key): the solution's noise is that of the last image, the iterations are mostly coarse."""
+def run_lm_polish(with_params, target, coarse, fine, seeds, *, solver="gauss_newton", steps=3):
+    """LM at ``coarse`` spp from the start, then ``steps`` iterations of ``solver`` at ``fine``
+    spp from its solution (another key): the solution's noise is that of the fine image, the
+    iterations from far away are coarse. Measured (docs/inverse.md §4): LM run to convergence
+    at 4096 spp from the 128-spp solution took 15 iterations (748 s on the loaded machine);
+    the fine stage only has to move a few per cent, which Gauss-Newton does in 2-3 steps."""
     out = []
     for seed in seeds:
         p, rec0 = _lm(with_params, target, coarse, seed, _start())
-        rec = _lm(with_params, target, fine, 1000 + seed, p)[1]
+        log("lm polish, coarse stage", rec0)
+        rec = _lm(with_params, target, fine, 1000 + seed, p, solver=solver, max_steps=steps)[1]
         rec["coarse"] = rec0
         # the route's cost: both solves (compilation reported separately: once per spp)
         rec["route_seconds"] = rec0["solve_seconds"] + rec["solve_seconds"]
@@ -268,6 +274,8 @@ def main(argv=None) -> int:
     p.add_argument("--lm-seeds", default="0,1,2,3,4")
     p.add_argument("--lm-polish", default="128:4096", help="COARSE:FINE spp ('' to skip)")
     p.add_argument("--polish-seeds", default="0,1,2,3,4")
+    p.add_argument("--polish-solver", default="gauss_newton", help="solver of the fine stage")
+    p.add_argument("--polish-steps", type=int, default=3, help="iterations of the fine stage")
     p.add_argument("--no-curve", action="store_true")
     p.add_argument("--out", default=None, help="also write the JSON here")
     p.add_argument("--plot", default=None, help="directory for alpha_precision.png")
@@ -289,7 +297,15 @@ def main(argv=None) -> int:
     out["lm"] = run_lm(with_params, target, ints(a.lm_spp), ints(a.lm_seeds))
     if a.lm_polish:
         coarse, fine = (int(x) for x in a.lm_polish.split(":"))
-        out["lm_polish"] = run_lm_polish(with_params, target, coarse, fine, ints(a.polish_seeds))
+        out["lm_polish"] = run_lm_polish(
+            with_params,
+            target,
+            coarse,
+            fine,
+            ints(a.polish_seeds),
+            solver=a.polish_solver,
+            steps=a.polish_steps,
+        )
         errs = [r["rel_error"] for r in out["lm_polish"]]
         out["lm_polish_summary"] = {
             "max_rel_error": max(errs),
