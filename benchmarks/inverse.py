@@ -215,8 +215,20 @@ def plot(path, res, truth):
             continue
         s = np.asarray(r["curve"]["seconds"])
         a = np.asarray(r["curve"]["alpha"])
-        axes[0].semilogy(s, np.maximum(np.abs(a - truth) / truth, 1e-4), label=name)
+        err = np.maximum(np.abs(a - truth) / truth, 1e-4)
+        axes[0].loglog(s[1:], err[1:], label=f"{name}, Adam")
         axes[1].plot(np.arange(len(a)), a, label=name)
+    lm = res.get("jaxgfx_lm")
+    if isinstance(lm, dict) and "solve_seconds" in lm:
+        axes[0].scatter(
+            [lm["solve_seconds"]],
+            [max(lm["alpha_error"] / truth, 1e-4)],
+            marker="*",
+            s=90,
+            color="tab:red",
+            zorder=3,
+            label="jaxgfx, " + lm["route"].replace("Gauss-Newton", "GN"),
+        )
     axes[0].axhline(0.02, color="k", ls=":", lw=0.8)
     axes[0].set_xlabel("seconds (after compilation)")
     axes[0].set_ylabel("|alpha - truth| / truth")
