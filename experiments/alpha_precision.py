@@ -220,7 +220,8 @@ def plot(path, out):
         t = r.get("trajectory")
         if t is None:
             continue
-        label = f"Adam, 2 x 4 spp/step (compile {r['compile_seconds']:.0f} s)" if i == 0 else None
+        n = len(t["alpha"]) - 1
+        label = f"Adam, 2 x 4 spp/step, {n} steps, {len(out['adam'])} keys" if i == 0 else None
         ax.plot(
             np.asarray(t["seconds"])[1:], rel(t["alpha"])[1:], color="0.45", lw=0.8, label=label
         )
@@ -229,33 +230,34 @@ def plot(path, out):
     cmap = plt.get_cmap("viridis")
     for j, spp in enumerate(spps):
         rs = [r for r in lm if r["spp"] == spp]
-        comp = max(r["compile_seconds"] for r in rs)
         ax.scatter(
             [r["solve_seconds"] for r in rs],
             rel([r["alpha"] for r in rs]),
             s=28,
             color=cmap(j / max(len(spps) - 1, 1) * 0.85),
             zorder=3,
-            label=f"LM, 2 x {spp} spp, {len(rs)} keys (compile {comp:.0f} s)",
+            label=f"LM, 2 x {spp} spp, {len(rs)} keys",
         )
     pol = out.get("lm_polish", [])
-    if pol:
-        c, f = pol[0]["coarse"]["spp"], pol[0]["spp"]
+    fines = sorted({r["spp"] for r in pol})
+    for j, fine in enumerate(fines):  # one marker per polish route (several runs may be merged)
+        rs = [r for r in pol if r["spp"] == fine]
         ax.scatter(
-            [r["route_seconds"] for r in pol],
-            rel([r["alpha"] for r in pol]),
+            [r["route_seconds"] for r in rs],
+            rel([r["alpha"] for r in rs]),
             s=70,
-            marker="*",
-            color="tab:red",
+            marker=("*", "P", "X")[j % 3],
+            color=("tab:red", "tab:orange", "tab:purple")[j % 3],
             zorder=4,
-            label=f"LM {c} spp, then {f} spp from there, {len(pol)} keys",
+            label=f"LM {rs[0]['coarse']['spp']} spp, then {rs[0]['iterations']} "
+            f"{rs[0].get('solver', 'lm')} steps at {fine} spp, {len(rs)} keys",
         )
     ax.axhline(0.02, color="k", ls=":", lw=0.9)
     ax.text(0.0, 0.021, " 2 %", fontsize=8, va="bottom", transform=ax.get_yaxis_transform())
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_ylim(floor * 0.8, 3.0)
-    ax.set_xlabel("seconds after compilation (shared 2-core CPU)")
+    ax.set_xlabel("seconds after compilation (shared 2-core CPU; LM polish: both stages)")
     ax.set_ylabel("|alpha - 0.15| / 0.15")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7, loc="lower left")
