@@ -1,7 +1,7 @@
 """Is the example fit's alpha error bias or noise, and what gets it within 2 %? (issue 14)
 
     python -m experiments.alpha_precision [--adam-seeds 0,1,2] [--lm-spp 32,128,512]
-        [--lm-seeds 0,1,2,3,4] [--lm-polish 128:4096] [--polish-seeds 0,1,2,3,4] [--no-curve]
+        [--lm-seeds 0,1,2,3,4] [--lm-polish 128:8192] [--polish-seeds 0,1,2,3,4] [--no-curve]
         [--out FILE] [--plot DIR] [--replot FILE]
 
 The problem is the shipped example (configs/inverse_material.yaml: GGX alpha 0.15 and the clay
@@ -274,7 +274,7 @@ def main(argv=None) -> int:
     p.add_argument("--adam-seeds", default="0,1,2")
     p.add_argument("--lm-spp", default="32,128,512")
     p.add_argument("--lm-seeds", default="0,1,2,3,4")
-    p.add_argument("--lm-polish", default="128:4096", help="COARSE:FINE spp ('' to skip)")
+    p.add_argument("--lm-polish", default="128:8192", help="COARSE:FINE spp ('' to skip)")
     p.add_argument("--polish-seeds", default="0,1,2,3,4")
     p.add_argument("--polish-solver", default="gauss_newton", help="solver of the fine stage")
     p.add_argument("--polish-steps", type=int, default=3, help="iterations of the fine stage")
