@@ -18,15 +18,15 @@ per step, Adam with the learning rate decaying from 0.05 to 0.005 over the confi
   lr 0.05 and clamping, the usual tutorial loop, oscillates by +-0.1 around 0.15 here.)
 
 Reported per system: seconds per step (median), compile / first-step seconds, the time to
-reach alpha within 2 % of the truth (``time_to_2pct_alpha``: from when on the mean of the last 5
-iterates stays within 2 % until the end, null if it does not settle; ``time_to_first_2pct_alpha``:
-the first iterate within 2 %, a noisy Adam iterate passes through), and the final errors (mean
-of the last 10 iterates). ``jaxgfx_lm``: jaxgfx's route to 2 % on a fixed key
-(``experiments.alpha_precision``: Levenberg-Marquardt at 128 spp, then 3 Gauss-Newton steps
-at 4096 spp from its
-solution; ``time_to_2pct_alpha`` = compile + solve seconds of both when the result is within
-2 %); Mitsuba 3 has no least-squares solver, so this row has no peer. Also the relative RMSE between
-the two targets (conventions check). Prints JSON; ``--plot DIR`` writes ``inverse_speed.png``
+reach alpha within 2 % of the truth (``time_to_2pct_alpha``: from when on the mean of the last
+5 iterates stays within 2 % until the end, null if it does not settle;
+``time_to_first_2pct_alpha``: the first iterate within 2 %, which a noisy Adam iterate passes
+through), and the final errors (mean of the last 10 iterates). ``jaxgfx_lm``: jaxgfx's route
+to 2 % on a fixed key (``experiments.alpha_precision``: Levenberg-Marquardt at 128 spp, then 3
+Gauss-Newton steps at 4096 spp from its solution, key 0; ``time_to_2pct_alpha`` = compile +
+solve seconds of both stages when the result is within 2 %); Mitsuba 3 has no least-squares
+solver, so this row has no peer. Also the relative RMSE between the two targets (conventions
+check). Prints JSON; ``--plot DIR`` writes ``inverse_speed.png``
 (alpha error vs seconds, both systems). The machine may be shared: compare the two systems
 within one run.
 """
