@@ -68,9 +68,8 @@ def check_visibility(visibility, scene, integrator) -> None:
             f"{type(integrator).__name__}"
         )
     if not isinstance(scene.camera, PerspectiveCamera):
-        raise TypeError(
-            f"visibility: edge sampling needs a PerspectiveCamera, got {type(scene.camera).__name__}"
-        )
+        name = type(scene.camera).__name__
+        raise TypeError(f"visibility: edge sampling needs a PerspectiveCamera, got {name}")
     rf = scene.rfilter
     if rf is not None and not (isinstance(rf, BoxFilter) and rf.radius == 0.5):
         raise ValueError(f"visibility: edge sampling needs the box filter of radius 0.5, got {rf}")
@@ -114,7 +113,9 @@ def tangent_circle(center, radius, o, phi):
     d = safe_sqrt(jnp.where(ok, d2, 1.0))
     a = v / d[..., None]
     # helper axis: the world axis least aligned with a (frozen: a choice, not a function of θ)
-    helper = jax.nn.one_hot(jnp.argmin(jnp.abs(jax.lax.stop_gradient(a)), axis=-1), 3, dtype=a.dtype)
+    helper = jax.nn.one_hot(
+        jnp.argmin(jnp.abs(jax.lax.stop_gradient(a)), axis=-1), 3, dtype=a.dtype
+    )
     e1 = safe_normalize(jnp.cross(a, helper))
     e2 = jnp.cross(a, e1)
     rho = radius * safe_sqrt(jnp.where(ok, d2 - r2, 0.0)) / d
@@ -185,8 +186,12 @@ def _primary_pass(scene, scene_sg, key, integrator, spheres):
     uu = None
     if integrator.random_shape is not None:
         uu = _uniform(jax.random.fold_in(key, 1), (m, *integrator.random_shape), dtype)
-    both = integrator(scene_sg, jnp.concatenate([o, o]), jnp.concatenate([d_in, d_out]),
-                      None if uu is None else jnp.concatenate([uu, uu]))
+    both = integrator(
+        scene_sg,
+        jnp.concatenate([o, o]),
+        jnp.concatenate([d_in, d_out]),
+        None if uu is None else jnp.concatenate([uu, uu]),
+    )
     dl = both[:m] - both[m:]
     inside = (x0[:, 0] >= 0) & (x0[:, 0] < w) & (x0[:, 1] >= 0) & (x0[:, 1] < h)
     valid = ok & (z > 0) & inside & jnp.all(jnp.isfinite(dl), -1) & (length > 0)
