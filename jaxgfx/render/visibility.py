@@ -75,12 +75,18 @@ def check_visibility(visibility, scene, integrator) -> None:
         raise ValueError(f"visibility: edge sampling needs the box filter of radius 0.5, got {rf}")
 
 
-def _spheres(scene):
+def _spheres(scene, *, occluders=False):
     """All sphere primitives of the scene: centres (K, 3), radii (K,), and per primitive the
-    static ``(shape index, primitive index)`` of the hit records."""
+    static ``(shape index, primitive index)`` of the hit records; ``None`` if there are none.
+
+    ``occluders``: leave out spheres that are area lights. A moving sphere light's outline seen
+    from a shading point is a boundary in the direction measure only, which light sampling (area
+    measure, attached) already differentiates; adding it here would count it twice.
+    """
+    lights = {al.shape_index for al in scene.area_lights}
     cs, rs, sid, pid = [], [], [], []
     for i, s in enumerate(scene.shapes):
-        if isinstance(s, Spheres):
+        if isinstance(s, Spheres) and not (occluders and i in lights):
             n = s.centers.shape[0]
             cs.append(s.centers)
             rs.append(s.radii)
@@ -272,14 +278,14 @@ def edge_boundary(scene, key, integrator, *, spp: int):
         return jnp.zeros((h, w, integrator.n_channels), jnp.float32)
     sg = jax.lax.stop_gradient
     scene_sg = sg(scene)
-    shadow = integrator.max_depth > 1
+    occ = _spheres(scene, occluders=True) if integrator.max_depth > 1 else None
 
     def one_pass(s):
         ks = jax.random.fold_in(key, s)
         b = _primary_pass(scene, scene_sg, jax.random.fold_in(ks, 0), integrator, spheres)
         b = b.reshape(h, w, -1)
-        if shadow:
-            b = b + _shadow_pass(scene, scene_sg, jax.random.fold_in(ks, 1), integrator, spheres)
+        if occ is not None:
+            b = b + _shadow_pass(scene, scene_sg, jax.random.fold_in(ks, 1), integrator, occ)
         return b
 
     one_pass = jax.checkpoint(one_pass, prevent_cse=False)
