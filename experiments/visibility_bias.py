@@ -1,7 +1,8 @@
 """Bias of shape derivatives from moving silhouettes and shadows (issue 10, "Visibility").
 
     python -m experiments.visibility_bias [--size 16] [--keys 16] [--spp 32] [--h 0.05]
-                                         [--integrator direct] [--out FILE]
+                                         [--integrator direct] [--max-depth 3]
+                                         [--strategy mis] [--out FILE]
 
 Scene: a diffuse sphere moves sideways (parameter: its centre's x) in front of an area light
 that faces the camera and lights a diffuse floor, plus a constant environment; the sphere's
@@ -67,7 +68,7 @@ def scene_desc(size: int) -> dict:
     }
 
 
-def measure(size, keys, spp, h, integrator, max_depth=3):
+def measure(size, keys, spp, h, integrator, max_depth=3, strategy="mis"):
     scene = load_scene(scene_desc(size))
     si = next(i for i, s in enumerate(scene.shapes) if isinstance(s, Spheres))
     path = f"shapes.{si}.centers"
@@ -80,7 +81,15 @@ def measure(size, keys, spp, h, integrator, max_depth=3):
 
     def loss(x, key, vis):
         sc = scene.replace(path, c0 + e * x)
-        img = render(sc, key, spp=spp, integrator=integrator, max_depth=max_depth, visibility=vis)
+        img = render(
+            sc,
+            key,
+            spp=spp,
+            integrator=integrator,
+            max_depth=max_depth,
+            strategy=strategy,
+            visibility=vis,
+        )
         return jnp.sum(img.mean(-1) * wts) / (size * size)
 
     g_plain = jax.jit(jax.grad(lambda x, k: loss(x, k, None)))
@@ -113,6 +122,7 @@ def measure(size, keys, spp, h, integrator, max_depth=3):
         "spp": spp,
         "h": h,
         "integrator": integrator,
+        "strategy": strategy,
         "max_depth": max_depth if integrator == "path" else 2,
         "ad_plain": ms(a[:, 0]),
         "ad_edge": ms(a[:, 1]),
@@ -131,9 +141,10 @@ def main(argv=None) -> int:
     p.add_argument("--h", type=float, default=0.05)
     p.add_argument("--integrator", default="direct")
     p.add_argument("--max-depth", type=int, default=3)
+    p.add_argument("--strategy", default="mis")
     p.add_argument("--out", default=None)
     a = p.parse_args(argv)
-    res = measure(a.size, a.keys, a.spp, a.h, a.integrator, a.max_depth)
+    res = measure(a.size, a.keys, a.spp, a.h, a.integrator, a.max_depth, a.strategy)
     txt = json.dumps(res, indent=1)
     print(txt)
     if a.out:

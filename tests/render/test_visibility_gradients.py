@@ -173,7 +173,7 @@ def test_tangent_circle_and_projection():
     r = jnp.asarray(0.7)
     o = jnp.asarray([1.0, 2.0, 4.0])
     phi = jnp.linspace(0.0, 2 * math.pi, 13)
-    t, u, rho, ok = tangent_circle(c, r, o, phi)
+    t, u, rho, ok = jax.jit(tangent_circle)(c, r, o, phi)
     assert bool(jnp.all(ok))
     np.testing.assert_allclose(jnp.linalg.norm(t - c, axis=-1), 0.7, rtol=1e-6)
     np.testing.assert_allclose(jnp.sum((t - o) * (t - c), -1), 0.0, atol=1e-5)
@@ -185,7 +185,7 @@ def test_tangent_circle_and_projection():
     scene = load_scene(_primary_desc())
     px = jnp.asarray([[0.3, 7.1], [4.0, 4.0], [7.9, 0.2]])
     oo, dd = scene.camera.generate_ray(px)
-    back, z = project(scene.camera, oo + 2.5 * dd)
+    back, z = jax.jit(project)(scene.camera, oo + 2.5 * dd)
     np.testing.assert_allclose(back, px, atol=1e-5)
     assert bool(jnp.all(z > 0))
 
