@@ -167,7 +167,7 @@ def test_silhouette_tangent_to_image_border(primary):
     assert gc[0] > 0  # moving out of the image uncovers background (radiance 1)
 
 
-def test_tangent_circle_and_projection():
+def test_tangent_circle_and_projection(primary):
     """T is on the sphere and rays from o graze it there; project inverts generate_ray."""
     c = jnp.asarray([0.3, -0.2, 0.5])
     r = jnp.asarray(0.7)
@@ -182,7 +182,7 @@ def test_tangent_circle_and_projection():
     # u points away from the axis (outside the cone of hitting rays)
     axis = (c - o) / jnp.linalg.norm(c - o)
     np.testing.assert_allclose(jnp.sum(u * axis, -1), 0.0, atol=1e-6)
-    scene = load_scene(_primary_desc())
+    scene = primary[0]
     px = jnp.asarray([[0.3, 7.1], [4.0, 4.0], [7.9, 0.2]])
     oo, dd = scene.camera.generate_ray(px)
     back, z = jax.jit(project)(scene.camera, oo + 2.5 * dd)
