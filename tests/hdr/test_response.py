@@ -21,7 +21,13 @@ def _errors(resp, st):
     )
 
 
-@pytest.mark.parametrize("name", ["gamma2.2", "srgb", "filmic", "log"])
+# issue 9: ~15 s of a loaded 2-core default run for the four; the filmic curve (toe and
+# shoulder, where OpenCV was better on real data) stays in the default run
+@pytest.mark.parametrize(
+    "name",
+    [pytest.param(n, marks=pytest.mark.slow) for n in ("gamma2.2", "srgb")]
+    + ["filmic", pytest.param("log", marks=pytest.mark.slow)],
+)
 def test_debevec_beats_opencv(name):
     st = stack(name)
     ours = _errors(_recover(st.images, st.exposure_times), st)
@@ -181,6 +187,9 @@ def test_bad_dtype_raises():
         hdr.recover_response(np.zeros((2, 8, 8), np.int32), [1.0, 2.0])
 
 
+# issue 9: ~4 s of a loaded 2-core default run; jit of the solvers is exercised by every other
+# test of this file
+@pytest.mark.slow
 def test_grayscale_and_jit_matches_eager():
     st = stack("log")
     g = st.images[..., 1]

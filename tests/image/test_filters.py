@@ -193,6 +193,9 @@ def test_bilateral_affine_equivariance_any_range(rng):
         np.testing.assert_allclose(big, 30 * base - 17, atol=2e-4 * 30, err_msg=method)
 
 
+# issue 9: ~4 s of a loaded 2-core default run; the bilateral filter vs OpenCV stays in the
+# default run
+@pytest.mark.slow
 def test_bilateral_grid_approximates_brute(rng):
     # Step edge + noise; the grid's measured mean error is a few % of sigma_range.
     x = np.where(np.arange(32)[None, :] < 16, 0.2, 0.8) + 0.05 * rng.standard_normal((32, 32))

@@ -33,6 +33,18 @@ def test_glossy_scene_high_spp():
     assert np.all(s["fd_se"][1:] < 0.03 * np.abs(s["fd"][1:]))
 
 
+def test_glossy_alpha_resolves_a_40_percent_bias():
+    """The α derivative alone at 64 keys x 512 spp: the power statement the check above lacks.
+    The bias that once passed every gradient test was 40 % of dα; this test fails if
+    ``4 diff_se >= 0.4 |fd|``, so a 40 % error in dα stands at 4 standard errors or more of the
+    paired difference and fails ``G.check``. (The paired difference's standard error scales
+    as ``1 / sqrt(keys)``: 0.0007 at 32 keys, so about 0.0005 here against |dα| ≈ 0.005.)"""
+    params = G.GLOSSY_PARAMS[:1]
+    s = G.run(G.glossy_scene(), params, spp=512, keys=64, integrator="path", max_depth=4, seed=2)
+    G.check(params, s)
+    assert 4 * s["diff_se"][0] < 0.4 * abs(s["fd"][0]), (s["diff_se"][0], s["fd"][0])
+
+
 def test_glass_scene_path():
     s = G.run(G.glass_scene(), G.GLASS_PARAMS, spp=128, keys=16, integrator="path", max_depth=5)
     G.check(G.GLASS_PARAMS, s)

@@ -27,6 +27,11 @@ from jaxgfx.render.scene import load_scene
 
 from ._scenes import camera, inside_sphere_scene, metal_floor_scene, point_light
 
+# issue 9: ~23 s of a loaded 2-core default run (one reverse-mode program of the metal scene,
+# shared by every test here); the BSDF-level hard cases (tiny alpha, grazing) stay in the
+# default run (tests/render/test_bsdf_grads.py)
+pytestmark = pytest.mark.slow
+
 KEY = jax.random.key(11)
 
 

@@ -76,6 +76,9 @@ def test_dict_format_and_errors():
         S.sdf_from_dict([1, 2])
 
 
+# issue 9: ~6 s of a loaded 2-core default run; the closed-form sphere-trace gradient test stays
+# in the default run
+@pytest.mark.slow
 def test_sphere_trace_matches_analytic_sphere(rng):
     c, r = np.array([0.2, -0.1, 0.3]), 0.8
     o = rng.uniform(-3, 3, (300, 3)).astype(np.float32)

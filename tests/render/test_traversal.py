@@ -300,7 +300,17 @@ def scene_ref():
     return scene, idx, (hit, np.asarray(occ))
 
 
-@pytest.mark.parametrize("name", BACKENDS)
+# issue 9: the Warp case is ~3 s of a loaded 2-core default run: slow (Warp's hits and
+# gradients against the reference stay in the default run in the tests above and below)
+@pytest.mark.parametrize(
+    "name",
+    [
+        p
+        if p.values[0] == "embree"
+        else pytest.param(*p.values, marks=[*p.marks, pytest.mark.slow])
+        for p in BACKENDS
+    ],
+)
 def test_backend_scene_intersection_equal_reference(scene_ref, name):
     """Through the scene's two-phase intersection (mesh + analytic floor + light): the same hit
     records and shadow-ray visibility as brute force."""
