@@ -252,7 +252,7 @@ def _shadow_scene():
     )
 
 
-@pytest.mark.slow  # issue 10: ~150-300 s on the loaded 2-core machine (compile of direct + edge)
+@pytest.mark.slow  # issue 10: ~180 s on the loaded 2-core machine (compile of direct + edge)
 def test_shadow_boundary_matches_occluded_cap():
     scene = _shadow_scene()
     si = next(i for i, s in enumerate(scene.shapes) if isinstance(s, Spheres))
@@ -290,7 +290,7 @@ def _front_desc(size):
     return scene_desc(size)
 
 
-@pytest.mark.slow  # issue 10: ~10 min on the loaded 2-core machine (two gradient programs)
+@pytest.mark.slow  # issue 10: ~60 s on the loaded 2-core machine (two gradient programs)
 def test_edge_gradient_matches_finite_differences():
     """Sphere moving in front of an area light over a lit floor (silhouette over the light and
     the floor, shadow edge on the floor), direct lighting, 8², fixed-weight image sum."""
