@@ -42,6 +42,7 @@ import numpy as np
 from jaxgfx._math import safe_div, safe_normalize, safe_sqrt, sum_last
 from jaxgfx.render.camera import PerspectiveCamera, look_at_basis
 from jaxgfx.render.film import BoxFilter
+from jaxgfx.render.geometry.rectangle import Rectangles
 from jaxgfx.render.geometry.sphere import Spheres
 from jaxgfx.render.integrators import _common as C
 from jaxgfx.render.integrators.path import DirectIntegrator, PathIntegrator
@@ -100,6 +101,25 @@ def _spheres(scene, *, occluders=False):
         np.asarray(sid, np.int32),
         np.asarray(pid, np.int32),
     )
+
+
+def _segments(scene, *, occluders=False):
+    """The four edges of every rectangle: endpoints ``(E, 2, 3)`` (differentiable w.r.t. the
+    rectangles' centres and edge vectors) and the static shape and primitive index of each;
+    ``None`` if there are none. ``occluders``: leave out area lights (as :func:`_spheres`)."""
+    lights = {al.shape_index for al in scene.area_lights}
+    segs, sid, pid = [], [], []
+    for i, s in enumerate(scene.shapes):
+        if isinstance(s, Rectangles) and not (occluders and i in lights):
+            c, hu, hv = s.centers, 0.5 * s.edge_u, 0.5 * s.edge_v
+            corners = [c - hu - hv, c + hu - hv, c + hu + hv, c - hu + hv]
+            for a in range(4):
+                segs.append(jnp.stack([corners[a], corners[(a + 1) % 4]], axis=1))
+                sid += [i] * c.shape[0]
+                pid += list(range(c.shape[0]))
+    if not segs:
+        return None
+    return jnp.concatenate(segs), np.asarray(sid, np.int32), np.asarray(pid, np.int32)
 
 
 def tangent_circle(center, radius, o, phi):
@@ -210,6 +230,115 @@ def _primary_pass(scene, scene_sg, key, integrator, spheres):
     return jnp.zeros((m, contrib.shape[-1]), dtype).at[iy * w + ix].add(contrib)
 
 
+def _primary_segments_pass(scene, scene_sg, key, integrator, segments):
+    """As :func:`_primary_pass` for straight edges (rectangles): ``H*W`` samples, edge chosen
+    uniformly, position along it stratified; the two sides are one thousandth of a pixel away
+    along the edge's image normal ``n``, and the jump is ``L(x − εn) − L(x + εn)`` (the formula
+    does not depend on the orientation of ``n``)."""
+    ends = segments[0]
+    sg = jax.lax.stop_gradient
+    cam, cam_sg = scene.camera, scene_sg.camera
+    w, h = scene.width, scene.height
+    m = w * h
+    e = ends.shape[0]
+    dtype = ends.dtype
+    u = _uniform(key, (m, 2), dtype)
+    kk = jnp.minimum((u[:, 0] * e).astype(jnp.int32), e - 1)
+    t = (jnp.arange(m, dtype=dtype) + u[:, 1]) / m  # stratified along the chosen edges
+    a, b = ends[kk, 0], ends[kk, 1]
+
+    def screen(t, a, b, cam):
+        return project(cam, a + t[:, None] * (b - a))
+
+    x, _ = screen(t, a, b, cam)
+    (x0, z), (dx, _) = jax.jvp(lambda q: screen(q, sg(a), sg(b), cam_sg), (t,), (jnp.ones_like(t),))
+    length = jnp.sqrt(sum_last(dx * dx))
+    n = safe_div(jnp.stack([dx[:, 1], -dx[:, 0]], -1), length[:, None])
+    eps = 1e-3
+    o, d = cam_sg.generate_ray(jnp.concatenate([x0 - eps * n, x0 + eps * n]))
+    uu = None
+    if integrator.random_shape is not None:
+        uu = _uniform(jax.random.fold_in(key, 1), (m, *integrator.random_shape), dtype)
+        uu = jnp.concatenate([uu, uu])
+    both = integrator(scene_sg, o.astype(dtype), d.astype(dtype), uu)
+    dl = both[:m] - both[m:]
+    inside = (x0[:, 0] >= 0) & (x0[:, 0] < w) & (x0[:, 1] >= 0) & (x0[:, 1] < h)
+    valid = (z > 0) & inside & jnp.all(jnp.isfinite(dl), -1) & (length > 0)
+    valid = valid & jnp.isfinite(length)
+    wgt = jnp.where(valid[:, None], dl * (length * e / m)[:, None], 0.0)
+    vn = sum_last(jnp.where(valid[:, None], sg(n) * x, 0.0))
+    ix = jnp.clip(jnp.floor(x0[:, 0]).astype(jnp.int32), 0, w - 1)
+    iy = jnp.clip(jnp.floor(x0[:, 1]).astype(jnp.int32), 0, h - 1)
+    contrib = sg(wgt) * vn[:, None]
+    return jnp.zeros((m, contrib.shape[-1]), dtype).at[iy * w + ix].add(contrib)
+
+
+def _first_vertex(scene_sg, key, dtype):
+    """One camera ray per pixel (uniform in the pixel) and its first vertex's shading data."""
+    w, h = scene_sg.width, scene_sg.height
+    u = _uniform(key, (h, w, 4), dtype)
+    jj, ii = jnp.meshgrid(jnp.arange(w), jnp.arange(h))
+    px = jnp.stack([jj, ii], -1).astype(dtype) + u[..., :2]
+    o, d = scene_sg.camera.generate_ray(px)
+    o, d = o.astype(dtype), d.astype(dtype)
+    hit = C.intersect(scene_sg, o, d)
+    mat = C.hit_material(scene_sg, hit)
+    frame, ng, wo = C.shading_frame(scene_sg, hit, d, mat)
+    return u[..., 2:], hit, mat, frame, ng, wo
+
+
+def _jump(scene_sg, key, integrator, vertex, w_minus, w_plus):
+    """``f L_i`` on the two sides (common random numbers): the integrand of the first vertex's
+    outgoing radiance along directions ``w_minus``, ``w_plus`` (..., 3)."""
+    _, hit, mat, frame, ng, wo = vertex
+    h = w_minus.shape[0]
+    sub = _sub_integrator(integrator)
+    uu = _uniform(key, (*w_minus.shape[:-1], *sub.random_shape), w_minus.dtype)
+    fs, os_, ds = [], [], []
+    for wi in (w_minus, w_plus):
+        fs.append(
+            C.dispatch(
+                scene_sg, mat, lambda mm, wi=wi: mm.eval(wo, C.to_local(frame, wi)), uv=hit.uv
+            )
+        )
+        so, sd = C.spawn_ray(hit.p, ng, wi)
+        os_.append(so)
+        ds.append(sd)
+    li = sub(scene_sg, jnp.concatenate(os_), jnp.concatenate(ds), jnp.concatenate([uu, uu]))
+    return fs[0] * li[:h] - fs[1] * li[h:]
+
+
+def _shadow_segments_pass(scene, scene_sg, key, integrator, segments):
+    """As :func:`_shadow_pass` for straight edges of occluding rectangles."""
+    ends, sids, pids = segments
+    sg = jax.lax.stop_gradient
+    e = ends.shape[0]
+    dtype = ends.dtype
+    vertex = _first_vertex(scene_sg, key, dtype)
+    u, hit = vertex[0], vertex[1]
+    p = hit.p
+    kk = jnp.minimum((u[..., 0] * e).astype(jnp.int32), e - 1)
+    t = u[..., 1]
+    a, b = ends[kk, 0], ends[kk, 1]
+
+    def direction(t, a, b):
+        return safe_normalize(a + t[..., None] * (b - a) - p)
+
+    om = direction(t, a, b)
+    om0, dom = jax.jvp(lambda q: direction(q, sg(a), sg(b)), (t,), (jnp.ones_like(t),))
+    length = jnp.sqrt(sum_last(dom * dom))
+    n = safe_div(jnp.cross(om0, dom), length[..., None])
+    eps = 1e-4  # radians
+    w_minus = safe_normalize(om0 - eps * n)
+    w_plus = safe_normalize(om0 + eps * n)
+    dh = _jump(scene_sg, jax.random.fold_in(key, 1), integrator, vertex, w_minus, w_plus)
+    own = (hit.shape_id == jnp.asarray(sids)[kk]) & (hit.prim_id == jnp.asarray(pids)[kk])
+    valid = hit.valid & ~own & jnp.all(jnp.isfinite(dh), -1) & (length > 0)
+    wgt = jnp.where(valid[..., None], dh * (length * e)[..., None], 0.0)
+    vn = sum_last(jnp.where(valid[..., None], sg(n) * om, 0.0))
+    return sg(wgt) * vn[..., None]
+
+
 def _shadow_pass(scene, scene_sg, key, integrator, spheres):
     """Boundary image ``(H, W, 3)`` of the occluders' silhouettes seen from the first vertex of
     one camera ray per pixel (direction measure, box filter)."""
@@ -272,20 +401,32 @@ def _shadow_pass(scene, scene_sg, key, integrator, spheres):
 def edge_boundary(scene, key, integrator, *, spp: int):
     """Boundary image ``(H, W, C)`` whose derivative w.r.t. the scene is the silhouette term of
     the image's derivative (its value is meaningless). Jittable; ``spp`` passes."""
-    spheres = _spheres(scene)
+    spheres, segs = _spheres(scene), _segments(scene)
     w, h = scene.width, scene.height
-    if spheres is None:
-        return jnp.zeros((h, w, integrator.n_channels), jnp.float32)
+    nc = integrator.n_channels
+    if spheres is None and segs is None:
+        return jnp.zeros((h, w, nc), jnp.float32)
     sg = jax.lax.stop_gradient
     scene_sg = sg(scene)
-    occ = _spheres(scene, occluders=True) if integrator.max_depth > 1 else None
+    dtype = (spheres[0] if spheres is not None else segs[0]).dtype
+    direct = integrator.max_depth > 1
+    occ = _spheres(scene, occluders=True) if direct else None
+    occ_segs = _segments(scene, occluders=True) if direct else None
 
     def one_pass(s):
         ks = jax.random.fold_in(key, s)
-        b = _primary_pass(scene, scene_sg, jax.random.fold_in(ks, 0), integrator, spheres)
-        b = b.reshape(h, w, -1)
+        b = jnp.zeros((h, w, nc), dtype)
+        if spheres is not None:
+            pb = _primary_pass(scene, scene_sg, jax.random.fold_in(ks, 0), integrator, spheres)
+            b = b + pb.reshape(h, w, nc)
+        if segs is not None:
+            k2 = jax.random.fold_in(ks, 2)
+            b = b + _primary_segments_pass(scene, scene_sg, k2, integrator, segs).reshape(h, w, nc)
         if occ is not None:
             b = b + _shadow_pass(scene, scene_sg, jax.random.fold_in(ks, 1), integrator, occ)
+        if occ_segs is not None:
+            k3 = jax.random.fold_in(ks, 3)
+            b = b + _shadow_segments_pass(scene, scene_sg, k3, integrator, occ_segs)
         return b
 
     one_pass = jax.checkpoint(one_pass, prevent_cse=False)
@@ -293,8 +434,7 @@ def edge_boundary(scene, key, integrator, *, spp: int):
     def body(acc, s):
         return acc + one_pass(s), None
 
-    dtype = spheres[0].dtype
-    acc, _ = jax.lax.scan(body, jnp.zeros((h, w, integrator.n_channels), dtype), jnp.arange(spp))
+    acc, _ = jax.lax.scan(body, jnp.zeros((h, w, nc), dtype), jnp.arange(spp))
     return acc / spp
 
 

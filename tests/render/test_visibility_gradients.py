@@ -303,3 +303,113 @@ def test_edge_gradient_matches_finite_differences():
     assert abs(d["mean"]) <= 4 * d["stderr"]
     # without the boundary term the same comparison is off by more than 4 standard errors
     assert abs(p["mean"]) > 4 * p["stderr"]
+
+
+# ------------------------------------------------------------------- rectangles (slow)
+
+
+@pytest.mark.slow  # issue 10: ~20 s (a second primary program)
+def test_primary_square_matches_projected_square():
+    """A black square of side 1 facing the camera at distance 4 before a constant environment:
+    its image is a square of side f s / D pixels, so d mean / d(scale of both edges) =
+    -2 (f s/D)² / (W H) and d mean / dz = -2 (f s)² / (D³ W H)."""
+    desc = _primary_desc()
+    desc["shapes"] = [
+        {
+            "type": "rectangle",
+            "center": [0, 0, 0],
+            "normal": [0, 0, 1],
+            "size": [1.0, 1.0],
+            "material": "black",
+        }
+    ]
+    scene = load_scene(desc)
+    eu, ev, c0 = (scene.get(f"shapes.0.{n}") for n in ("edge_u", "edge_v", "centers"))
+    ez = jnp.asarray([0.0, 0.0, 1.0])
+
+    def mean(x, dz, key, vis):
+        sc = scene.replace("shapes.0.edge_u", eu * x).replace("shapes.0.edge_v", ev * x)
+        sc = sc.replace("shapes.0.centers", c0 + ez * dz)
+        return render(sc, key, spp=4, integrator="path", max_depth=1, visibility=vis).mean()
+
+    vg = jax.jit(jax.grad(lambda x, dz, k: mean(x, dz, k, "edge"), argnums=(0, 1)))
+    gx, gz = vg(jnp.float32(1.0), jnp.float32(0.0), jax.random.key(0))
+    f = (W / 2) / math.tan(math.radians(FOV / 2))
+    # ΔL = -1 on the whole outline and the positions along the 4 edges are stratified over
+    # 4 x 64 samples: float32 rounding only (measured 1e-7 relative)
+    assert float(gx) == pytest.approx(-2 * (f / 4) ** 2 / W**2, rel=1e-3)
+    assert float(gz) == pytest.approx(-2 * f**2 / 4**3 / W**2, rel=1e-3)
+
+
+def _square_form_factor(s, c):
+    """Cosine-weighted fraction of the hemisphere a centred parallel square (side s, height c)
+    covers: 4 x the corner formula (Howell's catalogue, configuration B-3)."""
+    x = y = (s / 2) / c
+    ax, ay = math.sqrt(1 + x * x), math.sqrt(1 + y * y)
+    f = (x / ax * math.atan(y / ax) + y / ay * math.atan(x / ay)) / (2 * math.pi)
+    return 4 * f
+
+
+@pytest.mark.slow  # issue 10: ~180 s (compile of direct + edges)
+def test_shadow_of_a_square_matches_form_factor():
+    """Floor point below a square occluder (side 1, height 2) under a constant environment:
+    radiance ρ L (1 - F(s, h)); derivatives of the closed form w.r.t. s and h."""
+    desc = {
+        "camera": {
+            "origin": [0, 0.5, 0],
+            "target": [0, 0, 0],
+            "up": [0, 0, -1],
+            "fov": 2,
+            "width": 2,
+            "height": 2,
+        },
+        "shapes": [
+            {
+                "type": "rectangle",
+                "center": [0, _H, 0],
+                "normal": [0, 1, 0],
+                "size": [1.0, 1.0],
+                "material": "white",
+            },
+            {
+                "type": "rectangle",
+                "center": [0, 0, 0],
+                "normal": [0, 1, 0],
+                "size": [4, 4],
+                "material": "floor",
+            },
+        ],
+        "materials": {
+            "white": {"type": "diffuse", "reflectance": 0.5},
+            "floor": {"type": "diffuse", "reflectance": _RHO},
+        },
+        "emitters": [{"type": "constant", "radiance": _L}],
+    }
+    scene = load_scene(desc)
+    eu, ev, c = (scene.get(f"shapes.0.{n}") for n in ("edge_u", "edge_v", "centers"))
+    # the loader concatenates both rectangles into one shape: move only the occluder (row 0)
+    sel = jnp.asarray([[1.0], [0.0]])
+    ey = jnp.asarray([0.0, 1.0, 0.0])
+
+    def mean(x, dh, key):
+        k = 1 + sel * (x - 1)
+        sc = scene.replace("shapes.0.edge_u", eu * k).replace("shapes.0.edge_v", ev * k)
+        sc = sc.replace("shapes.0.centers", c + sel * ey * dh)
+        return render(sc, key, spp=16, integrator="direct", visibility="edge").mean()
+
+    vg = jax.jit(jax.value_and_grad(mean, argnums=(0, 1)))
+    rows = []
+    for s in range(8):
+        v, (gx, gh) = vg(jnp.float32(1.0), jnp.float32(0.0), jax.random.key(s))
+        rows.append([float(v), float(gx), float(gh)])
+    a = np.asarray(rows)
+    m, se = a.mean(0), a.std(0, ddof=1) / np.sqrt(len(a))
+    assert np.all(np.isfinite(a))
+    ff = _square_form_factor
+    want_v = _RHO * _L * (1 - ff(1.0, _H))
+    want_s = -_RHO * _L * _derivative(lambda s: ff(s, _H), 1.0)  # d/d(scale) at side 1
+    want_h = -_RHO * _L * _derivative(lambda h: ff(1.0, h), _H)
+    assert m[0] == pytest.approx(want_v, abs=4 * se[0] + 1e-3)
+    # 4 standard errors over the keys plus 1e-3 relative (pixel footprint, ray offsets)
+    assert m[1] == pytest.approx(want_s, abs=4 * se[1] + 1e-3 * abs(want_s))
+    assert m[2] == pytest.approx(want_h, abs=4 * se[2] + 1e-3 * abs(want_h))
