@@ -8,7 +8,8 @@ radiance jumps across a moving curve and the derivative of the integral gains a 
 
 (Reynolds transport theorem; ``Ω`` the region the shape covers, ``v_n`` the outward normal
 velocity of its boundary, ``L_in`` / ``L_out`` the integrand just inside / outside). This module
-estimates the second integral for the silhouettes of **spheres** in two domains:
+estimates the second integral for the silhouettes of **spheres** (and the four straight edges
+of **rectangles**, :func:`_segments`) in two domains:
 
 * **primary visibility**: the image plane (pixel units, box filter of one pixel): the
   silhouette of a sphere seen from the pinhole is the projection of the circle of tangent points
