@@ -49,7 +49,14 @@ from jaxgfx.render.integrators import _common as C
 from jaxgfx.render.integrators.path import DirectIntegrator, PathIntegrator
 from jaxgfx.render.sampler import _uniform
 
-__all__ = ["VISIBILITY", "check_visibility", "tangent_circle", "project", "render_with_edges"]
+__all__ = [
+    "VISIBILITY",
+    "check_visibility",
+    "tangent_circle",
+    "project",
+    "edge_boundary",
+    "render_with_edges",
+]
 
 VISIBILITY = ("edge",)
 """Boundary-term methods ``render(..., visibility=...)`` accepts (``None``: none)."""
@@ -345,20 +352,13 @@ def _shadow_pass(scene, scene_sg, key, integrator, spheres):
     one camera ray per pixel (direction measure, box filter)."""
     centers, radii, sids, pids = spheres
     sg = jax.lax.stop_gradient
-    w, h = scene.width, scene.height
     k = centers.shape[0]
     dtype = centers.dtype
-    u = _uniform(key, (h, w, 4), dtype)
-    jj, ii = jnp.meshgrid(jnp.arange(w), jnp.arange(h))
-    px = jnp.stack([jj, ii], -1).astype(dtype) + u[..., :2]
-    o, d = scene_sg.camera.generate_ray(px)
-    o, d = o.astype(dtype), d.astype(dtype)
-    hit = C.intersect(scene_sg, o, d)
-    mat = C.hit_material(scene_sg, hit)
-    frame, ng, wo = C.shading_frame(scene_sg, hit, d, mat)
+    vertex = _first_vertex(scene_sg, key, dtype)
+    u, hit = vertex[0], vertex[1]
     p = hit.p
-    kk = jnp.minimum((u[..., 2] * k).astype(jnp.int32), k - 1)
-    psi = 2 * math.pi * u[..., 3]
+    kk = jnp.minimum((u[..., 0] * k).astype(jnp.int32), k - 1)
+    psi = 2 * math.pi * u[..., 1]
     c, r = centers[kk], radii[kk]
     c_sg, r_sg = sg(c), sg(r)
 
@@ -371,27 +371,11 @@ def _shadow_pass(scene, scene_sg, key, integrator, spheres):
     t0, uo, rho, ok = tangent_circle(c_sg, r_sg, p, psi)
     length = jnp.sqrt(sum_last(dom * dom))
     n = safe_div(jnp.cross(om0, dom), length[..., None])
-    n = jnp.where((sum_last(n * uo) < 0)[..., None], -n, n)
+    n = jnp.where((sum_last(n * uo) < 0)[..., None], -n, n)  # outwards
     off = (_ETA * rho)[..., None] * uo
     w_in = safe_normalize(t0 - off - p)
     w_out = safe_normalize(t0 + off - p)
-    sub = _sub_integrator(integrator)
-    uu = _uniform(jax.random.fold_in(key, 1), (h, w, *sub.random_shape), dtype)
-
-    def h_of(wi):
-        f = C.dispatch(scene_sg, mat, lambda mm: mm.eval(wo, C.to_local(frame, wi)), uv=hit.uv)
-        so, sd = C.spawn_ray(p, ng, wi)
-        return f, so, sd
-
-    f_in, so_in, sd_in = h_of(w_in)
-    f_out, so_out, sd_out = h_of(w_out)
-    li = sub(
-        scene_sg,
-        jnp.concatenate([so_in, so_out]),
-        jnp.concatenate([sd_in, sd_out]),
-        jnp.concatenate([uu, uu]),
-    )
-    dh = f_in * li[:h] - f_out * li[h:]
+    dh = _jump(scene_sg, jax.random.fold_in(key, 1), integrator, vertex, w_in, w_out)
     own = (hit.shape_id == jnp.asarray(sids)[kk]) & (hit.prim_id == jnp.asarray(pids)[kk])
     valid = hit.valid & ok & ~own & jnp.all(jnp.isfinite(dh), -1) & (length > 0)
     wgt = jnp.where(valid[..., None], dh * (length * (2 * math.pi * k))[..., None], 0.0)
