@@ -252,7 +252,7 @@ def _shadow_scene():
     )
 
 
-@pytest.mark.slow  # issue 10: ~180 s on the loaded 2-core machine (compile of direct + edge)
+@pytest.mark.slow  # issue 10: ~55 s (load 2) to 180 s (load 5) on 2 cores: direct + edges compile
 def test_shadow_boundary_matches_occluded_cap():
     scene = _shadow_scene()
     si = next(i for i, s in enumerate(scene.shapes) if isinstance(s, Spheres))
@@ -290,7 +290,7 @@ def _front_desc(size):
     return scene_desc(size)
 
 
-@pytest.mark.slow  # issue 10: ~60 s on the loaded 2-core machine (two gradient programs)
+@pytest.mark.slow  # issue 10: ~60 s on the shared 2-core machine (two gradient programs)
 def test_edge_gradient_matches_finite_differences():
     """Sphere moving in front of an area light over a lit floor (silhouette over the light and
     the floor, shadow edge on the floor), direct lighting, 8², fixed-weight image sum."""
@@ -308,7 +308,7 @@ def test_edge_gradient_matches_finite_differences():
 # ------------------------------------------------------------------- rectangles (slow)
 
 
-@pytest.mark.slow  # issue 10: ~7 s (a second primary program; over the default budget)
+@pytest.mark.slow  # issue 10: ~5-7 s (a second primary program; over the default budget)
 def test_primary_square_matches_projected_square():
     """A black square of side 1 facing the camera at distance 4 before a constant environment:
     its image is a square of side f s / D pixels, so d mean / d(scale of both edges) =
@@ -350,7 +350,7 @@ def _square_form_factor(s, c):
     return 4 * f
 
 
-@pytest.mark.slow  # issue 10: ~50 s (compile of direct + edges, 16 keys)
+@pytest.mark.slow  # issue 10: ~25 s at load 2 (compile of direct + edges, 16 keys)
 def test_shadow_of_a_square_matches_form_factor():
     """Floor point below a square occluder (side 1, height 2) under a constant environment:
     radiance ρ L (1 - F(s, h)); derivatives of the closed form w.r.t. s and h."""
