@@ -38,7 +38,8 @@ def test_glossy_alpha_resolves_a_40_percent_bias():
     The bias that once passed every gradient test was 40 % of dα; this test fails if
     ``4 diff_se >= 0.4 |fd|``, so a 40 % error in dα stands at 4 standard errors or more of the
     paired difference and fails ``G.check``. (The paired difference's standard error scales
-    as ``1 / sqrt(keys)``: 0.0007 at 32 keys, so about 0.0005 here against |dα| ≈ 0.005.)"""
+    as ``1 / sqrt(keys)``: 0.0007 at 32 keys. Measured here: AD -0.00583 +- 0.00027, FD
+    -0.00634 +- 0.00045, difference 0.00051 +- 0.00050, i.e. 4 se = 32 % of |FD|.)"""
     params = G.GLOSSY_PARAMS[:1]
     s = G.run(G.glossy_scene(), params, spp=512, keys=64, integrator="path", max_depth=4, seed=2)
     G.check(params, s)
