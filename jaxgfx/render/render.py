@@ -53,10 +53,10 @@ def render(
     (``load_scene(..., accel="auto")``). A different backend is built on the host (cached per
     mesh), so pass ``accel`` outside ``jax.jit`` or use :meth:`Scene.with_accel` once.
     ``visibility``: ``None`` (default: plain AD, which misses the boundary term of moving
-    silhouettes) or ``"edge"``: edge sampling (Li et al. 2018) of sphere silhouettes and
-    rectangle edges in the image and, for ``path`` / ``direct``, of occluding spheres and
-    rectangles seen from the first shading point (box filter, perspective camera). The image
-    is identical; only derivatives change (docs/render_gradients.md, "Visibility").
+    silhouettes) or ``"edge"``: edge sampling (Li et al. 2018) of sphere silhouettes and the
+    edges of rectangles and triangle meshes in the image and, for ``path`` / ``direct``, of the
+    same occluders seen from the first shading point (box filter, perspective camera). The
+    image is identical; only derivatives change (docs/render_gradients.md, "Visibility").
     """
     if accel is not None:
         scene = scene.with_accel(accel)
