@@ -2,9 +2,11 @@
 
     python -m experiments.visibility_bias [--size 16] [--keys 16] [--spp 32] [--h 0.05]
                                          [--integrator direct] [--max-depth 3]
-                                         [--strategy mis] [--out FILE]
+                                         [--strategy mis] [--occluder sphere|mesh]
+                                         [--out FILE]
 
-Scene: a diffuse sphere moves sideways (parameter: its centre's x) in front of an area light
+Scene: a diffuse sphere (or, ``--occluder mesh``, an 80-triangle icosphere) moves sideways
+(parameter: its centre's x, or every vertex's x) in front of an area light
 that faces the camera and lights a diffuse floor, plus a constant environment; the sphere's
 silhouette crosses the light and the lit floor in the image, and its shadow edge moves on the
 floor. Loss: the mean of the image columns right of the sphere's projected centre (the image
@@ -28,8 +30,15 @@ import numpy as np
 
 from jaxgfx.render import Spheres, load_scene, render
 
+CENTER = [0.2, 0.6, 0.0]
 
-def scene_desc(size: int) -> dict:
+
+def scene_desc(size: int, occluder: str = "sphere") -> dict:
+    if occluder == "sphere":
+        occ = {"type": "sphere", "center": CENTER, "radius": 0.4, "material": "white"}
+    else:  # an icosphere mesh of 80 triangles (vertex normals: smooth shading)
+        gen = {"name": "icosphere", "level": 1, "radius": 0.4, "center": CENTER}
+        occ = {"type": "mesh", "generator": gen, "material": "white"}
     return {
         "camera": {
             "origin": [0, 1.2, 4.0],
@@ -39,7 +48,7 @@ def scene_desc(size: int) -> dict:
             "height": size,
         },
         "shapes": [
-            {"type": "sphere", "center": [0.2, 0.6, 0.0], "radius": 0.4, "material": "white"},
+            occ,
             {
                 "type": "rectangle",
                 "center": [0, 0, 0],
@@ -68,15 +77,19 @@ def scene_desc(size: int) -> dict:
     }
 
 
-def measure(size, keys, spp, h, integrator, max_depth=3, strategy="mis"):
-    scene = load_scene(scene_desc(size))
-    si = next(i for i, s in enumerate(scene.shapes) if isinstance(s, Spheres))
-    path = f"shapes.{si}.centers"
-    c0 = scene.get(path)
-    e = jnp.asarray([1.0, 0.0, 0.0], c0.dtype)
+def measure(size, keys, spp, h, integrator, max_depth=3, strategy="mis", occluder="sphere"):
     from jaxgfx.render.visibility import project
 
-    col = float(project(scene.camera, c0[0])[0][0])
+    scene = load_scene(scene_desc(size, occluder))
+    if occluder == "sphere":
+        si = next(i for i, s in enumerate(scene.shapes) if isinstance(s, Spheres))
+        path = f"shapes.{si}.centers"
+    else:
+        si = next(i for i, s in enumerate(scene.shapes) if hasattr(s, "vertices"))
+        path = f"shapes.{si}.vertices"
+    c0 = scene.get(path)
+    e = jnp.asarray([1.0, 0.0, 0.0], c0.dtype)
+    col = float(project(scene.camera, jnp.asarray(CENTER, c0.dtype))[0][0])
     wts = jnp.asarray(np.arange(size)[None, :] + 0.5 >= col, c0.dtype) * jnp.ones((size, 1))
 
     def loss(x, key, vis):
@@ -123,6 +136,7 @@ def measure(size, keys, spp, h, integrator, max_depth=3, strategy="mis"):
         "h": h,
         "integrator": integrator,
         "strategy": strategy,
+        "occluder": occluder,
         "max_depth": max_depth if integrator == "path" else 2,
         "ad_plain": ms(a[:, 0]),
         "ad_edge": ms(a[:, 1]),
@@ -142,9 +156,10 @@ def main(argv=None) -> int:
     p.add_argument("--integrator", default="direct")
     p.add_argument("--max-depth", type=int, default=3)
     p.add_argument("--strategy", default="mis")
+    p.add_argument("--occluder", default="sphere", choices=("sphere", "mesh"))
     p.add_argument("--out", default=None)
     a = p.parse_args(argv)
-    res = measure(a.size, a.keys, a.spp, a.h, a.integrator, a.max_depth, a.strategy)
+    res = measure(a.size, a.keys, a.spp, a.h, a.integrator, a.max_depth, a.strategy, a.occluder)
     txt = json.dumps(res, indent=1)
     print(txt)
     if a.out:
