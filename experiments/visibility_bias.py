@@ -5,7 +5,7 @@
                                          [--strategy mis] [--occluder sphere|mesh]
                                          [--out FILE]
 
-Scene: a diffuse sphere (or, ``--occluder mesh``, an 80-triangle icosphere) moves sideways
+Scene: a diffuse sphere (or, ``--occluder mesh``, a 20-triangle icosahedron) moves sideways
 (parameter: its centre's x, or every vertex's x) in front of an area light
 that faces the camera and lights a diffuse floor, plus a constant environment; the sphere's
 silhouette crosses the light and the lit floor in the image, and its shadow edge moves on the
@@ -36,8 +36,8 @@ CENTER = [0.2, 0.6, 0.0]
 def scene_desc(size: int, occluder: str = "sphere") -> dict:
     if occluder == "sphere":
         occ = {"type": "sphere", "center": CENTER, "radius": 0.4, "material": "white"}
-    else:  # an icosphere mesh of 80 triangles (vertex normals: smooth shading)
-        gen = {"name": "icosphere", "level": 1, "radius": 0.4, "center": CENTER}
+    else:  # an icosahedron mesh (20 triangles; below the BVH threshold of load_scene)
+        gen = {"name": "icosphere", "level": 0, "radius": 0.4, "center": CENTER}
         occ = {"type": "mesh", "generator": gen, "material": "white"}
     return {
         "camera": {
