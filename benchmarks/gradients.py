@@ -19,7 +19,8 @@
    the scene as arguments; one warm-up call each, then the medians of ``repeat`` rounds that
    call both in turn, so load changes on a shared machine affect both alike).
 5. Visibility: d(image mean)/d(x of an occluder sphere between a diffuse floor and an area
-   light) by AD and by central FD of the same key: AD misses the moving shadow boundary.
+   light) by AD and by central FD of the same key: plain AD misses the moving shadow boundary;
+   ``visibility="edge"`` adds it (edge sampling).
 
 Prints one JSON document (progress to stderr).
 """
@@ -218,13 +219,17 @@ def visibility(*, spp, n):
     scene = load_scene(desc)
     c0 = scene.get("shapes.0.centers")
 
-    def loss(x, k):
-        s = scene.replace("shapes.0.centers", c0.at[0, 0].set(x))
-        return jnp.mean(render(s, k, spp=spp, integrator="direct"))
+    out = {}
+    for vis in (None, "edge"):  # plain AD, then edge sampling (docs/render_gradients.md)
 
-    st = grad_stats(loss, jnp.float32(0.2), jax.random.key(2), n, fd_step=0.02)
-    out = {k: float(v) for k, v in st._asdict().items() if v is not None and np.ndim(v) == 0}
-    _log("visibility", out)
+        def loss(x, k, vis=vis):
+            s = scene.replace("shapes.0.centers", c0.at[0, 0].set(x))
+            return jnp.mean(render(s, k, spp=spp, integrator="direct", visibility=vis))
+
+        st = grad_stats(loss, jnp.float32(0.2), jax.random.key(2), n, fd_step=0.02)
+        res = {k: float(v) for k, v in st._asdict().items() if v is not None and np.ndim(v) == 0}
+        out["plain" if vis is None else vis] = res
+        _log("visibility", vis, res)
     return out
 
 

@@ -28,6 +28,7 @@ def render(
     strategy: str | None = None,
     sampling: str | None = None,
     accel: str | None = None,
+    visibility: str | None = None,
 ):
     """Render ``scene`` to an ``(H, W, 3)`` float32 linear radiance image.
 
@@ -51,6 +52,11 @@ def render(
     ``"warp"`` | ``"jax"`` (docs/render_backends.md); ``None`` (default) keeps the scene's
     (``load_scene(..., accel="auto")``). A different backend is built on the host (cached per
     mesh), so pass ``accel`` outside ``jax.jit`` or use :meth:`Scene.with_accel` once.
+    ``visibility``: ``None`` (default: plain AD, which misses the boundary term of moving
+    silhouettes) or ``"edge"``: edge sampling (Li et al. 2018) of sphere silhouettes and the
+    edges of rectangles and triangle meshes in the image and, for ``path`` / ``direct``, of the
+    same occluders seen from the first shading point (box filter, perspective camera). The
+    image is identical; only derivatives change (docs/render_gradients.md, "Visibility").
     """
     if accel is not None:
         scene = scene.with_accel(accel)
@@ -63,6 +69,11 @@ def render(
         sampling=sampling,
         caller="render",
     )
+    if visibility is not None:
+        from jaxgfx.render.visibility import check_visibility, render_with_edges
+
+        check_visibility(visibility, scene, integ)
+        return render_with_edges(scene, key, spp, integ)
     return _render(scene, key, spp, integ)
 
 

@@ -116,13 +116,13 @@ def path_radiance(
             C.dispatch(scene, mat, lambda m: m.sample(wo, ub[..., 3], ub[..., 4:6]), uv=hit.uv)
         )
         if detached:
-            wi_s, weight = C.detach_bsdf_sample(scene, mat, wo, s, hit.uv)
+            # world-space detached direction (Mitsuba 3 prb): it does not turn with the normal
+            wi_world, weight = C.detach_bsdf_sample(scene, mat, wo, s, hit.uv, frame=frame)
             # a zero weight (e.g. reflectance 0) still has a derivative: keep the path
             alive = alive & (s.pdf > 0)
         else:
-            wi_s, weight = s.wi, s.weight
+            wi_world, weight = C.to_world(frame, s.wi), s.weight
             alive = alive & (s.pdf > 0) & (max_last(s.weight) > 0)
-        wi_world = C.to_world(frame, wi_s)
         beta = beta * weight
         o_next, d_next = C.spawn_ray(hit.p, ng, wi_world)
         # Russian roulette (Mitsuba: after rr_depth bounces, survival = min(max(beta), 0.95))
