@@ -15,7 +15,6 @@ means, their standard errors and the ratio, for ``integrator`` direct and path.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 
@@ -24,6 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 import yaml
 
+from experiments._common import emit_json, log
 from jaxgfx.optim import decorrelated_loss, l2_loss
 from jaxgfx.render import load_scene, render
 
@@ -89,13 +89,9 @@ def main(argv=None) -> int:
                 "fd_se": se(fd),
                 "ratio_ad_over_fd": float(ad.mean() / fd.mean()),
             }
-            print(integ, alpha, res[str(alpha)], file=sys.stderr, flush=True)
+            log(integ, alpha, res[str(alpha)])
         out[integ] = res
-    text = json.dumps(out, indent=1)
-    print(text)
-    if a.out:
-        with open(a.out, "w") as f:
-            f.write(text)
+    emit_json(out, a.out)
     return 0
 
 

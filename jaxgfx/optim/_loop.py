@@ -402,7 +402,8 @@ def fit_least_squares(
         raise FloatingPointError(f"fit_least_squares: the residuals are not finite (loss = {l1})")
     if result == optx.RESULTS.successful:
         reason = "converged"
-    elif result == optx.RESULTS.max_steps_reached:
+    elif result in (optx.RESULTS.max_steps_reached, optx.RESULTS.nonlinear_max_steps_reached):
+        # optimistix's least-squares solvers report the nonlinear variant
         reason = "max_steps"
     else:
         try:

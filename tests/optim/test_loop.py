@@ -156,6 +156,21 @@ def test_linear_least_squares_matches_lstsq(x64, solver):
     np.testing.assert_allclose(res.loss[1], 0.5 * np.sum((a @ ref - y) ** 2), rtol=1e-10)
 
 
+@pytest.mark.parametrize("solver", ["lm", "gauss_newton"])
+def test_least_squares_out_of_steps_reports_max_steps(x64, solver):
+    # Rosenbrock residuals from (-1.2, 1): no solver reaches the minimum (1, 1) in 2 steps;
+    # the documented stop reason is "max_steps" (optimistix calls it
+    # nonlinear_max_steps_reached), not "failed"
+    res = fit_least_squares(
+        lambda p: jnp.stack([10 * (p[1] - p[0] ** 2), 1 - p[0]]),
+        np.array([-1.2, 1.0]),
+        solver=solver,
+        max_steps=2,
+    )
+    assert res.stop_reason == "max_steps"
+    assert np.max(np.abs(np.asarray(res.params) - 1.0)) > 1e-3
+
+
 def _traced_linear_residuals(p, args):
     _TRACES.append(1)  # runs once per trace, not per call
     return args[0] @ p - args[1]
