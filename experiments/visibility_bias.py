@@ -20,7 +20,6 @@ units). Prints JSON: means, standard errors over the keys, and the paired AD −
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 
@@ -28,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from experiments._common import emit_json
 from jaxgfx.render import Spheres, load_scene, render
 
 CENTER = [0.2, 0.6, 0.0]
@@ -160,11 +160,7 @@ def main(argv=None) -> int:
     p.add_argument("--out", default=None)
     a = p.parse_args(argv)
     res = measure(a.size, a.keys, a.spp, a.h, a.integrator, a.max_depth, a.strategy, a.occluder)
-    txt = json.dumps(res, indent=1)
-    print(txt)
-    if a.out:
-        with open(a.out, "w") as f:
-            f.write(txt + "\n")
+    emit_json(res, a.out)
     return 0
 
 
