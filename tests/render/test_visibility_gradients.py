@@ -29,6 +29,8 @@ import pytest
 from jaxgfx.render import Spheres, load_scene, render
 from jaxgfx.render.visibility import project, tangent_circle
 
+from ._scenes import rectangle
+
 W = 8
 FOV = 30.0
 
@@ -223,13 +225,7 @@ def _shadow_scene():
             },
             "shapes": [
                 {"type": "sphere", "center": [0, _H, 0], "radius": _R, "material": "white"},
-                {
-                    "type": "rectangle",
-                    "center": [0, 0, 0],
-                    "normal": [0, 1, 0],
-                    "size": [4, 4],
-                    "material": "floor",
-                },
+                rectangle(size=(4, 4), material="floor"),
             ],
             "materials": {
                 "white": {"type": "diffuse", "reflectance": 0.5},
@@ -371,13 +367,7 @@ def test_shadow_of_a_square_matches_form_factor():
                 "size": [1.0, 1.0],
                 "material": "white",
             },
-            {
-                "type": "rectangle",
-                "center": [0, 0, 0],
-                "normal": [0, 1, 0],
-                "size": [4, 4],
-                "material": "floor",
-            },
+            rectangle(size=(4, 4), material="floor"),
         ],
         "materials": {
             "white": {"type": "diffuse", "reflectance": 0.5},
