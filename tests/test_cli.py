@@ -16,6 +16,9 @@ def png(tmp_path, rng):
     return path, img.astype(np.float32) / 255.0
 
 
+# issue 9: ~4 s of a loaded 2-core default run; the other CLI subcommands' tests stay in the
+# default run
+@pytest.mark.slow
 def test_filter_gaussian_png_matches_library(png, tmp_path, capsys):
     src, img = png
     dst = tmp_path / "out" / "blur.exr"

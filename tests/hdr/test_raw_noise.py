@@ -71,6 +71,9 @@ def test_bracket_noise_gain_read_ratios_linearity(dng_bracket):
     )
 
 
+# issue 9: ~3 s of a loaded 2-core default run; the gain/read/ratio and linearity tests stay in
+# the default run
+@pytest.mark.slow
 def test_bracket_noise_within_standard_errors_of_truth():
     """Poisson-Gaussian frames (no CFA, no rounding) with known gain and read variance: the
     bracket estimate lies within 4 reported standard errors of the truth, and its gain s.e.

@@ -402,6 +402,9 @@ def test_two_phase_scene_intersection_matches_per_shape_merge(key):
     np.testing.assert_array_equal(occ, ref.valid & (ref.t < 5.0))
 
 
+# issue 9: ~4 s of a loaded 2-core default run; an internal gather helper, exercised by every
+# render
+@pytest.mark.slow
 def test_take_rows_matches_gather(key):
     for n in (1, 3, 8, 9):
         arr = jax.random.normal(key, (n, 3))

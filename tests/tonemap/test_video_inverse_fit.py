@@ -19,6 +19,9 @@ def blinking_sequence(T=24, H=16, W=16, period=4, peak=1e4):
     return frames, mask
 
 
+# issue 9: ~3 s of a loaded 2-core default run; the EMA closed form of the adaptation stays in the
+# default run
+@pytest.mark.slow
 def test_smooth_adaptation_reduces_flicker():
     frames, mask = blinking_sequence()
     per_frame = tm.tonemap_Reinhard2002(frames, encode="linear")
