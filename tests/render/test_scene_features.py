@@ -125,13 +125,13 @@ TEX_IMG = np.array([[[0.9, 0.5, 0.1], [0.2, 0.4, 0.8]], [[0.6, 0.6, 0.6], [0.3, 
 
 
 @eqx.filter_jit
-def _img_and_grad(scene, path, value, w):
+def _img_and_grad(scene, path, value, w, key=KEY):
     """``direct`` image (4 spp) of ``scene`` with parameter ``path`` set to ``value``, and the
     gradient of ``sum_c w_c mean(image_c)`` w.r.t. ``value``, in ONE compiled program (the
     finite differences reuse it, so each scene structure compiles once)."""
 
     def f(v):
-        img = render(scene.replace(path, v), KEY, spp=4, integrator="direct")
+        img = render(scene.replace(path, v), key, spp=4, integrator="direct")
         return jnp.sum(jnp.mean(img, (0, 1)) * w), img
 
     (_, img), g = jax.value_and_grad(f, has_aux=True)(value)
@@ -250,13 +250,13 @@ def test_sdf_sphere_renders_like_analytic_sphere():
     assert close.mean() > 0.95
 
 
-def _radius_grad_fd(kind, h=0.01):
+def _radius_grad_fd(kind, h=0.01, key=KEY):
     # zoomed in: every pixel sees the sphere, so there is no silhouette (whose motion AD of a
     # path tracer without edge sampling does not see) and d mean / d radius is smooth
     s = _sphere_scene(kind, origin=(0, 0, 2.2), fov=20)
-    _, g = _img_and_grad(s, _radius(kind), jnp.float32(1.0), W3)
-    hi = _weighted(_img_and_grad(s, _radius(kind), jnp.float32(1.0 + h), W3)[0], W3)
-    lo = _weighted(_img_and_grad(s, _radius(kind), jnp.float32(1.0 - h), W3)[0], W3)
+    _, g = _img_and_grad(s, _radius(kind), jnp.float32(1.0), W3, key)
+    hi = _weighted(_img_and_grad(s, _radius(kind), jnp.float32(1.0 + h), W3, key)[0], W3)
+    lo = _weighted(_img_and_grad(s, _radius(kind), jnp.float32(1.0 - h), W3, key)[0], W3)
     return float(g), (hi - lo) / (2 * h)
 
 
@@ -264,12 +264,23 @@ def _radius_grad_fd(kind, h=0.01):
 # (test_sdf_hit_gradients_float64, test_sdf.py)
 @pytest.mark.slow
 def test_sdf_radius_gradient_matches_finite_differences():
-    """Implicit differentiation of the sphere-traced hit vs central differences (same key)."""
-    g, fd = _radius_grad_fd("sdf")
-    assert np.isfinite(g) and abs(g) > 1e-2
-    # measured |g / fd - 1| = 0.30 % at h = 0.01 and 0.06 % at h = 0.005: the central
-    # difference's O(h^2) error, so AD is right; rtol 1 % is 3x the measured error
-    np.testing.assert_allclose(g, fd, rtol=0.01)
+    """Implicit differentiation of the sphere-traced hit vs central differences, 8 keys.
+
+    A statistical check, not a per-key identity: BSDF-sampled directions are detached in world
+    space (Mitsuba 3 prb; docs/render_gradients.md), so AD differentiates a realisation whose
+    directions stay fixed as the radius turns the normal, while same-key FD re-renders with
+    directions that turn with it. Both estimate the derivative of the expected image; per key
+    they differ by Monte Carlo noise (1.96 % at this key and 4 spp). Tolerance: 4 standard
+    errors of the paired difference over the keys plus 0.5 % of |FD| for the central
+    difference's O(h^2) error (measured 0.3 % at h = 0.01 when AD and FD shared directions).
+    Measured: AD 0.06240, FD 0.06274, difference -0.00034 +- 0.00060 (0.6 se)."""
+    pairs = np.array([_radius_grad_fd("sdf", key=jax.random.key(100 + i)) for i in range(8)])
+    g, fd = pairs[:, 0], pairs[:, 1]
+    assert np.all(np.isfinite(g)) and abs(g.mean()) > 1e-2
+    d = g - fd
+    se = d.std(ddof=1) / np.sqrt(len(d))
+    assert 4 * se < 0.05 * abs(fd.mean()), (se, fd.mean())  # the check resolves a 5 % error
+    assert abs(d.mean()) < 4 * se + 0.005 * abs(fd.mean()), (d.mean(), se, fd.mean())
 
 
 @pytest.mark.slow
