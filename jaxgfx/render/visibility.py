@@ -228,6 +228,30 @@ def _sub_integrator(integrator):
     )
 
 
+def _boundary_term(valid, jump, weight, n, x):
+    """Per sample ``sg(jump · weight) · (sg(n) · x(θ))``, 0 where not ``valid``: its value is
+    meaningless, its derivative is the boundary integrand (the jump across the edge times the
+    normal speed ``n · ∂x/∂θ`` of the attached boundary point ``x``), ``(..., C)``."""
+    sg = jax.lax.stop_gradient
+    v = valid[..., None]
+    wgt = jnp.where(v, jump * weight[..., None], 0.0)
+    vn = sum_last(jnp.where(v, sg(n) * x, 0.0))
+    return sg(wgt) * vn[..., None]
+
+
+def _in_image(x0, w, h):
+    """Image points ``(M, 2)`` (pixel units) inside the ``w × h`` image."""
+    return (x0[:, 0] >= 0) & (x0[:, 0] < w) & (x0[:, 1] >= 0) & (x0[:, 1] < h)
+
+
+def _splat(x0, contrib, w, h, dtype):
+    """Sum the samples' ``contrib (M, C)`` into the ``(H*W, C)`` pixels their points ``x0`` fall
+    in (box filter)."""
+    ix = jnp.clip(jnp.floor(x0[:, 0]).astype(jnp.int32), 0, w - 1)
+    iy = jnp.clip(jnp.floor(x0[:, 1]).astype(jnp.int32), 0, h - 1)
+    return jnp.zeros((w * h, contrib.shape[-1]), dtype).at[iy * w + ix].add(contrib)
+
+
 def _primary_pass(scene, scene_sg, key, integrator, spheres):
     """Boundary image ``(H*W, C)`` of one pass of ``H*W`` silhouette samples (box filter)."""
     centers, radii, _, _ = spheres
@@ -271,15 +295,9 @@ def _primary_pass(scene, scene_sg, key, integrator, spheres):
         None if uu is None else jnp.concatenate([uu, uu]),
     )
     dl = both[:m] - both[m:]
-    inside = (x0[:, 0] >= 0) & (x0[:, 0] < w) & (x0[:, 1] >= 0) & (x0[:, 1] < h)
-    valid = ok & (z > 0) & inside & jnp.all(jnp.isfinite(dl), -1) & (length > 0)
-    wgt = dl * (length * (2 * math.pi * k / m))[:, None]
-    wgt = jnp.where(valid[:, None], wgt, 0.0)
-    vn = sum_last(jnp.where(valid[:, None], sg(n) * x, 0.0))  # ∂vn/∂θ: normal velocity
-    ix = jnp.clip(jnp.floor(x0[:, 0]).astype(jnp.int32), 0, w - 1)
-    iy = jnp.clip(jnp.floor(x0[:, 1]).astype(jnp.int32), 0, h - 1)
-    contrib = sg(wgt) * vn[:, None]
-    return jnp.zeros((m, contrib.shape[-1]), dtype).at[iy * w + ix].add(contrib)
+    valid = ok & (z > 0) & _in_image(x0, w, h) & jnp.all(jnp.isfinite(dl), -1) & (length > 0)
+    contrib = _boundary_term(valid, dl, length * (2 * math.pi * k / m), n, x)
+    return _splat(x0, contrib, w, h, dtype)
 
 
 def _primary_segments_pass(scene, scene_sg, key, integrator, segments):
@@ -316,15 +334,10 @@ def _primary_segments_pass(scene, scene_sg, key, integrator, segments):
         uu = jnp.concatenate([uu, uu])
     both = integrator(scene_sg, o.astype(dtype), d.astype(dtype), uu)
     dl = both[:m] - both[m:]
-    inside = (x0[:, 0] >= 0) & (x0[:, 0] < w) & (x0[:, 1] >= 0) & (x0[:, 1] < h)
-    valid = (z > 0) & inside & jnp.all(jnp.isfinite(dl), -1) & (length > 0)
+    valid = (z > 0) & _in_image(x0, w, h) & jnp.all(jnp.isfinite(dl), -1) & (length > 0)
     valid = valid & jnp.isfinite(length)
-    wgt = jnp.where(valid[:, None], dl * (length * ew[kk] * per)[:, None], 0.0)
-    vn = sum_last(jnp.where(valid[:, None], sg(n) * x, 0.0))
-    ix = jnp.clip(jnp.floor(x0[:, 0]).astype(jnp.int32), 0, w - 1)
-    iy = jnp.clip(jnp.floor(x0[:, 1]).astype(jnp.int32), 0, h - 1)
-    contrib = sg(wgt) * vn[:, None]
-    return jnp.zeros((m, contrib.shape[-1]), dtype).at[iy * w + ix].add(contrib)
+    contrib = _boundary_term(valid, dl, length * ew[kk] * per, n, x)
+    return _splat(x0, contrib, w, h, dtype)
 
 
 def _deal(m: int, e: int, u_off, u_t):
@@ -410,9 +423,7 @@ def _shadow_segments_pass(scene, scene_sg, key, integrator, segments):
     dh = _jump(scene_sg, jax.random.fold_in(key, 1), integrator, vertex, w_minus, w_plus)
     own = (hit.shape_id == jnp.asarray(sids)[kk]) & (hit.prim_id == jnp.asarray(pids)[kk])
     valid = hit.valid & ~own & jnp.all(jnp.isfinite(dh), -1) & (length > 0)
-    wgt = jnp.where(valid[..., None], dh * (length * ew[kk] * e)[..., None], 0.0)
-    vn = sum_last(jnp.where(valid[..., None], sg(n) * om, 0.0))
-    return sg(wgt) * vn[..., None]
+    return _boundary_term(valid, dh, length * ew[kk] * e, n, om)
 
 
 def _shadow_pass(scene, scene_sg, key, integrator, spheres):
@@ -446,9 +457,7 @@ def _shadow_pass(scene, scene_sg, key, integrator, spheres):
     dh = _jump(scene_sg, jax.random.fold_in(key, 1), integrator, vertex, w_in, w_out)
     own = (hit.shape_id == jnp.asarray(sids)[kk]) & (hit.prim_id == jnp.asarray(pids)[kk])
     valid = hit.valid & ok & ~own & jnp.all(jnp.isfinite(dh), -1) & (length > 0)
-    wgt = jnp.where(valid[..., None], dh * (length * (2 * math.pi * k))[..., None], 0.0)
-    vn = sum_last(jnp.where(valid[..., None], sg(n) * om, 0.0))
-    return sg(wgt) * vn[..., None]
+    return _boundary_term(valid, dh, length * (2 * math.pi * k), n, om)
 
 
 def edge_boundary(scene, key, integrator, *, spp: int):

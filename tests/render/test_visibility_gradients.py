@@ -29,7 +29,7 @@ import pytest
 from jaxgfx.render import Spheres, load_scene, render
 from jaxgfx.render.visibility import project, tangent_circle
 
-from ._scenes import rectangle
+from ._scenes import camera, rectangle
 
 W = 8
 FOV = 30.0
@@ -209,20 +209,18 @@ def test_bad_options():
 _RHO, _L, _R, _H = 0.5, 1.0, 0.5, 2.0
 
 
+def _down_camera():
+    """0.5 above the floor point, looking straight down, 2° field of view, 2 x 2 pixels."""
+    return camera([0, 0.5, 0], [0, 0, 0], up=[0, 0, -1], fov=2, width=2)
+
+
 def _shadow_scene():
     """Camera 0.5 above the floor looking straight down (2° field of view) under a sphere of
     radius 0.5 centred 2 above the floor point; constant environment 1; a small area light above
     the sphere that the sphere hides completely from the floor point (hard case)."""
     return load_scene(
         {
-            "camera": {
-                "origin": [0, 0.5, 0],
-                "target": [0, 0, 0],
-                "up": [0, 0, -1],
-                "fov": 2,
-                "width": 2,
-                "height": 2,
-            },
+            "camera": _down_camera(),
             "shapes": [
                 {"type": "sphere", "center": [0, _H, 0], "radius": _R, "material": "white"},
                 rectangle(size=(4, 4), material="floor"),
@@ -351,14 +349,7 @@ def test_shadow_of_a_square_matches_form_factor():
     """Floor point below a square occluder (side 1, height 2) under a constant environment:
     radiance ρ L (1 - F(s, h)); derivatives of the closed form w.r.t. s and h."""
     desc = {
-        "camera": {
-            "origin": [0, 0.5, 0],
-            "target": [0, 0, 0],
-            "up": [0, 0, -1],
-            "fov": 2,
-            "width": 2,
-            "height": 2,
-        },
+        "camera": _down_camera(),
         "shapes": [
             {
                 "type": "rectangle",
