@@ -63,31 +63,13 @@ def primary():
     with edge sampling; every default test below calls it with other parameter values."""
     scene = load_scene(_primary_desc())
 
-    def mean(r, c, key, vis):
+    def image(r, c, key, vis):
         sc = scene.replace("shapes.0.radii", r).replace("shapes.0.centers", c)
-        img = render(sc, key, spp=4, integrator="path", max_depth=1, visibility=vis)
-        return img.mean()
+        return render(sc, key, spp=4, integrator="path", max_depth=1, visibility=vis)
 
-    vg = jax.jit(jax.value_and_grad(lambda r, c, k: mean(r, c, k, "edge"), argnums=(0, 1)))
-    fwd = jax.jit(
-        lambda r, c, k: render(
-            scene.replace("shapes.0.radii", r).replace("shapes.0.centers", c),
-            k,
-            spp=4,
-            integrator="path",
-            max_depth=1,
-        )
-    )
-    fwd_edge = jax.jit(
-        lambda r, c, k: render(
-            scene.replace("shapes.0.radii", r).replace("shapes.0.centers", c),
-            k,
-            spp=4,
-            integrator="path",
-            max_depth=1,
-            visibility="edge",
-        )
-    )
+    vg = jax.jit(jax.value_and_grad(lambda r, c, k: image(r, c, k, "edge").mean(), argnums=(0, 1)))
+    fwd = jax.jit(lambda r, c, k: image(r, c, k, None))
+    fwd_edge = jax.jit(lambda r, c, k: image(r, c, k, "edge"))
     return scene, vg, fwd, fwd_edge
 
 
