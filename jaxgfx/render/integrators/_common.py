@@ -60,7 +60,7 @@ def _replace_grad_jvp(primals, tangents):
     return x, jnp.broadcast_to(ty, jnp.shape(x)).astype(jnp.result_type(x))
 
 
-def detach_bsdf_sample(scene, mat, wo, s, uv, frame=None):
+def detach_bsdf_sample(scene, mat, wo, s, uv, frame):
     """Detached BSDF sample ``(wi, weight)`` for the next path segment.
 
     Non-delta lobes: the direction carries no derivative and the weight has the value of the
@@ -71,24 +71,21 @@ def detach_bsdf_sample(scene, mat, wo, s, uv, frame=None):
     parameters, e.g. refraction through ``eta``) and weight; a discrete lobe choice is made
     unbiased inside the BSDF (``SmoothDielectric``: ``R / stop_gradient(R)``).
 
-    ``frame`` (the shading frame, optional): detach the direction in *world* space, as Mitsuba 3
-    ``prb`` does, and return it in world coordinates. Without it the local direction is detached
-    and ``to_world(frame, wi)`` still rotates with the frame, i.e. with shape parameters: the
-    sampled rays then sweep across emitter outlines and silhouettes as the surface normal turns,
-    a boundary term no estimator adds (docs/render_gradients.md, "Visibility"). Values are the
-    same either way; derivatives w.r.t. material parameters differ by rounding only.
+    ``frame`` (the shading frame): the direction is detached in *world* space, as Mitsuba 3
+    ``prb`` does, and returned in world coordinates. Detaching the local direction instead would
+    leave ``to_world(frame, wi)`` rotating with the frame, i.e. with shape parameters: the
+    sampled rays would sweep across emitter outlines and silhouettes as the surface normal
+    turns, a boundary term no estimator adds (docs/render_gradients.md, "Visibility"). Values
+    are the same either way; derivatives w.r.t. material parameters differ by rounding only.
     """
     sg = jax.lax.stop_gradient
-    if frame is None:
-        wi_d = sg(s.wi)
-        wi_eval = wi_d
-    else:
-        wi_d = sg(to_world(frame, s.wi))
-        wi_eval = to_local(frame, wi_d)
+    wi_w = to_world(frame, s.wi)
+    wi_d = sg(wi_w)
+    wi_eval = to_local(frame, wi_d)
     f = dispatch(scene, mat, lambda m: m.eval(wo, wi_eval), uv=uv)
     y = safe_div(f, sg(s.pdf)[..., None])
     delta = s.is_delta[..., None]
-    wi = jnp.where(delta, s.wi if frame is None else to_world(frame, s.wi), wi_d)
+    wi = jnp.where(delta, wi_w, wi_d)
     weight = jnp.where(delta, s.weight, replace_grad(s.weight, y))
     return wi, weight
 
