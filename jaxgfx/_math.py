@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 
 import jax
+import jax.custom_batching
 import jax.numpy as jnp
 
 __all__ = [
@@ -79,15 +80,38 @@ def fusion_barrier(tree):
     (measured 5x slower scene intersection, 4x longer compiles). ``lax.optimization_barrier``
     is expanded away before fusion on CPU, so this wraps the values in a ``lax.cond`` on a
     runtime predicate (always true) whose two branches are both the identity. Differentiable,
-    jittable and vmappable (under ``vmap`` with batched values it becomes a select: correct, no
-    barrier).
+    jittable and vmappable.
+
+    Under ``jax.vmap`` the barrier stays a barrier: the predicate is read from ONE element of
+    the batch (:func:`_one_of_batch`), so it is unbatched and the ``cond`` keeps its branches
+    (a batched predicate would turn it into a ``select``, no barrier: ``render`` vmapped over
+    keys was measured 4-17x slower per key than unbatched, docs/performance.md).
     """
     leaves = [x for x in jax.tree_util.tree_leaves(tree) if x.size > 0]
     if not leaves:
         return tree
     first = leaves[0].reshape(-1)[0].astype(jnp.float32)
-    pred = jax.lax.bitcast_convert_type(first, jnp.int32) != 0x7FBADBAD  # a NaN payload
+    # int32 bits carry no tangent, so no derivative ever passes through the custom_vmap
+    bits = _one_of_batch(jax.lax.bitcast_convert_type(jax.lax.stop_gradient(first), jnp.int32))
+    pred = bits != 0x7FBADBAD  # a NaN payload
     return jax.lax.cond(pred, lambda t: t, lambda t: jax.tree_util.tree_map(_same, t), tree)
+
+
+@jax.custom_batching.custom_vmap
+def _one_of_batch(x):
+    """Identity on an array; under ``vmap``, its first element along the batch axis, unbatched.
+
+    Only for values whose every element gives the same result downstream (the always-true
+    predicate of :func:`fusion_barrier`): it keeps such a predicate out of the batch.
+    """
+    return x
+
+
+@_one_of_batch.def_vmap
+def _one_of_batch_vmap(axis_size, in_batched, x):
+    del axis_size
+    # recurse: under nested vmaps each level drops its own batch axis
+    return _one_of_batch(x[0] if in_batched else x), False
 
 
 def _same(x):
