@@ -174,3 +174,32 @@ def test_fusion_barrier_is_identity_with_gradients(x64):
     check_grads(lambda v: (_math.fusion_barrier(v * v) ** 2).sum(), (x,), order=2)
     g = jax.vmap(lambda v: _math.fusion_barrier(v).sum())(jnp.ones((4, 3)))
     np.testing.assert_array_equal(g, [3.0] * 4)
+
+
+def test_fusion_barrier_stays_a_cond_under_vmap(x64):
+    """A batched predicate would turn the cond into a select (no barrier: render vmapped over
+    keys was 8-27x slower per key, docs/performance.md); the predicate is read from one element
+    of the batch instead. Values and derivatives through vmap, nested vmap, grad and jacfwd
+    against the closed form of f(v) = sum(barrier(v * v)^2) = sum(v^4): df/dv = 4 v^3."""
+
+    def f(v):
+        return (_math.fusion_barrier({"a": v * v, "b": v > 0})["a"] ** 2).sum()
+
+    def prims(fn, *args):
+        return [e.primitive.name for e in jax.make_jaxpr(fn)(*args).jaxpr.eqns]
+
+    x = jnp.asarray(np.random.default_rng(0).normal(size=(2, 4, 3)))
+    assert "cond" in prims(jax.vmap(f), x[0])
+    assert "cond" in prims(jax.vmap(jax.vmap(f)), x)
+    assert "cond" in prims(jax.vmap(jax.grad(f)), x[0])
+    assert "select_n" not in prims(jax.vmap(jax.vmap(f)), x)
+    np.testing.assert_allclose(jax.jit(jax.vmap(jax.vmap(f)))(x), (x**4).sum(-1), rtol=1e-12)
+    np.testing.assert_allclose(jax.jit(jax.vmap(jax.vmap(jax.grad(f))))(x), 4 * x**3, rtol=1e-12)
+    np.testing.assert_allclose(
+        jax.grad(lambda x: jax.vmap(jax.vmap(f))(x).sum())(x), 4 * x**3, rtol=1e-12
+    )
+    np.testing.assert_allclose(jax.vmap(jax.jacfwd(f))(x[0]), 4 * x[0] ** 3, rtol=1e-12)
+    # the barrier's sentinel inside a batch: still the identity on every element
+    sentinel = jax.lax.bitcast_convert_type(jnp.int32(0x7FBADBAD), jnp.float32)
+    out = jax.vmap(_math.fusion_barrier)(jnp.stack([jnp.stack([sentinel, 1.0]), jnp.ones(2, jnp.float32)]))
+    np.testing.assert_array_equal(jnp.isnan(out), [[True, False], [False, False]])

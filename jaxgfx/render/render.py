@@ -47,7 +47,11 @@ def render(
     ``max_depth`` follows Mitsuba 3 (1: emitters only, 2: direct light, 3: one indirect bounce).
     ``key`` is a JAX PRNG key; the same key gives the same image. Differentiable w.r.t. every
     float leaf of ``scene`` (see ``Scene.replace``); jittable (``spp`` and the integrator are
-    static).
+    static). Batches of keys (independent estimates, error bars):
+    ``jax.jit(jax.vmap(lambda k: render(scene, k, spp=16)))(keys)`` returns ``(K, H, W, 3)``,
+    bit-identical to rendering each key alone and no slower per key (also under ``jax.grad``;
+    docs/performance.md, "Batches of keys"); ``lax.map`` over the keys holds one key's
+    intermediates at a time.
     ``accel``: traversal backend of the scene's triangle meshes, ``"auto"`` | ``"embree"`` |
     ``"warp"`` | ``"jax"`` (docs/render_backends.md); ``None`` (default) keeps the scene's
     (``load_scene(..., accel="auto")``). A different backend is built on the host (cached per
