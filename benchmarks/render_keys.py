@@ -49,7 +49,8 @@ def _log(*a):
 def _max_diff(a, b):
     a = jax.tree_util.tree_leaves(a)
     b = jax.tree_util.tree_leaves(b)
-    return max(float(np.max(np.abs(np.asarray(x) - np.asarray(y)))) for x, y in zip(a, b))
+    pairs = zip(a, b, strict=True)
+    return max(float(np.max(np.abs(np.asarray(x) - np.asarray(y)))) for x, y in pairs)
 
 
 def bench(scene, keys, integrator, spp, repeat):

@@ -201,5 +201,6 @@ def test_fusion_barrier_stays_a_cond_under_vmap(x64):
     np.testing.assert_allclose(jax.vmap(jax.jacfwd(f))(x[0]), 4 * x[0] ** 3, rtol=1e-12)
     # the barrier's sentinel inside a batch: still the identity on every element
     sentinel = jax.lax.bitcast_convert_type(jnp.int32(0x7FBADBAD), jnp.float32)
-    out = jax.vmap(_math.fusion_barrier)(jnp.stack([jnp.stack([sentinel, 1.0]), jnp.ones(2, jnp.float32)]))
+    batch = jnp.stack([jnp.stack([sentinel, 1.0]), jnp.ones(2, jnp.float32)])
+    out = jax.vmap(_math.fusion_barrier)(batch)
     np.testing.assert_array_equal(jnp.isnan(out), [[True, False], [False, False]])
