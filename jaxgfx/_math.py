@@ -85,7 +85,7 @@ def fusion_barrier(tree):
     Under ``jax.vmap`` the barrier stays a barrier: the predicate is read from ONE element of
     the batch (:func:`_one_of_batch`), so it is unbatched and the ``cond`` keeps its branches
     (a batched predicate would turn it into a ``select``, no barrier: ``render`` vmapped over
-    keys was measured 4-17x slower per key than unbatched, docs/performance.md).
+    keys was measured 7-31x slower per key than one key at a time, docs/performance.md).
     """
     leaves = [x for x in jax.tree_util.tree_leaves(tree) if x.size > 0]
     if not leaves:

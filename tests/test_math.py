@@ -178,7 +178,7 @@ def test_fusion_barrier_is_identity_with_gradients(x64):
 
 def test_fusion_barrier_stays_a_cond_under_vmap(x64):
     """A batched predicate would turn the cond into a select (no barrier: render vmapped over
-    keys was 8-27x slower per key, docs/performance.md); the predicate is read from one element
+    keys was 7-31x slower per key, docs/performance.md); the predicate is read from one element
     of the batch instead. Values and derivatives through vmap, nested vmap, grad and jacfwd
     against the closed form of f(v) = sum(barrier(v * v)^2) = sum(v^4): df/dv = 4 v^3."""
 

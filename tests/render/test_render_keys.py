@@ -1,7 +1,7 @@
 """``render`` batched over keys (``jax.vmap`` under ``jax.jit``) against the same renders one key
 at a time, values and gradients; and the structural property that kept the batch fast: the
 renderer's fusion barriers (``lax.cond`` on a runtime predicate, ``jaxgfx._math.fusion_barrier``)
-stay ``cond``s under ``vmap`` instead of becoming ``select``s (measured 27x slower per key before,
+stay ``cond``s under ``vmap`` instead of becoming ``select``s (measured 7-31x slower per key before,
 docs/performance.md "Batches of keys").
 """
 
@@ -85,7 +85,7 @@ def _count(jaxpr, counter=None):
 def test_fusion_barriers_survive_vmap_over_keys(lit_plane):
     """The batched program keeps every ``cond`` of the unbatched one (a batched predicate turns
     a cond into a select: XLA then fuses through the barrier and recomputes intersection tests,
-    the 27x of docs/performance.md). Tracing only, no compilation."""
+    the 7-31x of docs/performance.md). Tracing only, no compilation."""
     scene, render_one = lit_plane
     keys = jax.random.split(jax.random.key(13), K)
     path = "materials.m.reflectance"
