@@ -16,7 +16,10 @@ def _two_images(image_fn: Callable, key):
     ``jax.random.split(key)``: two calls, not ``jax.vmap`` over the keys. Measured on the
     32x32 inverse scene (docs/inverse.md §4, CPU): a render vmapped over two keys ran 25-40x
     slower than two calls (forward-mode Jacobian at 2 x 64 spp 2.6 s against 0.08 s, the
-    Adam step's gradient at 2 x 4 spp 0.30 s against 0.007 s) and compiled 4-10x longer."""
+    Adam step's gradient at 2 x 4 spp 0.30 s against 0.007 s) and compiled 4-10x longer.
+    (That was render's fusion barriers turning into selects under ``vmap``; since they stay
+    barriers, a vmapped render costs about the same per key as separate calls:
+    docs/performance.md "Batches of keys". Two calls remain the simple choice here.)"""
     ka, kb = jax.random.split(key)
     return jax.lax.stop_gradient(image_fn(ka)), image_fn(kb)
 
