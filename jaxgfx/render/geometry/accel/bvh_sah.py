@@ -13,10 +13,12 @@ from jaxgfx.render.geometry.accel._common import (
     STACK_SIZE,
     TriangleAccel,
     as_numpy_triangles,
+    safe_inv,
     slab,
     tri_chunk,
 )
 from jaxgfx.render.geometry.mesh import TriangleMesh
+from jaxgfx.render.geometry.ray import prepare_rays
 
 __all__ = ["BVH", "build_bvh"]
 
@@ -100,6 +102,122 @@ class BVH(TriangleAccel):
 
         out = jax.lax.while_loop(cond, body, init)
         return out[5], out[6]
+
+    def _run(self, o, d, tmin, tmax, any_hit):
+        o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
+        batch = o.shape[:-1]
+        sg = jax.lax.stop_gradient
+        O = sg(o).reshape(-1, 3)
+        D = sg(d).reshape(-1, 3)
+        TMIN = jnp.broadcast_to(sg(tmin), batch).reshape(-1)
+        TMAX = jnp.broadcast_to(sg(tmax), batch).reshape(-1)
+        tris = sg(self.mesh.vertices)[self.mesh.faces].astype(O.dtype)
+        t, prim = _wavefront(self, tris, O, D, TMIN, TMAX, any_hit, WAVEFRONT_WIDTH)
+        return o, d, t.reshape(batch), prim.reshape(batch)
+
+
+WAVEFRONT_WIDTH = 1024
+
+
+def _step(bvh, tris, bounds, o, d, inv, tmin, any_hit, s):
+    """One traversal step of ONE ray (vmapped over the slots of the wavefront pool); a no-op
+    for a finished ray."""
+    L = bvh.max_leaf
+    ks = jnp.arange(L)
+    node, tnode, sp, sn, st, best, bprim, done = s
+    cnt = bvh.count[node]
+    off = bvh.offset[node]
+    is_leaf = cnt > 0
+    skip = (tnode >= best) | done
+    slots = off + ks
+    idx = bvh.prims[jnp.minimum(slots, bvh.prims.shape[0] - 1)]
+    tl, j = tri_chunk(tris, idx, ks < cnt, o, d, tmin, best)
+    leaf_better = is_leaf & ~skip & (tl < best)
+    best = jnp.where(leaf_better, tl, best)
+    bprim = jnp.where(leaf_better, idx[j], bprim)
+    left, right = node + 1, off
+    bl = bounds[jnp.stack([left, right])]
+    ctn, _, chit = slab(bl[:, 0], bl[:, 1], o, inv, tmin, best)
+    inner = ~is_leaf & ~skip
+    hl, hr = inner & chit[0], inner & chit[1]
+    l_first = ctn[0] <= ctn[1]
+    near = jnp.where(hl & (~hr | l_first), left, right)
+    tnear = jnp.where(near == left, ctn[0], ctn[1])
+    far = jnp.where(near == left, right, left)
+    tfar = jnp.where(near == left, ctn[1], ctn[0])
+    push = hl & hr & (sp < STACK_SIZE)
+    sn = sn.at[sp].set(far, mode="drop")
+    st = st.at[sp].set(tfar, mode="drop")
+    sp = sp + push.astype(jnp.int32)
+    descend = hl | hr
+    empty = sp == 0
+    top = jnp.maximum(sp - 1, 0)
+    node_new = jnp.where(descend, near, sn[top])
+    t_new = jnp.where(descend, tnear, st[top])
+    node_new = jnp.where(done, node, node_new)
+    sp = jnp.where(descend | empty | done, sp, sp - 1)
+    done = done | (~descend & empty) | (any_hit & (bprim >= 0))
+    return node_new, t_new, sp, sn, st, best, bprim, done
+
+
+def _wavefront(bvh, tris, O, D, TMIN, TMAX, any_hit, width):
+    """Closest (or any) hit of rays ``O, D (N, 3)`` by a pool of ``width`` ray slots: every
+    loop iteration advances each slot's ray by one step of :meth:`BVH._trace`'s traversal and
+    refills the slots of finished rays with the next rays (a prefix sum ranks the free slots),
+    so the loop runs ~sum(steps) / width + max(steps) iterations of ``width`` rays instead of
+    max(steps) iterations of all N rays."""
+    N = O.shape[0]
+    W = min(width, N)
+    dt = O.dtype
+    bounds = bvh.bounds.astype(dt)
+    INV = safe_inv(D)
+    step = jax.vmap(
+        lambda o, d, inv, a, s: _step(bvh, tris, bounds, o, d, inv, a, any_hit, s)
+    )
+
+    def body(c):
+        ray, o, d, inv, a, s, nxt, out_t, out_p = c
+        node, tnode, sp, sn, st, best, bprim, done = s
+        # write out finished rays
+        fin = done & (ray >= 0)
+        dst = jnp.where(fin, ray, N)
+        out_t = out_t.at[dst].set(best, mode="drop")
+        out_p = out_p.at[dst].set(bprim, mode="drop")
+        # refill free slots with the next rays
+        rank = jnp.cumsum(done.astype(jnp.int32)) - 1
+        new = nxt + rank
+        take = done & (new < N)
+        g = jnp.minimum(new, N - 1)
+        o_n, d_n, inv_n, a_n, b_n = O[g], D[g], INV[g], TMIN[g], TMAX[g]
+        tn, _, hit0 = jax.vmap(slab, (None, None, 0, 0, 0, 0))(
+            bounds[0, 0], bounds[0, 1], o_n, inv_n, a_n, b_n
+        )
+        t3 = take[:, None]
+        o = jnp.where(t3, o_n, o)
+        d = jnp.where(t3, d_n, d)
+        inv = jnp.where(t3, inv_n, inv)
+        a = jnp.where(take, a_n, a)
+        ray = jnp.where(take, new, jnp.where(done, -1, ray))
+        node = jnp.where(take, 0, node)
+        tnode = jnp.where(take, tn, tnode)
+        sp = jnp.where(take, 0, sp)
+        best = jnp.where(take, b_n, best)
+        bprim = jnp.where(take, -1, bprim)
+        done = jnp.where(take, ~hit0, done)
+        nxt = jnp.minimum(nxt + rank[-1] + 1, N)
+        s = step(o, d, inv, a, (node, tnode, sp, sn, st, best, bprim, done))
+        return ray, o, d, inv, a, s, nxt, out_t, out_p
+
+    def cond(c):
+        return (c[6] < N) | jnp.any(c[0] >= 0)
+
+    zi, zf = jnp.zeros(W, jnp.int32), jnp.zeros(W, dt)
+    z3 = jnp.zeros((W, 3), dt)
+    s0 = (zi, zf, zi, jnp.zeros((W, STACK_SIZE), jnp.int32), jnp.zeros((W, STACK_SIZE), dt),
+          zf, zi - 1, jnp.ones(W, bool))  # fmt: skip
+    init = (zi - 1, z3, z3, z3, zf, s0, jnp.int32(0), jnp.zeros(N, dt), jnp.zeros(N, jnp.int32))
+    out = jax.lax.while_loop(cond, body, init)
+    return out[7], out[8]
 
 
 def _seg_reduce(ufunc, x, offsets):
