@@ -14,6 +14,7 @@ from jaxgfx.render.geometry.accel._common import (
     TriangleAccel,
     as_numpy_triangles,
     safe_inv,
+    _GROW,
     slab,
     tri_chunk,
 )
@@ -112,11 +113,40 @@ class BVH(TriangleAccel):
         TMIN = jnp.broadcast_to(sg(tmin), batch).reshape(-1)
         TMAX = jnp.broadcast_to(sg(tmax), batch).reshape(-1)
         tris = sg(self.mesh.vertices)[self.mesh.faces].astype(O.dtype)
-        t, prim = _wavefront(self, tris, O, D, TMIN, TMAX, any_hit, WAVEFRONT_WIDTH)
+        t, prim = _wavefront(self, tris, O, D, TMIN, TMAX, any_hit, WAVEFRONT_WIDTHS)
         return o, d, t.reshape(batch), prim.reshape(batch)
 
 
-WAVEFRONT_WIDTH = 1024
+BARRIER = 2
+
+
+def _min_slot(t):
+    """``(min, first argmin)`` of ``t (K,)`` as ONE variadic reduction: XLA CPU materialises a
+    reduction's result, where an elementwise chain feeding several outputs is fused into (and
+    recomputed by) each of them."""
+    k = jnp.arange(t.shape[-1], dtype=jnp.int32)
+
+    def pick(a, b):
+        first = (a[0] < b[0]) | ((a[0] == b[0]) & (a[1] < b[1]))
+        return jnp.where(first, a[0], b[0]), jnp.where(first, a[1], b[1])
+
+    return jax.lax.reduce((t, k), (jnp.array(jnp.inf, t.dtype), jnp.int32(t.shape[-1])), pick,
+                          (t.ndim - 1,))  # fmt: skip
+
+
+def _slab_reduced(bmin, bmax, o, inv, t0, t1):
+    """:func:`slab`'s ``(tn, hit)`` with the per-axis max/min as reductions (materialised)."""
+    ta = (bmin - o) * inv
+    tb = (bmax - o) * inv
+    lo, hi = jax.lax.reduce(
+        (jnp.minimum(ta, tb), jnp.maximum(ta, tb)),
+        (jnp.array(-jnp.inf, o.dtype), jnp.array(jnp.inf, o.dtype)),
+        lambda a, b: (jnp.maximum(a[0], b[0]), jnp.minimum(a[1], b[1])),
+        (ta.ndim - 1,),
+    )
+    tn = jnp.maximum(lo, t0)
+    tf = jnp.minimum(hi * _GROW[jnp.dtype(o.dtype)], t1)
+    return tn, tn <= tf
 
 
 def _step(bvh, tris, bounds, o, d, inv, tmin, any_hit, s):
@@ -131,13 +161,19 @@ def _step(bvh, tris, bounds, o, d, inv, tmin, any_hit, s):
     skip = (tnode >= best) | done
     slots = off + ks
     idx = bvh.prims[jnp.minimum(slots, bvh.prims.shape[0] - 1)]
-    tl, j = tri_chunk(tris, idx, ks < cnt, o, d, tmin, best)
+    if BARRIER:
+        tl, j = _min_slot(tri_chunk(tris, idx, ks < cnt, o, d, tmin, best, reduce=False))
+    else:
+        tl, j = tri_chunk(tris, idx, ks < cnt, o, d, tmin, best)
     leaf_better = is_leaf & ~skip & (tl < best)
     best = jnp.where(leaf_better, tl, best)
     bprim = jnp.where(leaf_better, idx[j], bprim)
     left, right = node + 1, off
     bl = bounds[jnp.stack([left, right])]
-    ctn, _, chit = slab(bl[:, 0], bl[:, 1], o, inv, tmin, best)
+    if BARRIER > 1:
+        ctn, chit = _slab_reduced(bl[:, 0], bl[:, 1], o, inv, tmin, best)
+    else:
+        ctn, _, chit = slab(bl[:, 0], bl[:, 1], o, inv, tmin, best)
     inner = ~is_leaf & ~skip
     hl, hr = inner & chit[0], inner & chit[1]
     l_first = ctn[0] <= ctn[1]
@@ -160,64 +196,94 @@ def _step(bvh, tris, bounds, o, d, inv, tmin, any_hit, s):
     return node_new, t_new, sp, sn, st, best, bprim, done
 
 
-def _wavefront(bvh, tris, O, D, TMIN, TMAX, any_hit, width):
-    """Closest (or any) hit of rays ``O, D (N, 3)`` by a pool of ``width`` ray slots: every
-    loop iteration advances each slot's ray by one step of :meth:`BVH._trace`'s traversal and
-    refills the slots of finished rays with the next rays (a prefix sum ranks the free slots),
-    so the loop runs ~sum(steps) / width + max(steps) iterations of ``width`` rays instead of
-    max(steps) iterations of all N rays."""
-    N = O.shape[0]
-    W = min(width, N)
-    dt = O.dtype
-    bounds = bvh.bounds.astype(dt)
-    INV = safe_inv(D)
-    step = jax.vmap(
-        lambda o, d, inv, a, s: _step(bvh, tris, bounds, o, d, inv, a, any_hit, s)
-    )
+def _pool(bvh, tris, bounds, any_hit, Q, nq, W, out, final):
+    """Advance queued rays ``Q`` (entries ``[0, nq)``) through a pool of ``W`` slots.
+
+    Every iteration writes out the results of finished slots, refills them with the next
+    queued rays (a prefix sum over the free slots ranks them) and advances every slot by one
+    traversal step. Runs until the queue is empty (``final=False``; returns the unfinished
+    rays compacted into a queue for a narrower pool) or until every ray is done."""
+    ray_q, o_q, d_q, inv_q, a_q, node_q, tn_q, sp_q, best_q, bp_q, sn_q, st_q = Q
+    N = out[0].shape[0]
+    dt = o_q.dtype
+    S = STACK_SIZE
+    step = jax.vmap(lambda o, d, inv, a, s: _step(bvh, tris, bounds, o, d, inv, a, any_hit, s))
+
+    def writeout(ray, best, bprim, done, out):
+        dst = jnp.where(done & (ray >= 0), ray, N)
+        return out[0].at[dst].set(best, mode="drop"), out[1].at[dst].set(bprim, mode="drop")
 
     def body(c):
-        ray, o, d, inv, a, s, nxt, out_t, out_p = c
+        ray, o, d, inv, a, s, nxt, out = c
         node, tnode, sp, sn, st, best, bprim, done = s
-        # write out finished rays
-        fin = done & (ray >= 0)
-        dst = jnp.where(fin, ray, N)
-        out_t = out_t.at[dst].set(best, mode="drop")
-        out_p = out_p.at[dst].set(bprim, mode="drop")
-        # refill free slots with the next rays
+        out = writeout(ray, best, bprim, done, out)
         rank = jnp.cumsum(done.astype(jnp.int32)) - 1
         new = nxt + rank
-        take = done & (new < N)
-        g = jnp.minimum(new, N - 1)
-        o_n, d_n, inv_n, a_n, b_n = O[g], D[g], INV[g], TMIN[g], TMAX[g]
-        tn, _, hit0 = jax.vmap(slab, (None, None, 0, 0, 0, 0))(
-            bounds[0, 0], bounds[0, 1], o_n, inv_n, a_n, b_n
-        )
-        t3 = take[:, None]
-        o = jnp.where(t3, o_n, o)
-        d = jnp.where(t3, d_n, d)
-        inv = jnp.where(t3, inv_n, inv)
-        a = jnp.where(take, a_n, a)
-        ray = jnp.where(take, new, jnp.where(done, -1, ray))
-        node = jnp.where(take, 0, node)
-        tnode = jnp.where(take, tn, tnode)
-        sp = jnp.where(take, 0, sp)
-        best = jnp.where(take, b_n, best)
-        bprim = jnp.where(take, -1, bprim)
-        done = jnp.where(take, ~hit0, done)
-        nxt = jnp.minimum(nxt + rank[-1] + 1, N)
+        take = done & (new < nq)
+        g = jnp.minimum(new, Q[0].shape[0] - 1)
+
+        def pick(q, cur):
+            m = take.reshape(take.shape + (1,) * (cur.ndim - 1))
+            return jnp.where(m, q[g], cur)
+
+        ray = jnp.where(take, ray_q[g], jnp.where(done, -1, ray))
+        o, d, inv, a = pick(o_q, o), pick(d_q, d), pick(inv_q, inv), pick(a_q, a)
+        node, tnode, sp = pick(node_q, node), pick(tn_q, tnode), pick(sp_q, sp)
+        best, bprim = pick(best_q, best), pick(bp_q, bprim)
+        if sn_q is not None:
+            sn, st = pick(sn_q, sn), pick(st_q, st)
+        done = done & ~take
+        nxt = jnp.minimum(nxt + rank[-1] + 1, nq)
         s = step(o, d, inv, a, (node, tnode, sp, sn, st, best, bprim, done))
-        return ray, o, d, inv, a, s, nxt, out_t, out_p
+        return ray, o, d, inv, a, s, nxt, out
 
     def cond(c):
-        return (c[6] < N) | jnp.any(c[0] >= 0)
+        more = c[6] < nq
+        return (more | jnp.any(c[0] >= 0)) if final else more
 
     zi, zf = jnp.zeros(W, jnp.int32), jnp.zeros(W, dt)
     z3 = jnp.zeros((W, 3), dt)
-    s0 = (zi, zf, zi, jnp.zeros((W, STACK_SIZE), jnp.int32), jnp.zeros((W, STACK_SIZE), dt),
-          zf, zi - 1, jnp.ones(W, bool))  # fmt: skip
-    init = (zi - 1, z3, z3, z3, zf, s0, jnp.int32(0), jnp.zeros(N, dt), jnp.zeros(N, jnp.int32))
-    out = jax.lax.while_loop(cond, body, init)
-    return out[7], out[8]
+    s0 = (zi, zf, zi, jnp.zeros((W, S), jnp.int32), jnp.zeros((W, S), dt), zf, zi - 1,
+          jnp.ones(W, bool))  # fmt: skip
+    c = (zi - 1, z3, z3, z3, zf, s0, jnp.int32(0), out)
+    ray, o, d, inv, a, s, _, out = jax.lax.while_loop(cond, body, c)
+    node, tnode, sp, sn, st, best, bprim, done = s
+    out = writeout(ray, best, bprim, done, out)
+    if final:
+        return out, None, None
+    live = ~done & (ray >= 0)
+    perm = jnp.argsort(~live, stable=True)
+    Q = tuple(x[perm] for x in (ray, o, d, inv, a, node, tnode, sp, best, bprim, sn, st))
+    return out, Q, jnp.sum(live.astype(jnp.int32))
+
+
+WAVEFRONT_WIDTHS = (1024, 256, 64)
+
+
+def _wavefront(bvh, tris, O, D, TMIN, TMAX, any_hit, widths):
+    """Closest (or any) hit of rays ``O, D (N, 3)``: the traversal of :meth:`BVH._trace`,
+    run for a compacted set of active rays. Rays that miss the root box are answered at
+    once; the rest are queued into a pool of ``widths[0]`` slots (:func:`_pool`), and the
+    rays still unfinished when the queue runs dry move to pools of ``widths[1]``, ... slots,
+    so the loop does ~sum(steps) / width + max(steps) iterations of a few ``width`` rays
+    instead of max(steps) iterations of all N rays."""
+    N = O.shape[0]
+    dt = O.dtype
+    bounds = bvh.bounds.astype(dt)
+    INV = safe_inv(D)
+    tn, _, hit0 = slab(bounds[0, 0], bounds[0, 1], O, INV, TMIN, TMAX)
+    # queue: rays that hit the root box first (stable compaction)
+    perm = jnp.argsort(~hit0, stable=True)
+    nq = jnp.sum(hit0.astype(jnp.int32))
+    zi = jnp.zeros(N, jnp.int32)
+    Q = (perm.astype(jnp.int32), O[perm], D[perm], INV[perm], TMIN[perm], zi, tn[perm], zi,
+         TMAX[perm], zi - 1, None, None)  # fmt: skip
+    out = (TMAX, zi - 1)
+    widths = [w for w in widths if w < N] or [N]
+    ws = [min(widths[0], N)] + list(widths[1:])
+    for k, W in enumerate(ws):
+        out, Q, nq = _pool(bvh, tris, bounds, any_hit, Q, nq, W, out, k == len(ws) - 1)
+    return out
 
 
 def _seg_reduce(ufunc, x, offsets):
