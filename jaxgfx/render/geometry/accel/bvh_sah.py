@@ -10,11 +10,11 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from jaxgfx.render.geometry.accel._common import (
+    _GROW,
     STACK_SIZE,
     TriangleAccel,
     as_numpy_triangles,
     safe_inv,
-    _GROW,
     slab,
     tri_chunk,
 )
@@ -45,65 +45,6 @@ class BVH(TriangleAccel):
     prims: Int[Array, " F"]
     max_leaf: int = eqx.field(static=True)
 
-    def _trace(self, tris, o, d, inv, tmin, tmax, any_hit):
-        L = self.max_leaf
-        bounds = self.bounds.astype(o.dtype)
-        tn, tf, hit0 = slab(bounds[0, 0], bounds[0, 1], o, inv, tmin, tmax)
-        stack_n = jnp.zeros(STACK_SIZE, jnp.int32)
-        stack_t = jnp.zeros(STACK_SIZE, o.dtype)
-        # state: node, its entry t, sp, stacks, best t, best prim, done
-        init = (jnp.int32(0), tn, jnp.int32(0), stack_n, stack_t, tmax, jnp.int32(-1), ~hit0)
-        ks = jnp.arange(L)
-
-        def cond(s):
-            return ~s[-1]
-
-        def body(s):
-            node, tnode, sp, sn, st, best, bprim, _ = s
-            cnt = self.count[node]
-            off = self.offset[node]
-            is_leaf = cnt > 0
-            skip = tnode >= best
-            # leaf: test up to L triangles
-            slots = off + ks
-            idx = self.prims[jnp.minimum(slots, self.prims.shape[0] - 1)]
-            tl, j = tri_chunk(tris, idx, ks < cnt, o, d, tmin, best)
-            leaf_better = is_leaf & ~skip & (tl < best)
-            best = jnp.where(leaf_better, tl, best)
-            bprim = jnp.where(leaf_better, idx[j], bprim)
-            # inner: test both children, descend into the nearer one, push the farther
-            left, right = node + 1, off
-            bl = bounds[jnp.stack([left, right])]
-            ctn, _, chit = slab(bl[:, 0], bl[:, 1], o, inv, tmin, best)
-            inner = ~is_leaf & ~skip
-            hl, hr = inner & chit[0], inner & chit[1]
-            l_first = ctn[0] <= ctn[1]
-            near = jnp.where(hl & (~hr | l_first), left, right)
-            tnear = jnp.where(near == left, ctn[0], ctn[1])
-            far = jnp.where(near == left, right, left)
-            tfar = jnp.where(near == left, ctn[1], ctn[0])
-            both = hl & hr
-            push = both & (sp < STACK_SIZE)
-            # Write the slot above the top unconditionally (it is free; an index past the end
-            # is dropped): a plain in-place update of the loop carry. Selecting between the old
-            # and the updated stack copied both (N, 64) stacks every iteration under vmap.
-            sn = sn.at[sp].set(far, mode="drop")
-            st = st.at[sp].set(tfar, mode="drop")
-            sp = sp + push.astype(jnp.int32)
-            descend = hl | hr
-            # otherwise pop
-            empty = sp == 0
-            top = jnp.maximum(sp - 1, 0)
-            pop_node, pop_t = sn[top], st[top]
-            node_new = jnp.where(descend, near, pop_node)
-            t_new = jnp.where(descend, tnear, pop_t)
-            sp = jnp.where(descend | empty, sp, sp - 1)
-            done = (~descend & empty) | (any_hit & (bprim >= 0))
-            return node_new, t_new, sp, sn, st, best, bprim, done
-
-        out = jax.lax.while_loop(cond, body, init)
-        return out[5], out[6]
-
     def _run(self, o, d, tmin, tmax, any_hit):
         o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
         batch = o.shape[:-1]
@@ -112,30 +53,34 @@ class BVH(TriangleAccel):
         D = sg(d).reshape(-1, 3)
         TMIN = jnp.broadcast_to(sg(tmin), batch).reshape(-1)
         TMAX = jnp.broadcast_to(sg(tmax), batch).reshape(-1)
-        tris = sg(self.mesh.vertices)[self.mesh.faces].astype(O.dtype)
-        t, prim = _wavefront(self, tris, O, D, TMIN, TMAX, any_hit, WAVEFRONT_WIDTHS)
+        t, prim = wavefront_trace(self, O, D, TMIN, TMAX, any_hit=any_hit)
         return o, d, t.reshape(batch), prim.reshape(batch)
 
 
-BARRIER = 2
+# Slots of the wavefront pools: the first pool takes all rays; the rays still unfinished when
+# its queue runs dry continue in the narrower pools (see :func:`wavefront_trace`).
+WAVEFRONT_WIDTHS = (1024, 256, 64)
 
 
 def _min_slot(t):
-    """``(min, first argmin)`` of ``t (K,)`` as ONE variadic reduction: XLA CPU materialises a
-    reduction's result, where an elementwise chain feeding several outputs is fused into (and
-    recomputed by) each of them."""
+    """``(min, first argmin)`` over the last axis of ``t`` as ONE variadic reduction.
+
+    XLA CPU fuses an elementwise chain into each of its consumers: with an unrolled minimum,
+    the Möller-Trumbore test that feeds the step's eight outputs was recomputed in six fused
+    kernels. A reduction's result is materialised once."""
     k = jnp.arange(t.shape[-1], dtype=jnp.int32)
 
     def pick(a, b):
         first = (a[0] < b[0]) | ((a[0] == b[0]) & (a[1] < b[1]))
         return jnp.where(first, a[0], b[0]), jnp.where(first, a[1], b[1])
 
-    return jax.lax.reduce((t, k), (jnp.array(jnp.inf, t.dtype), jnp.int32(t.shape[-1])), pick,
-                          (t.ndim - 1,))  # fmt: skip
+    init = (jnp.array(jnp.inf, t.dtype), jnp.int32(t.shape[-1]))
+    return jax.lax.reduce((t, k), init, pick, (t.ndim - 1,))
 
 
 def _slab_reduced(bmin, bmax, o, inv, t0, t1):
-    """:func:`slab`'s ``(tn, hit)`` with the per-axis max/min as reductions (materialised)."""
+    """:func:`slab`'s ``(tn, hit)`` with the per-axis max and min as one reduction (materialised,
+    like :func:`_min_slot`)."""
     ta = (bmin - o) * inv
     tb = (bmax - o) * inv
     lo, hi = jax.lax.reduce(
@@ -149,28 +94,33 @@ def _slab_reduced(bmin, bmax, o, inv, t0, t1):
     return tn, tn <= tf
 
 
-def _step(bvh, tris, bounds, o, d, inv, tmin, any_hit, s):
-    """One traversal step of ONE ray (vmapped over the slots of the wavefront pool); a no-op
-    for a finished ray."""
+def _step(bvh, tris, bounds, ray, s, any_hit, materialize=True):
+    """One traversal step of ONE ray ``ray = (o, d, 1/d, tmin)`` with state ``s = (node, its
+    entry t, stack pointer, node stack, t stack, best t, best prim, done)``; a no-op for a
+    finished ray. An inner node tests both child boxes, descends into the nearer hit child and
+    pushes the farther one; a leaf tests its ``max_leaf`` slots; a node entered beyond the best
+    hit is skipped; the stack is popped when there is nothing to descend into.
+    ``materialize=False``: the leaf and child tests as unrolled elementwise code (the
+    traversal before issue 13; kept for the ablation in benchmarks/accel.py)."""
+    o, d, inv, tmin = ray
+    node, tnode, sp, sn, st, best, bprim, done = s
     L = bvh.max_leaf
     ks = jnp.arange(L)
-    node, tnode, sp, sn, st, best, bprim, done = s
     cnt = bvh.count[node]
     off = bvh.offset[node]
     is_leaf = cnt > 0
     skip = (tnode >= best) | done
-    slots = off + ks
-    idx = bvh.prims[jnp.minimum(slots, bvh.prims.shape[0] - 1)]
-    if BARRIER:
+    idx = bvh.prims[jnp.minimum(off + ks, bvh.prims.shape[0] - 1)]
+    if materialize:
         tl, j = _min_slot(tri_chunk(tris, idx, ks < cnt, o, d, tmin, best, reduce=False))
     else:
         tl, j = tri_chunk(tris, idx, ks < cnt, o, d, tmin, best)
     leaf_better = is_leaf & ~skip & (tl < best)
     best = jnp.where(leaf_better, tl, best)
-    bprim = jnp.where(leaf_better, idx[j], bprim)
+    bprim = jnp.where(leaf_better, idx[jnp.minimum(j, L - 1)], bprim)
     left, right = node + 1, off
     bl = bounds[jnp.stack([left, right])]
-    if BARRIER > 1:
+    if materialize:
         ctn, chit = _slab_reduced(bl[:, 0], bl[:, 1], o, inv, tmin, best)
     else:
         ctn, _, chit = slab(bl[:, 0], bl[:, 1], o, inv, tmin, best)
@@ -182,32 +132,33 @@ def _step(bvh, tris, bounds, o, d, inv, tmin, any_hit, s):
     far = jnp.where(near == left, right, left)
     tfar = jnp.where(near == left, ctn[1], ctn[0])
     push = hl & hr & (sp < STACK_SIZE)
+    # The slot above the top is free: write it unconditionally (an index past the end is
+    # dropped), an in-place update of the loop carry.
     sn = sn.at[sp].set(far, mode="drop")
     st = st.at[sp].set(tfar, mode="drop")
     sp = sp + push.astype(jnp.int32)
     descend = hl | hr
     empty = sp == 0
     top = jnp.maximum(sp - 1, 0)
-    node_new = jnp.where(descend, near, sn[top])
+    node_new = jnp.where(done, node, jnp.where(descend, near, sn[top]))
     t_new = jnp.where(descend, tnear, st[top])
-    node_new = jnp.where(done, node, node_new)
     sp = jnp.where(descend | empty | done, sp, sp - 1)
     done = done | (~descend & empty) | (any_hit & (bprim >= 0))
     return node_new, t_new, sp, sn, st, best, bprim, done
 
 
-def _pool(bvh, tris, bounds, any_hit, Q, nq, W, out, final):
-    """Advance queued rays ``Q`` (entries ``[0, nq)``) through a pool of ``W`` slots.
+def _pool(bvh, tris, bounds, any_hit, Q, nq, W, out, final, materialize):
+    """Advance the queued rays ``Q`` (entries ``[0, nq)``) through a pool of ``W`` slots.
 
-    Every iteration writes out the results of finished slots, refills them with the next
+    Each iteration writes out the results of the finished slots, refills them with the next
     queued rays (a prefix sum over the free slots ranks them) and advances every slot by one
-    traversal step. Runs until the queue is empty (``final=False``; returns the unfinished
-    rays compacted into a queue for a narrower pool) or until every ray is done."""
+    :func:`_step`. Runs until the queue is empty (returning the unfinished rays compacted into
+    a queue for a narrower pool) or, for the ``final`` pool, until every ray is done."""
     ray_q, o_q, d_q, inv_q, a_q, node_q, tn_q, sp_q, best_q, bp_q, sn_q, st_q = Q
     N = out[0].shape[0]
+    n_q = ray_q.shape[0]
     dt = o_q.dtype
-    S = STACK_SIZE
-    step = jax.vmap(lambda o, d, inv, a, s: _step(bvh, tris, bounds, o, d, inv, a, any_hit, s))
+    step = jax.vmap(lambda ray, s: _step(bvh, tris, bounds, ray, s, any_hit, materialize))
 
     def writeout(ray, best, bprim, done, out):
         dst = jnp.where(done & (ray >= 0), ray, N)
@@ -220,33 +171,32 @@ def _pool(bvh, tris, bounds, any_hit, Q, nq, W, out, final):
         rank = jnp.cumsum(done.astype(jnp.int32)) - 1
         new = nxt + rank
         take = done & (new < nq)
-        g = jnp.minimum(new, Q[0].shape[0] - 1)
+        g = jnp.minimum(new, n_q - 1)
 
         def pick(q, cur):
-            m = take.reshape(take.shape + (1,) * (cur.ndim - 1))
-            return jnp.where(m, q[g], cur)
+            return jnp.where(take.reshape(take.shape + (1,) * (cur.ndim - 1)), q[g], cur)
 
         ray = jnp.where(take, ray_q[g], jnp.where(done, -1, ray))
         o, d, inv, a = pick(o_q, o), pick(d_q, d), pick(inv_q, inv), pick(a_q, a)
         node, tnode, sp = pick(node_q, node), pick(tn_q, tnode), pick(sp_q, sp)
         best, bprim = pick(best_q, best), pick(bp_q, bprim)
-        if sn_q is not None:
+        if sn_q is not None:  # queued rays in mid-traversal bring their stacks
             sn, st = pick(sn_q, sn), pick(st_q, st)
         done = done & ~take
         nxt = jnp.minimum(nxt + rank[-1] + 1, nq)
-        s = step(o, d, inv, a, (node, tnode, sp, sn, st, best, bprim, done))
+        s = step((o, d, inv, a), (node, tnode, sp, sn, st, best, bprim, done))
         return ray, o, d, inv, a, s, nxt, out
 
     def cond(c):
         more = c[6] < nq
         return (more | jnp.any(c[0] >= 0)) if final else more
 
-    zi, zf = jnp.zeros(W, jnp.int32), jnp.zeros(W, dt)
-    z3 = jnp.zeros((W, 3), dt)
-    s0 = (zi, zf, zi, jnp.zeros((W, S), jnp.int32), jnp.zeros((W, S), dt), zf, zi - 1,
-          jnp.ones(W, bool))  # fmt: skip
-    c = (zi - 1, z3, z3, z3, zf, s0, jnp.int32(0), out)
-    ray, o, d, inv, a, s, _, out = jax.lax.while_loop(cond, body, c)
+    zi, zf, z3 = jnp.zeros(W, jnp.int32), jnp.zeros(W, dt), jnp.zeros((W, 3), dt)
+    stacks = jnp.zeros((W, STACK_SIZE), jnp.int32), jnp.zeros((W, STACK_SIZE), dt)
+    s0 = (zi, zf, zi, *stacks, zf, zi - 1, jnp.ones(W, bool))
+    ray, o, d, inv, a, s, _, out = jax.lax.while_loop(
+        cond, body, (zi - 1, z3, z3, z3, zf, s0, jnp.int32(0), out)
+    )
     node, tnode, sp, sn, st, best, bprim, done = s
     out = writeout(ray, best, bprim, done, out)
     if final:
@@ -257,32 +207,37 @@ def _pool(bvh, tris, bounds, any_hit, Q, nq, W, out, final):
     return out, Q, jnp.sum(live.astype(jnp.int32))
 
 
-WAVEFRONT_WIDTHS = (1024, 256, 64)
+def wavefront_trace(bvh, o, d, tmin, tmax, *, any_hit=False, widths=WAVEFRONT_WIDTHS,
+                    materialize=True):  # fmt: skip
+    """Closest (or, ``any_hit``, some) hit ``(t, prim)`` of rays ``o, d (N, 3)`` in
+    ``(tmin, tmax) (N,)`` against ``bvh`` (``prim = -1``, ``t = tmax`` where nothing is hit).
 
-
-def _wavefront(bvh, tris, O, D, TMIN, TMAX, any_hit, widths):
-    """Closest (or any) hit of rays ``O, D (N, 3)``: the traversal of :meth:`BVH._trace`,
-    run for a compacted set of active rays. Rays that miss the root box are answered at
-    once; the rest are queued into a pool of ``widths[0]`` slots (:func:`_pool`), and the
-    rays still unfinished when the queue runs dry move to pools of ``widths[1]``, ... slots,
-    so the loop does ~sum(steps) / width + max(steps) iterations of a few ``width`` rays
-    instead of max(steps) iterations of all N rays."""
-    N = O.shape[0]
-    dt = O.dtype
-    bounds = bvh.bounds.astype(dt)
-    INV = safe_inv(D)
-    tn, _, hit0 = slab(bounds[0, 0], bounds[0, 1], O, INV, TMIN, TMAX)
-    # queue: rays that hit the root box first (stable compaction)
-    perm = jnp.argsort(~hit0, stable=True)
-    nq = jnp.sum(hit0.astype(jnp.int32))
+    A wavefront traversal that only steps active rays: rays that miss the root box are
+    answered at once; the rest are queued into a pool of ``widths[0]`` slots whose finished
+    rays are replaced by queued ones every step (:func:`_pool`); the rays still unfinished
+    when the queue runs dry move on to pools of ``widths[1]``, ... slots. The loop runs
+    ~sum(steps) / width + max(steps) iterations of ``width`` rays, where a per-ray
+    ``while_loop`` under ``vmap`` runs max(steps) iterations of all N rays. Each ray visits
+    nodes in the order of :func:`_step`'s stack traversal whatever the pool. Not
+    differentiable (the hit record is recomputed from ``prim``)."""
+    N = o.shape[0]
+    dt = o.dtype
+    sg = jax.lax.stop_gradient
+    bounds = sg(bvh.bounds).astype(dt)
+    tris = sg(bvh.mesh.vertices)[bvh.mesh.faces].astype(dt)
+    inv = safe_inv(d)
+    tn, _, hit0 = slab(bounds[0, 0], bounds[0, 1], o, inv, tmin, tmax)
+    # the queue: rays that hit the root box, in input order
+    perm = jnp.argsort(~hit0, stable=True).astype(jnp.int32)
     zi = jnp.zeros(N, jnp.int32)
-    Q = (perm.astype(jnp.int32), O[perm], D[perm], INV[perm], TMIN[perm], zi, tn[perm], zi,
-         TMAX[perm], zi - 1, None, None)  # fmt: skip
-    out = (TMAX, zi - 1)
-    widths = [w for w in widths if w < N] or [N]
-    ws = [min(widths[0], N)] + list(widths[1:])
+    Q = (perm, o[perm], d[perm], inv[perm], tmin[perm], zi, tn[perm], zi, tmax[perm], zi - 1,
+         None, None)  # fmt: skip
+    nq = jnp.sum(hit0.astype(jnp.int32))
+    out = (tmax, zi - 1)
+    ws = [w for w in widths if w < N] or [N]
     for k, W in enumerate(ws):
-        out, Q, nq = _pool(bvh, tris, bounds, any_hit, Q, nq, W, out, k == len(ws) - 1)
+        last = k == len(ws) - 1
+        out, Q, nq = _pool(bvh, tris, bounds, any_hit, Q, nq, W, out, last, materialize)
     return out
 
 
