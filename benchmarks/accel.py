@@ -318,30 +318,29 @@ _BVH_VARIANTS = {
 }
 
 
-def _bvh_fn(wave, materialize, widths):
+def _bvh_fn(wave, materialize, width):
     from jaxgfx.render.geometry.accel.bvh_sah import wavefront_trace
 
     @jax.jit
     def f(bvh, o, d):
         tmin, tmax = jnp.zeros(o.shape[0], o.dtype), jnp.full(o.shape[0], jnp.inf, o.dtype)
         if wave:
-            return wavefront_trace(bvh, o, d, tmin, tmax, widths=widths, materialize=materialize)
+            return wavefront_trace(bvh, o, d, tmin, tmax, width=width, materialize=materialize)
         return _per_ray_bvh(bvh, o, d, tmin, tmax, materialize)
 
     return f
 
 
 def run_wavefront(n_rings=(36, 144), n_rays=(16384, 65536), variants=tuple(_BVH_VARIANTS),
-                  widths=None, repeats=2):  # fmt: skip
+                  width=None, repeats=2):  # fmt: skip
     """Closest-hit M rays/s of the JAX BVH traversal variants on UV spheres (5 040 and 82 368
     triangles), primary and random rays; wall and process-CPU seconds, best of ``repeats``
     warm calls taken round-robin over the variants (the machine is shared: compare ratios
     within a row); compile seconds = first call minus the best warm call."""
-    from jaxgfx.render.geometry.accel.bvh_sah import WAVEFRONT_WIDTHS
+    from jaxgfx.render.geometry.accel.bvh_sah import pool_width
     from jaxgfx.render.geometry.mesh_io import make_uv_sphere
 
-    widths = tuple(widths or WAVEFRONT_WIDTHS)
-    fns = {v: _bvh_fn(*_BVH_VARIANTS[v], widths) for v in variants}
+    fns = {v: _bvh_fn(*_BVH_VARIANTS[v], width) for v in variants}
     rows = []
     for nr in n_rings:
         mesh = make_uv_sphere(nr)
@@ -355,7 +354,7 @@ def run_wavefront(n_rings=(36, 144), n_rays=(16384, 65536), variants=tuple(_BVH_
             for rname, (o, d) in (("primary", _primary_rays(side)), ("random", (ro, rd))):
                 o, d = jnp.asarray(o, jnp.float32), jnp.asarray(d, jnp.float32)
                 row = dict(n_tris=int(mesh.faces.shape[0]), rays=rname, n_rays=int(o.shape[0]),
-                           widths=list(widths), mrays_per_s={}, cpu_mrays_per_s={},
+                           pool_width=width or pool_width(n), mrays_per_s={}, cpu_mrays_per_s={},
                            compile_s={}, compile_cpu_s={})  # fmt: skip
                 outs, wall, cpu, first = {}, {}, {}, {}
                 for v, f in fns.items():
@@ -505,6 +504,8 @@ def main(argv=None):
                     help="any of structures,backends,scaling,wavefront")  # fmt: skip
     ap.add_argument("--wavefront-rays", default="16384,65536",
                     help="ray counts of the wavefront section")  # fmt: skip
+    ap.add_argument("--wavefront-width", type=int, default=None,
+                    help="pool slots (default: bvh_sah.pool_width)")  # fmt: skip
     ap.add_argument(
         "--wavefront-variants",
         default=",".join(_BVH_VARIANTS),
@@ -526,6 +527,7 @@ def main(argv=None):
             n_rings=(36,) if a.quick else (36, 144),
             n_rays=(4096,) if a.quick else tuple(int(x) for x in a.wavefront_rays.split(",")),
             variants=tuple(a.wavefront_variants.split(",")),
+            width=a.wavefront_width,
         )
     if "scaling" in sections:
         # 4n(n-1) triangles: 1 012, 4 032, 16 512, 65 280, 262 656, 1 001 000 (n = 501)

@@ -57,9 +57,8 @@ class BVH(TriangleAccel):
         return o, d, t.reshape(batch), prim.reshape(batch)
 
 
-# Slots of the wavefront pools: the first pool takes all rays; the rays still unfinished when
-# its queue runs dry continue in the narrower pools (see :func:`wavefront_trace`).
-WAVEFRONT_WIDTHS = (1024, 256, 64)
+# Most slots of the wavefront pool (see :func:`pool_width`).
+WAVEFRONT_WIDTH = 1024
 
 
 def _min_slot(t):
@@ -147,17 +146,40 @@ def _step(bvh, tris, bounds, ray, s, any_hit, materialize=True):
     return node_new, t_new, sp, sn, st, best, bprim, done
 
 
-def _pool(bvh, tris, bounds, any_hit, Q, nq, W, out, final, materialize):
-    """Advance the queued rays ``Q`` (entries ``[0, nq)``) through a pool of ``W`` slots.
+def pool_width(n_rays: int) -> int:
+    """Slots of the wavefront pool for ``n_rays`` rays: 1/16 of the rays, within [256, 1024]
+    (and at most ``n_rays``). Measured on XLA CPU (benchmarks/accel.py, docs/performance.md):
+    wider pools step more finished slots in the tail, narrower ones pay the per-iteration
+    overhead more often; extra narrower pools for the tail gained under 10 % and cost one more
+    compiled step each."""
+    return max(1, min(n_rays, WAVEFRONT_WIDTH, max(n_rays // 16, 256)))
 
-    Each iteration writes out the results of the finished slots, refills them with the next
-    queued rays (a prefix sum over the free slots ranks them) and advances every slot by one
-    :func:`_step`. Runs until the queue is empty (returning the unfinished rays compacted into
-    a queue for a narrower pool) or, for the ``final`` pool, until every ray is done."""
-    ray_q, o_q, d_q, inv_q, a_q, node_q, tn_q, sp_q, best_q, bp_q, sn_q, st_q = Q
-    N = out[0].shape[0]
-    n_q = ray_q.shape[0]
-    dt = o_q.dtype
+
+def wavefront_trace(bvh, o, d, tmin, tmax, *, any_hit=False, width=None, materialize=True):
+    """Closest (or, ``any_hit``, some) hit ``(t, prim)`` of rays ``o, d (N, 3)`` in
+    ``(tmin, tmax) (N,)`` against ``bvh`` (``prim = -1``, ``t = tmax`` where nothing is hit).
+
+    A wavefront traversal that only steps active rays. Rays that miss the root box are
+    answered at once; the others queue for a pool of ``width`` slots (default
+    :func:`pool_width`). Each loop iteration writes out the results of the finished slots,
+    refills them with the next queued rays (a prefix sum over the free slots ranks them) and
+    advances every slot by one :func:`_step`. The loop runs ~sum(steps) / width + max(steps)
+    iterations of ``width`` rays, where a per-ray ``while_loop`` under ``vmap`` runs max(steps)
+    iterations of all N rays. Each ray visits the nodes in the order of :func:`_step`'s stack
+    traversal, so hits do not depend on the pool. Not differentiable (the hit record is
+    recomputed from ``prim``)."""
+    N = o.shape[0]
+    W = pool_width(N) if width is None else min(width, N)
+    dt = o.dtype
+    sg = jax.lax.stop_gradient
+    bounds = sg(bvh.bounds).astype(dt)
+    tris = sg(bvh.mesh.vertices)[bvh.mesh.faces].astype(dt)
+    inv = safe_inv(d)
+    tn, _, hit0 = slab(bounds[0, 0], bounds[0, 1], o, inv, tmin, tmax)
+    # the queue: the rays that hit the root box, in input order
+    perm = jnp.argsort(~hit0, stable=True).astype(jnp.int32)
+    queue = tuple(x[perm] for x in (o, d, inv, tmin, tn, tmax))
+    nq = jnp.sum(hit0.astype(jnp.int32))
     step = jax.vmap(lambda ray, s: _step(bvh, tris, bounds, ray, s, any_hit, materialize))
 
     def writeout(ray, best, bprim, done, out):
@@ -171,74 +193,31 @@ def _pool(bvh, tris, bounds, any_hit, Q, nq, W, out, final, materialize):
         rank = jnp.cumsum(done.astype(jnp.int32)) - 1
         new = nxt + rank
         take = done & (new < nq)
-        g = jnp.minimum(new, n_q - 1)
-
-        def pick(q, cur):
-            return jnp.where(take.reshape(take.shape + (1,) * (cur.ndim - 1)), q[g], cur)
-
-        ray = jnp.where(take, ray_q[g], jnp.where(done, -1, ray))
-        o, d, inv, a = pick(o_q, o), pick(d_q, d), pick(inv_q, inv), pick(a_q, a)
-        node, tnode, sp = pick(node_q, node), pick(tn_q, tnode), pick(sp_q, sp)
-        best, bprim = pick(best_q, best), pick(bp_q, bprim)
-        if sn_q is not None:  # queued rays in mid-traversal bring their stacks
-            sn, st = pick(sn_q, sn), pick(st_q, st)
+        g = jnp.minimum(new, N - 1)
+        o_q, d_q, inv_q, a_q, tn_q, b_q = (q[g] for q in queue)
+        t3 = take[:, None]
+        o, d, inv = jnp.where(t3, o_q, o), jnp.where(t3, d_q, d), jnp.where(t3, inv_q, inv)
+        a = jnp.where(take, a_q, a)
+        ray = jnp.where(take, perm[g], jnp.where(done, -1, ray))
+        node = jnp.where(take, 0, node)
+        tnode = jnp.where(take, tn_q, tnode)
+        sp = jnp.where(take, 0, sp)
+        best = jnp.where(take, b_q, best)
+        bprim = jnp.where(take, -1, bprim)
         done = done & ~take
         nxt = jnp.minimum(nxt + rank[-1] + 1, nq)
         s = step((o, d, inv, a), (node, tnode, sp, sn, st, best, bprim, done))
         return ray, o, d, inv, a, s, nxt, out
 
     def cond(c):
-        more = c[6] < nq
-        return (more | jnp.any(c[0] >= 0)) if final else more
+        return (c[6] < nq) | jnp.any(c[0] >= 0)
 
     zi, zf, z3 = jnp.zeros(W, jnp.int32), jnp.zeros(W, dt), jnp.zeros((W, 3), dt)
     stacks = jnp.zeros((W, STACK_SIZE), jnp.int32), jnp.zeros((W, STACK_SIZE), dt)
     s0 = (zi, zf, zi, *stacks, zf, zi - 1, jnp.ones(W, bool))
-    ray, o, d, inv, a, s, _, out = jax.lax.while_loop(
-        cond, body, (zi - 1, z3, z3, z3, zf, s0, jnp.int32(0), out)
-    )
-    node, tnode, sp, sn, st, best, bprim, done = s
-    out = writeout(ray, best, bprim, done, out)
-    if final:
-        return out, None, None
-    live = ~done & (ray >= 0)
-    perm = jnp.argsort(~live, stable=True)
-    Q = tuple(x[perm] for x in (ray, o, d, inv, a, node, tnode, sp, best, bprim, sn, st))
-    return out, Q, jnp.sum(live.astype(jnp.int32))
-
-
-def wavefront_trace(bvh, o, d, tmin, tmax, *, any_hit=False, widths=WAVEFRONT_WIDTHS,
-                    materialize=True):  # fmt: skip
-    """Closest (or, ``any_hit``, some) hit ``(t, prim)`` of rays ``o, d (N, 3)`` in
-    ``(tmin, tmax) (N,)`` against ``bvh`` (``prim = -1``, ``t = tmax`` where nothing is hit).
-
-    A wavefront traversal that only steps active rays: rays that miss the root box are
-    answered at once; the rest are queued into a pool of ``widths[0]`` slots whose finished
-    rays are replaced by queued ones every step (:func:`_pool`); the rays still unfinished
-    when the queue runs dry move on to pools of ``widths[1]``, ... slots. The loop runs
-    ~sum(steps) / width + max(steps) iterations of ``width`` rays, where a per-ray
-    ``while_loop`` under ``vmap`` runs max(steps) iterations of all N rays. Each ray visits
-    nodes in the order of :func:`_step`'s stack traversal whatever the pool. Not
-    differentiable (the hit record is recomputed from ``prim``)."""
-    N = o.shape[0]
-    dt = o.dtype
-    sg = jax.lax.stop_gradient
-    bounds = sg(bvh.bounds).astype(dt)
-    tris = sg(bvh.mesh.vertices)[bvh.mesh.faces].astype(dt)
-    inv = safe_inv(d)
-    tn, _, hit0 = slab(bounds[0, 0], bounds[0, 1], o, inv, tmin, tmax)
-    # the queue: rays that hit the root box, in input order
-    perm = jnp.argsort(~hit0, stable=True).astype(jnp.int32)
-    zi = jnp.zeros(N, jnp.int32)
-    Q = (perm, o[perm], d[perm], inv[perm], tmin[perm], zi, tn[perm], zi, tmax[perm], zi - 1,
-         None, None)  # fmt: skip
-    nq = jnp.sum(hit0.astype(jnp.int32))
-    out = (tmax, zi - 1)
-    ws = [w for w in widths if w < N] or [N]
-    for k, W in enumerate(ws):
-        last = k == len(ws) - 1
-        out, Q, nq = _pool(bvh, tris, bounds, any_hit, Q, nq, W, out, last, materialize)
-    return out
+    out = (tmax, jnp.full(N, -1, jnp.int32))
+    c = jax.lax.while_loop(cond, body, (zi - 1, z3, z3, z3, zf, s0, jnp.int32(0), out))
+    return c[-1]
 
 
 def _seg_reduce(ufunc, x, offsets):
