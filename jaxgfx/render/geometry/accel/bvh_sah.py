@@ -1,5 +1,5 @@
 # ruff: noqa: F722  (jaxtyping shape strings)
-"""Bounding volume hierarchy: binned-SAH build on the host, stack traversal in JAX."""
+"""Bounding volume hierarchy: binned-SAH build on the host, wavefront stack traversal in JAX."""
 
 from __future__ import annotations
 
@@ -36,6 +36,7 @@ class BVH(TriangleAccel):
     ``bounds (M, 2, 3)`` node boxes (min, max); ``offset (M,)``: right child index for inner
     nodes, first slot in ``prims`` for leaves; ``count (M,)``: 0 for inner nodes, the number of
     triangles for leaves (<= ``max_leaf``); ``prims (F,)`` face indices in leaf order.
+    Queries run the wavefront traversal :func:`wavefront_trace`.
     """
 
     mesh: TriangleMesh
