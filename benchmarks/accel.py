@@ -15,7 +15,7 @@ Mitsuba 3 ``ray_intersect_preliminary`` (``llvm_ad_rgb`` on one thread and on al
 ``scalar_rgb`` if LLVM is missing) on UV spheres of 5 040 and 82 368 triangles, 65 536 primary
 rays (256^2 pinhole) and 65 536 random rays. jaxgfx rows are end to end from jitted JAX code:
 the backend's search plus the differentiable hit record (t, p, normals, uv) recomputed in JAX;
-``embree_host`` is embreex alone on NumPy arrays. The JAX BVH traces 4 096 of the rays. Also
+``embree_host`` is embreex alone on NumPy arrays. The JAX BVH traces 4 096 of the rays (``--backends-jax-rays``). Also
 reports build seconds and the fraction of rays whose hit and triangle id agree with Embree.
 
 ``scaling``: path-traced samples/s (depth 3, 64^2, 4 spp) of the example scene with its sphere
@@ -502,6 +502,8 @@ def main(argv=None):
     ap.add_argument("--out", default=None, help="also write the JSON here")
     ap.add_argument("--sections", default="structures,backends,scaling",
                     help="any of structures,backends,scaling,wavefront")  # fmt: skip
+    ap.add_argument("--backends-jax-rays", type=int, default=4096,
+                    help="rays traced by the JAX BVH in the backends section")  # fmt: skip
     ap.add_argument("--wavefront-rays", default="16384,65536",
                     help="ray counts of the wavefront section")  # fmt: skip
     ap.add_argument("--wavefront-width", type=int, default=None,
@@ -521,7 +523,8 @@ def main(argv=None):
     extra = {}
     if "backends" in sections:
         extra["backends"] = run_backends(n_rings=(36,) if a.quick else (36, 144),
-                                         n_side=64 if a.quick else 256)  # fmt: skip
+                                         n_side=64 if a.quick else 256,
+                                         jax_rays=a.backends_jax_rays)  # fmt: skip
     if "wavefront" in sections:
         extra["wavefront"] = run_wavefront(
             n_rings=(36,) if a.quick else (36, 144),
