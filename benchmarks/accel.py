@@ -15,8 +15,9 @@ Mitsuba 3 ``ray_intersect_preliminary`` (``llvm_ad_rgb`` on one thread and on al
 ``scalar_rgb`` if LLVM is missing) on UV spheres of 5 040 and 82 368 triangles, 65 536 primary
 rays (256^2 pinhole) and 65 536 random rays. jaxgfx rows are end to end from jitted JAX code:
 the backend's search plus the differentiable hit record (t, p, normals, uv) recomputed in JAX;
-``embree_host`` is embreex alone on NumPy arrays. The JAX BVH traces 4 096 of the rays (``--backends-jax-rays``). Also
-reports build seconds and the fraction of rays whose hit and triangle id agree with Embree.
+``embree_host`` is embreex alone on NumPy arrays. The JAX BVH traces 4 096 of the rays
+(``--backends-jax-rays``). Also reports build seconds and the fraction of rays whose hit and
+triangle id agree with Embree.
 
 ``scaling``: path-traced samples/s (depth 3, 64^2, 4 spp) of the example scene with its sphere
 replaced by a UV-sphere mesh of 1k ... 1M triangles (``--quick``: up to 16k) for each backend and
