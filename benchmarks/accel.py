@@ -1,7 +1,7 @@
 """Acceleration-structure and traversal-backend benchmark.
 
     python -m benchmarks.accel [--quick] [--max-exp 5] [--full] [--rays 4096] [--out FILE]
-                               [--sections structures,backends,scaling] [--plot DIR]
+                               [--sections structures,backends,scaling,wavefront] [--plot DIR]
 
 ``structures``: the pure-JAX BVH, grid and kd-tree. Scenes are random triangle soups
 (``make_triangle_soup``) of 1e2 ... 1e5 triangles (1e6 with ``--full``) whose triangle size
@@ -23,6 +23,13 @@ triangle id agree with Embree.
 replaced by a UV-sphere mesh of 1k ... 1M triangles (``--quick``: up to 16k) for each backend and
 Mitsuba 3 (same scene through ``to_mitsuba_dict``), with load/build and compile seconds;
 ``--plot DIR`` writes ``samples_vs_triangles.png``.
+
+``wavefront`` (issue 13, not run by default): closest-hit M rays/s of the JAX BVH traversal, a
+2x2 ablation: per-ray ``while_loop`` under ``vmap`` (the traversal before issue 13) or the
+wavefront pool, each with the step's leaf/child tests as fused elementwise code or as
+reductions; UV spheres of 5 040 and 82 368 triangles, primary and random rays, 16 384 and
+65 536 rays (``--wavefront-rays``); wall and process-CPU seconds, compile seconds, agreement of
+triangle ids and t with the first variant.
 
 Prints one JSON document (progress rows go to stderr).
 """
