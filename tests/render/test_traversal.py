@@ -170,6 +170,27 @@ def test_jax_wavefront_matches_brute_force(case):
     np.testing.assert_array_equal(t, tmax)
 
 
+def test_jax_wavefront_float64(x64):
+    """In float64 (x64 on: the pool's counters must stay int32) the wavefront's t equals brute
+    force's to 1e-12 and the primitives match, rays from inside and outside a sphere."""
+    ico = M.make_icosphere(1, radius=0.8)
+    mesh = S.TriangleMesh(np.asarray(ico.vertices, np.float64), ico.faces)
+    rng = np.random.default_rng(7)
+    o = rng.uniform(-1.5, 1.5, (300, 3))
+    d = rng.uniform(-0.5, 0.5, (300, 3)) - o  # aimed at the sphere
+    d[::4] = rng.normal(size=d[::4].shape)  # and some in random directions
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    bvh = T.build_traversal(mesh, "jax")
+    (t, pid), ref = jax.jit(lambda b, o, d: (b.closest_t(o, d), S.intersect(b.mesh, o, d)))(
+        bvh, o, d
+    )
+    assert t.dtype == jnp.float64 and 150 < int(ref.valid.sum()) < 300
+    np.testing.assert_array_equal(np.isfinite(t), np.asarray(ref.valid))
+    hit = np.asarray(ref.valid)
+    np.testing.assert_allclose(np.asarray(t)[hit], np.asarray(ref.t)[hit], rtol=1e-12)
+    np.testing.assert_array_equal(np.asarray(pid)[hit], np.asarray(ref.prim_id)[hit])
+
+
 @pytest.mark.parametrize("name", BACKENDS)
 def test_backend_transformed_mesh(case, name):
     """Rotating, scaling (s) and translating mesh and rays together scales t by s (closed

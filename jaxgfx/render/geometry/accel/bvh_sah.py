@@ -180,7 +180,7 @@ def wavefront_trace(bvh, o, d, tmin, tmax, *, any_hit=False, width=None, materia
     # the queue: the rays that hit the root box, in input order
     perm = jnp.argsort(~hit0, stable=True).astype(jnp.int32)
     queue = tuple(x[perm] for x in (o, d, inv, tmin, tn, tmax))
-    nq = jnp.sum(hit0.astype(jnp.int32))
+    nq = jnp.sum(hit0, dtype=jnp.int32)
     step = jax.vmap(lambda ray, s: _step(bvh, tris, bounds, ray, s, any_hit, materialize))
 
     def writeout(ray, best, bprim, done, out):
@@ -191,7 +191,7 @@ def wavefront_trace(bvh, o, d, tmin, tmax, *, any_hit=False, width=None, materia
         ray, o, d, inv, a, s, nxt, out = c
         node, tnode, sp, sn, st, best, bprim, done = s
         out = writeout(ray, best, bprim, done, out)
-        rank = jnp.cumsum(done.astype(jnp.int32)) - 1
+        rank = jnp.cumsum(done, dtype=jnp.int32) - 1
         new = nxt + rank
         take = done & (new < nq)
         g = jnp.minimum(new, N - 1)
