@@ -149,7 +149,7 @@ def test_jax_wavefront_matches_brute_force(case):
     """Issue 13: the wavefront traversal (ray slots refilled from a queue) finds brute force's
     closest hits on the hard cases (rays parallel to and inside a quad's plane, rays starting on
     surfaces, degenerate triangles, tmin/tmax), and any-hit agrees; a batch whose rays all miss
-    the root box returns no hits and tmax."""
+    the root box returns no hits and tmax; an empty batch returns empty arrays."""
     mesh, (o, d, tmin, tmax), on_surface, ts = case
     bvh = T.build_traversal(mesh, "jax")
     t, pid, occ = (np.asarray(x) for x in _wavefront16(bvh, o, d, tmin, tmax))
@@ -168,6 +168,8 @@ def test_jax_wavefront_matches_brute_force(case):
     t, pid, occ = (np.asarray(x) for x in _wavefront16(bvh, o_out, np.abs(d), tmin, tmax))
     assert np.all(pid == -1) and not occ.any()
     np.testing.assert_array_equal(t, tmax)
+    t, pid = wavefront_trace(bvh, o[:0], d[:0], tmin[:0], tmax[:0])  # an empty batch
+    assert t.shape == pid.shape == (0,)
 
 
 def test_jax_wavefront_float64(x64):

@@ -170,7 +170,9 @@ def wavefront_trace(bvh, o, d, tmin, tmax, *, any_hit=False, width=None, materia
     traversal, so hits do not depend on the pool. Not differentiable (the hit record is
     recomputed from ``prim``)."""
     N = o.shape[0]
-    W = pool_width(N) if width is None else min(width, N)
+    if N == 0:
+        return tmax, jnp.zeros(0, jnp.int32)
+    W = pool_width(N) if width is None else max(1, min(width, N))
     dt = o.dtype
     sg = jax.lax.stop_gradient
     bounds = sg(bvh.bounds).astype(dt)
