@@ -81,9 +81,9 @@ def example16():
     return load_scene(_example(16))
 
 
-def _img(scene, key, chunk):
+def _img(scene, key, chunk, depth=3):
     # 16² rays, chunks of 4 rows (64 rays): four chunks, three materials, dead rays
-    return render(scene, key, spp=2, integrator=PathIntegrator(max_depth=3, chunk=chunk))
+    return render(scene, key, spp=2, integrator=PathIntegrator(max_depth=depth, chunk=chunk))
 
 
 def test_chunked_path_tracer_equals_the_plain_layout():
@@ -100,8 +100,9 @@ def test_chunked_path_tracer_equals_the_plain_layout():
         }
     )
     key = jax.random.key(5)
-    plain = np.asarray(_img(scene, key, None))
-    chunked = np.asarray(jax.jit(_img, static_argnums=2)(scene, key, 64))
+    # depth 2 (one shaded bounce) keeps the two compiles short; the slow tests run depth 3
+    plain = np.asarray(_img(scene, key, None, 2))
+    chunked = np.asarray(jax.jit(_img, static_argnums=(2, 3))(scene, key, 64, 2))
     assert 0.05 < plain.mean() and (plain == 0).any()  # lit, and rays that leave
     np.testing.assert_allclose(chunked, plain, rtol=2e-5, atol=2e-6)
 
