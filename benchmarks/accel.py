@@ -1,7 +1,7 @@
 """Acceleration-structure and traversal-backend benchmark.
 
     python -m benchmarks.accel [--quick] [--max-exp 5] [--full] [--rays 4096] [--out FILE]
-                               [--sections structures,backends,scaling] [--plot DIR]
+                               [--sections structures,backends,scaling,wavefront] [--plot DIR]
 
 ``structures``: the pure-JAX BVH, grid and kd-tree. Scenes are random triangle soups
 (``make_triangle_soup``) of 1e2 ... 1e5 triangles (1e6 with ``--full``) whose triangle size
@@ -15,13 +15,21 @@ Mitsuba 3 ``ray_intersect_preliminary`` (``llvm_ad_rgb`` on one thread and on al
 ``scalar_rgb`` if LLVM is missing) on UV spheres of 5 040 and 82 368 triangles, 65 536 primary
 rays (256^2 pinhole) and 65 536 random rays. jaxgfx rows are end to end from jitted JAX code:
 the backend's search plus the differentiable hit record (t, p, normals, uv) recomputed in JAX;
-``embree_host`` is embreex alone on NumPy arrays. The JAX BVH traces 4 096 of the rays. Also
-reports build seconds and the fraction of rays whose hit and triangle id agree with Embree.
+``embree_host`` is embreex alone on NumPy arrays. The JAX BVH traces 4 096 of the rays
+(``--backends-jax-rays``). Also reports build seconds and the fraction of rays whose hit and
+triangle id agree with Embree.
 
 ``scaling``: path-traced samples/s (depth 3, 64^2, 4 spp) of the example scene with its sphere
 replaced by a UV-sphere mesh of 1k ... 1M triangles (``--quick``: up to 16k) for each backend and
 Mitsuba 3 (same scene through ``to_mitsuba_dict``), with load/build and compile seconds;
 ``--plot DIR`` writes ``samples_vs_triangles.png``.
+
+``wavefront`` (issue 13, not run by default): closest-hit M rays/s of the JAX BVH traversal, a
+2x2 ablation: per-ray ``while_loop`` under ``vmap`` (the traversal before issue 13) or the
+wavefront pool, each with the step's leaf/child tests as fused elementwise code or as
+reductions; UV spheres of 5 040 and 82 368 triangles, primary and random rays, 16 384 and
+65 536 rays (``--wavefront-rays``); wall and process-CPU seconds, compile seconds, agreement of
+triangle ids and t with the first variant.
 
 Prints one JSON document (progress rows go to stderr).
 """
@@ -281,6 +289,121 @@ def run_backends(n_rings=(36, 144), n_side=256, jax_rays=4096):
 
 
 # ---------------------------------------------------------------------------------------------
+# the JAX BVH: wavefront traversal vs a per-ray while_loop under vmap (issue 13)
+
+
+def _per_ray_bvh(bvh, o, d, tmin, tmax, materialize):
+    """The traversal before issue 13: one ``lax.while_loop`` per ray under ``vmap`` (the batch
+    iterates until its slowest ray is done), over the same step as the wavefront."""
+    from jaxgfx.render.geometry.accel._common import STACK_SIZE, safe_inv, slab
+    from jaxgfx.render.geometry.accel.bvh_sah import _step
+
+    dt = o.dtype
+    bounds = bvh.bounds.astype(dt)
+    tris = bvh.mesh.vertices[bvh.mesh.faces].astype(dt)
+
+    def one(o, d, a, b):
+        inv = safe_inv(d)
+        tn, _, hit0 = slab(bounds[0, 0], bounds[0, 1], o, inv, a, b)
+        s = (jnp.int32(0), tn, jnp.int32(0), jnp.zeros(STACK_SIZE, jnp.int32),
+             jnp.zeros(STACK_SIZE, dt), b, jnp.int32(-1), ~hit0)  # fmt: skip
+        s = jax.lax.while_loop(
+            lambda s: ~s[-1],
+            lambda s: _step(bvh, tris, bounds, (o, d, inv, a), s, False, materialize),
+            s,
+        )
+        return s[5], s[6]
+
+    return jax.vmap(one)(o, d, tmin, tmax)
+
+
+_BVH_VARIANTS = {
+    # name: (wavefront?, materialised leaf/child tests?)
+    "per_ray_fused": (False, False),  # the JAX BVH before issue 13
+    "per_ray": (False, True),
+    "wavefront_fused": (True, False),
+    "wavefront": (True, True),  # the JAX BVH now
+}
+
+
+def _bvh_fn(wave, materialize, width):
+    from jaxgfx.render.geometry.accel.bvh_sah import wavefront_trace
+
+    @jax.jit
+    def f(bvh, o, d):
+        tmin, tmax = jnp.zeros(o.shape[0], o.dtype), jnp.full(o.shape[0], jnp.inf, o.dtype)
+        if wave:
+            return wavefront_trace(bvh, o, d, tmin, tmax, width=width, materialize=materialize)
+        return _per_ray_bvh(bvh, o, d, tmin, tmax, materialize)
+
+    return f
+
+
+def run_wavefront(n_rings=(36, 144), n_rays=(16384, 65536), variants=tuple(_BVH_VARIANTS),
+                  width=None, repeats=2):  # fmt: skip
+    """Closest-hit M rays/s of the JAX BVH traversal variants on UV spheres (5 040 and 82 368
+    triangles), primary and random rays; wall and process-CPU seconds, best of ``repeats``
+    warm calls taken round-robin over the variants (the machine is shared: compare ratios
+    within a row); compile seconds = first call minus the best warm call."""
+    from jaxgfx.render.geometry.accel.bvh_sah import pool_width
+    from jaxgfx.render.geometry.mesh_io import make_uv_sphere
+
+    fns = {v: _bvh_fn(*_BVH_VARIANTS[v], width) for v in variants}
+    rows = []
+    for nr in n_rings:
+        mesh = make_uv_sphere(nr)
+        bvh = jax.block_until_ready(A.build_bvh(mesh))
+        for n in n_rays:
+            side = int(round(np.sqrt(n)))
+            rng = np.random.default_rng(0)
+            ro = rng.uniform(-1.5, 1.5, (n, 3))
+            rd = rng.uniform(-1, 1, (n, 3)) - ro
+            rd /= np.linalg.norm(rd, axis=1, keepdims=True)
+            for rname, (o, d) in (("primary", _primary_rays(side)), ("random", (ro, rd))):
+                o, d = jnp.asarray(o, jnp.float32), jnp.asarray(d, jnp.float32)
+                row = dict(n_tris=int(mesh.faces.shape[0]), rays=rname, n_rays=int(o.shape[0]),
+                           pool_width=width or pool_width(n), mrays_per_s={}, cpu_mrays_per_s={},
+                           compile_s={}, compile_cpu_s={})  # fmt: skip
+                outs, wall, cpu, first = {}, {}, {}, {}
+                for v, f in fns.items():
+                    t0, c0 = time.perf_counter(), time.process_time()
+                    outs[v] = jax.block_until_ready(f(bvh, o, d))
+                    first[v] = (time.perf_counter() - t0, time.process_time() - c0)
+                    wall[v], cpu[v] = [], []
+                for _ in range(repeats):
+                    for v, f in fns.items():
+                        t0, c0 = time.perf_counter(), time.process_time()
+                        jax.block_until_ready(f(bvh, o, d))
+                        wall[v].append(time.perf_counter() - t0)
+                        cpu[v].append(time.process_time() - c0)
+                for v in fns:
+                    w, c = min(wall[v]), min(cpu[v])
+                    row["mrays_per_s"][v] = o.shape[0] / w / 1e6
+                    row["cpu_mrays_per_s"][v] = o.shape[0] / c / 1e6
+                    row["compile_s"][v] = max(first[v][0] - w, 0.0)
+                    row["compile_cpu_s"][v] = max(first[v][1] - c, 0.0)
+                ref = variants[0]
+                t_ref, p_ref = (np.asarray(x) for x in outs[ref])
+                hit = p_ref >= 0
+                row["hit_fraction"] = float(hit.mean())
+                row[f"same_prim_as_{ref}"] = {
+                    v: float(np.mean(np.asarray(outs[v][1]) == p_ref)) for v in fns
+                }
+                rel = {
+                    v: np.abs(np.asarray(outs[v][0])[hit] - t_ref[hit]) / t_ref[hit] for v in fns
+                }
+                row[f"max_rel_dt_vs_{ref}"] = {
+                    v: float(np.max(r, initial=0.0)) for v, r in rel.items()
+                }
+                row[f"speedup_over_{ref}"] = {
+                    v: round(row["mrays_per_s"][v] / row["mrays_per_s"][ref], 2) for v in fns
+                }
+                rows.append(row)
+                print(json.dumps(row), flush=True, file=sys.stderr)
+    return dict(rows=rows)
+
+
+# ---------------------------------------------------------------------------------------------
 # samples/s against the triangle count, per backend and Mitsuba 3
 
 
@@ -385,7 +508,19 @@ def main(argv=None):
     ap.add_argument("--full", action="store_true", help="include 1e6 triangles (slow build)")
     ap.add_argument("--rays", type=int, default=4096)
     ap.add_argument("--out", default=None, help="also write the JSON here")
-    ap.add_argument("--sections", default="structures,backends,scaling")
+    ap.add_argument("--sections", default="structures,backends,scaling",
+                    help="any of structures,backends,scaling,wavefront")  # fmt: skip
+    ap.add_argument("--backends-jax-rays", type=int, default=4096,
+                    help="rays traced by the JAX BVH in the backends section")  # fmt: skip
+    ap.add_argument("--wavefront-rays", default="16384,65536",
+                    help="ray counts of the wavefront section")  # fmt: skip
+    ap.add_argument("--wavefront-width", type=int, default=None,
+                    help="pool slots (default: bvh_sah.pool_width)")  # fmt: skip
+    ap.add_argument(
+        "--wavefront-variants",
+        default=",".join(_BVH_VARIANTS),
+        help=f"subset of {','.join(_BVH_VARIANTS)} (the first is the reference)",
+    )
     ap.add_argument("--plot", default=None, help="write samples_vs_triangles.png here")
     a = ap.parse_args(argv)
     sections = set(a.sections.split(","))
@@ -396,7 +531,15 @@ def main(argv=None):
     extra = {}
     if "backends" in sections:
         extra["backends"] = run_backends(n_rings=(36,) if a.quick else (36, 144),
-                                         n_side=64 if a.quick else 256)  # fmt: skip
+                                         n_side=64 if a.quick else 256,
+                                         jax_rays=a.backends_jax_rays)  # fmt: skip
+    if "wavefront" in sections:
+        extra["wavefront"] = run_wavefront(
+            n_rings=(36,) if a.quick else (36, 144),
+            n_rays=(4096,) if a.quick else tuple(int(x) for x in a.wavefront_rays.split(",")),
+            variants=tuple(a.wavefront_variants.split(",")),
+            width=a.wavefront_width,
+        )
     if "scaling" in sections:
         # 4n(n-1) triangles: 1 012, 4 032, 16 512, 65 280, 262 656, 1 001 000 (n = 501)
         rings = (17, 33, 65) if a.quick else (17, 33, 65, 129, 257, 501)

@@ -94,7 +94,13 @@ def fusion_barrier(tree):
     # int32 bits carry no tangent, so no derivative ever passes through the custom_vmap
     bits = _one_of_batch(jax.lax.bitcast_convert_type(jax.lax.stop_gradient(first), jnp.int32))
     pred = bits != 0x7FBADBAD  # a NaN payload
-    return jax.lax.cond(pred, lambda t: t, lambda t: jax.tree_util.tree_map(_same, t), tree)
+    return jax.lax.cond(
+        pred,
+        lambda t, p: t,
+        lambda t, p: jax.tree_util.tree_map(lambda x: _same(x, p), t),
+        tree,
+        pred,
+    )
 
 
 @jax.custom_batching.custom_vmap
@@ -114,8 +120,12 @@ def _one_of_batch_vmap(axis_size, in_batched, x):
     return _one_of_batch(x[0] if in_batched else x), False
 
 
-def _same(x):
-    return x if x.dtype == bool else x + jnp.zeros((), x.dtype)
+def _same(x, pred):
+    # The false branch returns the same values by operations XLA cannot prove to be the
+    # identity: were both branches the identity on a leaf, XLA forwards that operand past the
+    # conditional and the barrier vanishes for it (it did for booleans: `x ^ pred` is `x` here,
+    # where pred is False, but only at run time).
+    return jnp.logical_xor(x, pred) if x.dtype == bool else x + jnp.zeros((), x.dtype)
 
 
 # Cody-Waite split of pi/2 (fdlibm's pio2_1 / pio2_1t for float64, float32 hi/lo for float32)

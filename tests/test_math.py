@@ -174,6 +174,24 @@ def test_fusion_barrier_is_identity_with_gradients(x64):
     check_grads(lambda v: (_math.fusion_barrier(v * v) ** 2).sum(), (x,), order=2)
     g = jax.vmap(lambda v: _math.fusion_barrier(v).sum())(jnp.ones((4, 3)))
     np.testing.assert_array_equal(g, [3.0] * 4)
+    # the sentinel in the first leaf runs the other branch: booleans must come out unchanged
+    flags = jnp.asarray([True, False])
+    out = jax.jit(_math.fusion_barrier)((jnp.stack([sentinel, 1.0]), flags))
+    np.testing.assert_array_equal(out[1], [True, False])
+
+
+def test_fusion_barrier_keeps_boolean_leaves_materialised():
+    # Were both branches the identity on a boolean leaf, XLA would forward it past the
+    # conditional (the barrier vanished for booleans before): the compiled program of a
+    # boolean-only barrier must still hold the conditional.
+    def f(x):
+        return _math.fusion_barrier(x > 0.5) & (x < 2.0)
+
+    hlo = jax.jit(f).lower(jnp.ones(8)).compile().as_text()
+    assert "conditional(" in hlo
+    np.testing.assert_array_equal(
+        jax.jit(f)(jnp.asarray([0.0, 1.0, 3.0])), [False, True, False]
+    )
 
 
 def test_fusion_barrier_stays_a_cond_under_vmap(x64):

@@ -8,7 +8,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from jaxgfx._math import safe_div, safe_normalize, take_rows, vdot
+from jaxgfx._math import fusion_barrier, safe_div, safe_normalize, take_rows, vdot
 from jaxgfx.render.geometry._points import as_points
 from jaxgfx.render.geometry.ray import Hit, hit_record
 
@@ -63,7 +63,8 @@ def rectangle_intersect(center, edge_u, edge_v, o, d, tmin=0.0, tmax=jnp.inf):
 def rectangle_hit(shape: Rectangles, pid, o, d, valid, prim_id, sid) -> Hit:
     """Differentiable hit record of rays ``o, d`` against rectangle ``pid``."""
     c, eu, ev = (take_rows(a, pid) for a in (shape.centers, shape.edge_u, shape.edge_v))
-    t, s, u = rectangle_intersect(c, eu, ev, o, d, -jnp.inf, jnp.inf)
+    # materialised: the record's fields are separate kernels that each repeated the test
+    t, s, u = fusion_barrier(rectangle_intersect(c, eu, ev, o, d, -jnp.inf, jnp.inf))
     valid = valid & jnp.isfinite(t)
     tt = jnp.where(valid, t, 0.0)
     p = c + (s - 0.5)[..., None] * eu + (u - 0.5)[..., None] * ev

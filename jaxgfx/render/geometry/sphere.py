@@ -10,7 +10,15 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from jaxgfx._checks import check_nonnegative
-from jaxgfx._math import safe_arccos, safe_atan2, safe_div, safe_sqrt, take_rows, vdot
+from jaxgfx._math import (
+    fusion_barrier,
+    safe_arccos,
+    safe_atan2,
+    safe_div,
+    safe_sqrt,
+    take_rows,
+    vdot,
+)
 from jaxgfx.render.geometry._points import as_points
 from jaxgfx.render.geometry.ray import Hit, hit_record
 
@@ -69,7 +77,6 @@ def sphere_hit(shape: Spheres, pid, o, d, valid, prim_id, sid) -> Hit:
     :func:`jaxgfx.render.geometry.intersect.primitive_hit`)."""
     c = take_rows(shape.centers, pid)
     r = take_rows(shape.radii, pid)
-    t = sphere_intersect(c, r, o, d, -jnp.inf, jnp.inf)
     # choose the root that the traversal found: the nearest positive one
     f = o - c
     b = vdot(f, d)
@@ -78,7 +85,8 @@ def sphere_hit(shape: Spheres, pid, o, d, valid, prim_id, sid) -> Hit:
     t_lo, t_hi = -b - h, -b + h
     t = jnp.where(t_lo > 0, t_lo, t_hi)
     valid = valid & jnp.isfinite(t)
-    tt = jnp.where(valid, t, 0.0)
+    # materialised: the record's fields are separate kernels that each repeated the test
+    valid, tt = fusion_barrier((valid, jnp.where(valid, t, 0.0)))
     p = o + tt[..., None] * d
     ng = safe_div(p - c, jnp.where(r > 0, r, 1.0)[..., None])
     theta = safe_arccos(ng[..., 2])

@@ -60,7 +60,7 @@ def _replace_grad_jvp(primals, tangents):
     return x, jnp.broadcast_to(ty, jnp.shape(x)).astype(jnp.result_type(x))
 
 
-def detach_bsdf_sample(scene, mat, wo, s, uv, frame):
+def detach_bsdf_sample(scene, mat, wo, s, uv, frame, *, lazy=False):
     """Detached BSDF sample ``(wi, weight)`` for the next path segment.
 
     Non-delta lobes: the direction carries no derivative and the weight has the value of the
@@ -82,7 +82,7 @@ def detach_bsdf_sample(scene, mat, wo, s, uv, frame):
     wi_w = to_world(frame, s.wi)
     wi_d = sg(wi_w)
     wi_eval = to_local(frame, wi_d)
-    f = dispatch(scene, mat, lambda m: m.eval(wo, wi_eval), uv=uv)
+    f = dispatch(scene, mat, lambda m: m.eval(wo, wi_eval), uv=uv, lazy=lazy)
     y = safe_div(f, sg(s.pdf)[..., None])
     delta = s.is_delta[..., None]
     wi = jnp.where(delta, wi_w, wi_d)
@@ -108,16 +108,38 @@ def hit_material(scene, hit):
     return mat
 
 
-def dispatch(scene, mat_id, fn, *, uv=None):
+def dispatch(scene, mat_id, fn, *, uv=None, lazy=False):
     """Evaluate ``fn(bsdf)`` for every material of the scene and select per ray by ``mat_id``.
 
     Only the materials the scene defines are evaluated (a one-material scene pays for one).
     Textured materials (``jaxgfx.render.bsdf.textured.Textured``) are resolved at the hit ``uv``.
+    ``lazy``: a material no ray of the batch uses is skipped at run time (a ``lax.cond``; its
+    rays would get zeros): for the material-sorted chunks of
+    :func:`~jaxgfx.render.integrators._wavefront.shade_sorted`, where most chunks hold one.
     """
-    # textures: only materials with an ``at`` method pay for a lookup
-    outs = [fn(m.at(uv) if hasattr(m, "at") else m) for m in scene.materials]
-    if len(outs) == 1:
-        return outs[0]
+
+    def call(m):
+        # textures: only materials with an ``at`` method pay for a lookup
+        return fn(m.at(uv) if hasattr(m, "at") else m)
+
+    mats = scene.materials
+    if len(mats) == 1:
+        return call(mats[0])
+    if lazy:
+        outs = []
+        for k, m in enumerate(mats):
+            shape = jax.eval_shape(call, m)
+            outs.append(
+                jax.lax.cond(
+                    jnp.any(mat_id == k),
+                    lambda m=m: call(m),
+                    lambda shape=shape: jax.tree_util.tree_map(
+                        lambda s: jnp.zeros(s.shape, s.dtype), shape
+                    ),
+                )
+            )
+    else:
+        outs = [call(m) for m in mats]
 
     def select(*xs):
         r = xs[0]

@@ -1,8 +1,10 @@
 """Acceleration structures for triangle meshes: BVH, uniform grid and kd-tree in JAX, and the
 traversal backends (Embree, NVIDIA Warp, the JAX BVH) behind the renderer's intersection.
 
-The JAX structures are built on the host (NumPy) and traversed in JAX (``lax.while_loop`` per
-ray, vmapped); all share the interface ``accel.intersect(o, d, *, tmin, tmax, shape_id) -> Hit``,
+The JAX structures are built on the host (NumPy) and traversed in JAX (the BVH as a wavefront:
+a pool of ray slots refilled from a queue, :func:`.bvh_sah.wavefront_trace`; grid and kd-tree
+with a ``lax.while_loop`` per ray, vmapped); all share the interface
+``accel.intersect(o, d, *, tmin, tmax, shape_id) -> Hit``,
 ``accel.closest_t(o, d, *, tmin, tmax)`` and ``accel.occluded(o, d, tmax, *, tmin) -> bool``.
 Pass the structure to jitted functions as an argument (it is a pytree) rather than closing over
 it. Backends (:mod:`.backends`, docs/render_backends.md): ``build_traversal(mesh, "auto" |

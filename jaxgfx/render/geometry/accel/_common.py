@@ -37,7 +37,7 @@ def slab(bmin, bmax, o, inv, t0, t1):
     return tn, tf, tn <= tf
 
 
-def tri_chunk(tris, idx, mask, o, d, tmin, tmax):
+def tri_chunk(tris, idx, mask, o, d, tmin, tmax, *, reduce=True):
     """Möller-Trumbore on ``tris[idx]`` (``idx (K,)``); returns ``(t_min, slot)`` over the chunk.
 
     Written per component with an unrolled minimum over the K slots: XLA CPU fuses it into
@@ -65,7 +65,8 @@ def tri_chunk(tris, idx, mask, o, d, tmin, tmax):
     b2 = (qx * dx + qy * dy + qz * dz) * inv_det
     t = (qx * e2[0] + qy * e2[1] + qz * e2[2]) * inv_det
     hit = mask & ok & (b1 >= 0) & (b2 >= 0) & (b1 + b2 <= 1) & (t > tmin) & (t < tmax)
-    return small_argmin(jnp.where(hit, t, jnp.inf))
+    t = jnp.where(hit, t, jnp.inf)
+    return small_argmin(t) if reduce else t
 
 
 def as_numpy_triangles(mesh: TriangleMesh):

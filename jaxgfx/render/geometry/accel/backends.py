@@ -11,7 +11,7 @@ name       engine                                          install
 ``warp``   NVIDIA Warp ``mesh_query_ray`` (CPU or CUDA),    ``pip install jaxgfx[warp]``
            ``wp.jax_kernel`` (XLA FFI)
 ``jax``    the pure-JAX BVH (``bvh_sah``),   always available (the reference)
-           portable, vmappable, slow on large meshes
+           wavefront traversal; portable, vmappable
 =========  ==============================================  ===================================
 
 ``"auto"`` picks the fastest available for JAX's default device (measured in

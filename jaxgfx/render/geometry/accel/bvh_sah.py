@@ -1,5 +1,5 @@
 # ruff: noqa: F722  (jaxtyping shape strings)
-"""Bounding volume hierarchy: binned-SAH build on the host, stack traversal in JAX."""
+"""Bounding volume hierarchy: binned-SAH build on the host, wavefront stack traversal in JAX."""
 
 from __future__ import annotations
 
@@ -10,13 +10,16 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from jaxgfx.render.geometry.accel._common import (
+    _GROW,
     STACK_SIZE,
     TriangleAccel,
     as_numpy_triangles,
+    safe_inv,
     slab,
     tri_chunk,
 )
 from jaxgfx.render.geometry.mesh import TriangleMesh
+from jaxgfx.render.geometry.ray import prepare_rays
 
 __all__ = ["BVH", "build_bvh"]
 
@@ -33,6 +36,7 @@ class BVH(TriangleAccel):
     ``bounds (M, 2, 3)`` node boxes (min, max); ``offset (M,)``: right child index for inner
     nodes, first slot in ``prims`` for leaves; ``count (M,)``: 0 for inner nodes, the number of
     triangles for leaves (<= ``max_leaf``); ``prims (F,)`` face indices in leaf order.
+    Queries run the wavefront traversal :func:`wavefront_trace`.
     """
 
     mesh: TriangleMesh
@@ -42,64 +46,181 @@ class BVH(TriangleAccel):
     prims: Int[Array, " F"]
     max_leaf: int = eqx.field(static=True)
 
-    def _trace(self, tris, o, d, inv, tmin, tmax, any_hit):
-        L = self.max_leaf
-        bounds = self.bounds.astype(o.dtype)
-        tn, tf, hit0 = slab(bounds[0, 0], bounds[0, 1], o, inv, tmin, tmax)
-        stack_n = jnp.zeros(STACK_SIZE, jnp.int32)
-        stack_t = jnp.zeros(STACK_SIZE, o.dtype)
-        # state: node, its entry t, sp, stacks, best t, best prim, done
-        init = (jnp.int32(0), tn, jnp.int32(0), stack_n, stack_t, tmax, jnp.int32(-1), ~hit0)
-        ks = jnp.arange(L)
+    def _run(self, o, d, tmin, tmax, any_hit):
+        o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
+        batch = o.shape[:-1]
+        sg = jax.lax.stop_gradient
+        O = sg(o).reshape(-1, 3)
+        D = sg(d).reshape(-1, 3)
+        TMIN = jnp.broadcast_to(sg(tmin), batch).reshape(-1)
+        TMAX = jnp.broadcast_to(sg(tmax), batch).reshape(-1)
+        t, prim = wavefront_trace(self, O, D, TMIN, TMAX, any_hit=any_hit)
+        return o, d, t.reshape(batch), prim.reshape(batch)
 
-        def cond(s):
-            return ~s[-1]
 
-        def body(s):
-            node, tnode, sp, sn, st, best, bprim, _ = s
-            cnt = self.count[node]
-            off = self.offset[node]
-            is_leaf = cnt > 0
-            skip = tnode >= best
-            # leaf: test up to L triangles
-            slots = off + ks
-            idx = self.prims[jnp.minimum(slots, self.prims.shape[0] - 1)]
-            tl, j = tri_chunk(tris, idx, ks < cnt, o, d, tmin, best)
-            leaf_better = is_leaf & ~skip & (tl < best)
-            best = jnp.where(leaf_better, tl, best)
-            bprim = jnp.where(leaf_better, idx[j], bprim)
-            # inner: test both children, descend into the nearer one, push the farther
-            left, right = node + 1, off
-            bl = bounds[jnp.stack([left, right])]
-            ctn, _, chit = slab(bl[:, 0], bl[:, 1], o, inv, tmin, best)
-            inner = ~is_leaf & ~skip
-            hl, hr = inner & chit[0], inner & chit[1]
-            l_first = ctn[0] <= ctn[1]
-            near = jnp.where(hl & (~hr | l_first), left, right)
-            tnear = jnp.where(near == left, ctn[0], ctn[1])
-            far = jnp.where(near == left, right, left)
-            tfar = jnp.where(near == left, ctn[1], ctn[0])
-            both = hl & hr
-            push = both & (sp < STACK_SIZE)
-            # Write the slot above the top unconditionally (it is free; an index past the end
-            # is dropped): a plain in-place update of the loop carry. Selecting between the old
-            # and the updated stack copied both (N, 64) stacks every iteration under vmap.
-            sn = sn.at[sp].set(far, mode="drop")
-            st = st.at[sp].set(tfar, mode="drop")
-            sp = sp + push.astype(jnp.int32)
-            descend = hl | hr
-            # otherwise pop
-            empty = sp == 0
-            top = jnp.maximum(sp - 1, 0)
-            pop_node, pop_t = sn[top], st[top]
-            node_new = jnp.where(descend, near, pop_node)
-            t_new = jnp.where(descend, tnear, pop_t)
-            sp = jnp.where(descend | empty, sp, sp - 1)
-            done = (~descend & empty) | (any_hit & (bprim >= 0))
-            return node_new, t_new, sp, sn, st, best, bprim, done
+# Most slots of the wavefront pool (see :func:`pool_width`).
+WAVEFRONT_WIDTH = 1024
 
-        out = jax.lax.while_loop(cond, body, init)
-        return out[5], out[6]
+
+def _min_slot(t):
+    """``(min, first argmin)`` over the last axis of ``t`` as ONE variadic reduction.
+
+    XLA CPU fuses an elementwise chain into each of its consumers: with an unrolled minimum,
+    the Möller-Trumbore test that feeds the step's eight outputs was recomputed in six fused
+    kernels. A reduction's result is materialised once."""
+    k = jnp.arange(t.shape[-1], dtype=jnp.int32)
+
+    def pick(a, b):
+        first = (a[0] < b[0]) | ((a[0] == b[0]) & (a[1] < b[1]))
+        return jnp.where(first, a[0], b[0]), jnp.where(first, a[1], b[1])
+
+    init = (jnp.array(jnp.inf, t.dtype), jnp.int32(t.shape[-1]))
+    return jax.lax.reduce((t, k), init, pick, (t.ndim - 1,))
+
+
+def _slab_reduced(bmin, bmax, o, inv, t0, t1):
+    """:func:`slab`'s ``(tn, hit)`` with the per-axis max and min as one reduction (materialised,
+    like :func:`_min_slot`)."""
+    ta = (bmin - o) * inv
+    tb = (bmax - o) * inv
+    lo, hi = jax.lax.reduce(
+        (jnp.minimum(ta, tb), jnp.maximum(ta, tb)),
+        (jnp.array(-jnp.inf, o.dtype), jnp.array(jnp.inf, o.dtype)),
+        lambda a, b: (jnp.maximum(a[0], b[0]), jnp.minimum(a[1], b[1])),
+        (ta.ndim - 1,),
+    )
+    tn = jnp.maximum(lo, t0)
+    tf = jnp.minimum(hi * _GROW[jnp.dtype(o.dtype)], t1)
+    return tn, tn <= tf
+
+
+def _step(bvh, tris, bounds, ray, s, any_hit, materialize=True):
+    """One traversal step of ONE ray ``ray = (o, d, 1/d, tmin)`` with state ``s = (node, its
+    entry t, stack pointer, node stack, t stack, best t, best prim, done)``; a no-op for a
+    finished ray. An inner node tests both child boxes, descends into the nearer hit child and
+    pushes the farther one; a leaf tests its ``max_leaf`` slots; a node entered beyond the best
+    hit is skipped; the stack is popped when there is nothing to descend into.
+    ``materialize=False``: the leaf and child tests as unrolled elementwise code (the
+    traversal before issue 13; kept for the ablation in benchmarks/accel.py)."""
+    o, d, inv, tmin = ray
+    node, tnode, sp, sn, st, best, bprim, done = s
+    L = bvh.max_leaf
+    ks = jnp.arange(L)
+    cnt = bvh.count[node]
+    off = bvh.offset[node]
+    is_leaf = cnt > 0
+    skip = (tnode >= best) | done
+    idx = bvh.prims[jnp.minimum(off + ks, bvh.prims.shape[0] - 1)]
+    if materialize:
+        tl, j = _min_slot(tri_chunk(tris, idx, ks < cnt, o, d, tmin, best, reduce=False))
+    else:
+        tl, j = tri_chunk(tris, idx, ks < cnt, o, d, tmin, best)
+    leaf_better = is_leaf & ~skip & (tl < best)
+    best = jnp.where(leaf_better, tl, best)
+    bprim = jnp.where(leaf_better, idx[jnp.minimum(j, L - 1)], bprim)
+    left, right = node + 1, off
+    bl = bounds[jnp.stack([left, right])]
+    if materialize:
+        ctn, chit = _slab_reduced(bl[:, 0], bl[:, 1], o, inv, tmin, best)
+    else:
+        ctn, _, chit = slab(bl[:, 0], bl[:, 1], o, inv, tmin, best)
+    inner = ~is_leaf & ~skip
+    hl, hr = inner & chit[0], inner & chit[1]
+    l_first = ctn[0] <= ctn[1]
+    near = jnp.where(hl & (~hr | l_first), left, right)
+    tnear = jnp.where(near == left, ctn[0], ctn[1])
+    far = jnp.where(near == left, right, left)
+    tfar = jnp.where(near == left, ctn[1], ctn[0])
+    push = hl & hr & (sp < STACK_SIZE)
+    # The slot above the top is free: write it unconditionally (an index past the end is
+    # dropped), an in-place update of the loop carry.
+    sn = sn.at[sp].set(far, mode="drop")
+    st = st.at[sp].set(tfar, mode="drop")
+    sp = sp + push.astype(jnp.int32)
+    descend = hl | hr
+    empty = sp == 0
+    top = jnp.maximum(sp - 1, 0)
+    node_new = jnp.where(done, node, jnp.where(descend, near, sn[top]))
+    t_new = jnp.where(descend, tnear, st[top])
+    sp = jnp.where(descend | empty | done, sp, sp - 1)
+    done = done | (~descend & empty) | (any_hit & (bprim >= 0))
+    return node_new, t_new, sp, sn, st, best, bprim, done
+
+
+def pool_width(n_rays: int) -> int:
+    """Slots of the wavefront pool for ``n_rays`` rays: 1/16 of the rays, within [256, 1024]
+    (and at most ``n_rays``). Measured on XLA CPU (benchmarks/accel.py, docs/performance.md):
+    wider pools step more finished slots in the tail, narrower ones pay the per-iteration
+    overhead more often; extra narrower pools for the tail gained under 10 % and cost one more
+    compiled step each."""
+    return max(1, min(n_rays, WAVEFRONT_WIDTH, max(n_rays // 16, 256)))
+
+
+def wavefront_trace(bvh, o, d, tmin, tmax, *, any_hit=False, width=None, materialize=True):
+    """Closest (or, ``any_hit``, some) hit ``(t, prim)`` of rays ``o, d (N, 3)`` in
+    ``(tmin, tmax) (N,)`` against ``bvh`` (``prim = -1``, ``t = tmax`` where nothing is hit).
+
+    A wavefront traversal that only steps active rays. Rays that miss the root box are
+    answered at once; the others queue for a pool of ``width`` slots (default
+    :func:`pool_width`). Each loop iteration writes out the results of the finished slots,
+    refills them with the next queued rays (a prefix sum over the free slots ranks them) and
+    advances every slot by one :func:`_step`. The loop runs ~sum(steps) / width + max(steps)
+    iterations of ``width`` rays, where a per-ray ``while_loop`` under ``vmap`` runs max(steps)
+    iterations of all N rays. Each ray visits the nodes in the order of :func:`_step`'s stack
+    traversal, so hits do not depend on the pool. Not differentiable (the hit record is
+    recomputed from ``prim``)."""
+    N = o.shape[0]
+    if N == 0:
+        return tmax, jnp.zeros(0, jnp.int32)
+    W = pool_width(N) if width is None else max(1, min(width, N))
+    dt = o.dtype
+    sg = jax.lax.stop_gradient
+    bounds = sg(bvh.bounds).astype(dt)
+    tris = sg(bvh.mesh.vertices)[bvh.mesh.faces].astype(dt)
+    inv = safe_inv(d)
+    tn, _, hit0 = slab(bounds[0, 0], bounds[0, 1], o, inv, tmin, tmax)
+    # the queue: the rays that hit the root box, in input order
+    perm = jnp.argsort(~hit0, stable=True).astype(jnp.int32)
+    queue = tuple(x[perm] for x in (o, d, inv, tmin, tn, tmax))
+    nq = jnp.sum(hit0, dtype=jnp.int32)
+    step = jax.vmap(lambda ray, s: _step(bvh, tris, bounds, ray, s, any_hit, materialize))
+
+    def writeout(ray, best, bprim, done, out):
+        dst = jnp.where(done & (ray >= 0), ray, N)
+        return out[0].at[dst].set(best, mode="drop"), out[1].at[dst].set(bprim, mode="drop")
+
+    def body(c):
+        ray, o, d, inv, a, s, nxt, out = c
+        node, tnode, sp, sn, st, best, bprim, done = s
+        out = writeout(ray, best, bprim, done, out)
+        rank = jnp.cumsum(done, dtype=jnp.int32) - 1
+        new = nxt + rank
+        take = done & (new < nq)
+        g = jnp.minimum(new, N - 1)
+        o_q, d_q, inv_q, a_q, tn_q, b_q = (q[g] for q in queue)
+        t3 = take[:, None]
+        o, d, inv = jnp.where(t3, o_q, o), jnp.where(t3, d_q, d), jnp.where(t3, inv_q, inv)
+        a = jnp.where(take, a_q, a)
+        ray = jnp.where(take, perm[g], jnp.where(done, -1, ray))
+        node = jnp.where(take, 0, node)
+        tnode = jnp.where(take, tn_q, tnode)
+        sp = jnp.where(take, 0, sp)
+        best = jnp.where(take, b_q, best)
+        bprim = jnp.where(take, -1, bprim)
+        done = done & ~take
+        nxt = jnp.minimum(nxt + rank[-1] + 1, nq)
+        s = step((o, d, inv, a), (node, tnode, sp, sn, st, best, bprim, done))
+        return ray, o, d, inv, a, s, nxt, out
+
+    def cond(c):
+        return (c[6] < nq) | jnp.any(c[0] >= 0)
+
+    zi, zf, z3 = jnp.zeros(W, jnp.int32), jnp.zeros(W, dt), jnp.zeros((W, 3), dt)
+    stacks = jnp.zeros((W, STACK_SIZE), jnp.int32), jnp.zeros((W, STACK_SIZE), dt)
+    s0 = (zi, zf, zi, *stacks, zf, zi - 1, jnp.ones(W, bool))
+    out = (tmax, jnp.full(N, -1, jnp.int32))
+    c = jax.lax.while_loop(cond, body, (zi - 1, z3, z3, z3, zf, s0, jnp.int32(0), out))
+    return c[-1]
 
 
 def _seg_reduce(ufunc, x, offsets):
