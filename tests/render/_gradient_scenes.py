@@ -239,8 +239,9 @@ def ad_fd(
     a third of a value-and-gradient, and compiles in a fraction of its time).
     The keys are vmapped: one program over all keys' rays (8² images are too small to fill a
     kernel alone). It is as fast per key as one key at a time since ``fusion_barrier`` stays a
-    barrier under ``vmap`` (before, the batched program was 7-31x slower per key and took the
-    glossy fixture of test_gradients_fd.py ~4x longer; docs/performance.md "Batches of keys").
+    barrier under ``vmap`` (before, the batched program was 7-31x slower per key; the glossy
+    fixture of test_gradients_fd.py took 269 s against 62 s now, loaded machine;
+    docs/performance.md "Batches of keys").
     """
     opts = (
         ("spp", spp),
