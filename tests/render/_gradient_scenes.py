@@ -240,7 +240,7 @@ def ad_fd(
     The keys are vmapped: one program over all keys' rays (8² images are too small to fill a
     kernel alone). It is as fast per key as one key at a time since ``fusion_barrier`` stays a
     barrier under ``vmap`` (before, the batched program was 7-31x slower per key; the glossy
-    fixture of test_gradients_fd.py took 269 s against 62 s now, loaded machine;
+    fixture of test_gradients_fd.py: 57 s before, 33 s now on a quiet machine;
     docs/performance.md "Batches of keys").
     """
     opts = (
