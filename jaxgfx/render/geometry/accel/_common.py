@@ -77,6 +77,21 @@ def as_numpy_triangles(mesh: TriangleMesh):
     return np.asarray(mesh.vertices, np.float64)[np.asarray(mesh.faces)]
 
 
+def flat_rays(o, d, tmin, tmax):
+    """``(o, d, batch, (O, D, TMIN, TMAX))``: the rays (``prepare_rays``) and, for traversal,
+    their flat ``(N, 3)`` / ``(N,)`` copies without derivatives."""
+    o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
+    batch = o.shape[:-1]
+    sg = jax.lax.stop_gradient
+    flat = (
+        sg(o).reshape(-1, 3),
+        sg(d).reshape(-1, 3),
+        jnp.broadcast_to(sg(tmin), batch).reshape(-1),
+        jnp.broadcast_to(sg(tmax), batch).reshape(-1),
+    )
+    return o, d, batch, flat
+
+
 class TriangleAccel(eqx.Module):
     """Base class: subclasses implement ``_trace(tris, o, d, inv, tmin, tmax, any_hit)``
     for ONE ray, returning ``(t, prim_id)`` (``prim_id = -1``: no hit)."""
@@ -87,14 +102,8 @@ class TriangleAccel(eqx.Module):
         raise NotImplementedError
 
     def _run(self, o, d, tmin, tmax, any_hit):
-        o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
-        batch = o.shape[:-1]
-        sg = jax.lax.stop_gradient
-        O = sg(o).reshape(-1, 3)
-        D = sg(d).reshape(-1, 3)
-        TMIN = jnp.broadcast_to(sg(tmin), batch).reshape(-1)
-        TMAX = jnp.broadcast_to(sg(tmax), batch).reshape(-1)
-        tris = sg(self.mesh.vertices)[self.mesh.faces].astype(O.dtype)
+        o, d, batch, (O, D, TMIN, TMAX) = flat_rays(o, d, tmin, tmax)
+        tris = jax.lax.stop_gradient(self.mesh.vertices)[self.mesh.faces].astype(O.dtype)
 
         def one(o1, d1, a, b):
             return self._trace(tris, o1, d1, safe_inv(d1), a, b, any_hit)

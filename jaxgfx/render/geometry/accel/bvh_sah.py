@@ -14,12 +14,12 @@ from jaxgfx.render.geometry.accel._common import (
     STACK_SIZE,
     TriangleAccel,
     as_numpy_triangles,
+    flat_rays,
     safe_inv,
     slab,
     tri_chunk,
 )
 from jaxgfx.render.geometry.mesh import TriangleMesh
-from jaxgfx.render.geometry.ray import prepare_rays
 
 __all__ = ["BVH", "build_bvh"]
 
@@ -47,13 +47,7 @@ class BVH(TriangleAccel):
     max_leaf: int = eqx.field(static=True)
 
     def _run(self, o, d, tmin, tmax, any_hit):
-        o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
-        batch = o.shape[:-1]
-        sg = jax.lax.stop_gradient
-        O = sg(o).reshape(-1, 3)
-        D = sg(d).reshape(-1, 3)
-        TMIN = jnp.broadcast_to(sg(tmin), batch).reshape(-1)
-        TMAX = jnp.broadcast_to(sg(tmax), batch).reshape(-1)
+        o, d, batch, (O, D, TMIN, TMAX) = flat_rays(o, d, tmin, tmax)
         t, prim = wavefront_trace(self, O, D, TMIN, TMAX, any_hit=any_hit)
         return o, d, t.reshape(batch), prim.reshape(batch)
 
