@@ -86,6 +86,9 @@ def _img(scene, key, chunk, depth=3):
     return render(scene, key, spp=2, integrator=PathIntegrator(max_depth=depth, chunk=chunk))
 
 
+# issue 9 budget: ~8-11 s (two path-tracer compiles); the default run keeps the jitted
+# shade_sorted and sort tests, CI runs this with the slow suite
+@pytest.mark.slow
 def test_chunked_path_tracer_equals_the_plain_layout():
     # 8² rays in chunks of 2 rows (16 rays): four chunks; two materials (diffuse, cheap to
     # compile), an area light and rays that leave the scene. The slow tests below run the
