@@ -182,8 +182,6 @@ class MicrofacetDistribution(eqx.Module):
         inv = jnp.where(has, 1.0 / safe_sqrt(jnp.where(has, lensq, 1.0)), 0.0)
         t1x = jnp.where(has, -hy * inv, 1.0)
         t1y = jnp.where(has, hx * inv, 0.0)
-        # t2 = vh x t1 with t1z = 0
-        t2x, t2y, t2z = -hz * t1y, hz * t1x, hx * t1y - hy * t1x
         r = safe_sqrt(u[..., 0])
         phi = 2.0 * math.pi * u[..., 1]
         sp, cp = sincos(phi)
@@ -194,6 +192,7 @@ class MicrofacetDistribution(eqx.Module):
         p3 = safe_sqrt(1.0 - p1 * p1 - p2 * p2)
         # materialised: XLA split what follows into kernels that each recomputed the above
         hx, hy, hz, t1x, t1y, p1, p2, p3 = fusion_barrier((hx, hy, hz, t1x, t1y, p1, p2, p3))
+        # t2 = vh x t1 with t1z = 0
         t2x, t2y, t2z = -hz * t1y, hz * t1x, hx * t1y - hy * t1x
         nx = p1 * t1x + p2 * t2x + p3 * hx
         ny = p1 * t1y + p2 * t2y + p3 * hy
