@@ -10,6 +10,7 @@ from jaxgfx._math import safe_div, safe_sqrt, sum_last, take_rows
 from jaxgfx.render.geometry import area, intersect_scene, occluded_scene, sample_area
 from jaxgfx.render.geometry.frame import frame_from_normal, to_local, to_world
 from jaxgfx.render.geometry.ray import spawn_ray
+from jaxgfx.render.integrators._wavefront import run_if
 
 __all__ = [
     "intersect",
@@ -126,18 +127,7 @@ def dispatch(scene, mat_id, fn, *, uv=None, lazy=False):
     if len(mats) == 1:
         return call(mats[0])
     if lazy:
-        outs = []
-        for k, m in enumerate(mats):
-            shape = jax.eval_shape(call, m)
-            outs.append(
-                jax.lax.cond(
-                    jnp.any(mat_id == k),
-                    lambda m=m: call(m),
-                    lambda shape=shape: jax.tree_util.tree_map(
-                        lambda s: jnp.zeros(s.shape, s.dtype), shape
-                    ),
-                )
-            )
+        outs = [run_if(jnp.any(mat_id == k), lambda m=m: call(m)) for k, m in enumerate(mats)]
     else:
         outs = [call(m) for m in mats]
 

@@ -22,7 +22,21 @@ import jax.numpy as jnp
 
 from jaxgfx._math import fusion_barrier
 
-__all__ = ["shade_sorted", "sort_positions"]
+__all__ = ["shade_sorted", "sort_positions", "run_if", "chunk_rows"]
+
+
+def run_if(pred, fn):
+    """``fn()`` where the scalar ``pred`` is true, else zeros of ``fn``'s output structure: only
+    the taken branch runs (a ``lax.cond``; under ``vmap`` with a batched ``pred``, both)."""
+    shape = jax.eval_shape(fn)
+    return jax.lax.cond(
+        pred, fn, lambda: jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shape)
+    )
+
+
+def chunk_rows(chunk: int, width: int) -> int:
+    """Rows of ``width`` rays in one chunk of :func:`shade_sorted` (at least one)."""
+    return max(1, int(chunk) // width)
 
 
 def sort_positions(key, n_keys: int):
@@ -57,7 +71,7 @@ def shade_sorted(fn, args, key, n_keys: int, chunk: int):
     nb = len(batch)
     w = batch[-1]
     n = key.size
-    rows = max(1, int(chunk) // w)
+    rows = chunk_rows(chunk, w)
     c = rows * w
     n_chunks = -(-n // c)
     n_pad = n_chunks * c
@@ -83,16 +97,9 @@ def shade_sorted(fn, args, key, n_keys: int, chunk: int):
         live = ks[0] < n_keys  # sorted: a chunk with a live ray starts with one
         return sub, jnp.where(ks < n_keys, ks, ks[0]).reshape(rows, w), live
 
-    out_shape = jax.eval_shape(lambda j: fn(*gathered(j)[:2]), 0)
-
     def body(_, j):
         sub, ks, live = gathered(j)
-        out = jax.lax.cond(
-            live,
-            lambda: fn(sub, ks),
-            lambda: jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), out_shape),
-        )
-        return None, out
+        return None, run_if(live, lambda: fn(sub, ks))
 
     _, outs = jax.lax.scan(body, None, jnp.arange(n_chunks))
 

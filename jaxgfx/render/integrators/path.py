@@ -86,7 +86,11 @@ def path_radiance(
 
     n_mat = len(scene.materials)
     # wavefront shading only where a pass has two chunks or more (else it is pure overhead)
-    if chunk is not None and batch and o.size // 3 < 2 * max(chunk // batch[-1], 1) * batch[-1]:
+    if (
+        chunk is not None
+        and batch
+        and o.size // 3 < 2 * _wavefront.chunk_rows(chunk, batch[-1]) * batch[-1]
+    ):
         chunk = None
     lazy = chunk is not None
 
