@@ -2,15 +2,13 @@
 
 Peers: a vectorised NumPy GGX conductor eval (same formula, float32) and OpenCV ``cv2.remap``
 (bilinear, wrap) for texture lookup. Prints one JSON object. Run:
-``python -m benchmarks.bsdf [--n 262144] [--repeat 5]``.
+``python -m benchmarks.bsdf [--n 262144] [--repeat 5] [--out FILE]``.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import platform
 import time
 
 import cv2
@@ -18,6 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from benchmarks._report import emit, machine
 from jaxgfx.render.bsdf import Diffuse, RoughConductor, RoughPlastic
 from jaxgfx.render.bsdf.texture import Texture, lookup
 
@@ -51,6 +50,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--n", type=int, default=1 << 18)
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--out", default=None, help="also write the JSON here")
     args = ap.parse_args()
     n = args.n
     rng = np.random.default_rng(0)
@@ -63,7 +63,7 @@ def main():
     u1 = rng.uniform(size=n).astype(np.float32)
     u2 = rng.uniform(size=(n, 2)).astype(np.float32)
     jwo, jwi, ju1, ju2 = map(jnp.asarray, (wo, wi, u1, u2))
-    out = {"device": jax.devices()[0].device_kind, "cpu": platform.processor(), "n": n}
+    out = {"benchmark": "bsdf", "machine": machine(opencv=cv2.__version__), "n": n}
 
     ev = jax.jit(lambda b, wo, wi: b.eval(wo, wi))
     sp = jax.jit(lambda b, wo, u1, u2: b.sample(wo, u1, u2).weight)
@@ -98,7 +98,7 @@ def main():
     out["opencv_remap_Mlookups_per_s"] = round(n / tcv / 1e6, 2)
     ref = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP).reshape(-1, 3)
     out["texture_max_abs_diff_vs_opencv"] = float(np.max(np.abs(np.asarray(lk(tex, juv)) - ref)))
-    print(json.dumps(out, indent=1))
+    emit(out, args.out)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Benchmark: response recovery + radiance merge, jaxgfx vs OpenCV, errors next to times.
 
-    python benchmarks/calibration.py [--quick] [--sizes 1024x1024 2448x2448]
+    python benchmarks/calibration.py [--quick] [--sizes 1024x1024 2448x2448] [--out FILE]
 
 A 5-frame 8-bit stack (exposures x4 apart, sRGB response, shot + read noise) of the
 synthetic scene; jaxgfx ``recover_response`` (Debevec, default options) + ``merge_radiance``
@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import sys
 import time
 
@@ -28,6 +27,7 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
+from benchmarks._report import emit, machine  # noqa: E402
 from jaxgfx import hdr  # noqa: E402
 
 
@@ -151,20 +151,13 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--cold", action="store_true", help="cold vs cached-process times")
     ap.add_argument("--no-robertson", action="store_true", help="skip OpenCV Robertson (slow)")
+    ap.add_argument("--out", default=None, help="also write the JSON here")
     a = ap.parse_args(argv)
     sizes = ["256x256"] if a.quick else a.sizes
     repeat = 1 if a.quick else a.repeat
     out = {
         "benchmark": "calibration",
-        "machine": {
-            "platform": platform.platform(),
-            "cpu_count": os.cpu_count(),
-            "jax": jax.__version__,
-            "backend": jax.default_backend(),
-            "opencv": cv2.__version__,
-            "opencv_threads": cv2.getNumThreads(),
-            "load_avg_1min": os.getloadavg()[0],
-        },
+        "machine": machine(opencv=cv2.__version__, opencv_threads=cv2.getNumThreads()),
         "runs": [],
     }
     for k, s in enumerate(sizes):
@@ -173,7 +166,7 @@ def main(argv=None):
         if a.cold and k == 0:
             out["runs"][-1]["jaxgfx_process"] = cold_warm(h, w)
         print(json.dumps(out["runs"][-1]), file=sys.stderr, flush=True)  # partial results
-    print(json.dumps(out, indent=1))
+    emit(out, a.out)
 
 
 if __name__ == "__main__":

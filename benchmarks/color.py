@@ -1,15 +1,14 @@
 """Speed and accuracy of jaxgfx.color against colour-science, scikit-image and OpenCV.
 
-Run: ``python -m benchmarks.color [--size 512] [--repeat 5]``. Prints one JSON object: per task,
-the median wall time (ms) of each implementation on the same float32 image (jaxgfx jitted,
-compile time reported separately, ``block_until_ready`` included) and the max abs difference to
-the float64 reference.
+Run: ``python -m benchmarks.color [--size 512] [--repeat 5] [--out FILE]``. Prints one JSON
+object: per task, the median wall time (ms) of each implementation on the same float32 image
+(jaxgfx jitted, compile time reported separately, ``block_until_ready`` included) and the max abs
+difference to the float64 reference.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import time
 
 import numpy as np
@@ -19,22 +18,26 @@ def main(argv=None):
     p = argparse.ArgumentParser()
     p.add_argument("--size", type=int, default=512)
     p.add_argument("--repeat", type=int, default=5)
+    p.add_argument("--out", default=None, help="also write the JSON here")
     args = p.parse_args(argv)
 
     import colour
     import cv2
     import jax
+    import skimage
     import skimage.color as skc
     from colour.difference import delta_E_CIE2000
 
     import jaxgfx.color as jc
+    from benchmarks._report import emit, machine
     from benchmarks._timing import median_time
 
     rng = np.random.default_rng(0)
     n = args.size
     srgb = rng.uniform(0, 1, (n, n, 3)).astype(np.float32)
     srgb64 = srgb.astype(np.float64)
-    results = {"size": [n, n, 3], "jax_backend": jax.default_backend(), "tasks": {}}
+    peers = dict(colour=colour.__version__, skimage=skimage.__version__, opencv=cv2.__version__)
+    results = {"benchmark": "color", "machine": machine(**peers), "size": [n, n, 3], "tasks": {}}
 
     def run(task, impls, ref):
         out = {}
@@ -121,7 +124,7 @@ def main(argv=None):
         {"jaxgfx": lambda: f_wp(lin), "numpy": lambda: np_wp(lin)},
         np_wp(lin.astype(np.float64)),
     )
-    print(json.dumps(results, indent=1))
+    emit(results, args.out)
 
 
 if __name__ == "__main__":

@@ -15,19 +15,18 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 
 import cv2
-import jax
 import jax.numpy as jnp
 import numpy as np
+import scipy
 import scipy.ndimage as ndi
 import skimage
 import skimage.feature
 import skimage.filters
 import skimage.restoration
 
+from benchmarks._report import emit, machine
 from benchmarks._timing import time_jax, time_np
 from jaxgfx import image as jimg
 
@@ -161,25 +160,26 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--sweep", action="store_true", help="run the crossover sweep")
     ap.add_argument("--sweep-only", action="store_true")
+    ap.add_argument("--out", default=None, help="also write the JSON here")
     args = ap.parse_args(argv)
     n = args.size or (256 if args.quick else 1024)
+    peers = dict(
+        opencv=cv2.__version__,
+        opencv_threads=cv2.getNumThreads(),
+        skimage=skimage.__version__,
+        scipy=scipy.__version__,
+    )
     result = {
+        "benchmark": "image_filters",
+        "machine": machine(**peers),
         "size": [n, n, 3],
         "dtype": "float32",
-        "jax": jax.__version__,
-        "backend": jax.default_backend(),
-        "cv2": cv2.__version__,
-        "cv2_threads": cv2.getNumThreads(),
-        "skimage": skimage.__version__,
-        "cpu_count": os.cpu_count(),
-        "load_avg": os.getloadavg(),
-        "machine": platform.processor() or platform.machine(),
     }
     if not args.sweep_only:
         result["filters"] = bench_filters(n, args.repeats)
     if args.sweep or args.sweep_only:
         result["crossover"] = bench_sweep(min(n, 512), args.repeats)
-    print(json.dumps(result, indent=1))
+    emit(result, args.out)
 
 
 if __name__ == "__main__":

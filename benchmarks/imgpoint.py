@@ -1,16 +1,14 @@
 """Speed of jaxgfx.image point / noise / Fourier / Bayer ops vs OpenCV / SciPy / scikit-image.
 
-Run: ``python benchmarks/imgpoint.py [--size 512] [--repeat 10]``; prints one JSON object.
-Times are medians over ``repeat`` runs of the jitted function after a warm-up call (compile
+Run: ``python -m benchmarks.imgpoint [--size 512] [--repeat 10] [--out FILE]``; prints one JSON
+object. Times are medians over ``repeat`` runs of the jitted function after a warm-up call (compile
 time reported separately), the peer measured in the same run on the same input.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
 import time
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
@@ -18,10 +16,13 @@ os.environ.setdefault("JAX_PLATFORMS", "cpu")
 import cv2  # noqa: E402
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
+import scipy  # noqa: E402
+import skimage  # noqa: E402
 from scipy import ndimage  # noqa: E402
 from scipy.interpolate import PchipInterpolator  # noqa: E402
 from skimage.exposure import equalize_hist  # noqa: E402
 
+from benchmarks._report import emit, machine  # noqa: E402
 from jaxgfx.image import bayer, fourier, noise, point  # noqa: E402
 
 
@@ -47,8 +48,11 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--repeat", type=int, default=10)
+    ap.add_argument("--out", default=None, help="also write the JSON here")
     a = ap.parse_args()
     n, r = a.size, a.repeat
+    peers = dict(opencv=cv2.__version__, scipy=scipy.__version__, skimage=skimage.__version__)
+    mach = machine(**peers)
     rng = np.random.default_rng(0)
     rgb = rng.random((n, n, 3)).astype(np.float32)
     gray = rgb[..., 0].copy()
@@ -116,22 +120,7 @@ def main():
         lambda: 0.01 * rng.poisson(rgb / 0.01) + 0.01 * rng.standard_normal(rgb.shape)
     )
 
-    print(
-        json.dumps(
-            {
-                "benchmark": "imgpoint",
-                "size": n,
-                "repeat": r,
-                "jax": jax.__version__,
-                "opencv": cv2.__version__,
-                "backend": jax.default_backend(),
-                "cpu_count": os.cpu_count(),
-                "machine": platform.machine(),
-                "results": res,
-            },
-            indent=1,
-        )
-    )
+    emit({"benchmark": "imgpoint", "machine": mach, "size": n, "repeat": r, "results": res}, a.out)
 
 
 if __name__ == "__main__":

@@ -7,7 +7,6 @@ Timings are the median of ``--repeat`` runs (wall clock, host CPU).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import tempfile
 
@@ -18,6 +17,7 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
+from benchmarks._report import emit, machine  # noqa: E402
 from benchmarks._timing import first_and_median  # noqa: E402
 from jaxgfx.hdr.encodings import (  # noqa: E402
     half_roundtrip,
@@ -128,14 +128,11 @@ def main():
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
-    result = {"quantisation": quantisation_table()}
+    result = {"benchmark": "io", "machine": machine(opencv=cv2.__version__)}
+    result["quantisation"] = quantisation_table()
     if a.size > 0:
         result["speed"] = speed(a.size, a.repeat)
-    text = json.dumps(result, indent=2)
-    print(text)
-    if a.out:
-        with open(a.out, "w") as fh:
-            fh.write(text)
+    emit(result, a.out)
 
 
 if __name__ == "__main__":

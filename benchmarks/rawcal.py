@@ -1,13 +1,12 @@
 """Speed and accuracy of jaxgfx.hdr.{align, noise, raw_calibration} vs OpenCV / scikit-image /
 SciPy / NumPy, measured in the same run. Prints one JSON object.
 
-    python -m benchmarks.rawcal [--size 256] [--repeats 5]
+    python -m benchmarks.rawcal [--size 256] [--repeats 5] [--out FILE]
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import time
 
@@ -17,9 +16,12 @@ import cv2  # noqa: E402
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+import scipy  # noqa: E402
+import skimage  # noqa: E402
 from scipy import ndimage  # noqa: E402
 from skimage.registration import phase_cross_correlation  # noqa: E402
 
+from benchmarks._report import emit, machine  # noqa: E402
 from jaxgfx.hdr.align import mtb_align, phase_correlation, shift_image  # noqa: E402
 from jaxgfx.hdr.noise import fit_photon_transfer  # noqa: E402
 from jaxgfx.hdr.raw_calibration import pairwise_exposure_ratio  # noqa: E402
@@ -157,14 +159,17 @@ def main():
     p = argparse.ArgumentParser()
     p.add_argument("--size", type=int, default=256)
     p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--out", default=None, help="also write the JSON here")
     args = p.parse_args()
+    peers = dict(opencv=cv2.__version__, scipy=scipy.__version__, skimage=skimage.__version__)
     out = {
-        "device": str(jax.devices()[0]),
+        "benchmark": "rawcal",
+        "machine": machine(**peers),
         "align": bench_align(args.size, args.repeats),
         "shift_image": bench_shift(args.size, args.repeats),
         "noise_and_ratio": bench_noise(args.size, args.repeats),
     }
-    print(json.dumps(out, indent=1, default=float))
+    emit(out, args.out)
 
 
 if __name__ == "__main__":

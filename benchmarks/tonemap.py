@@ -6,10 +6,10 @@ Usage::
     python -m benchmarks.tonemap --quick         # 256 x 256
     python -m benchmarks.tonemap --figure docs/images/tonemap_operators.png
 
-Prints one JSON document. jaxgfx is jitted: ``compile_s`` is lower+compile time, ``jax_s`` the
-median steady-state time over ``--repeats`` runs (``block_until_ready``). OpenCV is timed the
-same way on NumPy arrays; pfstmo (Debian ``pfstmo``, optional) is timed as a whole
-``pfsinpfm | pfstmo_* | pfsoutpfm`` pipeline minus the same pipeline with ``pfscat`` as the
+Prints one JSON document (progress on stderr). jaxgfx is jitted: ``compile_s`` is lower+compile
+time, ``jax_s`` the median steady-state time over ``--repeats`` runs (``block_until_ready``).
+OpenCV is timed the same way on NumPy arrays; pfstmo (Debian ``pfstmo``, optional) is timed as a
+whole ``pfsinpfm | pfstmo_* | pfsoutpfm`` pipeline minus the same pipeline with ``pfscat`` as the
 operator (the file I/O cost). ``ratio_cv2`` / ``ratio_pfstmo`` = jax_s / peer_s (lower is
 better). The machine may be shared: compare ratios within one run, not absolute times.
 """
@@ -19,15 +19,16 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import shutil
 import subprocess
+import sys
 import tempfile
 
 import cv2
 import jax
 import numpy as np
 
+from benchmarks._report import emit, machine
 from benchmarks._timing import median_time, time_jax
 from jaxgfx import tonemap as tm
 from jaxgfx.hdr import exposure_fusion
@@ -126,7 +127,7 @@ def bench(H, W, repeats):
             row["pfstmo_s"], row["pfs_io_s"] = time_pfs(img, PFS_CASES[name], max(1, repeats // 2))
             row["ratio_pfstmo"] = jax_s / row["pfstmo_s"]
         rows[name] = row
-        print(name, json.dumps(row), flush=True)
+        print(name, json.dumps(row), flush=True, file=sys.stderr)  # partial results
     # exposure fusion of a 3-frame bracket of the same scene
     frames = np.stack(
         [np.clip(img * t / np.median(img), 0, 1) ** (1 / 2.2) for t in (0.02, 0.18, 1.6)]
@@ -222,20 +223,20 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="256 x 256 instead of 2 MP")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--figure", default=None, help="write the side-by-side figure here")
+    ap.add_argument("--out", default=None, help="also write the JSON here")
     args = ap.parse_args(argv)
     H, W = (256, 256) if args.quick else (1224, 1632)
+    pfstmo = shutil.which("pfstmo_drago03") is not None
+    mach = machine(opencv=cv2.__version__, opencv_threads=cv2.getNumThreads(), pfstmo=pfstmo)
     img, rows = bench(H, W, args.repeats)
     out = {
+        "benchmark": "tonemap",
+        "machine": mach,
         "image": [H, W, 3],
-        "machine": platform.processor() or platform.machine(),
-        "cpu_count": os.cpu_count(),
-        "jax": jax.__version__,
-        "opencv": cv2.__version__,
-        "pfstmo": shutil.which("pfstmo_drago03") is not None,
         "note": "shared machine: compare ratios within this run",
         "results": rows,
     }
-    print(json.dumps(out, indent=1))
+    emit(out, args.out)
     if args.figure:
         figure(hdr_scene(300, 400), args.figure)
 
