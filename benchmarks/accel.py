@@ -39,7 +39,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import sys
 import time
 
@@ -47,6 +46,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from benchmarks._report import emit, machine
 from jaxgfx.render import geometry as S
 from jaxgfx.render.geometry import accel as A
 from jaxgfx.render.geometry.mesh_io import make_triangle_soup
@@ -523,6 +523,7 @@ def main(argv=None):
     )
     ap.add_argument("--plot", default=None, help="write samples_vs_triangles.png here")
     a = ap.parse_args(argv)
+    mach = machine()
     sections = set(a.sections.split(","))
     max_exp = 3 if a.quick else (6 if a.full else a.max_exp)
     n_rays = 1024 if a.quick else a.rays
@@ -546,22 +547,8 @@ def main(argv=None):
         extra["scaling"] = run_scaling(rings)
         if a.plot:
             extra["scaling"]["plot"] = plot_scaling(extra["scaling"], a.plot)
-    doc = dict(
-        benchmark="accel",
-        jax=jax.__version__,
-        backend=jax.default_backend(),
-        machine=platform.machine(),
-        cpu_count=os.cpu_count(),
-        load_avg=os.getloadavg(),
-        n_rays=n_rays,
-        results=res,
-        **extra,
-    )
-    text = json.dumps(doc, indent=1)
-    print(text)
-    if a.out:
-        with open(a.out, "w") as fh:
-            fh.write(text)
+    doc = dict(benchmark="accel", machine=mach, n_rays=n_rays, results=res, **extra)
+    emit(doc, a.out)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Multi-device rendering benchmark: samples/s of ``render`` vs ``render_sharded`` on n devices.
 
-    python -m benchmarks.distributed [--devices 1 2] [--size 64] [--spp 16] [--repeat 3]
+    python -m benchmarks.distributed [--devices 1 2] [--size 64] [--spp 16] [--repeat 3] [--out F]
 
 For each device count n, a subprocess with ``XLA_FLAGS=--xla_force_host_platform_device_count=n``
 (the flag must be set before jax is imported) renders ``configs/scenes/example.yaml`` at
@@ -22,11 +22,14 @@ import pathlib
 import subprocess
 import sys
 
+import jax
+
+from benchmarks._report import emit, machine
+
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
 def _child(size: int, spp: int, repeat: int) -> dict:
-    import jax
     import numpy as np
 
     from benchmarks._timing import interleaved_times
@@ -64,12 +67,22 @@ def main(argv=None):
     ap.add_argument("--size", type=int, default=64)
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--out", default=None, help="also write the JSON here")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.child:
         print(json.dumps(_child(a.size, a.spp, a.repeat)))
         return
-    results = []
+    jax.config.update("jax_platforms", "cpu")  # the backend the children use (JAX_PLATFORMS)
+    doc = {
+        "benchmark": "distributed",
+        "machine": machine(),
+        "scene": "configs/scenes/example.yaml",
+        "size": a.size,
+        "spp": a.spp,
+        "integrator": "direct",
+        "results": [],
+    }
     for n in a.devices:
         env = dict(os.environ)
         env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={n}"
@@ -83,22 +96,9 @@ def main(argv=None):
         r = json.loads(proc.stdout.strip().splitlines()[-1])
         for name in ("rows", "samples"):
             r[name]["speedup_vs_render"] = r["render"]["median_s"] / r[name]["median_s"]
-        results.append(r)
+        doc["results"].append(r)
         print(f"{n} devices done", file=sys.stderr)
-    print(
-        json.dumps(
-            {
-                "scene": "configs/scenes/example.yaml",
-                "size": a.size,
-                "spp": a.spp,
-                "integrator": "direct",
-                "cpu_count": os.cpu_count(),
-                "load_avg": os.getloadavg(),
-                "results": results,
-            },
-            indent=1,
-        )
-    )
+    emit(doc, a.out)
 
 
 if __name__ == "__main__":

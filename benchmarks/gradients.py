@@ -29,9 +29,7 @@ from __future__ import annotations
 
 import argparse
 import copy
-import json
 import os
-import platform
 import sys
 
 import equinox as eqx
@@ -39,6 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from benchmarks._report import emit, machine
 from benchmarks._timing import interleaved_times
 from jaxgfx.config import read_yaml
 from jaxgfx.render.geometry.mesh_io import make_uv_sphere
@@ -256,11 +255,7 @@ def main(argv=None):
     }
     res = 32 if q else 64
     spp = 4 if q else 16
-    result = {
-        "machine": platform.processor() or platform.machine(),
-        "jax": jax.__version__,
-        "devices": [str(d) for d in jax.devices()],
-    }
+    result = {"benchmark": "gradients", "machine": machine()}
     if "memory" in sections:
         result["memory_MB"] = memory(
             _with_res(example, 32),
@@ -280,11 +275,7 @@ def main(argv=None):
         result["grad_stats_alpha"] = statistics_alpha(spp=32 if q else 128, n=4 if q else 16)
     if "visibility" in sections:
         result["visibility"] = visibility(spp=32 if q else 128, n=4 if q else 16)
-    js = json.dumps(result, indent=1)
-    print(js)
-    if a.out:
-        with open(a.out, "w") as f:
-            f.write(js)
+    emit(result, a.out)
 
 
 if __name__ == "__main__":

@@ -35,14 +35,13 @@ from __future__ import annotations
 
 import argparse
 import copy
-import json
 import os
-import platform
 import sys
 import time
 
 import numpy as np
 
+from benchmarks._report import emit, machine
 from jaxgfx.config import read_yaml
 from jaxgfx.pipelines.fit import enable_compilation_cache, run_fit
 
@@ -262,7 +261,8 @@ def main(argv=None) -> int:
     cfg["progress"] = False
     spp, lr = int(cfg["render"]["spp"]), float(cfg["optimizer"]["lr"])
     res: dict = {
-        "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
+        "benchmark": "inverse",
+        "machine": machine(),
         "problem": {
             "config": "configs/inverse_material.yaml",
             "steps": a.steps,
@@ -281,6 +281,7 @@ def main(argv=None) -> int:
         _log("mitsuba ...")
         try:
             m = run_mitsuba(cfg, a.steps, spp, lr)
+            res["machine"]["mitsuba"] = sys.modules["mitsuba"].__version__
             tgt = m.pop("target")
             res["mitsuba"] = m
             # conventions check: the jaxgfx target at the same values and spp
@@ -301,17 +302,11 @@ def main(argv=None) -> int:
     if a.plot:
         os.makedirs(a.plot, exist_ok=True)
         plot(os.path.join(a.plot, "inverse_speed.png"), res, cfg["target"]["synthetic"][ALPHA])
-    text = json.dumps(
-        {
-            k: ({kk: vv for kk, vv in v.items() if kk != "curve"} if isinstance(v, dict) else v)
-            for k, v in res.items()
-        },
-        indent=1,
-    )
-    print(text)
-    if a.out:
-        with open(a.out, "w", encoding="utf-8") as f:
-            json.dump(res, f, indent=1)
+    short = {
+        k: ({kk: vv for kk, vv in v.items() if kk != "curve"} if isinstance(v, dict) else v)
+        for k, v in res.items()
+    }
+    emit(res, a.out, printed=short)
     return 0
 
 

@@ -28,7 +28,6 @@ import argparse
 import copy
 import json
 import os
-import platform
 import sys
 import tempfile
 import time
@@ -36,6 +35,7 @@ import time
 import jax
 import numpy as np
 
+from benchmarks._report import emit, machine
 from benchmarks._timing import median_time
 from jaxgfx.config import read_yaml
 from jaxgfx.render.geometry.mesh_io import make_uv_sphere, save_ply
@@ -332,13 +332,7 @@ def main(argv=None):
     mi, variant = (None, None) if args.no_mitsuba else _mitsuba(prefs)
     doc = {
         "benchmark": "render",
-        "machine": {
-            "platform": platform.platform(),
-            "cpus": os.cpu_count(),
-            "jax": jax.__version__,
-            "backend": jax.default_backend(),
-        },
-        "mitsuba": None if mi is None else {"version": mi.__version__, "variant": variant},
+        "machine": machine(mitsuba=None if mi is None else mi.__version__, mitsuba_variant=variant),
         "spp": spp,
         "repeat": repeat,
         "speed": [],
@@ -387,11 +381,7 @@ def main(argv=None):
         )
         if args.plot:
             doc["plot"] = plot(doc, args.plot)
-    text = json.dumps(doc, indent=1)
-    print(text)
-    if args.out:
-        with open(args.out, "w") as fh:
-            fh.write(text + "\n")
+    emit(doc, args.out)
 
 
 if __name__ == "__main__":

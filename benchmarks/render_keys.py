@@ -22,9 +22,7 @@ bit-identical). The machine may be shared: compare ratios within one run.
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
 import sys
 import time
 
@@ -32,6 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from benchmarks._report import emit, machine
 from benchmarks._timing import interleaved_times
 from jaxgfx.config import read_yaml
 from jaxgfx.render.render import render
@@ -112,8 +111,8 @@ def main(argv=None):
     keys = jax.random.split(jax.random.key(0), a.keys)
     names = a.integrators or ("direct" if a.quick else "direct,path")
     res = {
-        "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
-        "jax": jax.__version__,
+        "benchmark": "render_keys",
+        "machine": machine(),
         "scene": f"example.yaml {a.res}x{a.res}",
         "spp": a.spp,
         "keys": a.keys,
@@ -123,11 +122,7 @@ def main(argv=None):
         t0 = time.perf_counter()
         res["results"][name] = bench(scene, keys, name, a.spp, 1 if a.quick else a.repeat)
         _log(f"{name}: {time.perf_counter() - t0:.0f} s")
-    text = json.dumps(res, indent=1)
-    print(text)
-    if a.out:
-        with open(a.out, "w") as f:
-            f.write(text)
+    emit(res, a.out)
 
 
 if __name__ == "__main__":

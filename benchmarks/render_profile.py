@@ -1,7 +1,7 @@
 """Where a render's time goes: XLA kernels by profiled time, each with its source lines.
 
     python -m benchmarks.render_profile [--integrator path] [--max-depth 3] [--res 128]
-                                        [--spp 2] [--chunk 4096|none] [--top 15]
+                                        [--spp 2] [--chunk 4096|none] [--top 15] [--out F]
 
 Renders the example scene (``configs/scenes/example.yaml``) under ``jax.profiler.trace``, sums
 the time of every XLA CPU kernel (fusion) over the traced calls and joins each kernel with the
@@ -25,6 +25,7 @@ import tempfile
 
 import jax
 
+from benchmarks._report import emit, machine
 from jaxgfx.config import read_yaml
 from jaxgfx.render.integrators import DirectIntegrator, PathIntegrator
 from jaxgfx.render.render import render
@@ -118,7 +119,9 @@ def main(argv=None):
     ap.add_argument("--spp", type=int, default=2)
     ap.add_argument("--chunk", default="default", help="rays per shading chunk, or none")
     ap.add_argument("--top", type=int, default=15)
+    ap.add_argument("--out", default=None, help="also write the JSON here")
     a = ap.parse_args(argv)
+    mach = machine()
     desc = read_yaml(EXAMPLE)
     desc["camera"]["width"] = desc["camera"]["height"] = a.res
     scene = load_scene(desc)
@@ -140,6 +143,8 @@ def main(argv=None):
             events = json.load(fh)["traceEvents"]
     total, rows = kernel_table(hlo, events, a.top)
     doc = {
+        "benchmark": "render_profile",
+        "machine": mach,
         "integrator": a.integrator,
         "max_depth": a.max_depth if a.integrator == "path" else 2,
         "chunk": integ.chunk,
@@ -148,7 +153,7 @@ def main(argv=None):
         "kernel_seconds": round(total * 1e-6, 4),
         "top_kernels": rows,
     }
-    print(json.dumps(doc, indent=1))
+    emit(doc, a.out)
 
 
 if __name__ == "__main__":

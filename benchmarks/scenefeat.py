@@ -9,19 +9,20 @@ jaxpr / HLO size, the compile time and the forward throughput:
 * ``sdf``: the analytic sphere replaced by an SDF sphere (sphere traced, max_steps 128).
 
 The peer is the ``plain`` variant of the same run. Usage:
-``python -m benchmarks.scenefeat [--size 64] [--spp 4] [--repeat 5]``.
+``python -m benchmarks.scenefeat [--size 64] [--spp 4] [--repeat 5] [--out FILE]``; the per-variant
+rows are the document's ``results`` list.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import time
 
 import jax
 import numpy as np
 
+from benchmarks._report import emit, machine
 from jaxgfx.render.integrators import PathIntegrator
 from jaxgfx.render.scene import load_scene
 
@@ -110,9 +111,11 @@ def main(argv=None):
     p.add_argument("--spp", type=int, default=4)
     p.add_argument("--repeat", type=int, default=5)
     p.add_argument("--variants", default="plain,checker,bitmap,sdf")
+    p.add_argument("--out", default=None, help="also write the JSON here")
     a = p.parse_args(argv)
-    out = [measure(v, a.size, a.spp, a.repeat) for v in a.variants.split(",")]
-    print(json.dumps(out, indent=1))
+    doc = {"benchmark": "scenefeat", "machine": machine()}
+    doc["results"] = [measure(v, a.size, a.spp, a.repeat) for v in a.variants.split(",")]
+    emit(doc, a.out)
 
 
 if __name__ == "__main__":
