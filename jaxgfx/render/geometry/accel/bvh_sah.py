@@ -173,10 +173,16 @@ def wavefront_trace(bvh, o, d, tmin, tmax, *, any_hit=False, width=None, materia
     tris = sg(bvh.mesh.vertices)[bvh.mesh.faces].astype(dt)
     inv = safe_inv(d)
     tn, _, hit0 = slab(bounds[0, 0], bounds[0, 1], o, inv, tmin, tmax)
-    # the queue: the rays that hit the root box, in input order
-    perm = jnp.argsort(~hit0, stable=True).astype(jnp.int32)
-    queue = tuple(x[perm] for x in (o, d, inv, tmin, tn, tmax))
+    # the queue: the rays that hit the root box, in input order (a stable partition by two
+    # prefix sums; XLA's CPU argsort of the same boolean key cost ~4 % of a trace)
     nq = jnp.sum(hit0, dtype=jnp.int32)
+    pos = jnp.where(
+        hit0,
+        jnp.cumsum(hit0, dtype=jnp.int32) - 1,
+        nq + jnp.cumsum(~hit0, dtype=jnp.int32) - 1,
+    )
+    perm = jnp.zeros(N, jnp.int32).at[pos].set(jnp.arange(N, dtype=jnp.int32))
+    queue = tuple(x[perm] for x in (o, d, inv, tmin, tn, tmax))
     step = jax.vmap(lambda ray, s: _step(bvh, tris, bounds, ray, s, any_hit, materialize))
 
     def writeout(ray, best, bprim, done, out):
