@@ -129,8 +129,13 @@ def _same(x, pred):
 
 
 # Cody-Waite split of pi/2 (fdlibm's pio2_1 / pio2_1t for float64, float32 hi/lo for float32)
+# pi/2 split so that k * part is exact for every part but the last (Cody & Waite 1980): the
+# float32 parts have 8 and 11 significant bits (|k| < 2^13), fdlibm's float64 first part 33 bits
+# (|k| < 2^20). The reduction must not rely on FMA contraction: with a full-precision float32
+# first part, x - k * hi is exact only when the compiler fuses it (XLA CPU at -O2 does, -O0 and
+# FMA-less CPUs do not: 5e-4 error at |x| = 1e4).
 _PIO2 = {
-    "float32": (1.5707963705062866, -4.371139000186241e-08),
+    "float32": (1.5703125, 4.837512969970703125e-4, 7.549790126404332e-08),
     "float64": (1.57079632673412561417e00, 6.07710050650619224932e-11),
 }
 # minimax polynomials on [-pi/4, pi/4]: Cephes sinf/cosf (float32), fdlibm kernel_sin/cos (f64)
@@ -183,9 +188,10 @@ def sincos(x):
     if not jnp.issubdtype(x.dtype, jnp.floating):
         x = x.astype(jnp.float32)
     key = "float64" if x.dtype == jnp.float64 else "float32"
-    hi, lo = _PIO2[key]
     k = jnp.round(x * (2.0 / math.pi))
-    r = (x - k * hi) - k * lo
+    r = x
+    for part in _PIO2[key]:
+        r = r - k * part
     z = r * r
     s = r + r * z * _horner(z, _SIN[key])
     c = 1.0 - 0.5 * z + z * z * _horner(z, _COS[key])

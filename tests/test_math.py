@@ -137,6 +137,25 @@ def test_sincos_matches_numpy_f32():
     np.testing.assert_allclose([s, c], [0.5, np.sqrt(3) / 2], rtol=2e-7)
 
 
+def test_sincos_range_reduction_is_exact_without_fma():
+    """Every pi/2 part but the last times any reduction index k (|k| < 2^13 for |x| <= 1e4 in
+    float32, |k| < 2^20 for |x| <= 1e6 in float64) is exact in the working precision, so the
+    result does not depend on whether the compiler fuses x - k * part into an FMA. Reference:
+    the product in exact rational arithmetic."""
+    from fractions import Fraction
+
+    for dtype, kmax in ((np.float32, 2**13), (np.float64, 2**20)):
+        parts = _math._PIO2[np.dtype(dtype).name]
+        pi_half = Fraction("1.570796326794896619231321691639751442098584699687552910487")
+        assert abs(float(sum(Fraction(p) for p in parts) - pi_half)) < 1e-14
+        ks = np.concatenate([np.arange(1, 4097), kmax - np.arange(1, 4097)]).astype(dtype)
+        for part in parts[:-1]:
+            assert Fraction(float(dtype(part))) == Fraction(part)  # representable
+            prod = ks * dtype(part)
+            exact = [Fraction(int(k)) * Fraction(part) for k in ks]
+            assert all(Fraction(float(a)) == b for a, b in zip(prod, exact))
+
+
 def test_sincos_matches_numpy_f64_and_grads(x64):
     x = np.linspace(-1e6, 1e6, 200001)
     s, c = jax.jit(_math.sincos)(jnp.asarray(x))

@@ -162,7 +162,7 @@ def _binned_fit(level, q, dof, valid, *, remove_mean, n_bins, min_count, iters=4
             uu = qq  # u values (signed) are passed in q when remove_mean
             s1 = seg(uu)[:n_bins]
             s2 = seg(uu * uu)[:n_bins]
-            ss = s2 - safe_div(s1 * s1, cnt)
+            ss = jnp.maximum(s2 - safe_div(s1 * s1, cnt), 0.0)
             bdof = cnt - 1.0
         else:
             ss = seg(qq)[:n_bins]
@@ -174,13 +174,25 @@ def _binned_fit(level, q, dof, valid, *, remove_mean, n_bins, min_count, iters=4
         tiny = jnp.finfo(mu.dtype).tiny
 
         def solve(pred):
+            # weighted line fit in centred form, weights scaled to max 1: the raw weights span
+            # up to 1e18 in float32 (variance floor 1e-6 of the largest), so the textbook
+            # normal equations (sw * sxx - sx^2) overflow or cancel to NaN depending on FMA
+            # contraction; centring and scaling keep every sum O(1)
             w = jnp.where(ok, bdof / (2.0 * jnp.maximum(pred, tiny) ** 2), 0.0)
-            sw, sx, sxx = jnp.sum(w), jnp.sum(w * mu), jnp.sum(w * mu * mu)
-            sy, sxy = jnp.sum(w * s2), jnp.sum(w * mu * s2)
-            det = sw * sxx - sx * sx
-            g = safe_div(sw * sxy - sx * sy, det)
-            r = safe_div(sxx * sy - sx * sxy, det)
-            cov = safe_div(jnp.array([[sw, -sx], [-sx, sxx]]), det)
+            w_max = jnp.max(w)
+            wn = safe_div(w, w_max)
+            sw = jnp.sum(wn)
+            xm = safe_div(jnp.sum(wn * mu), sw)
+            ym = safe_div(jnp.sum(wn * s2), sw)
+            dx = mu - xm
+            sxx = jnp.sum(wn * dx * dx)
+            g = safe_div(jnp.sum(wn * dx * (s2 - ym)), sxx)
+            r = ym - g * xm
+            # inverse of the (g, r) normal matrix, in the weights' true scale
+            var_g = safe_div(1.0, sxx * w_max)
+            cov = jnp.array(
+                [[var_g, -xm * var_g], [-xm * var_g, safe_div(1.0, sw * w_max) + xm * xm * var_g]]
+            )
             return g, r, cov, w
 
         # floor the predicted variance so that zero-variance (clipped) bins cannot take
