@@ -14,6 +14,7 @@ dark-current noise and quantisation). This is the photon transfer curve of Janes
 from __future__ import annotations
 
 import functools
+import math
 
 import equinox as eqx
 import jax
@@ -223,7 +224,7 @@ def _ptc_core(arr, black, white, mask, saturation, *, method, n_bins, min_count)
         arr = arr - black
     if method == "pairs":
         level = 0.5 * (arr[:, 0] + arr[:, 1])
-        q = (arr[:, 0] - arr[:, 1]) / np.sqrt(2.0)
+        q = (arr[:, 0] - arr[:, 1]) / math.sqrt(2.0)
         dof = jnp.ones_like(level)
     else:
         level = jnp.mean(arr, axis=1)

@@ -70,6 +70,24 @@ def test_ptc_raw_units_with_clipping_excluded():
     assert abs(float(m_dn.gain[0]) - GAIN * k) < 4 * float(i_dn["gain_se"][0])
 
 
+def test_ptc_float32_fit_of_clipped_bins_matches_float64(x64):
+    """Clipped pixels left in (saturation=2) give zero-variance bins whose IRLS weights span
+    ~1e18: the float32 line fit must still agree with the same fit in float64 (the textbook
+    normal equations gave read variance 0 and covariance 0 in float32, or NaN without FMA)."""
+    black, white = 64.0, 1023.0
+    x = _frames(3, 2, c=1, top=1.3)
+    raw = np.asarray(jnp.clip(black + x * (white - black), 0.0, white), np.float64)
+    kw = dict(black=black, white=white, saturation=2.0)
+    _, i32 = fit_photon_transfer(jnp.asarray(raw, jnp.float32), **kw)
+    _, i64 = fit_photon_transfer(jnp.asarray(raw, jnp.float64), **kw)
+    assert i32["cov"].dtype == jnp.float32 and i64["cov"].dtype == jnp.float64
+    assert float(i64["read_variance_raw"][0]) > 1e-3  # the clipped bins bias it far up
+    for k in ("gain_raw", "read_variance_raw"):
+        np.testing.assert_allclose(i32[k], i64[k], rtol=2e-2, atol=1e-6)
+    np.testing.assert_allclose(i32["cov"], i64["cov"], rtol=2e-2)
+    assert np.all(np.isfinite(np.asarray(i32["gain_se"]))) and float(i32["gain_se"][0]) > 0
+
+
 def test_ptc_mask_and_list_input_match_array():
     f = _frames(5, 2)
     m1, _ = _fit_pairs(f)
