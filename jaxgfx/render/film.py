@@ -58,25 +58,29 @@ def make_filter(name: str = "box", **kwargs):
     return FILTERS[name](**kwargs)
 
 
-def pixel_samples(key, width: int, height: int, spp: int, rfilter=None):
-    """Continuous sample positions ``(height, width, spp, 2)`` (x, y) in pixels.
+def pixel_samples(key, width: int, height: int, spp: int, rfilter=None, *, dtype=jnp.float32):
+    """Continuous sample positions ``(height, width, spp, 2)`` (x, y) in pixels, of float
+    ``dtype`` (the renderer draws them in the scene's dtype).
 
     Stratified per pixel when ``spp`` is a perfect square (jittered grid), otherwise
     independent uniform samples; offsets then warped by the reconstruction filter.
     """
-    return _pixel_samples(key, width, height, spp, rfilter)
+    return _pixel_samples(key, width, height, spp, rfilter, dtype=dtype)
 
 
-def _pixel_samples(key, width: int, height: int, spp: int, rfilter=None, *, rows=None):
+def _pixel_samples(
+    key, width: int, height: int, spp: int, rfilter=None, *, rows=None, dtype=jnp.float32
+):
     """``pixel_samples(key, width, height, spp, rfilter)[rows]`` (package-internal).
 
     ``rows``: ``None`` (the whole image) or global row indices ``(R,)`` (may be traced): only
     those rows' samples are drawn (``sampler._uniform(..., rows=rows)``), and they equal the
-    whole image's. :func:`jaxgfx.render.render.render_partial` draws its samples here.
+    whole image's. :func:`jaxgfx.render.render.render_partial` draws its samples here, in the
+    scene's float ``dtype``.
     """
     rfilter = rfilter or BoxFilter()
     n = int(round(spp**0.5))
-    u = _uniform(key, (height, width, spp, 2), rows=rows)
+    u = _uniform(key, (height, width, spp, 2), dtype, rows=rows)
     if n * n == spp and spp > 1:
         iy, ix = jnp.divmod(jnp.arange(spp), n)
         u = (jnp.stack([ix, iy], -1) + u) / n

@@ -154,8 +154,8 @@ def render_partial(
     """
     w, h = scene.width, scene.height
     kp, ku = jax.random.split(key)
-    px = _pixel_samples(kp, w, h, spp, scene.rfilter, rows=rows)  # (R, W, spp, 2)
-    dtype = px.dtype
+    dtype = scene.dtype
+    px = _pixel_samples(kp, w, h, spp, scene.rfilter, rows=rows, dtype=dtype)  # (R, W, spp, 2)
     shape_u = integrator.random_shape
 
     def one_pass(s):

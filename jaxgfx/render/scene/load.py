@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 
+import jax
 import jax.numpy as jnp
 
 from jaxgfx.render.bsdf import make_bsdf
@@ -85,8 +86,12 @@ def _concat(shapes):
     )
 
 
-def load_scene(desc, *, base_dir: str | None = None, accel: str = "auto") -> Scene:
+def load_scene(desc, *, base_dir: str | None = None, accel: str = "auto", dtype=None) -> Scene:
     """Build a :class:`Scene` from a description mapping or a YAML file path.
+
+    ``dtype``: the float dtype of every scene array and of the render (``float32`` or
+    ``float64``); ``None`` is JAX's default float (float64 when ``jax_enable_x64`` is on, else
+    float32). Integer and float values in the description give the same dtype.
 
     ``accel`` selects the traversal backend of meshes with at least ``BVH_MIN_TRIANGLES``
     triangles (smaller ones are tested by brute force in JAX): ``"auto"`` (the fastest
@@ -97,6 +102,7 @@ def load_scene(desc, *, base_dir: str | None = None, accel: str = "auto") -> Sce
     from jaxgfx.render.geometry.accel import build_traversal, resolve_backend
 
     accel = resolve_backend(accel)  # ValueError / ImportError before any work
+    dtype = _float_dtype(dtype)
     if isinstance(desc, (str, os.PathLike)):
         from jaxgfx.config import read_yaml
 
@@ -213,7 +219,7 @@ def load_scene(desc, *, base_dir: str | None = None, accel: str = "auto") -> Sce
     for i, sh in enumerate(emitter_shapes):
         if float(area(sh)) <= 0:
             raise ValueError(f"emitters: area light {i} has zero area")
-    return Scene(
+    scene = Scene(
         camera=camera,
         shapes=tuple(shapes),
         shape_materials=tuple(shape_mats),
@@ -225,6 +231,33 @@ def load_scene(desc, *, base_dir: str | None = None, accel: str = "auto") -> Sce
         material_names=tuple(names),
         rfilter=rfilter,
     )
+    return cast_floats(scene, dtype)
+
+
+def _float_dtype(dtype):
+    if dtype is None:
+        return jnp.asarray(1.0).dtype
+    try:
+        dt = jnp.dtype(dtype)
+    except TypeError:
+        dt = None
+    if dt not in (jnp.dtype(jnp.float32), jnp.dtype(jnp.float64)):
+        raise ValueError(f"dtype: expected float32 or float64 (or None), got {dtype!r}")
+    if dt == jnp.float64 and not jax.config.jax_enable_x64:
+        raise ValueError("dtype: float64 needs jax.config.update('jax_enable_x64', True) first")
+    return dt
+
+
+def cast_floats(tree, dtype):
+    """``tree`` with every floating JAX array leaf cast to ``dtype`` (integer leaves, NumPy
+    arrays held by traversal backends and static fields unchanged)."""
+
+    def cast(x):
+        if isinstance(x, jax.Array) and jnp.issubdtype(x.dtype, jnp.floating):
+            return x.astype(dtype)
+        return x
+
+    return jax.tree_util.tree_map(cast, tree)
 
 
 def _black_material(names, materials):

@@ -38,6 +38,7 @@ sets both ``alpha_u`` and ``alpha_v``).
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from jaxgfx._checks import is_concrete
@@ -79,6 +80,17 @@ class Scene(eqx.Module):
     @property
     def height(self) -> int:
         return self.camera.height
+
+    @property
+    def dtype(self):
+        """The scene's float dtype (float32, or float64 for a scene loaded with x64 on): the
+        dtype the renderer computes in. :func:`load_scene` makes every float leaf this dtype."""
+        leaves = [
+            x
+            for x in jax.tree_util.tree_leaves(self)
+            if hasattr(x, "dtype") and jnp.issubdtype(x.dtype, jnp.floating)
+        ]
+        return jnp.result_type(*leaves) if leaves else jnp.dtype(jnp.float32)
 
     @property
     def accel(self) -> str | None:
