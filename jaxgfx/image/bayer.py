@@ -91,8 +91,31 @@ def bayer_mosaic(rgb, pattern="RGGB"):
         [[1.0, 2.0], [2.0, 3.0]]
     """
     x = check_image(rgb, "rgb", min_ndim=3, channels=3)
+    return _mosaic(x, _tile(pattern))
+
+
+def _tile(pattern):
+    """The checked pattern's (2, 2) channel tile as an int32 array: a traced core argument,
+    so that one compiled program serves all four patterns."""
+    return jnp.asarray(_pattern_channels(pattern), jnp.int32)
+
+
+def _tile_maps(tile, h, w):
+    """Channel of every site, and the channel held by its row (its horizontal neighbour's),
+    ``(h, w)`` int32, from the (2, 2) ``tile`` (traceable)."""
+    even_row = jax.lax.broadcasted_iota(jnp.int32, (h, 1), 0) % 2 == 0
+    even_col = jax.lax.broadcasted_iota(jnp.int32, (1, w), 1) % 2 == 0
+    first, second = (
+        jnp.where(even_row, tile[0, 0], tile[1, 0]),
+        jnp.where(even_row, tile[0, 1], tile[1, 1]),
+    )
+    return jnp.where(even_col, first, second), jnp.where(even_col, second, first)
+
+
+@jax.jit
+def _mosaic(x, tile):
     h, w = x.shape[-3], x.shape[-2]
-    cmap = jnp.asarray(_channel_map(h, w, pattern))
+    cmap, _ = _tile_maps(tile, h, w)
     return jnp.take_along_axis(x, jnp.broadcast_to(cmap[..., None], x.shape[:-1] + (1,)), -1)[
         ..., 0
     ]
@@ -138,18 +161,10 @@ def _apply(padded, kernel, h, w):
     return acc
 
 
-def _site_maps(h, w, pattern):
-    """Per-pixel colour of the site and colour held by its row (the horizontal neighbour's
-    colour by tile phase), as int8 arrays: passed as arguments so that the compiled program
-    is shared by all patterns."""
-    tile = _pattern_channels(pattern)
-    ii, jj = np.mgrid[:h, :w]
-    return tile[ii % 2, jj % 2].astype(np.int8), tile[ii % 2, (jj + 1) % 2].astype(np.int8)
-
-
-@functools.partial(jax.jit, static_argnums=(3,))
-def _demosaic(raw, cmap, row_colour, method):
+@functools.partial(jax.jit, static_argnames=("method",))
+def _demosaic(raw, tile, *, method):
     h, w = raw.shape[-2:]
+    cmap, row_colour = _tile_maps(tile, h, w)
     pad = [(0, 0)] * (raw.ndim - 2) + [(_PAD, _PAD), (_PAD, _PAD)]
     p = jnp.pad(raw, pad, mode="reflect")
     est = {name: _apply(p, k, h, w) for name, k in _KERNELS[method].items()}
@@ -198,8 +213,7 @@ def demosaic(raw, pattern="RGGB", *, method="malvar"):
     check_choice(method, "method", DEMOSAIC_METHODS)
     if x.shape[-2] < 3 or x.shape[-1] < 3:
         raise ValueError(f"raw: expected a mosaic (..., H, W) with H, W >= 3, got {x.shape}")
-    cmap, row_colour = _site_maps(x.shape[-2], x.shape[-1], pattern)
-    return _demosaic(x, jnp.asarray(cmap), jnp.asarray(row_colour), method)
+    return _demosaic(x, _tile(pattern), method=method)
 
 
 def demosaic_bilinear(raw, pattern="RGGB"):

@@ -9,6 +9,8 @@ first and the edge map has shape ``(..., H, W)``.
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -47,12 +49,17 @@ def _smoothed_diff_bhw(y, smooth, padding):
     return gx, gy
 
 
-def _smoothed_diff(image, smooth, padding):
-    x = check_image(image)
-    check_padding(padding)
+@functools.partial(jax.jit, static_argnames=("smooth", "padding"))
+def _smoothed_diff_core(x, *, smooth, padding):
     y, undo = to_bhw(x)
     gx, gy = _smoothed_diff_bhw(y, smooth, padding)
     return undo(gx), undo(gy)
+
+
+def _smoothed_diff(image, smooth, padding):
+    x = check_image(image)
+    check_padding(padding)
+    return _smoothed_diff_core(x, smooth=smooth, padding=padding)
 
 
 def sobel(image, *, padding: str = "reflect"):
@@ -95,6 +102,10 @@ def roberts(image, *, padding: str = "reflect"):
     """
     x = check_image(image)
     check_padding(padding)
+    return _roberts_core(x, padding=padding)
+
+
+def _roberts_bhw(x, padding):
     y, undo = to_bhw(x)
     H, W = y.shape[1], y.shape[2]
     p = pad_bhw(y, (0, 1), (0, 1), padding)
@@ -103,9 +114,27 @@ def roberts(image, *, padding: str = "reflect"):
     return undo(g1), undo(g2)
 
 
+_roberts_core = jax.jit(_roberts_bhw, static_argnames=("padding",))
+
+
+def _gradients(x, operator, padding):
+    """``(gx, gy)`` of a checked image by ``operator`` (traceable, no checks)."""
+    if operator == "roberts":
+        g1, g2 = _roberts_bhw(x, padding)
+        return 0.5 * (g1 - g2), 0.5 * (g1 + g2)
+    smooth = (1.0, 2.0, 1.0) if operator == "sobel" else (1.0, 1.0, 1.0)
+    y, undo = to_bhw(x)
+    gx, gy = _smoothed_diff_bhw(y, smooth, padding)
+    return undo(gx), undo(gy)
+
+
+_gradients_core = jax.jit(_gradients, static_argnames=("operator", "padding"))
+
+
 def _roberts_xy(image, *, padding="reflect"):
-    g1, g2 = roberts(image, padding=padding)
-    return 0.5 * (g1 - g2), 0.5 * (g1 + g2)
+    x = check_image(image)
+    check_padding(padding)
+    return _gradients_core(x, "roberts", padding)
 
 
 EDGE_OPERATORS = {"roberts": _roberts_xy, "prewitt": prewitt, "sobel": sobel}
@@ -135,7 +164,15 @@ def gradient_magnitude_direction(image, *, operator: str = "sobel", padding: str
         >>> m[1, 1], t[1, 1]
         (Array(8., dtype=float32), Array(0., dtype=float32))
     """
-    gx, gy = image_gradients(image, operator=operator, padding=padding)
+    check_choice(operator, "operator", tuple(EDGE_OPERATORS))
+    x = check_image(image)
+    check_padding(padding)
+    return _magnitude_direction_core(x, operator=operator, padding=padding)
+
+
+@functools.partial(jax.jit, static_argnames=("operator", "padding"))
+def _magnitude_direction_core(x, *, operator, padding):
+    gx, gy = _gradients(x, operator, padding)
     return safe_sqrt(gx * gx + gy * gy), safe_atan2(gy, gx)
 
 
@@ -180,11 +217,10 @@ def _neighbours(mag, gx, gy):
     return pick(1, 1), pick(-1, -1)
 
 
-def _canny_magnitude(x, sigma, padding, truncate, radius):
+def _canny_magnitude(x, sigma, padding, r):
     if x.ndim > 2:
         x = jnp.mean(x, axis=-1, keepdims=True)
     y, undo = to_bhw(x)
-    r = _static_radius(sigma, truncate, radius)
     if r > 0:
         k = gaussian_kernel1d(sigma, r, dtype=y.dtype)
         y = _conv1d(_conv1d(y, k, 1, padding, "auto"), k, 2, padding, "auto")
@@ -282,7 +318,26 @@ def canny(
         for name, q in (("low", low), ("high", high)):
             if isinstance(q, (int, float)) and q > 1:
                 raise ValueError(f"{name}: quantile must be in [0, 1], got {q}")
-    mag, gx, gy, undo = _canny_magnitude(x, sigma, padding, truncate, radius)
+    r = _static_radius(sigma, truncate, radius)
+    return _canny_core(
+        x,
+        _as(sigma, x),
+        _as(low, x),
+        _as(high, x),
+        radius=r,
+        use_quantiles=bool(use_quantiles),
+        padding=padding,
+    )
+
+
+def _as(v, x):
+    """A continuous parameter as an array of the image's dtype (a traced core argument)."""
+    return jnp.asarray(v, x.dtype)
+
+
+@functools.partial(jax.jit, static_argnames=("radius", "use_quantiles", "padding"))
+def _canny_core(x, sigma, low, high, *, radius, use_quantiles, padding):
+    mag, gx, gy, undo = _canny_magnitude(x, sigma, padding, radius)
     if use_quantiles:
         flat = mag.reshape(mag.shape[0], -1)
         lo = jnp.quantile(flat, low, axis=1)[:, None, None]
@@ -337,7 +392,22 @@ def soft_canny(
     check_positive(temperature, "temperature")
     if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 0:
         raise ValueError(f"iterations: expected a non-negative int, got {iterations!r}")
-    mag, gx, gy, undo = _canny_magnitude(x, sigma, padding, truncate, radius)
+    r = _static_radius(sigma, truncate, radius)
+    return _soft_canny_core(
+        x,
+        _as(sigma, x),
+        _as(low, x),
+        _as(high, x),
+        _as(temperature, x),
+        radius=r,
+        iterations=iterations,
+        padding=padding,
+    )
+
+
+@functools.partial(jax.jit, static_argnames=("radius", "iterations", "padding"))
+def _soft_canny_core(x, sigma, low, high, temperature, *, radius, iterations, padding):
+    mag, gx, gy, undo = _canny_magnitude(x, sigma, padding, radius)
     t = jnp.asarray(temperature, mag.dtype)
     fwd, bwd = _neighbours(mag, gx, gy)
     nms = jax.nn.sigmoid((mag - jnp.maximum(fwd, bwd)) / t)

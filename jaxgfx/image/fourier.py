@@ -121,14 +121,27 @@ def _crop(y, shape, padding):
     return jax.lax.slice_in_dim(y, 0, w, axis=y.ndim + ax)
 
 
+def _padded_grid(x, padding):
+    """``frequency_grid`` (rfft2 half-plane) of the padded image, in the image's dtype."""
+    ay, ax = _spatial_axes(x)
+    scale = 1 if padding == "wrap" else 2
+    return frequency_grid((x.shape[ay] * scale, x.shape[ax] * scale), dtype=x.dtype)
+
+
 @functools.partial(jax.jit, static_argnums=(1, 2))
 def _filter_fn(x, fn, padding, *params):
-    """Real-FFT filtering of ``x`` by ``fn(fy, fx, *params)`` (jitted, fn static)."""
+    """Real-FFT filtering of ``x`` by ``fn(fy, fx, *params)`` (jitted, fn static: only for
+    the module's own transfer functions, whose identity is fixed)."""
+    fy, fx = _padded_grid(x, padding)
+    return _filter_rfft(x, fn(fy, fx, *params).astype(x.dtype), padding)
+
+
+@functools.partial(jax.jit, static_argnums=(2,))
+def _filter_rfft(x, tf, padding):
+    """Real-FFT filtering of ``x`` by transfer values ``tf`` on the rfft2 half-plane."""
     xp = _pad(x, padding)
     axes = _spatial_axes(xp)
     h, w = xp.shape[axes[0]], xp.shape[axes[1]]
-    fy, fx = frequency_grid((h, w), dtype=x.dtype)
-    tf = fn(fy, fx, *params).astype(x.dtype)
     if x.ndim > 2:
         tf = tf[..., None]
     spec = jnp.fft.rfft2(xp, axes=axes)
@@ -171,7 +184,10 @@ def fft_filter(image, transfer, *, padding="wrap"):
     x = check_image(image)
     check_choice(padding, "padding", FOURIER_PADDINGS)
     if callable(transfer):
-        return _filter_fn(x, transfer, padding)
+        # evaluated here, not as a static argument of a jitted core: a user's callable (a
+        # new lambda at every call) would compile a new program each time
+        fy, fx = _padded_grid(x, padding)
+        return _filter_rfft(x, jnp.asarray(transfer(fy, fx)).astype(x.dtype), padding)
     tf = jnp.asarray(transfer)
     ay, ax = _spatial_axes(x)
     scale = 1 if padding == "wrap" else 2

@@ -69,13 +69,13 @@ def add_gaussian_noise(key, image, *, sigma, clip=False):
     """
     x = check_image(image, min_ndim=0)
     check_nonnegative(sigma, "sigma")
-    y = _gaussian(key, x, jnp.asarray(sigma, x.dtype))
+    return _gaussian(key, x, jnp.asarray(sigma, x.dtype), bool(clip))
+
+
+@functools.partial(jax.jit, static_argnums=(3,))
+def _gaussian(key, x, sigma, clip):
+    y = x + sigma * jax.random.normal(key, x.shape, x.dtype)
     return jnp.clip(y, 0.0, 1.0) if clip else y
-
-
-@jax.jit
-def _gaussian(key, x, sigma):
-    return x + sigma * jax.random.normal(key, x.shape, x.dtype)
 
 
 def add_salt_and_pepper(
@@ -172,14 +172,13 @@ def add_poisson_gaussian_noise(key, image, *, gain, read_sigma, method="exact", 
     if is_concrete(gain) and np.any(np.asarray(gain) <= 0):
         raise ValueError(f"gain: expected a finite value > 0, got {gain!r}")
     check_nonnegative(read_sigma, "read_sigma")
-    y = _poisson_gaussian(
-        key, x, jnp.asarray(gain, x.dtype), jnp.asarray(read_sigma, x.dtype), method
+    return _poisson_gaussian(
+        key, x, jnp.asarray(gain, x.dtype), jnp.asarray(read_sigma, x.dtype), method, bool(clip)
     )
-    return jnp.clip(y, 0.0, 1.0) if clip else y
 
 
-@functools.partial(jax.jit, static_argnums=(4,))
-def _poisson_gaussian(key, x, gain, read_sigma, method):
+@functools.partial(jax.jit, static_argnums=(4, 5))
+def _poisson_gaussian(key, x, gain, read_sigma, method, clip):
     k1, k2 = jax.random.split(key)
     signal = jnp.maximum(x, 0.0)
     z = jax.random.normal(k2, x.shape, x.dtype)
@@ -188,7 +187,7 @@ def _poisson_gaussian(key, x, gain, read_sigma, method):
         y = gain * counts.astype(x.dtype) + read_sigma * z
     else:
         y = signal + safe_sqrt(gain * signal + read_sigma * read_sigma) * z
-    return y
+    return jnp.clip(y, 0.0, 1.0) if clip else y
 
 
 TEMPORAL_AVERAGE_METHODS = ("mean", "median", "trimmed")

@@ -66,7 +66,6 @@ def _bin_index(x, lo, hi, bins):
     return idx, valid
 
 
-@functools.partial(jax.jit, static_argnums=(1, 2, 3))
 def _histogram_hwc(x3, lo, hi, bins):
     """Per-image, per-channel counts of ``x3 (..., H, W, C)`` → ``(..., bins, C)`` int32."""
     *batch, h, w, c = x3.shape
@@ -78,6 +77,23 @@ def _histogram_hwc(x3, lo, hi, bins):
         valid.astype(jnp.int32).ravel(), group.ravel(), num_segments=n_img * bins * c
     )
     return counts.reshape(*batch, bins, c)
+
+
+@functools.partial(jax.jit, static_argnums=(1, 2, 3, 4))
+def _cumulative(x, lo, hi, bins, normalize):
+    """Histogram (``normalize=None``) or cumulative histogram of a checked image (jitted)."""
+    x3, gray = _to_hwc(x)
+    h = _histogram_hwc(x3, lo, hi, bins)
+    h = h[..., 0] if gray else h
+    if normalize is None:
+        return h
+    axis = 0 if h.ndim == 1 else -2
+    c = jnp.cumsum(h, axis=axis)
+    if normalize:
+        total = jnp.take(c, -1, axis=axis)
+        total = total if h.ndim == 1 else total[..., None, :]
+        c = safe_div(c.astype(x.dtype), total.astype(x.dtype))
+    return c
 
 
 def histogram(image, *, bins=256, range=(0.0, 1.0)):  # noqa: A002 (NumPy's name)
@@ -104,9 +120,7 @@ def histogram(image, *, bins=256, range=(0.0, 1.0)):  # noqa: A002 (NumPy's name
     x = check_image(image)
     bins = _check_bins(bins)
     lo, hi = _check_range(range)
-    x3, gray = _to_hwc(x)
-    counts = _histogram_hwc(x3, lo, hi, bins)
-    return counts[..., 0] if gray else counts
+    return _cumulative(x, lo, hi, bins, None)
 
 
 def cumulative_histogram(image, *, bins=256, range=(0.0, 1.0), normalize=False):  # noqa: A002
@@ -119,15 +133,10 @@ def cumulative_histogram(image, *, bins=256, range=(0.0, 1.0), normalize=False):
         >>> cumulative_histogram(jnp.array([[0.0, 0.2], [0.7, 1.0]]), bins=2).tolist()
         [2, 4]
     """
-    h = histogram(image, bins=bins, range=range)
-    axis = 0 if h.ndim == 1 else -2
-    c = jnp.cumsum(h, axis=axis)
-    if normalize:
-        dtype = as_float_array(image, "image").dtype
-        total = jnp.take(c, -1, axis=axis)
-        total = total if h.ndim == 1 else total[..., None, :]
-        c = safe_div(c.astype(dtype), total.astype(dtype))
-    return c
+    x = check_image(image)
+    bins = _check_bins(bins)
+    lo, hi = _check_range(range)
+    return _cumulative(x, lo, hi, bins, bool(normalize))
 
 
 def _check_fraction(v, name):
@@ -206,6 +215,11 @@ def gamma_correct(image, gamma, *, gain=1.0):
     check_positive(gamma, "gamma")
     if is_concrete(gain):
         check_finite(as_float_array(gain, "gain"), "gain")
+    return _gamma(x, gamma, gain)
+
+
+@jax.jit
+def _gamma(x, gamma, gain):
     return gain * safe_pow(x, gamma)
 
 
@@ -453,4 +467,9 @@ def adjust_brightness_contrast(image, brightness, contrast, *, pivot=0.5):
     for v, n in ((brightness, "brightness"), (contrast, "contrast"), (pivot, "pivot")):
         if is_concrete(v):
             check_finite(as_float_array(v, n), n)
+    return _brightness_contrast(x, brightness, contrast, pivot)
+
+
+@jax.jit
+def _brightness_contrast(x, brightness, contrast, pivot):
     return (x - pivot) * contrast + pivot + brightness

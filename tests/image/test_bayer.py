@@ -108,6 +108,20 @@ def test_bilinear_matches_opencv_interior(pattern):
     assert np.abs(out - ref)[2:-2, 2:-2].max() <= 0.5 + 1e-2
 
 
+def test_eager_demosaic_one_program_for_all_patterns():
+    # the pattern is a traced (2, 2) tile: all four share one compiled core (OpenCV reference)
+    from jaxgfx.image.bayer import _demosaic, _mosaic
+
+    rgb = _smooth_rgb(24, 32)
+    n0, m0 = _demosaic._cache_size(), _mosaic._cache_size()
+    for pattern in BAYER_PATTERNS:
+        raw16 = np.round(np.asarray(bayer_mosaic(rgb, pattern)) * 60000).astype(np.uint16)
+        ref = cv2.cvtColor(raw16, CV_CODE[pattern]).astype(np.float64)
+        out = np.asarray(demosaic(raw16.astype(np.float32), pattern, method="bilinear"))
+        assert np.abs(out - ref)[2:-2, 2:-2].max() <= 0.5 + 1e-2
+    assert _demosaic._cache_size() - n0 <= 1 and _mosaic._cache_size() - m0 <= 1
+
+
 @pytest.mark.parametrize("pattern", BAYER_PATTERNS)
 @pytest.mark.parametrize("shape", [(16, 20), (15, 17)], ids=["even", "odd"])
 def test_malvar_matches_reference(x64, pattern, shape):

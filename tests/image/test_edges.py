@@ -19,7 +19,7 @@ from jaxgfx.image import (
     sobel,
     soft_canny,
 )
-from jaxgfx.image.edges import _hysteresis
+from jaxgfx.image.edges import _canny_core, _hysteresis, _smoothed_diff_core, _soft_canny_core
 
 
 def shapes_image(seed, n=80, noise=0.05):
@@ -170,9 +170,12 @@ def test_canny_flat_and_tiny():
 def test_soft_canny_tends_to_canny():
     im = shapes_image(0)
     hard = np.asarray(canny(im, 1.0, 0.1, 0.3))
-    soft = np.asarray(soft_canny(im, 1.0, 0.1, 0.3, temperature=1e-3, iterations=30))
-    assert soft.min() >= 0 and soft.max() <= 1
-    assert f1_with_tolerance(soft > 0.5, hard) >= 0.95
+    n0 = _soft_canny_core._cache_size()
+    for lo, t in ((0.1, 1e-3), (0.12, 2e-3)):  # traced thresholds/temperature: one program
+        soft = np.asarray(soft_canny(im, 1.0, lo, 0.3, temperature=t, iterations=30))
+        assert soft.min() >= 0 and soft.max() <= 1
+        assert f1_with_tolerance(soft > 0.5, hard) >= 0.95
+    assert _soft_canny_core._cache_size() - n0 <= 1
 
 
 def test_soft_canny_grads(x64):
@@ -210,3 +213,27 @@ def test_jit_matches_eager_operators(img):
             np.testing.assert_allclose(np.asarray(got), np.asarray(want), atol=1e-6)
     g1, _ = jax.jit(roberts)(img)
     np.testing.assert_allclose(np.asarray(g1)[:-1, :-1], img[1:, 1:] - img[:-1, :-1], atol=1e-6)
+
+
+def test_eager_canny_one_program_for_all_sigmas_and_thresholds():
+    # An eager call runs one jitted core (not op by op); sigma (same radius) and the
+    # thresholds are traced arguments, so new values reuse the compiled program.
+    n0 = _canny_core._cache_size()
+    for seed, sigma, lo, hi in ((0, 1.0, 0.1, 0.3), (1, 2.0, 0.12, 0.35)):
+        im = shapes_image(seed)
+        mine = np.asarray(canny(im, sigma, lo, hi, radius=8))
+        ref = sk_canny(im, sigma, lo, hi, mode="mirror")
+        assert ref.sum() > 100
+        assert f1_with_tolerance(mine, ref) >= 0.95
+        assert (mine == ref).mean() >= 0.99
+    assert _canny_core._cache_size() - n0 <= 1
+
+
+def test_eager_sobel_one_program(img):
+    n0 = _smoothed_diff_core._cache_size()
+    b = cv2.BORDER_REFLECT_101
+    for a in (img, 2.0 * img + 1.0):
+        gx, gy = sobel(a)
+        np.testing.assert_allclose(np.asarray(gx), cv2.Sobel(a, -1, 1, 0, borderType=b), atol=2e-5)
+        np.testing.assert_allclose(np.asarray(gy), cv2.Sobel(a, -1, 0, 1, borderType=b), atol=2e-5)
+    assert _smoothed_diff_core._cache_size() - n0 <= 1

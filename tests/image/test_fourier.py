@@ -175,3 +175,18 @@ def test_extreme_cutoffs_finite(img, kind, cutoff):
 def test_bad_input_raises(img, call, match):
     with pytest.raises(ValueError, match=match):
         call(img)
+
+
+def test_fft_filter_new_callables_share_one_program(img):
+    # a callable transfer is evaluated at the boundary, so a new lambda per call (different
+    # width) reuses one compiled program; reference: scipy.ndimage.fourier_gaussian
+    from jaxgfx.image.fourier import _filter_rfft
+
+    x = img[..., 0]
+    n0 = _filter_rfft._cache_size()
+    for sigma in (1.0, 2.5):
+        c = 1.0 / (2 * np.pi * sigma)  # frequency-domain sigma of a spatial blur sigma
+        y = fft_filter(x, lambda fy, fx, c=c: jnp.exp(-(fy**2 + fx**2) / (2 * c * c)))
+        ref = np.fft.ifft2(ndimage.fourier_gaussian(np.fft.fft2(x), sigma)).real
+        np.testing.assert_allclose(np.asarray(y), ref, atol=2e-6)
+    assert _filter_rfft._cache_size() - n0 <= 1
