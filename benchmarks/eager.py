@@ -30,6 +30,9 @@ def _cases(n):
     grey = rgb[..., 0]
     hdr = rgb * 100.0
     stack = jnp.stack([jnp.clip(rgb * s, 0, 1) for s in (0.25, 1.0, 4.0)])
+    times = jnp.array([0.25, 1.0, 4.0])
+    ldr = jnp.round(jnp.clip(stack, 0, 1) ** (1 / 2.2) * 255).astype(jnp.uint8)
+    resp = H.recover_response(ldr, times, method="debevec")
     return {
         "image.gaussian_blur": (lambda a: I.gaussian_blur(a, 2.0), rgb),
         "image.box_blur": (lambda a: I.box_blur(a, 5), rgb),
@@ -50,6 +53,15 @@ def _cases(n):
         "tonemap.Durand2002": (lambda a: T.tonemap_Durand2002(a), hdr),
         "hdr.exposure_fusion": (lambda a: H.exposure_fusion(a), stack),
         "hdr.rgbe_roundtrip": (lambda a: H.rgbe_decode(H.rgbe_encode(a)), hdr),
+        "hdr.recover_response_debevec": (
+            lambda a: H.recover_response(a, times, method="debevec").params,
+            ldr,
+        ),
+        "hdr.recover_response_robertson": (
+            lambda a: H.recover_response(a, times, method="robertson").params,
+            ldr,
+        ),
+        "hdr.merge_radiance": (lambda a: H.merge_radiance(a, times, resp), ldr),
     }
 
 
