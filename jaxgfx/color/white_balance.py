@@ -80,7 +80,11 @@ def _masked_quantile(image, w, q):
 
     XLA's CPU sort is ~20x slower than NumPy's, so instead of sorting we take the
     ``k = floor(min(q, 1 - q) (N - 1)) + 2`` extreme values with ``lax.top_k`` (``k`` is static
-    and bounds the needed rank for any count ``n <= N`` of unmasked pixels)."""
+    and bounds the needed rank for any count ``n <= N`` of unmasked pixels).
+
+    The ``top_k`` values pass an ``optimization_barrier``: under jit, when only one rank of
+    them is read, XLA otherwise turns the ``top_k`` into a full sort of all ``N`` pixels (XLA
+    CPU, JAX 0.10: 66 ms instead of 2.2 ms for the 99 % quantile of 512 x 512 values)."""
     *batch, H, W, C = image.shape
     N = H * W
     x = jnp.swapaxes(image.reshape(*batch, N, C), -1, -2)  # (..., C, N)
@@ -96,10 +100,10 @@ def _masked_quantile(image, w, q):
     top = q >= 0.5
     k = min(N, int(np.floor((1.0 - q if top else q) * (N - 1))) + 2)
     if top:  # descending largest values; bottom rank j is top rank n - 1 - j
-        vals = jax.lax.top_k(jnp.where(m, x, low), k)[0]
+        vals = jax.lax.optimization_barrier(jax.lax.top_k(jnp.where(m, x, low), k)[0])
         r_lo, r_hi = n_i - 1 - lo_i, n_i - 1 - hi_i
     else:  # ascending smallest values
-        vals = -jax.lax.top_k(jnp.where(m, -x, low), k)[0]
+        vals = -jax.lax.optimization_barrier(jax.lax.top_k(jnp.where(m, -x, low), k)[0])
         r_lo, r_hi = lo_i, hi_i
     r_lo = jnp.clip(r_lo, 0, k - 1)[..., None, :]
     r_hi = jnp.clip(r_hi, 0, k - 1)[..., None, :]
@@ -226,6 +230,16 @@ def white_balance_brightest_pixel_gains(image, *, quantile=0.99, saturation=None
     image = check_image(image, channels=3, min_ndim=3)
     q = _check_unit(quantile, "quantile")
     _check_saturation(saturation)
+    return _brightest_pixel_gains(image, saturation, q=q)
+
+
+@functools.partial(jax.jit, static_argnames=("q",))
+def _brightest_pixel(image, saturation, *, q):
+    return _apply_gains(image, _brightest_pixel_gains(image, saturation, q=q))
+
+
+@functools.partial(jax.jit, static_argnames=("q",))
+def _brightest_pixel_gains(image, saturation, *, q):
     w = _valid_mask(image, saturation)
     lum = (image[..., 0] * 0.2126 + image[..., 1] * 0.7152 + image[..., 2] * 0.0722)[..., None]
     thr, n = _masked_quantile(lum, w, q)  # (..., 1)
@@ -239,8 +253,9 @@ def white_balance_brightest_pixel(image, *, quantile=0.99, saturation=None):
     """Highlight white balance from the brightest pixels' colour (see
     :func:`white_balance_brightest_pixel_gains`)."""
     image = check_image(image, channels=3, min_ndim=3)
-    g = white_balance_brightest_pixel_gains(image, quantile=quantile, saturation=saturation)
-    return apply_white_balance(image, g)
+    q = _check_unit(quantile, "quantile")
+    _check_saturation(saturation)
+    return _brightest_pixel(image, saturation, q=q)
 
 
 def white_balance_stretch_limits(image, *, low=0.01, high=0.99, saturation=None):
