@@ -153,7 +153,7 @@ def test_sincos_range_reduction_is_exact_without_fma():
             assert Fraction(float(dtype(part))) == Fraction(part)  # representable
             prod = ks * dtype(part)
             exact = [Fraction(int(k)) * Fraction(part) for k in ks]
-            assert all(Fraction(float(a)) == b for a, b in zip(prod, exact))
+            assert all(Fraction(float(a)) == b for a, b in zip(prod, exact, strict=True))
 
 
 def test_sincos_matches_numpy_f64_and_grads(x64):

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import functools
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -94,9 +95,16 @@ def pad_image(image, pad_h, pad_w, *, mode: str = "reflect"):
             raise ValueError(f"{name}: expected one or two non-negative ints, got {p!r}")
     if x.ndim < 2:
         raise ValueError(f"image: expected at least 2 dimensions, got shape {x.shape}")
+    pad_h = (int(pad_h[0]), int(pad_h[1]))
+    pad_w = (int(pad_w[0]), int(pad_w[1]))
+    return _pad_image_core(x, pad_h=pad_h, pad_w=pad_w, mode=mode)
+
+
+@functools.partial(jax.jit, static_argnames=("pad_h", "pad_w", "mode"))
+def _pad_image_core(x, *, pad_h, pad_w, mode: str):
     ax_h, ax_w = (x.ndim - 2, x.ndim - 1) if x.ndim == 2 else (x.ndim - 3, x.ndim - 2)
-    x = _pad_axis(x, ax_h, int(pad_h[0]), int(pad_h[1]), mode)
-    return _pad_axis(x, ax_w, int(pad_w[0]), int(pad_w[1]), mode)
+    x = _pad_axis(x, ax_h, pad_h[0], pad_h[1], mode)
+    return _pad_axis(x, ax_w, pad_w[0], pad_w[1], mode)
 
 
 def pad_bhw(x, pad_h, pad_w, mode: str):

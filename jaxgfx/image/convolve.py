@@ -25,6 +25,8 @@ Back ends (``method=``):
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -180,6 +182,29 @@ def _prepare(image, padding, method, methods=CONVOLVE_METHODS):
     return x
 
 
+@functools.partial(jax.jit, static_argnames=("padding", "method"))
+def _convolve_core(x, k, *, padding: str, method: str):
+    """Same-size 2-d convolution of a checked image by a non-separable path
+    (``method`` is ``"direct"`` or ``"fft"``); one compiled program per shape and mode."""
+    kh, kw = k.shape
+    y, undo = to_bhw(x)
+    H, W = y.shape[1], y.shape[2]
+    ci, cj = kh // 2, kw // 2
+    yp = pad_bhw(y, (kh - 1 - ci, ci), (kw - 1 - cj, cj), padding)
+    if method == "fft":
+        return undo(_conv2d_fft(yp, k, H, W))
+    return undo(_conv2d_direct(yp, k, H, W))
+
+
+@functools.partial(jax.jit, static_argnames=("padding", "method"))
+def _convolve_separable_core(x, kv, kh, *, padding: str, method: str):
+    """Two 1-d passes on a checked image (``kv``, ``kh`` already in its dtype)."""
+    y, undo = to_bhw(x)
+    y = _conv1d(y, kv, 1, padding, method)
+    y = _conv1d(y, kh, 2, padding, method)
+    return undo(y)
+
+
 def convolve(image, kernel, *, padding: str = "reflect", method: str = "auto"):
     """Convolve every channel of an image with a 2-d kernel (true convolution, same size).
 
@@ -204,21 +229,16 @@ def convolve(image, kernel, *, padding: str = "reflect", method: str = "auto"):
     if method in ("auto", "separable"):
         factors = separable_factors(k) if is_concrete(k) else None
         if factors is not None:
-            return convolve_separable(x, factors[0], factors[1], padding=padding, method="auto")
+            kv = jnp.asarray(factors[0]).astype(x.dtype)
+            kh = jnp.asarray(factors[1]).astype(x.dtype)
+            return _convolve_separable_core(x, kv, kh, padding=padding, method="auto")
         if method == "separable":
             raise ValueError(
                 "method: 'separable' needs a concrete rank-1 kernel; use convolve_separable "
                 "with the two 1-d factors, or method='direct'/'fft'"
             )
         method = "fft" if k.size > FFT_CROSSOVER_2D else "direct"
-    kh, kw = k.shape
-    y, undo = to_bhw(x)
-    H, W = y.shape[1], y.shape[2]
-    ci, cj = kh // 2, kw // 2
-    yp = pad_bhw(y, (kh - 1 - ci, ci), (kw - 1 - cj, cj), padding)
-    if method == "fft":
-        return undo(_conv2d_fft(yp, k, H, W))
-    return undo(_conv2d_direct(yp, k, H, W))
+    return _convolve_core(x, k, padding=padding, method=method)
 
 
 def convolve_separable(
@@ -245,7 +265,4 @@ def convolve_separable(
     x = _prepare(image, padding, method, ("auto", "direct", "fft"))
     kv = _check_kernel(kernel_v, "kernel_v", 1).astype(x.dtype)
     kh = _check_kernel(kernel_h, "kernel_h", 1).astype(x.dtype)
-    y, undo = to_bhw(x)
-    y = _conv1d(y, kv, 1, padding, method)
-    y = _conv1d(y, kh, 2, padding, method)
-    return undo(y)
+    return _convolve_separable_core(x, kv, kh, padding=padding, method=method)

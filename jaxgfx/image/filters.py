@@ -27,7 +27,7 @@ from jaxgfx._checks import (
 from jaxgfx._math import safe_div
 
 from ._padding import check_padding, pad_bhw, to_bhw
-from .convolve import _conv1d, convolve, convolve_separable
+from .convolve import _conv1d, _convolve_core, _convolve_separable_core
 
 __all__ = [
     "BILATERAL_METHODS",
@@ -120,16 +120,34 @@ def gaussian_blur(
         Array(2., dtype=float32)
     """
     x = check_image(image)
+    r = _gaussian_radius(sigma, truncate, radius, padding, method)
+    return _gaussian_blur_core(x, _as_dtype(sigma, x), radius=r, padding=padding, method=method)
+
+
+def _as_dtype(value, x):
+    """``value`` as an array of ``x``'s dtype (done before the jitted core, so that Python
+    floats, NumPy scalars and arrays of other dtypes share one compiled program)."""
+    return jnp.asarray(value, dtype=x.dtype)
+
+
+def _gaussian_radius(sigma, truncate, radius, padding, method) -> int:
+    """Validate :func:`gaussian_blur`'s options and return the static kernel radius."""
     check_padding(padding)
     check_choice(method, "method", ("auto", "direct", "fft"))
     check_nonnegative(sigma, "sigma")
     if jnp.ndim(sigma) != 0:
         raise ValueError(f"sigma: expected a scalar, got shape {jnp.shape(sigma)}")
-    r = _static_radius(sigma, truncate, radius)
-    if r == 0:
-        return x * gaussian_kernel1d(sigma, 0, dtype=x.dtype)[0]
-    k = gaussian_kernel1d(sigma, r, dtype=x.dtype)
-    return convolve_separable(x, k, k, padding=padding, method=method)
+    return _static_radius(sigma, truncate, radius)
+
+
+def _gaussian_blur_impl(x, sigma, radius: int, padding: str, method: str):
+    k = gaussian_kernel1d(sigma, radius, dtype=x.dtype)
+    if radius == 0:
+        return x * k[0]
+    return _convolve_separable_core(x, k, k, padding=padding, method=method)
+
+
+_gaussian_blur_core = jax.jit(_gaussian_blur_impl, static_argnames=("radius", "padding", "method"))
 
 
 _BOX_CUMSUM_MIN = 15  # box sizes >= this use running sums instead of shift-and-add
@@ -173,8 +191,13 @@ def box_blur(image, size, *, padding: str = "reflect"):
     x = check_image(image)
     check_padding(padding)
     sh, sw = (size, size) if np.ndim(size) == 0 else tuple(size)
-    check_odd_int(sh, "size")
-    check_odd_int(sw, "size")
+    sh = check_odd_int(sh, "size")
+    sw = check_odd_int(sw, "size")
+    return _box_blur_core(x, sh=sh, sw=sw, padding=padding)
+
+
+@functools.partial(jax.jit, static_argnames=("sh", "sw", "padding"))
+def _box_blur_core(x, *, sh: int, sw: int, padding: str):
     y, undo = to_bhw(x)
     if sh > 1:
         y = _box1d(y, sh, 1, padding)
@@ -256,6 +279,11 @@ def median_filter(image, size, *, padding: str = "reflect"):
     size = check_odd_int(size, "size")
     if size == 1:
         return x
+    return _median_core(x, size=size, padding=padding)
+
+
+@functools.partial(jax.jit, static_argnames=("size", "padding"))
+def _median_core(x, *, size: int, padding: str):
     r = size // 2
     y, undo = to_bhw(x)
     H, W = y.shape[1], y.shape[2]
@@ -456,12 +484,15 @@ def bilateral_filter(
         radius = max(1, int(round(1.5 * float(sigma_spatial))))
     if method == "auto":
         method = "brute" if radius <= 4 else "grid"
-    y, undo = to_bhw(x)
     if method == "brute":
         radius = _static_radius(sigma_spatial, 1.5, radius, "sigma_spatial")
-        ss = jnp.asarray(sigma_spatial, x.dtype)
-        sr = jnp.asarray(sigma_range, x.dtype)
-        return undo(_bilateral_brute(y, ss, sr, radius, padding))
+        return _bilateral_brute_core(
+            x,
+            _as_dtype(sigma_spatial, x),
+            _as_dtype(sigma_range, x),
+            radius=radius,
+            padding=padding,
+        )
     if not is_concrete(sigma_spatial):
         raise ValueError("sigma_spatial: method='grid' needs a concrete sigma_spatial")
     if range_bins is None:
@@ -469,15 +500,32 @@ def bilateral_filter(
             raise ValueError(
                 "range_bins: image or sigma_range is traced; pass a static range_bins=int"
             )
-        a = np.asarray(y)
-        span = float(np.max(a.max(axis=(1, 2)) - a.min(axis=(1, 2))))
+        a = np.asarray(x)
+        hw = (0, 1) if a.ndim == 2 else (a.ndim - 3, a.ndim - 2)  # per channel (and image)
+        span = float(np.max(a.max(axis=hw) - a.min(axis=hw)))
         range_bins = max(1, int(math.ceil(span / float(sigma_range))))
     elif isinstance(range_bins, bool) or not isinstance(range_bins, (int, np.integer)):
         raise TypeError(f"range_bins: expected an int, got {type(range_bins).__name__}")
     elif range_bins < 1:
         raise ValueError(f"range_bins: expected an int >= 1, got {range_bins}")
-    sr = jnp.asarray(sigma_range, x.dtype)
-    return undo(_bilateral_grid(y, float(sigma_spatial), sr, int(range_bins)))
+    return _bilateral_grid_core(
+        x,
+        _as_dtype(sigma_range, x),
+        sigma_spatial=float(sigma_spatial),
+        range_bins=int(range_bins),
+    )
+
+
+@functools.partial(jax.jit, static_argnames=("radius", "padding"))
+def _bilateral_brute_core(x, sigma_spatial, sigma_range, *, radius: int, padding: str):
+    y, undo = to_bhw(x)
+    return undo(_bilateral_brute(y, sigma_spatial, sigma_range, radius, padding))
+
+
+@functools.partial(jax.jit, static_argnames=("sigma_spatial", "range_bins"))
+def _bilateral_grid_core(x, sigma_range, *, sigma_spatial: float, range_bins: int):
+    y, undo = to_bhw(x)
+    return undo(_bilateral_grid(y, sigma_spatial, sigma_range, range_bins))
 
 
 # ----------------------------------------------------------------------- sharpening
@@ -513,11 +561,22 @@ def unsharp_mask(
     """
     x = check_image(image)
     check_nonnegative(threshold, "threshold")
-    blurred = gaussian_blur(x, sigma, truncate=truncate, radius=radius, padding=padding)
-    d = x - blurred
-    t = jnp.asarray(threshold, x.dtype)
-    d = d - jnp.clip(d, -t, t)
-    return x + jnp.asarray(amount, x.dtype) * d
+    r = _gaussian_radius(sigma, truncate, radius, padding, "auto")
+    return _unsharp_core(
+        x,
+        _as_dtype(sigma, x),
+        _as_dtype(amount, x),
+        _as_dtype(threshold, x),
+        radius=r,
+        padding=padding,
+    )
+
+
+@functools.partial(jax.jit, static_argnames=("radius", "padding"))
+def _unsharp_core(x, sigma, amount, threshold, *, radius: int, padding: str):
+    d = x - _gaussian_blur_impl(x, sigma, radius, padding, "auto")
+    d = d - jnp.clip(d, -threshold, threshold)
+    return x + amount * d
 
 
 def laplacian_of_gaussian(
@@ -550,7 +609,12 @@ def laplacian_of_gaussian(
             f"kernel's centre -2/sigma^2 and its sigma-derivative overflow below), got {sigma!r}"
         )
     r = max(1, _static_radius(sigma, truncate, radius))
-    s = jnp.asarray(sigma, x.dtype)
+    return _log_core(x, _as_dtype(sigma, x), radius=r, padding=padding)
+
+
+@functools.partial(jax.jit, static_argnames=("radius", "padding"))
+def _log_core(x, s, *, radius: int, padding: str):
+    r = radius
     g = gaussian_kernel1d(s, r, dtype=x.dtype)
     i = jnp.arange(-r, r + 1, dtype=x.dtype)
     # G''(i) = G(i) i^2 / s^4 - G(i) / s^2. The first term in log space: G(i) underflows to 0
@@ -560,9 +624,9 @@ def laplacian_of_gaussian(
     safe_i2 = jnp.where(i == 0, 1.0, i2)
     tail = jnp.where(i == 0, 0.0, jnp.exp(log_g + jnp.log(safe_i2) - 4.0 * jnp.log(s)))
     g2 = tail - g / (s * s)
-    return convolve_separable(x, g2, g, padding=padding) + convolve_separable(
-        x, g, g2, padding=padding
-    )
+    return _convolve_separable_core(
+        x, g2, g, padding=padding, method="auto"
+    ) + _convolve_separable_core(x, g, g2, padding=padding, method="auto")
 
 
 def sharpen(image, amount=1.0, *, padding: str = "reflect"):
@@ -578,7 +642,11 @@ def sharpen(image, amount=1.0, *, padding: str = "reflect"):
     """
     x = check_image(image)
     check_padding(padding)
-    a = jnp.asarray(amount, x.dtype)
+    return _sharpen_core(x, _as_dtype(amount, x), padding=padding)
+
+
+@functools.partial(jax.jit, static_argnames=("padding",))
+def _sharpen_core(x, a, *, padding: str):
     k = jnp.full((3, 3), -1.0 / 9.0, x.dtype) * a
     k = k.at[1, 1].add(1.0 + a)
-    return convolve(x, k, padding=padding, method="direct")
+    return _convolve_core(x, k, padding=padding, method="direct")

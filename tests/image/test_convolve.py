@@ -1,5 +1,7 @@
 """Padding and convolution against np.pad, scipy.ndimage, OpenCV and a NumPy reference."""
 
+import importlib
+
 import cv2
 import jax
 import jax.numpy as jnp
@@ -190,3 +192,17 @@ def test_jit_pad_and_separable(rng):
     g = jax.jit(lambda a, v, h: convolve_separable(a, v, h, padding="edge"))
     want = np.stack([np_convolve(x[..., c], np.outer(kv, kh), "edge") for c in range(2)], -1)
     np.testing.assert_allclose(np.asarray(g(x, kv, kh)), want, atol=1e-5)
+
+
+def test_eager_convolve_compiles_once_for_new_kernel_values(rng):
+    """Eager convolve runs one jitted core per shape / padding / method: new kernel values
+    of the same shape reuse the compiled program. Values: scipy.ndimage.convolve."""
+    conv_mod = importlib.import_module("jaxgfx.image.convolve")  # the module, not the function
+
+    x = rng.random((13, 22, 2)).astype(np.float32)  # a shape no other test uses
+    n0 = conv_mod._convolve_core._cache_size()
+    for _ in range(2):
+        k = rng.standard_normal((3, 4)).astype(np.float32)  # rank 2: not separable
+        want = np.stack([ndi.convolve(x[..., c], k, mode="mirror") for c in range(2)], -1)
+        np.testing.assert_allclose(np.asarray(convolve(x, k)), want, atol=1e-5)
+    assert conv_mod._convolve_core._cache_size() - n0 == 1

@@ -370,3 +370,27 @@ def test_jit_matches_eager_small_filters(rng):
         lambda a: gaussian_kernel1d(a[0, 0, 0] + 0.5, 3),
     ):
         np.testing.assert_allclose(np.asarray(jax.jit(fn)(x)), np.asarray(fn(x)), atol=1e-6)
+
+
+def test_eager_calls_compile_once_traced_parameters(img3):
+    """An eager call validates, then runs one jitted core (compiled once per shape and static
+    options); sigma / amount are traced arguments: a new value runs the same program (the
+    cores' compile caches do not grow). Values: OpenCV and scikit-image."""
+    from jaxgfx.image import filters
+
+    x = np.ascontiguousarray(img3[:, :21])  # a shape no other test uses: one compile each
+    cores = (filters._gaussian_blur_core, filters._unsharp_core, filters._sharpen_core)
+    n0 = [c._cache_size() for c in cores]
+    for s in (1.0, 1.3):  # same radius 3, new sigma
+        want = cv2.GaussianBlur(x, (7, 7), s, borderType=cv2.BORDER_REFLECT_101)
+        np.testing.assert_allclose(np.asarray(gaussian_blur(x, s, radius=3)), want, atol=1e-6)
+    for a in (0.7, 1.2):
+        want = sk_unsharp(x, radius=1.5, amount=a, preserve_range=True, channel_axis=2)
+        got = unsharp_mask(x, 1.5, a, truncate=4.0, padding="symmetric")
+        np.testing.assert_allclose(np.asarray(got), want, atol=1e-5)
+    for a in (0.5, 0.9):
+        k = np.full((3, 3), -a / 9)
+        k[1, 1] += 1 + a
+        want = cv2.filter2D(x, -1, k, borderType=cv2.BORDER_REFLECT_101)
+        np.testing.assert_allclose(np.asarray(sharpen(x, a)), want, atol=1e-5)
+    assert [c._cache_size() - n for c, n in zip(cores, n0, strict=True)] == [1, 1, 1]
