@@ -3,16 +3,22 @@
 A CAT maps XYZ seen under a source white to the corresponding XYZ under a destination white:
 ``M = A^-1 diag(A w_dst / A w_src) A`` with ``A`` a cone-like response matrix (von Kries
 1902 in its modern linear form; Fairchild, *Color Appearance Models*, 3rd ed., §9).
+
+The public functions validate names and white points eagerly, then call one jitted core
+(``_*``) with the names static and the white points traced.
 """
 
 from __future__ import annotations
 
+import functools
+
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_choice
 from ._common import as_colour, cast_const, matvec3
-from .spaces import _RGB_TO_XYZ, _XYZ_TO_RGB, RGB_SPACES, whitepoint_xyz
+from .spaces import _RGB_TO_XYZ, _XYZ_TO_RGB, RGB_SPACES, WHITEPOINTS, _xy_to_xyz, whitepoint_xyz
 
 __all__ = [
     "CAT_MATRICES",
@@ -41,11 +47,38 @@ CAT_MATRICES: dict[str, np.ndarray] = {
 _CAT_INV = {k: np.linalg.inv(m) for k, m in CAT_MATRICES.items()}
 
 
+def _white_xyz(name):
+    """Float64 NumPy XYZ (Y = 1) of a named white point (what :func:`whitepoint_xyz` casts)."""
+    return _xy_to_xyz(np.asarray(WHITEPOINTS[name]), np)
+
+
 def _cat_matrix(src_xyz, dst_xyz, method, like):
     A = cast_const(CAT_MATRICES[method], like)
     Ainv = cast_const(_CAT_INV[method], like)
     gain = (dst_xyz @ A.T) / (src_xyz @ A.T)  # (..., 3): batched whites broadcast
     return Ainv @ (gain[..., :, None] * A)
+
+
+@functools.partial(jax.jit, static_argnames=("method",))
+def _cat_matrix_jit(src_xyz, dst_xyz, like, *, method):
+    return _cat_matrix(src_xyz, dst_xyz, method, like)
+
+
+@functools.partial(jax.jit, static_argnames=("method",))
+def _adapt(xyz, src_xyz, dst_xyz, *, method):
+    return matvec3(_cat_matrix(src_xyz, dst_xyz, method, xyz), xyz)
+
+
+@functools.partial(jax.jit, static_argnames=("src", "dst", "adaptation"))
+def _rgb_to_rgb(rgb, *, src, dst, adaptation):
+    M = cast_const(_RGB_TO_XYZ[src], rgb)
+    ws, wd = RGB_SPACES[src].white, RGB_SPACES[dst].white
+    if adaptation is not None and ws != wd:
+        src_w = cast_const(_white_xyz(ws), rgb)
+        dst_w = cast_const(_white_xyz(wd), rgb)
+        M = _cat_matrix(src_w, dst_w, adaptation, rgb) @ M
+    M = cast_const(_XYZ_TO_RGB[dst], rgb) @ M
+    return matvec3(M, rgb)
 
 
 def chromatic_adaptation_matrix(src_white, dst_white, *, method="bradford", dtype=None):
@@ -74,7 +107,7 @@ def chromatic_adaptation_matrix(src_white, dst_white, *, method="bradford", dtyp
                 like = jnp.zeros((), jnp.result_type(like, wd))
     src = whitepoint_xyz(src_white, "src_white", like=like)
     dst = whitepoint_xyz(dst_white, "dst_white", like=like)
-    return _cat_matrix(src, dst, method, like)
+    return _cat_matrix_jit(src, dst, like, method=method)
 
 
 def chromatic_adaptation(xyz, src_white, dst_white, *, method="bradford"):
@@ -90,8 +123,7 @@ def chromatic_adaptation(xyz, src_white, dst_white, *, method="bradford"):
     xyz = as_colour(xyz, "xyz")
     src = whitepoint_xyz(src_white, "src_white", like=xyz)
     dst = whitepoint_xyz(dst_white, "dst_white", like=xyz)
-    M = _cat_matrix(src, dst, method, xyz)
-    return matvec3(M, xyz)
+    return _adapt(xyz, src, dst, method=method)
 
 
 def rgb_to_rgb(rgb, *, src="srgb", dst="prophoto", adaptation="bradford"):
@@ -107,11 +139,4 @@ def rgb_to_rgb(rgb, *, src="srgb", dst="prophoto", adaptation="bradford"):
     if adaptation is not None:
         check_choice(adaptation, "adaptation", CAT_MATRICES)
     rgb = as_colour(rgb, "rgb")
-    M = cast_const(_RGB_TO_XYZ[src], rgb)
-    ws, wd = RGB_SPACES[src].white, RGB_SPACES[dst].white
-    if adaptation is not None and ws != wd:
-        src_w = whitepoint_xyz(ws, like=rgb)
-        dst_w = whitepoint_xyz(wd, like=rgb)
-        M = _cat_matrix(src_w, dst_w, adaptation, rgb) @ M
-    M = cast_const(_XYZ_TO_RGB[dst], rgb) @ M
-    return matvec3(M, rgb)
+    return _rgb_to_rgb(rgb, src=src, dst=dst, adaptation=adaptation)

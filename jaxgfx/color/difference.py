@@ -1,7 +1,12 @@
-"""Colour differences in CIELAB: CIE 1976 and CIEDE2000."""
+"""Colour differences in CIELAB: CIE 1976 and CIEDE2000.
+
+The public functions validate their inputs eagerly, then call one jitted core (``_*``; the
+weights ``kL, kC, kH`` are traced, so a new value does not recompile).
+"""
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from .._checks import check_positive
@@ -27,8 +32,11 @@ def delta_e_1976(lab1, lab2):
       >>> float(delta_e_1976(jnp.array([50.0, 0, 0]), jnp.array([53.0, 4.0, 0])))
       5.0
     """
-    lab1 = as_colour(lab1, "lab1")
-    lab2 = as_colour(lab2, "lab2")
+    return _delta_e_1976(as_colour(lab1, "lab1"), as_colour(lab2, "lab2"))
+
+
+@jax.jit
+def _delta_e_1976(lab1, lab2):
     return safe_norm(lab1 - lab2, axis=-1)
 
 
@@ -60,6 +68,11 @@ def delta_e_2000(lab1, lab2, *, kL=1.0, kC=1.0, kH=1.0):
     lab2 = as_colour(lab2, "lab2")
     for v, n in ((kL, "kL"), (kC, "kC"), (kH, "kH")):
         check_positive(v, n)
+    return _delta_e_2000(lab1, lab2, kL, kC, kH)
+
+
+@jax.jit
+def _delta_e_2000(lab1, lab2, kL, kC, kH):
     L1, a1, b1 = lab1[..., 0], lab1[..., 1], lab1[..., 2]
     L2, a2, b2 = lab2[..., 0], lab2[..., 1], lab2[..., 2]
 

@@ -7,12 +7,18 @@ reference white has ``Y = 1``; CIELAB ``L*`` is in [0, 100].
 
 RGB -> XYZ matrices are *derived* at import time from the primaries' and white point's xy
 chromaticities (SMPTE RP 177-1993 normalised primary matrix), not copied as decimals.
+
+Each public function validates its inputs eagerly (names, shapes, finiteness) and then calls
+one jitted core (``_*``): an eager call runs one compiled program. Names are static arguments
+of the cores; white points and matrices are traced arguments.
 """
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -131,6 +137,11 @@ def normalised_primary_matrix(primaries, white_xy):
             f"primaries/white_xy: expected shapes (3, 2) and (2,), "
             f"got {primaries.shape} and {white_xy.shape}"
         )
+    return _npm_jit(primaries, white_xy)
+
+
+@jax.jit
+def _npm_jit(primaries, white_xy):
     return _npm(primaries, white_xy, jnp)
 
 
@@ -149,7 +160,11 @@ def rgb_to_xyz_matrix(space="srgb"):
 
 def xy_to_xyz(xy):
     """Chromaticity ``(..., 2)`` -> XYZ ``(..., 3)`` with ``Y = 1``."""
-    xy = as_colour(xy, "xy", channels=2)
+    return _xy_to_xyz_jit(as_colour(xy, "xy", channels=2))
+
+
+@jax.jit
+def _xy_to_xyz_jit(xy):
     return _xy_to_xyz(xy, jnp)
 
 
@@ -180,7 +195,13 @@ def whitepoint_xyz(white, name="white", *, like=None):
 
 
 def _apply(m, x):
-    return matvec3(cast_const(m, x), x)
+    # The NumPy float64 matrix is cast here, outside jit: passed as a NumPy argument, it once
+    # reached an executable compiled under the other jax_enable_x64 setting in tests/color
+    # ("expected f32[3,3] but got f64[3,3]"; JAX 0.10, not reduced to a small repro).
+    return _matvec3(cast_const(m, x), x)
+
+
+_matvec3 = jax.jit(matvec3)
 
 
 def rgb_to_xyz(rgb, *, space="srgb"):
@@ -231,7 +252,11 @@ def xyz_to_lab(xyz, *, white="D65"):
       [100.0, 0.0, 0.0]
     """
     xyz = as_colour(xyz, "xyz")
-    wn = whitepoint_xyz(white, "white", like=xyz)
+    return _xyz_to_lab(xyz, whitepoint_xyz(white, "white", like=xyz))
+
+
+@jax.jit
+def _xyz_to_lab(xyz, wn):
     f = _lab_f(xyz / wn)
     fx, fy, fz = f[..., 0], f[..., 1], f[..., 2]
     return jnp.stack([116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz)], axis=-1)
@@ -240,7 +265,11 @@ def xyz_to_lab(xyz, *, white="D65"):
 def lab_to_xyz(lab, *, white="D65"):
     """CIE 1976 L*a*b* -> CIE XYZ, exact inverse of :func:`xyz_to_lab` (CIE 15:2004 §8.2.1)."""
     lab = as_colour(lab, "lab")
-    wn = whitepoint_xyz(white, "white", like=lab)
+    return _lab_to_xyz(lab, whitepoint_xyz(white, "white", like=lab))
+
+
+@jax.jit
+def _lab_to_xyz(lab, wn):
     L, a, b = lab[..., 0], lab[..., 1], lab[..., 2]
     fy = (L + 16.0) / 116.0
     fx = fy + a / 500.0
@@ -262,7 +291,11 @@ def xyz_to_xyY(xyz, *, white="D65"):
       [0.3127, 0.329, 1.0]
     """
     xyz = as_colour(xyz, "xyz")
-    wn = whitepoint_xyz(white, "white", like=xyz)
+    return _xyz_to_xyY(xyz, whitepoint_xyz(white, "white", like=xyz))
+
+
+@jax.jit
+def _xyz_to_xyY(xyz, wn):
     s = jnp.sum(xyz, axis=-1)
     w_xy = wn[:2] / jnp.sum(wn)
     x = safe_div(xyz[..., 0], s, fill=0.0) + jnp.where(s == 0, w_xy[0], 0.0)
@@ -272,7 +305,11 @@ def xyz_to_xyY(xyz, *, white="D65"):
 
 def xyY_to_xyz(xyY):
     """CIE xyY -> CIE XYZ; ``y = 0`` maps to black."""
-    xyY = as_colour(xyY, "xyY")
+    return _xyY_to_xyz(as_colour(xyY, "xyY"))
+
+
+@jax.jit
+def _xyY_to_xyz(xyY):
     x, y, Y = xyY[..., 0], xyY[..., 1], xyY[..., 2]
     return jnp.stack([safe_div(x * Y, y), Y, safe_div((1.0 - x - y) * Y, y)], axis=-1)
 
@@ -287,7 +324,11 @@ def rgb_to_hsv(rgb):
       >>> [round(float(v), 4) for v in rgb_to_hsv(jnp.array([0.2, 0.4, 0.8]))]
       [0.6111, 0.75, 0.8]
     """
-    rgb = as_colour(rgb, "rgb")
+    return _rgb_to_hsv(as_colour(rgb, "rgb"))
+
+
+@jax.jit
+def _rgb_to_hsv(rgb):
     r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
     v = jnp.max(rgb, axis=-1)
     d = v - jnp.min(rgb, axis=-1)
@@ -314,7 +355,11 @@ def hsv_to_rgb(hsv):
       >>> [round(float(v), 4) for v in hsv_to_rgb(jnp.array([0.6111111, 0.75, 0.8]))]
       [0.2, 0.4, 0.8]
     """
-    hsv = as_colour(hsv, "hsv")
+    return _hsv_to_rgb(as_colour(hsv, "hsv"))
+
+
+@jax.jit
+def _hsv_to_rgb(hsv):
     h, s, v = hsv[..., 0], hsv[..., 1], hsv[..., 2]
     n = cast_const(np.array([5.0, 3.0, 1.0]), hsv)
     k = jnp.mod(n + 6.0 * h[..., None], 6.0)
@@ -348,7 +393,11 @@ def rgb_to_cmyk(rgb):
       >>> [round(float(v), 4) for v in rgb_to_cmyk(jnp.array([0.5, 0.25, 0.0]))]
       [0.0, 0.5, 1.0, 0.5]
     """
-    rgb = as_colour(rgb, "rgb")
+    return _rgb_to_cmyk(as_colour(rgb, "rgb"))
+
+
+@jax.jit
+def _rgb_to_cmyk(rgb):
     k = 1.0 - jnp.max(rgb, axis=-1)
     cmy = safe_div(1.0 - rgb - k[..., None], 1.0 - k[..., None])
     return jnp.concatenate([cmy, k[..., None]], axis=-1)
@@ -356,7 +405,11 @@ def rgb_to_cmyk(rgb):
 
 def cmyk_to_rgb(cmyk):
     """Naive CMYK ``(..., 4)`` -> RGB: ``R = (1 - C)(1 - K)`` (likewise G, B)."""
-    cmyk = as_colour(cmyk, "cmyk", channels=4)
+    return _cmyk_to_rgb(as_colour(cmyk, "cmyk", channels=4))
+
+
+@jax.jit
+def _cmyk_to_rgb(cmyk):
     return (1.0 - cmyk[..., :3]) * (1.0 - cmyk[..., 3:])
 
 
@@ -375,6 +428,10 @@ def luminance(rgb, *, weights="rec709"):
       1.0...
     """
     check_choice(weights, "weights", LUMINANCE_WEIGHTS)
-    rgb = as_colour(rgb, "rgb")
+    return _luminance(as_colour(rgb, "rgb"), weights=weights)
+
+
+@functools.partial(jax.jit, static_argnames=("weights",))
+def _luminance(rgb, *, weights):
     w = LUMINANCE_WEIGHTS[weights]
     return rgb[..., 0] * w[0] + rgb[..., 1] * w[1] + rgb[..., 2] * w[2]

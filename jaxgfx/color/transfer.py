@@ -9,10 +9,14 @@ out-of-gamut values survive a round trip and the maps stay strictly monotonic. I
 follow the same analytic curve (no clamping). Near zero every curve with a linear toe (sRGB,
 Rec.709, ProPhoto) has a finite, exact gradient; the pure power laws (Adobe RGB, ``gamma_*``)
 have an infinite true slope at 0 for exponents < 1, where the gradient returned is 0.
+
+Each public function validates its input eagerly and then calls one jitted core (``_*``), so
+an eager call runs one compiled program instead of one dispatch per primitive.
 """
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from .._checks import check_choice, check_positive
@@ -57,6 +61,11 @@ def _power_odd(x, p):
 # --- sRGB (IEC 61966-2-1:1999) -----------------------------------------------------------------
 
 
+@jax.jit
+def _srgb_to_linear(v):
+    return _piecewise_odd(v, 0.04045, 1.0 / 12.92, lambda a: ((a + 0.055) / 1.055) ** 2.4)
+
+
 def srgb_to_linear(v):
     """sRGB EOTF: non-linear sRGB code value -> linear light (IEC 61966-2-1:1999).
 
@@ -73,8 +82,12 @@ def srgb_to_linear(v):
       >>> float(srgb_to_linear(0.5))  # doctest: +ELLIPSIS
       0.21404...
     """
-    v = as_values(v, "v")
-    return _piecewise_odd(v, 0.04045, 1.0 / 12.92, lambda a: ((a + 0.055) / 1.055) ** 2.4)
+    return _srgb_to_linear(as_values(v, "v"))
+
+
+@jax.jit
+def _linear_to_srgb(x):
+    return _piecewise_odd(x, 0.0031308, 12.92, lambda a: 1.055 * a ** (1.0 / 2.4) - 0.055)
 
 
 def linear_to_srgb(x):
@@ -87,13 +100,21 @@ def linear_to_srgb(x):
       >>> float(linear_to_srgb(0.18))  # doctest: +ELLIPSIS
       0.46135...
     """
-    x = as_values(x, "x")
-    return _piecewise_odd(x, 0.0031308, 12.92, lambda a: 1.055 * a ** (1.0 / 2.4) - 0.055)
+    return _linear_to_srgb(as_values(x, "x"))
 
 
 # --- Rec. ITU-R BT.709-6 -------------------------------------------------------------------------
 
 _REC709_KNEE_CODE = 1.099 * 0.018**0.45 - 0.099  # the OETF's value just above its knee
+
+
+@jax.jit
+def _linear_to_rec709(x):
+    a = jnp.abs(x)
+    lin = a < 0.018
+    a_safe = jnp.where(lin, 1.0, a)
+    s = jnp.where(x < 0, -1.0, 1.0).astype(a.dtype)
+    return jnp.where(lin, 4.5 * x, s * (1.099 * a_safe**0.45 - 0.099))
 
 
 def linear_to_rec709(x):
@@ -105,12 +126,16 @@ def linear_to_rec709(x):
       >>> float(linear_to_rec709(0.18))  # doctest: +ELLIPSIS
       0.40900...
     """
-    x = as_values(x, "x")
-    a = jnp.abs(x)
-    lin = a < 0.018
+    return _linear_to_rec709(as_values(x, "x"))
+
+
+@jax.jit
+def _rec709_to_linear(v):
+    a = jnp.abs(v)
+    lin = a < _REC709_KNEE_CODE
     a_safe = jnp.where(lin, 1.0, a)
-    s = jnp.where(x < 0, -1.0, 1.0).astype(a.dtype)
-    return jnp.where(lin, 4.5 * x, s * (1.099 * a_safe**0.45 - 0.099))
+    s = jnp.where(v < 0, -1.0, 1.0).astype(a.dtype)
+    return jnp.where(lin, v / 4.5, s * ((a_safe + 0.099) / 1.099) ** (1.0 / 0.45))
 
 
 def rec709_to_linear(v):
@@ -119,15 +144,15 @@ def rec709_to_linear(v):
     ``L = V / 4.5`` below the OETF's value at its knee (0.0812...), else
     ``((V + 0.099) / 1.099) ** (1 / 0.45)``; odd extension below 0.
     """
-    v = as_values(v, "v")
-    a = jnp.abs(v)
-    lin = a < _REC709_KNEE_CODE
-    a_safe = jnp.where(lin, 1.0, a)
-    s = jnp.where(v < 0, -1.0, 1.0).astype(a.dtype)
-    return jnp.where(lin, v / 4.5, s * ((a_safe + 0.099) / 1.099) ** (1.0 / 0.45))
+    return _rec709_to_linear(as_values(v, "v"))
 
 
 # --- Adobe RGB (1998) -----------------------------------------------------------------------------
+
+
+@jax.jit
+def _linear_to_adobe_rgb(x):
+    return _power_odd(x, 1.0 / ADOBE_RGB_GAMMA)
 
 
 def linear_to_adobe_rgb(x):
@@ -139,19 +164,27 @@ def linear_to_adobe_rgb(x):
       >>> float(linear_to_adobe_rgb(0.18))  # doctest: +ELLIPSIS
       0.45852...
     """
-    x = as_values(x, "x")
-    return _power_odd(x, 1.0 / ADOBE_RGB_GAMMA)
+    return _linear_to_adobe_rgb(as_values(x, "x"))
+
+
+@jax.jit
+def _adobe_rgb_to_linear(v):
+    return _power_odd(v, ADOBE_RGB_GAMMA)
 
 
 def adobe_rgb_to_linear(v):
     """Adobe RGB (1998) decoding: ``L = V ** (563/256)`` (odd extension)."""
-    v = as_values(v, "v")
-    return _power_odd(v, ADOBE_RGB_GAMMA)
+    return _adobe_rgb_to_linear(as_values(v, "v"))
 
 
 # --- ProPhoto RGB / ROMM RGB (ISO 22028-2:2013) ---------------------------------------------------
 
 _ROMM_ET = 16.0 ** (1.8 / (1.0 - 1.8))  # = 1/512, where 16 x meets x ** (1/1.8)
+
+
+@jax.jit
+def _linear_to_prophoto(x):
+    return _piecewise_odd(x, _ROMM_ET, 16.0, lambda a: a ** (1.0 / 1.8))
 
 
 def linear_to_prophoto(x):
@@ -163,17 +196,31 @@ def linear_to_prophoto(x):
       >>> float(linear_to_prophoto(0.18))  # doctest: +ELLIPSIS
       0.38571...
     """
-    x = as_values(x, "x")
-    return _piecewise_odd(x, _ROMM_ET, 16.0, lambda a: a ** (1.0 / 1.8))
+    return _linear_to_prophoto(as_values(x, "x"))
+
+
+@jax.jit
+def _prophoto_to_linear(v):
+    return _piecewise_odd(v, 16.0 * _ROMM_ET, 1.0 / 16.0, lambda a: a**1.8)
 
 
 def prophoto_to_linear(v):
     """ProPhoto (ROMM) RGB decoding: ``L = V / 16`` for ``V < 1/32``, else ``V ** 1.8``."""
-    v = as_values(v, "v")
-    return _piecewise_odd(v, 16.0 * _ROMM_ET, 1.0 / 16.0, lambda a: a**1.8)
+    return _prophoto_to_linear(as_values(v, "v"))
 
 
 # --- pure gamma -----------------------------------------------------------------------------------
+
+
+@jax.jit
+def _gamma_encode(x, gamma):
+    # gamma is traced (a new value does not recompile) and cast to the image's dtype
+    return _power_odd(x, 1.0 / jnp.asarray(gamma, dtype=x.dtype))
+
+
+@jax.jit
+def _gamma_decode(v, gamma):
+    return _power_odd(v, jnp.asarray(gamma, dtype=v.dtype))
 
 
 def gamma_encode(x, gamma=2.2):
@@ -188,8 +235,7 @@ def gamma_encode(x, gamma=2.2):
     """
     x = as_values(x, "x")
     check_positive(gamma, "gamma")
-    gamma = jnp.asarray(gamma, dtype=x.dtype)
-    return _power_odd(x, 1.0 / gamma)
+    return _gamma_encode(x, gamma)
 
 
 def gamma_decode(v, gamma=2.2):
@@ -202,8 +248,7 @@ def gamma_decode(v, gamma=2.2):
     """
     v = as_values(v, "v")
     check_positive(gamma, "gamma")
-    gamma = jnp.asarray(gamma, dtype=v.dtype)
-    return _power_odd(v, gamma)
+    return _gamma_decode(v, gamma)
 
 
 def _identity(x):

@@ -17,9 +17,15 @@ pixels. If no pixel remains (or an estimate is 0) the gains fall back to 1.
 
 Values are not clipped (except by :func:`white_balance_stretch` with ``clip=True``), so
 balanced highlights may exceed 1.
+
+The public functions validate their inputs eagerly, then call one jitted core (``_*``):
+quantile levels (they fix the ``top_k`` size), names and ``clip`` are static; ``saturation``
+(``None`` or a traced number), gains and whites are traced.
 """
 
 from __future__ import annotations
+
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -74,7 +80,11 @@ def _masked_quantile(image, w, q):
 
     XLA's CPU sort is ~20x slower than NumPy's, so instead of sorting we take the
     ``k = floor(min(q, 1 - q) (N - 1)) + 2`` extreme values with ``lax.top_k`` (``k`` is static
-    and bounds the needed rank for any count ``n <= N`` of unmasked pixels)."""
+    and bounds the needed rank for any count ``n <= N`` of unmasked pixels).
+
+    The ``top_k`` values pass an ``optimization_barrier``: under jit, when only one rank of
+    them is read, XLA otherwise turns the ``top_k`` into a full sort of all ``N`` pixels (XLA
+    CPU, JAX 0.10: 66 ms instead of 2.2 ms for the 99 % quantile of 512 x 512 values)."""
     *batch, H, W, C = image.shape
     N = H * W
     x = jnp.swapaxes(image.reshape(*batch, N, C), -1, -2)  # (..., C, N)
@@ -90,10 +100,10 @@ def _masked_quantile(image, w, q):
     top = q >= 0.5
     k = min(N, int(np.floor((1.0 - q if top else q) * (N - 1))) + 2)
     if top:  # descending largest values; bottom rank j is top rank n - 1 - j
-        vals = jax.lax.top_k(jnp.where(m, x, low), k)[0]
+        vals = jax.lax.optimization_barrier(jax.lax.top_k(jnp.where(m, x, low), k)[0])
         r_lo, r_hi = n_i - 1 - lo_i, n_i - 1 - hi_i
     else:  # ascending smallest values
-        vals = -jax.lax.top_k(jnp.where(m, -x, low), k)[0]
+        vals = -jax.lax.optimization_barrier(jax.lax.top_k(jnp.where(m, -x, low), k)[0])
         r_lo, r_hi = lo_i, hi_i
     r_lo = jnp.clip(r_lo, 0, k - 1)[..., None, :]
     r_hi = jnp.clip(r_hi, 0, k - 1)[..., None, :]
@@ -124,7 +134,37 @@ def apply_white_balance(image, gains):
     """
     image = check_image(image, channels=3, min_ndim=3)
     gains = as_colour(gains, "gains")
+    return _apply_gains(image, gains)
+
+
+@jax.jit
+def _apply_gains(image, gains):
     return image * cast_const(gains, image)[..., None, None, :]
+
+
+@jax.jit
+def _grey_world_gains(image, saturation):
+    w = _valid_mask(image, saturation)
+    n = jnp.sum(w, axis=(-3, -2))  # (..., 1)
+    mean = safe_div(jnp.sum(image * w, axis=(-3, -2)), n)
+    return _gains_from_estimate(mean, n > 0)
+
+
+@jax.jit
+def _grey_world(image, saturation):
+    return _apply_gains(image, _grey_world_gains(image, saturation))
+
+
+@functools.partial(jax.jit, static_argnames=("q",))
+def _white_patch_gains(image, saturation, *, q):
+    w = _valid_mask(image, saturation)
+    est, n = _masked_quantile(image, w, q)
+    return _gains_from_estimate(est, n > 0)
+
+
+@functools.partial(jax.jit, static_argnames=("q",))
+def _white_patch(image, saturation, *, q):
+    return _apply_gains(image, _white_patch_gains(image, saturation, q=q))
 
 
 def white_balance_grey_world_gains(image, *, saturation=None):
@@ -138,17 +178,15 @@ def white_balance_grey_world_gains(image, *, saturation=None):
     """
     image = check_image(image, channels=3, min_ndim=3)
     _check_saturation(saturation)
-    w = _valid_mask(image, saturation)
-    n = jnp.sum(w, axis=(-3, -2))  # (..., 1)
-    mean = safe_div(jnp.sum(image * w, axis=(-3, -2)), n)
-    return _gains_from_estimate(mean, n > 0)
+    return _grey_world_gains(image, saturation)
 
 
 def white_balance_grey_world(image, *, saturation=None):
     """Grey-world white balance: scale channels so that their means become equal (to their
     average). See :func:`white_balance_grey_world_gains`."""
     image = check_image(image, channels=3, min_ndim=3)
-    return apply_white_balance(image, white_balance_grey_world_gains(image, saturation=saturation))
+    _check_saturation(saturation)
+    return _grey_world(image, saturation)
 
 
 def white_balance_white_patch_gains(image, *, quantile=0.99, saturation=None):
@@ -164,16 +202,15 @@ def white_balance_white_patch_gains(image, *, quantile=0.99, saturation=None):
     image = check_image(image, channels=3, min_ndim=3)
     q = _check_unit(quantile, "quantile")
     _check_saturation(saturation)
-    w = _valid_mask(image, saturation)
-    est, n = _masked_quantile(image, w, q)
-    return _gains_from_estimate(est, n > 0)
+    return _white_patch_gains(image, saturation, q=q)
 
 
 def white_balance_white_patch(image, *, quantile=0.99, saturation=None):
     """White-patch white balance (see :func:`white_balance_white_patch_gains`)."""
     image = check_image(image, channels=3, min_ndim=3)
-    g = white_balance_white_patch_gains(image, quantile=quantile, saturation=saturation)
-    return apply_white_balance(image, g)
+    q = _check_unit(quantile, "quantile")
+    _check_saturation(saturation)
+    return _white_patch(image, saturation, q=q)
 
 
 def white_balance_brightest_pixel_gains(image, *, quantile=0.99, saturation=None):
@@ -193,6 +230,16 @@ def white_balance_brightest_pixel_gains(image, *, quantile=0.99, saturation=None
     image = check_image(image, channels=3, min_ndim=3)
     q = _check_unit(quantile, "quantile")
     _check_saturation(saturation)
+    return _brightest_pixel_gains(image, saturation, q=q)
+
+
+@functools.partial(jax.jit, static_argnames=("q",))
+def _brightest_pixel(image, saturation, *, q):
+    return _apply_gains(image, _brightest_pixel_gains(image, saturation, q=q))
+
+
+@functools.partial(jax.jit, static_argnames=("q",))
+def _brightest_pixel_gains(image, saturation, *, q):
     w = _valid_mask(image, saturation)
     lum = (image[..., 0] * 0.2126 + image[..., 1] * 0.7152 + image[..., 2] * 0.0722)[..., None]
     thr, n = _masked_quantile(lum, w, q)  # (..., 1)
@@ -206,23 +253,45 @@ def white_balance_brightest_pixel(image, *, quantile=0.99, saturation=None):
     """Highlight white balance from the brightest pixels' colour (see
     :func:`white_balance_brightest_pixel_gains`)."""
     image = check_image(image, channels=3, min_ndim=3)
-    g = white_balance_brightest_pixel_gains(image, quantile=quantile, saturation=saturation)
-    return apply_white_balance(image, g)
+    q = _check_unit(quantile, "quantile")
+    _check_saturation(saturation)
+    return _brightest_pixel(image, saturation, q=q)
 
 
 def white_balance_stretch_limits(image, *, low=0.01, high=0.99, saturation=None):
     """Per-channel ``low`` and ``high`` quantiles ``(lo, hi)``, each ``(..., 3)``, used by
     :func:`white_balance_stretch`."""
     image = check_image(image, channels=3, min_ndim=3)
+    lo_q, hi_q = _check_low_high(low, high)
+    _check_saturation(saturation)
+    return _stretch_limits(image, saturation, lo_q=lo_q, hi_q=hi_q)
+
+
+def _check_low_high(low, high):
     lo_q = _check_unit(low, "low")
     hi_q = _check_unit(high, "high")
     if not lo_q < hi_q:
         raise ValueError(f"low, high: expected low < high, got low={low!r}, high={high!r}")
-    _check_saturation(saturation)
+    return lo_q, hi_q
+
+
+@functools.partial(jax.jit, static_argnames=("lo_q", "hi_q"))
+def _stretch_limits(image, saturation, *, lo_q, hi_q):
     w = _valid_mask(image, saturation)
     lo, _ = _masked_quantile(image, w, lo_q)
     hi, _ = _masked_quantile(image, w, hi_q)
     return lo, hi
+
+
+@functools.partial(jax.jit, static_argnames=("lo_q", "hi_q", "clip"))
+def _stretch(image, saturation, *, lo_q, hi_q, clip):
+    lo, hi = _stretch_limits(image, saturation, lo_q=lo_q, hi_q=hi_q)
+    span = hi - lo
+    ok = span > 0
+    scale = jnp.where(ok, 1.0 / jnp.where(ok, span, 1.0), 1.0)
+    offset = jnp.where(ok, lo, 0.0)
+    out = (image - offset[..., None, None, :]) * scale[..., None, None, :]
+    return jnp.clip(out, 0.0, 1.0) if clip else out
 
 
 def white_balance_stretch(image, *, low=0.01, high=0.99, saturation=None, clip=True):
@@ -237,13 +306,9 @@ def white_balance_stretch(image, *, low=0.01, high=0.99, saturation=None, clip=T
       [[[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]]
     """
     image = check_image(image, channels=3, min_ndim=3)
-    lo, hi = white_balance_stretch_limits(image, low=low, high=high, saturation=saturation)
-    span = hi - lo
-    ok = span > 0
-    scale = jnp.where(ok, 1.0 / jnp.where(ok, span, 1.0), 1.0)
-    offset = jnp.where(ok, lo, 0.0)
-    out = (image - offset[..., None, None, :]) * scale[..., None, None, :]
-    return jnp.clip(out, 0.0, 1.0) if clip else out
+    lo_q, hi_q = _check_low_high(low, high)
+    _check_saturation(saturation)
+    return _stretch(image, saturation, lo_q=lo_q, hi_q=hi_q, clip=bool(clip))
 
 
 def white_balance_von_kries_matrix(
@@ -262,13 +327,24 @@ def white_balance_von_kries_matrix(
     check_choice(method, "method", CAT_MATRICES)
     check_choice(space, "space", RGB_SPACES)
     src = as_colour(src_white_rgb, "src_white_rgb")
+    dst = None if dst_white_rgb is None else as_colour(dst_white_rgb, "dst_white_rgb")
+    return _von_kries_matrix(src, dst, method=method, space=space)
+
+
+@functools.partial(jax.jit, static_argnames=("method", "space"))
+def _von_kries(image, src, dst, *, method, space):
+    M = _von_kries_matrix(src, dst, method=method, space=space).astype(image.dtype)
+    return matvec3(M, image)
+
+
+@functools.partial(jax.jit, static_argnames=("method", "space"))
+def _von_kries_matrix(src, dst, *, method, space):
     to_xyz = cast_const(_RGB_TO_XYZ[space], src)
     src_xyz = src @ to_xyz.T
-    if dst_white_rgb is None:
+    if dst is None:
         dst_xyz = jnp.broadcast_to(src_xyz[..., 1:2] * jnp.sum(to_xyz, axis=1), src_xyz.shape)
     else:
-        dst = as_colour(dst_white_rgb, "dst_white_rgb").astype(src.dtype)
-        dst_xyz = dst @ to_xyz.T
+        dst_xyz = dst.astype(src.dtype) @ to_xyz.T
     A = cast_const(CAT_MATRICES[method], src)
     Ainv = cast_const(_CAT_INV[method], src)
     gain = safe_div(dst_xyz @ A.T, src_xyz @ A.T, fill=1.0)
@@ -285,9 +361,11 @@ def white_balance_von_kries(
     :func:`white_balance_von_kries_matrix`.
     """
     image = check_image(image, channels=3, min_ndim=3)
-    M = white_balance_von_kries_matrix(src_white_rgb, dst_white_rgb, method=method, space=space)
-    M = M.astype(image.dtype)
-    return matvec3(M, image)
+    check_choice(method, "method", CAT_MATRICES)
+    check_choice(space, "space", RGB_SPACES)
+    src = as_colour(src_white_rgb, "src_white_rgb")
+    dst = None if dst_white_rgb is None else as_colour(dst_white_rgb, "dst_white_rgb")
+    return _von_kries(image, src, dst, method=method, space=space)
 
 
 #: name -> estimator returning the balanced image; keyword options pass through.
