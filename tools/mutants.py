@@ -58,8 +58,8 @@ MUTANTS = [
     {
         "name": "image.add_gaussian_noise.sigma_x1.025",
         "file": "jaxgfx/image/noise.py",
-        "old": "return x + sigma * jax.random.normal(key, x.shape, x.dtype)",
-        "new": "return x + 1.025 * sigma * jax.random.normal(key, x.shape, x.dtype)",
+        "old": "y = x + sigma * jax.random.normal(key, x.shape, x.dtype)",
+        "new": "y = x + 1.025 * sigma * jax.random.normal(key, x.shape, x.dtype)",
         "tests": ["tests/image/test_noise.py::test_gaussian_noise_statistics_per_channel_sigma"],
         "why": "variance off by 5 % (issue 15: 5 sd on 4k samples let 10 % pass)",
     },
