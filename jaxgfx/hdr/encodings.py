@@ -94,6 +94,11 @@ def rgbe_encode(rgb: _Triple) -> _RGBEOut:
     """
     rgb = as_float_array(rgb, "rgb")
     _check_last(rgb, 3, "rgb")
+    return _rgbe_encode(rgb)
+
+
+@jax.jit
+def _rgbe_encode(rgb):
     rgb = jnp.where(jnp.isnan(rgb) | (rgb < 0), 0.0, rgb)
     v = jnp.max(rgb, axis=-1)
     # 2**128 is not a float32: there only inf saturates.
@@ -122,8 +127,14 @@ def rgbe_decode(rgbe: _RGBEIn, *, offset: float = 0.5, dtype=jnp.float32) -> _Tr
     """
     rgbe = _check_uint(rgbe, "rgbe")
     _check_last(rgbe, 4, "rgbe")
+    dtype = jnp.dtype(dtype)
+    return _rgbe_decode(rgbe, jnp.asarray(offset, dtype), dtype=dtype)
+
+
+@functools.partial(jax.jit, static_argnames=("dtype",))
+def _rgbe_decode(rgbe, offset, *, dtype):
     e = rgbe[..., 3].astype(jnp.int32)
-    m = rgbe[..., :3].astype(dtype) + jnp.asarray(offset, dtype)
+    m = rgbe[..., :3].astype(dtype) + offset
     scale = jnp.ldexp(jnp.ones(e.shape, dtype), e - 136)
     return jnp.where((e > 0)[..., None], m * scale[..., None], jnp.zeros((), dtype))
 
@@ -164,6 +175,11 @@ def logluv32_encode(XYZ: _Triple) -> _WordOut:
     """
     XYZ = as_float_array(XYZ, "XYZ")
     _check_last(XYZ, 3, "XYZ")
+    return _logluv32_encode(XYZ)
+
+
+@jax.jit
+def _logluv32_encode(XYZ):
     Y = XYZ[..., 1]
     aY = jnp.abs(Y)
     tiny = ~(aY > 5.4136769e-20)  # also catches NaN
@@ -184,7 +200,12 @@ def logluv32_decode(word: _WordIn, *, dtype=jnp.float32) -> _TripleOut:
     ``Y = ±2**((Le + 0.5) / 256 - 64)`` (0 when ``Le = 0``), ``u' = (ue + 0.5) / 410``,
     ``v' = (ve + 0.5) / 410``.
     """
-    word = _check_uint(word, "word").astype(jnp.uint32)
+    return _logluv32_decode(_check_uint(word, "word"), dtype=jnp.dtype(dtype))
+
+
+@functools.partial(jax.jit, static_argnames=("dtype",))
+def _logluv32_decode(word, *, dtype):
+    word = word.astype(jnp.uint32)
     Le = ((word >> 16) & 0x7FFF).astype(dtype)
     sign = jnp.where((word >> 31) == 1, -1.0, 1.0).astype(dtype)
     Y = jnp.where(Le > 0, sign * jnp.exp2((Le + 0.5) / 256.0 - 64.0), 0.0).astype(dtype)
@@ -272,6 +293,12 @@ def logluv24_encode(XYZ: _Triple) -> _WordOut:
     """
     XYZ = as_float_array(XYZ, "XYZ")
     _check_last(XYZ, 3, "XYZ")
+    logluv24_uv_table()  # built eagerly (NumPy, colour-science), not while tracing
+    return _logluv24_encode(XYZ)
+
+
+@jax.jit
+def _logluv24_encode(XYZ):
     Y = XYZ[..., 1]
     lo = ~(Y > 0.00024283)
     hi = Y >= 15.742
@@ -287,7 +314,14 @@ def logluv24_decode(word: _WordIn, *, dtype=jnp.float32) -> _TripleOut:
 
     ``Y = 2**((L10 + 0.5) / 64 - 12)`` (0 when ``L10 = 0``); u'v' = centre of the indexed cell.
     """
-    word = _check_uint(word, "word").astype(jnp.uint32)
+    word = _check_uint(word, "word")
+    logluv24_uv_table()
+    return _logluv24_decode(word, dtype=jnp.dtype(dtype))
+
+
+@functools.partial(jax.jit, static_argnames=("dtype",))
+def _logluv24_decode(word, *, dtype):
+    word = word.astype(jnp.uint32)
     L = ((word >> 14) & 0x3FF).astype(dtype)
     Y = jnp.where(L > 0, jnp.exp2((L + 0.5) / 64.0 - 12.0), 0.0).astype(dtype)
     u, v = _index_to_uv(word & 0x3FFF, dtype)

@@ -199,3 +199,17 @@ def test_vmap_and_bad_inputs():
         logluv32_encode(jnp.ones(4))
     with pytest.raises(TypeError, match="word"):
         logluv24_decode(jnp.ones(4))
+
+
+def test_eager_codecs_compile_once(rng):
+    """Eager calls run one compiled core each: new pixel values of the same shape neither
+    retrace nor recompile; values against the NumPy file codec (jaxgfx.io.hdr_rgbe)."""
+    from jaxgfx.hdr import encodings as enc
+
+    before = {f: f._cache_size() for f in (enc._rgbe_encode, enc._logluv32_encode)}
+    for scale in (1.0, 7.5):
+        x = (rng.random((5, 7, 3)) * scale).astype(np.float32)
+        np.testing.assert_array_equal(np.asarray(rgbe_encode(x)), rgbe_from_float(x))
+        l32e(jnp.asarray(x))
+    for f, n in before.items():
+        assert f._cache_size() <= n + 1
