@@ -90,10 +90,13 @@ def _fusion(images, wc, ws, we, sigma, *, levels):
     W = W + 1e-12
     W = W / jnp.sum(W, axis=0, keepdims=True)
     chans = jnp.moveaxis(images, -1, 1)  # (N, C, H, W)
-    gi, gw = [chans], [W]
+    # one Gaussian pyramid of the images and their weights together (the weights ride as an
+    # extra channel): half the pyramid kernels to compile, the same values
+    g = [jnp.concatenate([chans, W[:, None]], axis=1)]
     for _ in range(levels):
-        gi.append(pyramid_down(gi[-1]))
-        gw.append(pyramid_down(gw[-1]))
+        g.append(pyramid_down(g[-1]))
+    gi = [x[:, :C] for x in g]
+    gw = [x[:, C] for x in g]
     res = []
     for lvl in range(levels + 1):
         band = gi[lvl]
