@@ -322,14 +322,20 @@ def fit_photon_transfer(
             "frames_or_pairs: fewer than 3 populated level bins in some channel "
             f"(bins used per channel: {np.asarray(nb).tolist()}); give more pixels or levels"
         )
-    scale = jnp.maximum(chi2, 1.0)
     model = NoiseModel(
         jnp.maximum(g, 0.0),
         jnp.maximum(r, 0.0),
         black_level=None if white is None else black,
         white_level=white,
     )
-    info = {
+    return model, _fit_info(g, r, cov, chi2, mu, s2, bdof, nb)
+
+
+def _fit_info(g, r, cov, chi2, mu, s2, bdof, nb):
+    """The ``info`` dict of a binned line fit (:func:`_binned_fit`'s outputs): standard errors
+    from the covariance, scaled by ``sqrt(chi2_reduced)`` when that exceeds 1."""
+    scale = jnp.maximum(chi2, 1.0)
+    return {
         "gain_se": jnp.sqrt(cov[:, 0, 0] * scale),
         "read_variance_se": jnp.sqrt(cov[:, 1, 1] * scale),
         "gain_raw": g,
@@ -341,7 +347,6 @@ def fit_photon_transfer(
         "bin_variance": s2,
         "bin_dof": bdof,
     }
-    return model, info
 
 
 @functools.partial(jax.jit, static_argnames=("n_bins", "min_count"))
@@ -469,24 +474,13 @@ def fit_noise_from_bracket(
             f"(bins used per channel: {np.asarray(nb).tolist()}); the bracket has too few "
             "unsaturated pixels in adjacent frames"
         )
-    scale = jnp.maximum(chi2, 1.0)
-    gain_se = jnp.sqrt(cov[:, 0, 0] * scale)
-    read_se = jnp.sqrt(cov[:, 1, 1] * scale)
+    info = _fit_info(g, r, cov, chi2, mu, s2, bdof, nb)
+    gain_se, read_se = info["gain_se"], info["read_variance_se"]
     span = w - b
     g_pos = jnp.maximum(g, jnp.finfo(g.dtype).tiny)
     r_pos = jnp.maximum(r, jnp.finfo(r.dtype).tiny)
     model = NoiseModel(jnp.maximum(g, 0.0), jnp.maximum(r, 0.0), black_level=b, white_level=w)
-    info = {
-        "gain_se": gain_se,
-        "read_variance_se": read_se,
-        "gain_raw": g,
-        "read_variance_raw": r,
-        "cov": cov,
-        "chi2_reduced": chi2,
-        "n_bins_used": nb,
-        "bin_mean": mu,
-        "bin_variance": s2,
-        "bin_dof": bdof,
+    info |= {
         "gain_e_per_dn": 1.0 / (g_pos * span),
         "gain_e_per_dn_se": gain_se / (g_pos * g_pos * span),
         "read_noise_dn": jnp.sqrt(r_pos) * span,

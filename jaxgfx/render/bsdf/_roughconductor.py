@@ -18,7 +18,11 @@ from jaxgfx.render.bsdf._base import (
     to_rgb,
 )
 from jaxgfx.render.bsdf._conductor import check_fresnel, fresnel_factor, resolve_fresnel
-from jaxgfx.render.bsdf.microfacet import MicrofacetDistribution, reflection_pdf
+from jaxgfx.render.bsdf.microfacet import (
+    DISTRIBUTION_ALIASES,
+    MicrofacetDistribution,
+    reflection_pdf,
+)
 from jaxgfx.render.geometry.frame import reflect
 
 __all__ = ["RoughConductor"]
@@ -47,11 +51,7 @@ class RoughConductor(BSDF):
     k: jnp.ndarray | None
     fresnel: str = eqx.field(static=True, default="none")
 
-    PARAMETER_ALIASES: ClassVar[dict[str, tuple[str, ...]]] = {
-        "alpha": ("distribution.alpha_u", "distribution.alpha_v"),
-        "alpha_u": ("distribution.alpha_u",),
-        "alpha_v": ("distribution.alpha_v",),
-    }
+    PARAMETER_ALIASES: ClassVar[dict[str, tuple[str, ...]]] = DISTRIBUTION_ALIASES
 
     def __init__(
         self,

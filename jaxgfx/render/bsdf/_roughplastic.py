@@ -21,7 +21,11 @@ from jaxgfx.render.bsdf._base import (
     to_rgb,
 )
 from jaxgfx.render.bsdf.fresnel import fresnel_dielectric, fresnel_diffuse_reflectance
-from jaxgfx.render.bsdf.microfacet import MicrofacetDistribution, reflection_pdf
+from jaxgfx.render.bsdf.microfacet import (
+    DISTRIBUTION_ALIASES,
+    MicrofacetDistribution,
+    reflection_pdf,
+)
 from jaxgfx.render.geometry.frame import reflect
 from jaxgfx.render.warp import square_to_cosine_hemisphere
 
@@ -56,11 +60,7 @@ class RoughPlastic(BSDF):
     eta: jnp.ndarray
     nonlinear: bool = eqx.field(static=True, default=False)
 
-    PARAMETER_ALIASES: ClassVar[dict[str, tuple[str, ...]]] = {
-        "alpha": ("distribution.alpha_u", "distribution.alpha_v"),
-        "alpha_u": ("distribution.alpha_u",),
-        "alpha_v": ("distribution.alpha_v",),
-    }
+    PARAMETER_ALIASES: ClassVar[dict[str, tuple[str, ...]]] = DISTRIBUTION_ALIASES
 
     def __init__(
         self,

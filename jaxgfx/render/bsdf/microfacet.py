@@ -30,6 +30,14 @@ _INV_SQRT_PI = 1.0 / math.sqrt(math.pi)
 ALPHA_MIN = 1e-4  # smallest roughness used (Mitsuba 3 clamps alpha the same way)
 
 
+# parameter names of a BSDF that holds a ``distribution`` field (rough conductor, rough plastic)
+DISTRIBUTION_ALIASES: dict[str, tuple[str, ...]] = {
+    "alpha": ("distribution.alpha_u", "distribution.alpha_v"),
+    "alpha_u": ("distribution.alpha_u",),
+    "alpha_v": ("distribution.alpha_v",),
+}
+
+
 class MicrofacetDistribution(eqx.Module):
     """Microfacet normal distribution ``D``, Smith masking ``G1``/``G``, and a sampler.
 
