@@ -9,6 +9,7 @@ noise-optimal weight (Granados et al. 2010) needs a noise model and the response
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from .._checks import check_choice
@@ -22,6 +23,7 @@ __all__ = [
 ]
 
 
+@jax.jit
 def weight_hat(z):
     """Debevec & Malik (1997) hat: ``w(z) = 2 min(z, 1 - z)`` on normalised levels.
 
@@ -37,6 +39,7 @@ def weight_hat(z):
 _G_END = float(jnp.exp(-4.0))
 
 
+@jax.jit
 def weight_gaussian(z):
     """Robertson, Borman & Stevenson (2003) Gaussian-like weight, shifted to vanish at the ends.
 
@@ -48,6 +51,7 @@ def weight_gaussian(z):
     return (jnp.exp(-16.0 * (z - 0.5) ** 2) - _G_END) / (1.0 - _G_END)
 
 
+@jax.jit
 def weight_linear(z, *, knee: float = 0.9):
     """Signal-proportional weight ``w(z) = z / knee`` up to ``knee``, then a ramp to 0 at 1.
 
