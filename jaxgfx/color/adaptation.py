@@ -18,7 +18,7 @@ import numpy as np
 
 from .._checks import check_choice
 from ._common import as_colour, cast_const, matvec3
-from .spaces import _RGB_TO_XYZ, _XYZ_TO_RGB, RGB_SPACES, WHITEPOINTS, _xy_to_xyz, whitepoint_xyz
+from .spaces import _RGB_TO_XYZ, _XYZ_TO_RGB, RGB_SPACES, whitepoint_xyz
 
 __all__ = [
     "CAT_MATRICES",
@@ -47,11 +47,6 @@ CAT_MATRICES: dict[str, np.ndarray] = {
 _CAT_INV = {k: np.linalg.inv(m) for k, m in CAT_MATRICES.items()}
 
 
-def _white_xyz(name):
-    """Float64 NumPy XYZ (Y = 1) of a named white point (what :func:`whitepoint_xyz` casts)."""
-    return _xy_to_xyz(np.asarray(WHITEPOINTS[name]), np)
-
-
 def _cat_matrix(src_xyz, dst_xyz, method, like):
     A = cast_const(CAT_MATRICES[method], like)
     Ainv = cast_const(_CAT_INV[method], like)
@@ -74,8 +69,8 @@ def _rgb_to_rgb(rgb, *, src, dst, adaptation):
     M = cast_const(_RGB_TO_XYZ[src], rgb)
     ws, wd = RGB_SPACES[src].white, RGB_SPACES[dst].white
     if adaptation is not None and ws != wd:
-        src_w = cast_const(_white_xyz(ws), rgb)
-        dst_w = cast_const(_white_xyz(wd), rgb)
+        src_w = whitepoint_xyz(ws, like=rgb)
+        dst_w = whitepoint_xyz(wd, like=rgb)
         M = _cat_matrix(src_w, dst_w, adaptation, rgb) @ M
     M = cast_const(_XYZ_TO_RGB[dst], rgb) @ M
     return matvec3(M, rgb)

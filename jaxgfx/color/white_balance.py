@@ -324,11 +324,17 @@ def white_balance_von_kries_matrix(
       method: cone matrix, see :data:`jaxgfx.color.adaptation.CAT_MATRICES`.
       space: RGB space of the image (:data:`jaxgfx.color.spaces.RGB_SPACES`).
     """
+    src, dst = _von_kries_whites(src_white_rgb, dst_white_rgb, method, space)
+    return _von_kries_matrix(src, dst, method=method, space=space)
+
+
+def _von_kries_whites(src_white_rgb, dst_white_rgb, method, space):
+    """Check the von Kries options; the source and target whites as arrays (target or None)."""
     check_choice(method, "method", CAT_MATRICES)
     check_choice(space, "space", RGB_SPACES)
     src = as_colour(src_white_rgb, "src_white_rgb")
     dst = None if dst_white_rgb is None else as_colour(dst_white_rgb, "dst_white_rgb")
-    return _von_kries_matrix(src, dst, method=method, space=space)
+    return src, dst
 
 
 @functools.partial(jax.jit, static_argnames=("method", "space"))
@@ -361,10 +367,7 @@ def white_balance_von_kries(
     :func:`white_balance_von_kries_matrix`.
     """
     image = check_image(image, channels=3, min_ndim=3)
-    check_choice(method, "method", CAT_MATRICES)
-    check_choice(space, "space", RGB_SPACES)
-    src = as_colour(src_white_rgb, "src_white_rgb")
-    dst = None if dst_white_rgb is None else as_colour(dst_white_rgb, "dst_white_rgb")
+    src, dst = _von_kries_whites(src_white_rgb, dst_white_rgb, method, space)
     return _von_kries(image, src, dst, method=method, space=space)
 
 

@@ -20,7 +20,7 @@ from jaxgfx._math import safe_atan2, safe_div, safe_sqrt
 
 from ._padding import check_padding, pad_bhw, to_bhw
 from .convolve import _conv1d
-from .filters import _static_radius, gaussian_kernel1d
+from .filters import _as_dtype, _static_radius, gaussian_kernel1d
 
 __all__ = [
     "EDGE_OPERATORS",
@@ -49,17 +49,20 @@ def _smoothed_diff_bhw(y, smooth, padding):
     return gx, gy
 
 
-@functools.partial(jax.jit, static_argnames=("smooth", "padding"))
-def _smoothed_diff_core(x, *, smooth, padding):
+def _smoothed_diff_xy(x, smooth, padding):
+    """``(gx, gy)`` of a checked image in its own layout (traceable, no checks)."""
     y, undo = to_bhw(x)
     gx, gy = _smoothed_diff_bhw(y, smooth, padding)
     return undo(gx), undo(gy)
 
 
+_smoothed_diff_core = jax.jit(_smoothed_diff_xy, static_argnames=("smooth", "padding"))
+
+
 def _smoothed_diff(image, smooth, padding):
     x = check_image(image)
     check_padding(padding)
-    return _smoothed_diff_core(x, smooth=smooth, padding=padding)
+    return _smoothed_diff_core(x, smooth, padding)
 
 
 def sobel(image, *, padding: str = "reflect"):
@@ -123,9 +126,7 @@ def _gradients(x, operator, padding):
         g1, g2 = _roberts_bhw(x, padding)
         return 0.5 * (g1 - g2), 0.5 * (g1 + g2)
     smooth = (1.0, 2.0, 1.0) if operator == "sobel" else (1.0, 1.0, 1.0)
-    y, undo = to_bhw(x)
-    gx, gy = _smoothed_diff_bhw(y, smooth, padding)
-    return undo(gx), undo(gy)
+    return _smoothed_diff_xy(x, smooth, padding)
 
 
 _gradients_core = jax.jit(_gradients, static_argnames=("operator", "padding"))
@@ -321,18 +322,13 @@ def canny(
     r = _static_radius(sigma, truncate, radius)
     return _canny_core(
         x,
-        _as(sigma, x),
-        _as(low, x),
-        _as(high, x),
+        _as_dtype(sigma, x),
+        _as_dtype(low, x),
+        _as_dtype(high, x),
         radius=r,
         use_quantiles=bool(use_quantiles),
         padding=padding,
     )
-
-
-def _as(v, x):
-    """A continuous parameter as an array of the image's dtype (a traced core argument)."""
-    return jnp.asarray(v, x.dtype)
 
 
 @functools.partial(jax.jit, static_argnames=("radius", "use_quantiles", "padding"))
@@ -395,10 +391,10 @@ def soft_canny(
     r = _static_radius(sigma, truncate, radius)
     return _soft_canny_core(
         x,
-        _as(sigma, x),
-        _as(low, x),
-        _as(high, x),
-        _as(temperature, x),
+        _as_dtype(sigma, x),
+        _as_dtype(low, x),
+        _as_dtype(high, x),
+        _as_dtype(temperature, x),
         radius=r,
         iterations=iterations,
         padding=padding,

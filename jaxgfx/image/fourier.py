@@ -121,11 +121,16 @@ def _crop(y, shape, padding):
     return jax.lax.slice_in_dim(y, 0, w, axis=y.ndim + ax)
 
 
-def _padded_grid(x, padding):
-    """``frequency_grid`` (rfft2 half-plane) of the padded image, in the image's dtype."""
+def _padded_shape(x, padding):
+    """``(h, w)`` of the image as filtered: doubled by every padding but ``"wrap"``."""
     ay, ax = _spatial_axes(x)
     scale = 1 if padding == "wrap" else 2
-    return frequency_grid((x.shape[ay] * scale, x.shape[ax] * scale), dtype=x.dtype)
+    return (x.shape[ay] * scale, x.shape[ax] * scale)
+
+
+def _padded_grid(x, padding):
+    """``frequency_grid`` (rfft2 half-plane) of the padded image, in the image's dtype."""
+    return frequency_grid(_padded_shape(x, padding), dtype=x.dtype)
 
 
 @functools.partial(jax.jit, static_argnums=(1, 2))
@@ -189,13 +194,11 @@ def fft_filter(image, transfer, *, padding="wrap"):
         fy, fx = _padded_grid(x, padding)
         return _filter_rfft(x, jnp.asarray(transfer(fy, fx)).astype(x.dtype), padding)
     tf = jnp.asarray(transfer)
-    ay, ax = _spatial_axes(x)
-    scale = 1 if padding == "wrap" else 2
-    want = (x.shape[ay] * scale, x.shape[ax] * scale)
+    want = _padded_shape(x, padding)
     if tf.shape != want:
         raise ValueError(
             f"transfer: expected a callable or an array of shape {want} (the "
-            f"{'padded ' if scale == 2 else ''}fft2 grid), got shape {tf.shape}"
+            f"{'' if padding == 'wrap' else 'padded '}fft2 grid), got shape {tf.shape}"
         )
     return _filter_array(x, tf, padding)
 
