@@ -288,11 +288,11 @@ def main(argv=None) -> int:
             import jax
 
             from jaxgfx.config import load_config
-            from jaxgfx.pipelines.fit import FitConfig, _build_scene, prepare_fit
+            from jaxgfx.pipelines.fit import FitConfig, build_scene, prepare_fit
             from jaxgfx.render import render
 
             prep = prepare_fit(load_config(FitConfig, cfg), base_dir=ROOT)
-            s = _build_scene(prep.scene, list(prep.truth), prep.truth)
+            s = build_scene(prep.scene, list(prep.truth), prep.truth)
             ours = np.asarray(render(s, jax.random.key(7), spp=256, integrator="direct"))
             res["target_relative_rmse_jaxgfx_vs_mitsuba"] = float(
                 np.sqrt(np.mean((ours - tgt) ** 2)) / np.sqrt(np.mean(tgt**2))

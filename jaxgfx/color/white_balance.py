@@ -35,7 +35,7 @@ from .._checks import check_choice, check_image, check_positive
 from .._math import safe_div
 from ._common import as_colour, cast_const, matvec3
 from .adaptation import _CAT_INV, CAT_MATRICES
-from .spaces import _RGB_TO_XYZ, _XYZ_TO_RGB, RGB_SPACES
+from .spaces import _RGB_TO_XYZ, _XYZ_TO_RGB, LUMINANCE_WEIGHTS, RGB_SPACES
 
 __all__ = [
     "apply_white_balance",
@@ -241,7 +241,8 @@ def _brightest_pixel(image, saturation, *, q):
 @functools.partial(jax.jit, static_argnames=("q",))
 def _brightest_pixel_gains(image, saturation, *, q):
     w = _valid_mask(image, saturation)
-    lum = (image[..., 0] * 0.2126 + image[..., 1] * 0.7152 + image[..., 2] * 0.0722)[..., None]
+    wr, wg, wb = LUMINANCE_WEIGHTS["rec709"]
+    lum = (image[..., 0] * wr + image[..., 1] * wg + image[..., 2] * wb)[..., None]
     thr, n = _masked_quantile(lum, w, q)  # (..., 1)
     sel = w * (lum >= thr[..., None, None, :]).astype(image.dtype)
     cnt = jnp.sum(sel, axis=(-3, -2))

@@ -3,9 +3,13 @@
 See ``docs/hdr.md``.
 """
 
+from ._curves import ANALYTIC_RESPONSES as ANALYTIC_RESPONSES
 from ._metrics import radiance_error as radiance_error
 from ._metrics import response_curve_error as response_curve_error
+from ._model import RESPONSE_KINDS as RESPONSE_KINDS
 from ._model import CameraResponse as CameraResponse
+from .camera import CAMERA_BITS as CAMERA_BITS
+from .camera import Camera as Camera
 from .merge import merge_radiance as merge_radiance
 from .response import MIN_USABLE_PIXELS as MIN_USABLE_PIXELS
 from .response import RESPONSE_METHODS as RESPONSE_METHODS
@@ -13,7 +17,6 @@ from .response import check_response_options as check_response_options
 from .response import recover_response as recover_response
 from .synthetic import SYNTHETIC_RESPONSES as SYNTHETIC_RESPONSES
 from .synthetic import BracketedStack as BracketedStack
-from .synthetic import NoiseParams as NoiseParams
 from .synthetic import jpeg_roundtrip as jpeg_roundtrip
 from .synthetic import make_bracketed_stack as make_bracketed_stack
 from .synthetic import make_jpeg_stack as make_jpeg_stack
@@ -26,11 +29,14 @@ from .weighting import weight_linear as weight_linear
 
 __all__ = [
     "CameraResponse",
+    "RESPONSE_KINDS",
+    "ANALYTIC_RESPONSES",
     "RESPONSE_METHODS",
     "WEIGHTINGS",
     "SYNTHETIC_RESPONSES",
     "BracketedStack",
-    "NoiseParams",
+    "Camera",
+    "CAMERA_BITS",
     "recover_response",
     "check_response_options",
     "MIN_USABLE_PIXELS",

@@ -11,7 +11,13 @@ import jax.numpy as jnp
 
 from .._math import safe_pow, safe_sqrt
 
-__all__ = ["base_to_linear", "base_from_linear", "interp_channels", "ANALYTIC_KINDS"]
+__all__ = [
+    "base_to_linear",
+    "base_from_linear",
+    "interp_channels",
+    "ANALYTIC_KINDS",
+    "ANALYTIC_RESPONSES",
+]
 
 _TINY = 1e-30
 
@@ -127,7 +133,12 @@ def _camera_offset_inv(z):
     return _camera_inv_b(z, _CAM_B)
 
 
+def _identity(v):
+    return v
+
+
 ANALYTIC_KINDS = {
+    "linear": (_identity, _identity),
     "srgb": (_srgb_inv, _srgb_fwd),
     "camera": (_camera_inv, _camera_fwd),
     "camera-offset": (_camera_offset_inv, _camera_offset_fwd),
@@ -135,6 +146,11 @@ ANALYTIC_KINDS = {
     "filmic": (_filmic_inv, _filmic_fwd),
     "log": (_log_inv, _log_fwd),
 }
+
+
+ANALYTIC_RESPONSES = tuple(ANALYTIC_KINDS)
+"""Names of the fixed analytic response curves (the one list: :class:`CameraResponse`
+kinds, synthetic ground truths and the fit's camera models are built from it)."""
 
 
 def base_to_linear(kind, params, z):

@@ -22,9 +22,11 @@ from jaxtyping import Array
 from .._checks import check_choice
 from ._curves import ANALYTIC_KINDS, base_from_linear, base_to_linear
 
-__all__ = ["CameraResponse", "resolve_anchor"]
+__all__ = ["CameraResponse", "resolve_anchor", "RESPONSE_KINDS"]
 
-_KINDS = ("table", "gamma", "polynomial", *ANALYTIC_KINDS)
+RESPONSE_KINDS = ("table", "gamma", "polynomial", *ANALYTIC_KINDS)
+"""Curve families of :class:`CameraResponse` (fitted tables, power laws, polynomials and the
+analytic curves of :data:`jaxgfx.hdr.ANALYTIC_RESPONSES`)."""
 
 
 def resolve_anchor(anchor) -> float:
@@ -69,8 +71,8 @@ class CameraResponse(eqx.Module):
     diagnostics: dict = eqx.field(default_factory=dict)
 
     def __check_init__(self):
-        if self.kind not in _KINDS:
-            raise ValueError(f"kind: expected one of {_KINDS}, got {self.kind!r}")
+        if self.kind not in RESPONSE_KINDS:
+            raise ValueError(f"kind: expected one of {RESPONSE_KINDS}, got {self.kind!r}")
 
     # -- constructors -----------------------------------------------------------------------
     @classmethod

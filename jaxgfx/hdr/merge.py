@@ -64,7 +64,7 @@ def merge_radiance(
       (gain · x̂ + read_variance + (dx̂/dz)² Δ²/12)`` with ``x̂ = x / x(z=1)`` the exposure
       in units of the clipping level, ``Δ = 1 / code_max`` the quantisation step; levels 0
       and the maximum are excluded. ``noise`` must have ``.gain`` and ``.read_variance``
-      (per channel, e.g. :class:`NoiseParams`).
+      (per channel, e.g. :class:`NoiseModel`).
 
     ``domain="linear"`` averages ``E_j`` (default); ``"log"`` averages ``ln E_j``
     (Debevec & Malik's eq. 6). Pixels with zero total weight (clipped or black in every

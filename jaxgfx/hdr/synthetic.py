@@ -16,27 +16,22 @@ import jax.numpy as jnp
 from .._checks import check_choice, check_nonnegative, check_positive
 from ._curves import ANALYTIC_KINDS
 from ._model import CameraResponse
+from .camera import Camera
+from .noise import NoiseModel
 
 __all__ = [
     "synthetic_radiance",
     "synthetic_response",
     "make_bracketed_stack",
     "BracketedStack",
-    "NoiseParams",
     "SYNTHETIC_RESPONSES",
     "jpeg_roundtrip",
     "make_jpeg_stack",
 ]
 
-SYNTHETIC_RESPONSES = ("gamma2.2", "srgb", "s-curve", "filmic", "log", "camera", "camera-offset")
-
-
-class NoiseParams(NamedTuple):
-    """Poisson–Gaussian sensor noise in normalised linear units (1 = clipping level):
-    ``Var(x) = gain · x + read_variance``, per channel ``(C,)``."""
-
-    gain: jax.Array
-    read_variance: jax.Array
+SYNTHETIC_RESPONSES = ("gamma2.2", *(k for k in ANALYTIC_KINDS if k != "linear"))
+"""Ground-truth responses by name: a gamma-2.2 power law and the analytic curves of
+:meth:`CameraResponse.analytic` (the identity ``"linear"`` aside)."""
 
 
 class BracketedStack(NamedTuple):
@@ -44,7 +39,8 @@ class BracketedStack(NamedTuple):
 
     ``images`` ``(N, H, W, C)`` (uint8 / uint16 / float), ``exposure_times`` ``(N,)``,
     ``radiance`` ``(H, W, C)`` ground truth, ``response`` the true :class:`CameraResponse`,
-    ``noise`` the :class:`NoiseParams` used, ``linear`` ``(N, H, W, C)`` clean exposures
+    ``noise`` the :class:`NoiseModel` used (normalised units), ``linear`` ``(N, H, W, C)``
+    clean exposures
     ``radiance · t`` before noise and clipping.
     """
 
@@ -52,7 +48,7 @@ class BracketedStack(NamedTuple):
     exposure_times: jax.Array
     radiance: jax.Array
     response: CameraResponse
-    noise: NoiseParams
+    noise: NoiseModel
     linear: jax.Array
 
 
@@ -187,24 +183,11 @@ def make_bracketed_stack(
 def _stack_jit(key, radiance, t, response, gain, read_sigma, *, bits, clip):
     c = radiance.shape[-1]
     lin = radiance[None] * t[:, None, None, None]
-    k1, k2 = jax.random.split(key)
-    n1 = jax.random.normal(k1, lin.shape, lin.dtype)
-    n2 = jax.random.normal(k2, lin.shape, lin.dtype)
-    x = lin + jnp.sqrt(gain * jnp.maximum(lin, 0.0)) * n1 + read_sigma * n2
-    x = jnp.clip(x, 0.0, 1.0) if clip else jnp.maximum(x, 0.0)
-    # response anchored so that x = 1 maps to level 1
-    x1 = response.to_linear_normalized(jnp.ones((c,), x.dtype))
-    zn = response.from_linear_normalized(x * x1)
-    zn = jnp.clip(zn, 0.0, 1.0)
-    if bits is None:
-        img = zn
-    else:
-        qmax = 2.0**bits - 1.0
-        dtype = jnp.uint8 if bits == 8 else jnp.uint16
-        img = jnp.round(zn * qmax).astype(dtype)
-    noise = NoiseParams(
-        jnp.full((c,), gain, radiance.dtype), jnp.full((c,), read_sigma**2, radiance.dtype)
-    )
+    dt = radiance.dtype
+    noise = NoiseModel(jnp.full((c,), gain, dt), jnp.full((c,), read_sigma**2, dt))
+    # the exposure times are applied above (lin is what the sensor sees): exposure 1 here
+    camera = Camera(response, jnp.ones((), radiance.dtype), noise=noise, bits=bits, clip=clip)
+    img = camera.capture(lin, key)
     return BracketedStack(img, t, radiance, response, noise, lin)
 
 

@@ -9,6 +9,8 @@ noise-optimal weight (Granados et al. 2010) needs a noise model and the response
 
 from __future__ import annotations
 
+import math
+
 import jax
 import jax.numpy as jnp
 
@@ -36,7 +38,7 @@ def weight_hat(z):
     return 2.0 * jnp.minimum(z, 1.0 - z)
 
 
-_G_END = float(jnp.exp(-4.0))
+_G_END = math.exp(-4.0)  # a Python float: no array op at import time
 
 
 @jax.jit

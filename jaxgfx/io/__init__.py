@@ -5,6 +5,11 @@ arrays. Missing files raise ``FileNotFoundError``; corrupt, truncated or unsuppo
 ``ValueError`` naming the file.
 """
 
+from ._dispatch import FILE_KINDS as FILE_KINDS
+from ._dispatch import HDR_EXTENSIONS as HDR_EXTENSIONS
+from ._dispatch import LDR_EXTENSIONS as LDR_EXTENSIONS
+from ._dispatch import RAW_EXTENSIONS as RAW_EXTENSIONS
+from ._dispatch import kind_of as kind_of
 from ._dispatch import read_any as read_any
 from ._dispatch import write_any as write_any
 from .dng import write_dng as write_dng
@@ -27,6 +32,11 @@ from .raw import read_raw_linear_rgb as read_raw_linear_rgb
 from .raw import read_raw_stack as read_raw_stack
 
 __all__ = [
+    "FILE_KINDS",
+    "HDR_EXTENSIONS",
+    "LDR_EXTENSIONS",
+    "RAW_EXTENSIONS",
+    "kind_of",
     "read_exr",
     "read_exr_header",
     "write_exr",

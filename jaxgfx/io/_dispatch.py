@@ -15,7 +15,16 @@ from .hdr_rgbe import read_hdr, write_hdr
 from .ldr import read_image, write_png
 from .raw import read_raw_linear_rgb
 
-__all__ = ["read_any", "write_any", "RAW_EXTENSIONS", "LDR_EXTENSIONS"]
+__all__ = [
+    "read_any",
+    "write_any",
+    "kind_of",
+    "FILE_KINDS",
+    "RAW_EXTENSIONS",
+    "LDR_EXTENSIONS",
+    "HDR_EXTENSIONS",
+    "WRITE_EXTENSIONS",
+]
 
 RAW_EXTENSIONS = frozenset(
     {
@@ -45,8 +54,32 @@ RAW_EXTENSIONS = frozenset(
 )
 LDR_EXTENSIONS = frozenset({".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"})
 _HDR_EXTENSIONS = frozenset({".hdr", ".pic", ".rgbe"})
+HDR_EXTENSIONS = frozenset({".exr"}) | _HDR_EXTENSIONS
+"""Radiance files: OpenEXR and Radiance RGBE."""
 WRITE_EXTENSIONS = (".exr", ".hdr", ".pic", ".rgbe", ".png", ".jpg", ".jpeg", ".tif", ".tiff")
 """What :func:`write_any` can write (``.bmp`` and camera raws are read-only here)."""
+
+FILE_KINDS = {
+    "raw": RAW_EXTENSIONS,
+    "ldr": LDR_EXTENSIONS,
+    "hdr": HDR_EXTENSIONS,
+    "npy": frozenset({".npy"}),
+}
+"""File kinds by extension (lower case, with the dot): camera raws, display-referred images
+(8/16-bit), radiance files and NumPy arrays. The one table every command reads."""
+
+
+def kind_of(path) -> str | None:
+    """The kind of file ``path`` names by its extension (case-insensitive): ``"raw"``,
+    ``"ldr"``, ``"hdr"``, ``"npy"``, or ``None`` for an unknown extension.
+
+    Example: ``kind_of("IMG_0001.NRW")`` → ``"raw"``; ``kind_of("a.exr")`` → ``"hdr"``.
+    """
+    ext = os.path.splitext(os.fspath(path))[1].lower()
+    for kind, exts in FILE_KINDS.items():
+        if ext in exts:
+            return kind
+    return None
 
 
 def read_any(path) -> np.ndarray:

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from jaxgfx.config import config_to_dict
+from jaxgfx.io import kind_of
 from jaxgfx.pipelines._output import StagedDir
 
 __all__ = [
@@ -47,11 +48,7 @@ __all__ = [
     "OUTPUT_NAMES",
     "build_report",
     "run_calibrate",
-    "RAW_EXTENSIONS",
 ]
-
-RAW_EXTENSIONS = (".dng", ".nef", ".cr2", ".cr3", ".arw", ".raf", ".orf", ".rw2", ".pef", ".srw")
-LDR_EXTENSIONS = (".jpg", ".jpeg", ".png", ".tif", ".tiff")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -227,7 +224,7 @@ def _collect_inputs(inputs) -> list[str]:
         item = os.fspath(item)
         if os.path.isdir(item):
             for name in sorted(os.listdir(item)):
-                if name.lower().endswith(RAW_EXTENSIONS + LDR_EXTENSIONS):
+                if kind_of(name) in ("raw", "ldr"):
                     files.append(os.path.join(item, name))
         elif os.path.exists(item):
             files.append(item)
@@ -584,7 +581,7 @@ def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
     weighting = "noise" if cal.noise is not None else "hat"
     noise = None  # the mosaic is merged as one channel: the CFA channels' model, pooled
     if cal.noise is not None:
-        noise = hdr.NoiseParams(
+        noise = hdr.NoiseModel(
             np.mean(np.asarray(cal.noise.gain), keepdims=True),
             np.mean(np.asarray(cal.noise.read_variance), keepdims=True),
         )
@@ -649,8 +646,8 @@ def run_calibrate(
     job = _as_job(job, inputs, out_dir, progress, overwrite)
     cfg = job.config
     files = _collect_inputs(job.inputs)
-    is_raw = bool(files) and all(f.lower().endswith(RAW_EXTENSIONS) for f in files)
-    if files and not is_raw and any(f.lower().endswith(RAW_EXTENSIONS) for f in files):
+    is_raw = bool(files) and all(kind_of(f) == "raw" for f in files)
+    if files and not is_raw and any(kind_of(f) == "raw" for f in files):
         raise ValueError("inputs: mix of RAW and LDR files; calibrate one kind at a time")
     if files and len(files) < 2:
         raise ValueError(f"inputs: a bracket needs at least 2 images, got {files}")

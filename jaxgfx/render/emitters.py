@@ -23,6 +23,7 @@ import jax.numpy as jnp
 
 from jaxgfx._checks import as_float_array, check_finite, check_nonnegative
 from jaxgfx._math import safe_arccos, safe_atan2, safe_div, safe_sqrt, sincos, sum_last, take_rows
+from jaxgfx.color import LUMINANCE_WEIGHTS
 from jaxgfx.render.bsdf import rgb_param
 from jaxgfx.render.warp import Distribution2D
 
@@ -142,7 +143,7 @@ class EnvironmentMap(eqx.Module):
         img = jnp.maximum(img[..., :3], 0.0)
         h = img.shape[0]
         theta = (jnp.arange(h) + 0.5) / h * math.pi
-        lum = img @ jnp.asarray([0.2126, 0.7152, 0.0722], img.dtype)
+        lum = img @ jnp.asarray(LUMINANCE_WEIGHTS["rec709"], img.dtype)
         # The radiance is looked up bilinearly, so a texel's area also sees its neighbours.
         # Sample proportionally to the bilinear radiance averaged over each texel: separable
         # weights (1/8, 3/4, 1/8), wrapping in u, clamped in v (pbrt-v4 likewise builds its

@@ -130,7 +130,7 @@ def test_merge_gradients(x64):
         return hdr.merge_radiance(z, tt, r, weighting="gaussian")
 
     check_grads(f, (jnp.asarray([2.2, 2.0, 1.9]), t), order=1, modes=["rev"])
-    noise = hdr.NoiseParams(jnp.full((3,), 1e-4), jnp.full((3,), 1e-6))
+    noise = hdr.NoiseModel(jnp.full((3,), 1e-4), jnp.full((3,), 1e-6))
 
     def g(gam):
         r = hdr.CameraResponse(gam, "gamma", "g", 1.0, 0.5)

@@ -258,7 +258,7 @@ SMALL = "synthetic: {height: 16, width: 16}\nresponse: {method: debevec, compare
 def small_config(tmp_path, monkeypatch):
     """A config, and the job's computation replaced by a fixed result: D8/D9 test what
     ``run_calibrate`` does with its outputs (the science is tested in
-    tests/test_pipeline_calibrate.py); writing, the plot and the report stay real."""
+    tests/pipelines/test_calibrate.py); writing, the plot and the report stay real."""
     p = tmp_path / "small.yaml"
     p.write_text(SMALL)
     rad = np.linspace(0.01, 2.0, 16 * 16 * 3, dtype=np.float32).reshape(16, 16, 3)

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgfx._checks import as_float_array, check_finite
+from jaxgfx.color import LUMINANCE_WEIGHTS
 from jaxgfx.render.bsdf.texture import TEXTURE_FILTERS, TEXTURE_WRAP_MODES, Texture, lookup
 from jaxgfx.render.parameters import get_path, parameter_paths
 
@@ -46,7 +47,7 @@ __all__ = [
 ]
 
 TEXTURE_TYPES = ("bitmap", "checkerboard")
-_LUMA = (0.2126, 0.7152, 0.0722)
+_LUMA = LUMINANCE_WEIGHTS["rec709"]
 _LDR = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
 

@@ -1,4 +1,4 @@
-"""The fit job (jaxgfx/pipelines/fit.py): clear errors before rendering; end-to-end (slow)."""
+"""The fit job (jaxgfx/pipelines/fit/): clear errors before rendering; end-to-end (slow)."""
 
 import json
 import os
@@ -9,7 +9,7 @@ import pytest
 from jaxgfx.config import load_config
 from jaxgfx.pipelines.fit import FitConfig, apply_camera, prepare_fit, run_fit
 
-SCENE = os.path.join(os.path.dirname(__file__), "..", "configs", "scenes", "inverse.yaml")
+SCENE = os.path.join(os.path.dirname(__file__), "..", "..", "configs", "scenes", "inverse.yaml")
 
 
 def _cfg(**over):

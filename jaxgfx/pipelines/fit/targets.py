@@ -1,0 +1,301 @@
+"""Everything a fit checks before it renders: the scene file, each parameter path, init and
+bounds, and the target (a photo or radiance file, or a synthetic target rendered here).
+
+A target file is read once, here, and checked for what would otherwise fail after the compile
+or silently change the fit: its size against the camera's, its bit depth against
+``camera.bits``, non-finite radiance, a photo with no unclipped pixel. Grey targets (``(H, W)``
+files, 2-D arrays or one channel) are compared with the render's luminance; the alpha channel
+of an RGBA photo is a mask (pixels with alpha 0 do not count)."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from typing import Any
+
+import numpy as np
+
+from jaxgfx.config import load_config, read_yaml
+
+from .camera import RESPONSE_MODELS
+from .config import FitConfig, FitParam
+
+__all__ = ["Prepared", "Target", "prepare_fit", "resolve_path", "load_fit_scene", "build_scene"]
+
+TARGET_CAMERA_KEYS = ("response", "gamma", "exposure", "bits")
+SYNTHETIC_TARGET_KEYS = ("synthetic", "spp", "seed", "camera")
+
+
+@dataclasses.dataclass
+class Target:
+    """A target as the loss sees it: ``pixels`` ``(H, W, C)`` float32 (integer codes for
+    photos, radiance otherwise), ``grey`` (compare with the render's luminance), ``mask``
+    ``(H, W, 1)`` float32 weights or None, ``bits`` of a photo (None for radiance), and
+    ``path`` (None for a synthetic target)."""
+
+    pixels: np.ndarray
+    grey: bool = False
+    mask: np.ndarray | None = None
+    bits: int | None = None
+    path: str | None = None
+
+
+@dataclasses.dataclass
+class Prepared:
+    scene: Any
+    paths: list
+    init: dict
+    bounds: dict
+    truth: dict | None
+    target_spec: Any
+    ldr: bool
+    target: Target | None = None  # file targets, read and checked; synthetic ones are rendered
+
+
+def resolve_path(path: str, base: str | None, what: str) -> str:
+    """``path`` as given when absolute; a relative path is looked up in ``base`` (the config's
+    folder) first, then in the working directory. ``FileNotFoundError`` names ``what`` and
+    every place looked in."""
+    path = os.fspath(path)
+    if os.path.isabs(path) or base is None:
+        if not os.path.exists(path):
+            raise FileNotFoundError(f"{what}: file not found: {path}")
+        return path
+    candidates = [os.path.join(base, path), path]
+    for c in candidates:
+        if os.path.exists(c):
+            return c
+    raise FileNotFoundError(
+        f"{what}: file not found: {path} (looked in {os.path.abspath(base)} and "
+        f"{os.getcwd()})"
+    )
+
+
+def load_fit_scene(cfg: FitConfig, base: str | None):
+    """The scene of ``cfg`` (``render.width/height`` override the camera's resolution)."""
+    from jaxgfx.render import load_scene
+
+    spath = resolve_path(cfg.scene, base, "scene")
+    desc = read_yaml(spath)
+    if cfg.render.width is not None or cfg.render.height is not None:
+        cam = dict(desc.get("camera", {}))
+        if cfg.render.width is not None:
+            cam["width"] = cfg.render.width
+        if cfg.render.height is not None:
+            cam["height"] = cfg.render.height
+        desc["camera"] = cam
+    return load_scene(desc, base_dir=os.path.dirname(os.path.abspath(spath)))
+
+
+def build_scene(scene, paths, values):
+    """``scene`` with each parameter path in ``paths`` replaced by ``values[path]``."""
+    for path in paths:
+        scene = scene.replace(path, values[path])
+    return scene
+
+
+def _param_spec(path, raw) -> FitParam:
+    if isinstance(raw, FitParam):
+        return raw
+    if raw is None:
+        raw = {}
+    if not isinstance(raw, dict):
+        raise ValueError(f"params.{path}: expected a mapping with init/min/max, got {raw!r}")
+    try:
+        return load_config(FitParam, raw)
+    except ValueError as e:
+        raise ValueError(f"params.{path}.{e}") from None
+
+
+def _check_value(path, scene_value, value, what):
+    v = np.asarray(value, np.float64)
+    try:
+        np.broadcast_to(v, scene_value.shape)
+    except ValueError:
+        raise ValueError(
+            f"params.{path}.{what}: shape {v.shape} does not fit the parameter's shape "
+            f"{tuple(scene_value.shape)}"
+        ) from None
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"params.{path}.{what}: expected finite numbers, got {value!r}")
+    return v
+
+
+# ------------------------------------------------------------------------------ target files
+
+
+def _read_target_file(path: str) -> Target:
+    """Read and check a target file (module doc)."""
+    from jaxgfx import io
+
+    kind = io.kind_of(path)
+    if kind == "ldr":
+        codes = io.read_image(path)
+        if not np.issubdtype(codes.dtype, np.integer):
+            raise ValueError(
+                f"target: {path}: a float TIFF holds radiance or display values, not camera "
+                "codes; save the photo as 8/16-bit, or the radiance as .exr"
+            )
+        bits = 16 if codes.dtype == np.uint16 else 8
+        mask = None
+        if codes.ndim == 3 and codes.shape[-1] in (2, 4):  # grey + alpha, RGB + alpha
+            alpha = codes[..., -1:].astype(np.float32)
+            mask = (alpha > 0).astype(np.float32)
+            codes = codes[..., :-1]
+            if not mask.any():
+                raise ValueError(f"target: {path}: the alpha channel is 0 everywhere")
+        pixels = codes.astype(np.float32)
+        if pixels.ndim == 2:
+            pixels = pixels[..., None]
+        code_max = float(2**bits - 1)
+        w = np.ones(pixels.shape[:2] + (1,), np.float32) if mask is None else mask
+        informative = ((pixels > 0) & (pixels < code_max)) * w
+        if not informative.any():
+            level = "0 (black)" if pixels.max() <= 0 else f"clipped ({int(code_max)})"
+            raise ValueError(
+                f"target: {path}: every pixel is {level}; a fit needs pixels between black "
+                "and the clip level"
+            )
+        return Target(pixels, grey=pixels.shape[-1] == 1, mask=mask, bits=bits, path=path)
+    if kind in ("hdr", "npy"):
+        arr = np.load(path) if kind == "npy" else io.read_any(path)
+        arr = np.asarray(arr)
+        if not np.issubdtype(arr.dtype, np.number) or arr.ndim not in (2, 3):
+            raise ValueError(
+                f"target: {path}: expected an (H, W) or (H, W, C) array of numbers, got "
+                f"{arr.dtype} {arr.shape}"
+            )
+        arr = arr.astype(np.float32)
+        if arr.ndim == 2:
+            arr = arr[..., None]
+        if arr.shape[-1] not in (1, 3, 4):
+            raise ValueError(f"target: {path}: expected 1, 3 or 4 channels, got {arr.shape[-1]}")
+        mask = None
+        if arr.shape[-1] == 4:
+            mask = (arr[..., 3:] > 0).astype(np.float32)
+            arr = arr[..., :3]
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            n = int(bad.any(axis=-1).sum())
+            raise ValueError(f"target: {path}: {n} pixel(s) are NaN or infinite")
+        if (arr < 0).any():
+            n = int((arr < 0).any(axis=-1).sum())
+            raise ValueError(f"target: {path}: {n} pixel(s) have negative radiance")
+        return Target(arr, grey=arr.shape[-1] == 1, mask=mask, path=path)
+    raise ValueError(
+        f"target: {path}: unsupported file type {os.path.splitext(path)[1]!r}; expected a photo "
+        f"({', '.join(sorted(io.FILE_KINDS['ldr']))}) or radiance "
+        f"({', '.join(sorted(io.FILE_KINDS['hdr'] | io.FILE_KINDS['npy']))})"
+    )
+
+
+def _synthetic_spec(t: dict, scene):
+    unknown = set(t) - set(SYNTHETIC_TARGET_KEYS)
+    if unknown or "synthetic" not in t:
+        raise ValueError(
+            "target: expected a file path or {synthetic: {path: value}, spp, seed, camera}"
+            + (f"; unknown keys {sorted(unknown)}" if unknown else "")
+        )
+    for key in ("spp", "seed"):
+        if key in t:
+            v = t[key]
+            if isinstance(v, bool) or not isinstance(v, int) or v < (1 if key == "spp" else 0):
+                raise ValueError(f"target.{key}: expected a positive integer, got {v!r}")
+    truth = {}
+    synth = t["synthetic"] or {}
+    if not isinstance(synth, dict):
+        raise ValueError(f"target.synthetic: expected a mapping {{path: value}}, got {synth!r}")
+    for path, value in synth.items():
+        try:
+            current = scene.get(path)
+        except (ValueError, IndexError, AttributeError) as e:
+            raise ValueError(f"target.synthetic.{path}: unknown parameter path ({e})") from None
+        truth[path] = np.broadcast_to(
+            _check_value(path, current, value, "synthetic value"), current.shape
+        ).astype(np.float32)
+    ldr = t.get("camera") is not None
+    if ldr:
+        cam = t["camera"]
+        if not isinstance(cam, dict):
+            raise ValueError(f"target.camera: expected a mapping, got {cam!r}")
+        bad = set(cam) - set(TARGET_CAMERA_KEYS)
+        if bad:
+            raise ValueError(
+                f"target.camera: unknown keys {sorted(bad)}; expected some of {TARGET_CAMERA_KEYS}"
+            )
+        from jaxgfx._checks import check_choice
+
+        check_choice(cam.get("response", "gamma"), "target.camera.response", RESPONSE_MODELS)
+        if cam.get("bits", 8) not in (8, 16):
+            raise ValueError(f"target.camera.bits: expected 8 or 16, got {cam.get('bits')!r}")
+        for key in ("gamma", "exposure"):
+            v = cam.get(key, 1.0)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+                raise ValueError(f"target.camera.{key}: expected a positive number, got {v!r}")
+    return truth, ldr
+
+
+def prepare_fit(cfg: FitConfig, *, base_dir: str | None = None) -> Prepared:
+    """Load the scene and the target and check parameters, bounds, the target's size, kind and
+    content (no rendering).
+
+    Raises ``ValueError`` naming the offending config entry: an unknown parameter path, an init
+    or bound of the wrong shape, bounds that exclude the init, a target whose size differs from
+    the camera's, an LDR target without ``camera`` (or a linear one with it), a photo of
+    another bit depth than ``camera.bits``, non-finite radiance; ``FileNotFoundError`` for a
+    missing scene or target file (relative paths: the config's folder, then the working
+    directory).
+    """
+    if not isinstance(cfg, FitConfig):
+        raise TypeError(f"cfg: expected a FitConfig, got {type(cfg).__name__}")
+    scene = load_fit_scene(cfg, base_dir)
+    paths, init, bounds = [], {}, {}
+    for path, raw in cfg.params.items():
+        spec = _param_spec(path, raw)
+        try:
+            current = scene.get(path)
+        except (ValueError, IndexError, AttributeError) as e:
+            raise ValueError(f"params.{path}: unknown parameter path ({e})") from None
+        x0 = np.asarray(current, np.float64) if spec.init is None else spec.init
+        x0 = np.broadcast_to(_check_value(path, current, x0, "init"), current.shape)
+        lo = None if spec.min is None else _check_value(path, current, spec.min, "min")
+        hi = None if spec.max is None else _check_value(path, current, spec.max, "max")
+        if lo is not None and hi is not None and not np.all(lo < hi):
+            raise ValueError(f"params.{path}: expected min < max, got ({spec.min}, {spec.max})")
+        if (lo is not None and np.any(x0 < lo)) or (hi is not None and np.any(x0 > hi)):
+            raise ValueError(
+                f"params.{path}: the bounds ({spec.min}, {spec.max}) exclude the init "
+                f"{np.asarray(x0).tolist()}"
+            )
+        paths.append(path)
+        init[path] = np.array(x0, np.float32)
+        lo_b = None if lo is None else np.broadcast_to(lo, current.shape)
+        hi_b = None if hi is None else np.broadcast_to(hi, current.shape)
+        bounds[path] = (lo_b, hi_b)
+
+    h, w = scene.height, scene.width
+    truth, target = None, None
+    if isinstance(cfg.target, dict):
+        truth, ldr = _synthetic_spec(dict(cfg.target), scene)
+        target_spec = dict(cfg.target)
+    else:
+        path = resolve_path(cfg.target, base_dir, "target")
+        target = _read_target_file(path)
+        th, tw = target.pixels.shape[:2]
+        if (th, tw) != (h, w):
+            raise ValueError(
+                f"target: size {tw}x{th} (W x H) differs from the scene camera's {w}x{h}; "
+                "set render.width/height or resize the target"
+            )
+        ldr = target.bits is not None
+        target_spec = path
+        if ldr and cfg.camera is not None and cfg.camera.bits != target.bits:
+            raise ValueError(
+                f"camera.bits: the target {path} is a {target.bits}-bit photo; expected "
+                f"camera.bits: {target.bits}, got {cfg.camera.bits}"
+            )
+    if ldr and cfg.camera is None:
+        raise ValueError("camera: an LDR (8-bit) target needs a camera section (response model)")
+    if not ldr and cfg.camera is not None:
+        raise ValueError("camera: only LDR targets (PNG/JPEG or a synthetic camera) use a camera")
+    return Prepared(scene, paths, init, bounds, truth, target_spec, ldr, target)
