@@ -97,7 +97,7 @@ def _assert_terminated(name, res, sig, folder):
     assert os.listdir(folder) == []  # staging removed, nothing written
 
 
-# issue 28: one `python -c` run (a JAX import): ~5 s of a loaded 2-core run. `timeout 10
+# issue 28: one `python -c` run (a JAX import): 5-7 s on a loaded 2-core machine. `timeout 10
 # jaxgfx render ...` as reported; the other signals and jobs: the slow test below
 def test_sigterm_mid_render_leaves_no_staging(files, tmp_path):
     res = _run_and_signal(["render"], files, tmp_path)
