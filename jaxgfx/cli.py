@@ -142,9 +142,7 @@ def _calibrate_run(args) -> int:
     from jaxgfx.pipelines.calibrate import run_calibrate
 
     job = calibrate_job(args)
-    report = run_calibrate(job)
-    if report["replaced"]:
-        print(f"replaced the previous results in {os.path.abspath(job.out)}")
+    report = run_calibrate(job)  # "replaced ..." is printed by run_command
     print(f"outputs in {os.path.abspath(job.out)}:")
     for name, p in report["outputs"].items():
         print(f"  {name:14s} {p}")
@@ -193,10 +191,18 @@ def _render_run(args) -> int:
     )
     res = run_render(job)
     print(
-        f"wrote {' and '.join(res['outputs'].values())} ({res['seconds']:.2f} s incl. compile, "
-        f"{res['samples_per_second'] / 1e6:.2f} M samples/s)"
+        f"wrote {' and '.join(res['outputs'].values())} (render {res['seconds']:.3g} s, "
+        f"{_rate(res['samples_per_second'])} samples/s; compile {res['compile_seconds']:.3g} s)"
     )
     return 0
+
+
+def _rate(per_second: float) -> str:
+    """``1.23 M`` / ``45.6 k`` / ``789``: three significant digits at any speed."""
+    for scale, unit in ((1e9, " G"), (1e6, " M"), (1e3, " k")):
+        if per_second >= scale:
+            return f"{per_second / scale:.3g}{unit}"
+    return f"{per_second:.3g}"
 
 
 # ----------------------------------------------------------------------------- tonemap
@@ -327,6 +333,24 @@ class _UsageError(Exception):
     """A usage error found after parsing (exit status 2)."""
 
 
+class _LineEndTracker:
+    """``sys.stderr`` during a command: remembers whether the last character written ended a
+    line (progress bars end theirs with ``\\r``), so the final message starts a line of its
+    own. Everything else is delegated to the real stream."""
+
+    def __init__(self, stream):
+        self._stream = stream
+        self.at_line_start = True
+
+    def write(self, text):
+        if text:
+            self.at_line_start = text.endswith("\n")
+        return self._stream.write(text)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def _common_options() -> argparse.ArgumentParser:
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument(
@@ -393,23 +417,44 @@ def _runtime_message(text: str) -> str:
 
 def run_command(args: argparse.Namespace) -> int:
     """Run a parsed command; every failure becomes one line on stderr and a nonzero status
-    (1; 2 for usage errors; 130 for Ctrl-C). With ``--debug`` the traceback is shown."""
+    (1; 2 for usage errors; 130 for Ctrl-C; 128 + N for SIGTERM / SIGHUP, which remove the
+    staging like any failure). With ``--debug`` the traceback is shown. Outputs replaced under
+    ``--overwrite`` are named on stdout (one line per stage, by :mod:`jaxgfx.pipelines._output`)."""
+    from jaxgfx.pipelines._output import Terminated, cleanup_on_signals, report_replacements
+
+    real_stderr = sys.stderr
+    err = sys.stderr = _LineEndTracker(real_stderr)
+
+    def say(message):
+        if not err.at_line_start:  # a progress bar's last line: end it first
+            print(file=err)
+        print(f"jaxgfx {args.command}: {message}", file=err)
+
     try:
-        return int(args.func(args) or 0)
+        with cleanup_on_signals(), report_replacements(print):
+            return int(args.func(args) or 0)
     except KeyboardInterrupt:
-        print(f"jaxgfx {args.command}: interrupted", file=sys.stderr)
+        say("interrupted")
         return 130
+    except Terminated as e:
+        say(f"terminated ({e})")
+        return 128 + e.signum
     except Exception as e:  # noqa: BLE001 - the CLI boundary: one line per failure
         debug = getattr(args, "debug", False) or getattr(args, "debug_all", False)
         if debug:
             import traceback
 
-            traceback.print_exc()
+            if not err.at_line_start:
+                print(file=err)
+            traceback.print_exc(file=err)
         status = 2 if isinstance(e, _UsageError) else 1
         expected = isinstance(e, (ValueError, TypeError, OSError, _UsageError))
         hint = "" if debug or expected else " (rerun with --debug for the traceback)"
-        print(f"jaxgfx {args.command}: error: {format_error(e)}{hint}", file=sys.stderr)
+        say(f"error: {format_error(e)}{hint}")
         return status
+    finally:
+        if sys.stderr is err:
+            sys.stderr = real_stderr
 
 
 def main(argv=None) -> int:

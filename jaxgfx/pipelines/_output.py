@@ -12,6 +12,16 @@ The guarantees (documented in README.md, "Command line"):
 * A target that already holds results is refused unless ``overwrite=True`` (``--overwrite``);
   with it, the new results replace the old ones, and stale outputs of the previous run (names
   of this job that the new run does not write) are removed so the folder never mixes runs.
+  Each replacement is announced to the callbacks of :func:`report_replacements` (the CLI
+  prints them, so every subcommand says so without code of its own).
+* Staging names carry the owning process: ``.<name>.<pid>@<host>.<random>.partial[.ext]``.
+  Entering a stage removes the staging entries in the same folder whose process (on this
+  host) is gone: what a killed (SIGKILL) or crashed run left behind. Another live run's
+  staging is never touched (its pid is alive; other hosts' entries are never removed).
+* :func:`cleanup_on_signals` (used by the CLI) turns SIGTERM / SIGHUP into a
+  :class:`Terminated` exception (SIGINT stays ``KeyboardInterrupt``), so the staging is removed
+  as on any other failure; a signal that arrives while results are being moved into place is
+  held until the move is complete, so a target never mixes two runs.
 
 :class:`StagedFiles` handles jobs whose outputs are files (``render``, ``filter``);
 :class:`StagedDir` handles jobs whose output is a folder (``calibrate``).
@@ -19,11 +29,25 @@ The guarantees (documented in README.md, "Command line"):
 
 from __future__ import annotations
 
+import contextlib
 import os
+import re
 import shutil
+import signal
+import socket
 import tempfile
+import threading
 
-__all__ = ["StagedFiles", "StagedDir", "check_output_extension", "OutputExistsError"]
+__all__ = [
+    "StagedFiles",
+    "StagedDir",
+    "check_output_extension",
+    "OutputExistsError",
+    "Terminated",
+    "cleanup_on_signals",
+    "report_replacements",
+    "remove_stale_staging",
+]
 
 # format families by extension, and how many channels each can hold (None: any 1..4)
 HDR_EXTENSIONS = (".exr", ".hdr", ".pic", ".rgbe")
@@ -33,6 +57,144 @@ WRITABLE_EXTENSIONS = HDR_EXTENSIONS + LDR_EXTENSIONS
 
 class OutputExistsError(FileExistsError):
     """The target holds results and ``overwrite`` was not given."""
+
+
+class Terminated(BaseException):
+    """SIGTERM or SIGHUP arrived (raised by the handler of :func:`cleanup_on_signals`)."""
+
+    def __init__(self, signum: int):
+        self.signum = int(signum)
+        super().__init__(signal.Signals(self.signum).name)
+
+
+# ----------------------------------------------------------------------------- signals
+
+_SIGNAL_STATE = {"defer": 0, "pending": None}
+
+
+def _raise_for(signum: int):
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
+    raise Terminated(signum)
+
+
+def _on_signal(signum, frame):
+    if _SIGNAL_STATE["defer"]:  # moving results into place: finish that first
+        _SIGNAL_STATE["pending"] = _SIGNAL_STATE["pending"] or signum
+        return
+    _raise_for(signum)
+
+
+@contextlib.contextmanager
+def cleanup_on_signals():
+    """While inside: SIGTERM and SIGHUP raise :class:`Terminated`, SIGINT ``KeyboardInterrupt``,
+    so ``with StagedFiles/StagedDir`` blocks remove their staging as on any failure. Handlers
+    that are not the default ones (``nohup``'s ignored SIGHUP, an embedding program's own) are
+    kept; the previous handlers are restored on exit. Outside the main thread: no change."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {}
+    for name in ("SIGTERM", "SIGHUP", "SIGINT"):
+        sig = getattr(signal, name, None)
+        if sig is None:
+            continue
+        old = signal.getsignal(sig)
+        default = signal.default_int_handler if sig == signal.SIGINT else signal.SIG_DFL
+        if old is default:
+            previous[sig] = old
+            signal.signal(sig, _on_signal)
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """Hold the signals of :func:`cleanup_on_signals` inside (results being moved into place);
+    one that arrived is raised on exit (unless the block itself raised)."""
+    _SIGNAL_STATE["defer"] += 1
+    try:
+        yield
+    finally:
+        _SIGNAL_STATE["defer"] -= 1
+        pending = _SIGNAL_STATE["pending"] if not _SIGNAL_STATE["defer"] else None
+        if pending is not None:
+            _SIGNAL_STATE["pending"] = None
+    if pending is not None:
+        _raise_for(pending)
+
+
+# ----------------------------------------------------------------------------- replacements
+
+_LISTENERS: list = []
+
+
+@contextlib.contextmanager
+def report_replacements(callback):
+    """While inside, ``callback(message)`` is called each time a stage replaced previous
+    results (``--overwrite``), with one line naming them."""
+    _LISTENERS.append(callback)
+    try:
+        yield
+    finally:
+        _LISTENERS.remove(callback)
+
+
+def _announce(message: str) -> None:
+    for callback in list(_LISTENERS):
+        callback(message)
+
+
+# ----------------------------------------------------------------------------- staging names
+
+_HOST = re.sub(r"[^A-Za-z0-9-]", "-", socket.gethostname())[:48] or "host"
+_STAGING_RE = re.compile(
+    r"^\..+\.(?P<pid>[1-9][0-9]{0,9})@(?P<host>[A-Za-z0-9-]+)\.[a-z0-9_]+\.partial"
+    r"(\.[A-Za-z0-9]+)?$"
+)
+
+
+def _owner_tag() -> str:
+    return f"{os.getpid()}@{_HOST}"
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (OSError, OverflowError, ValueError):
+        return True  # EPERM: another user's live process; anything else: leave it alone
+    return True
+
+
+def remove_stale_staging(folder) -> list[str]:
+    """Remove the staging files/folders in ``folder`` left by runs on this host whose process
+    is gone (killed or crashed); returns their paths. Never raises."""
+    removed = []
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return removed
+    for n in names:
+        m = _STAGING_RE.match(n)
+        if m is None or m["host"] != _HOST or _alive(int(m["pid"])):
+            continue
+        p = os.path.join(folder, n)
+        try:
+            if os.path.isdir(p) and not os.path.islink(p):
+                shutil.rmtree(p)
+            else:
+                os.unlink(p)
+        except OSError:
+            continue
+        removed.append(p)
+    return removed
 
 
 def check_output_extension(path, name: str, allowed=WRITABLE_EXTENSIONS) -> str:
@@ -116,6 +278,7 @@ class StagedFiles:
                     17, f"{name}: already exists; pass --overwrite to replace it", path
                 )
         self.staging: dict[str, str] = {}
+        self.replaced: list[str] = []
         self._created: list[str] = []
 
     def __enter__(self):
@@ -123,10 +286,11 @@ class StagedFiles:
             for name, path in self.targets.items():
                 folder = os.path.dirname(os.path.abspath(path))
                 self._created += _make_parents(folder, name)
+                remove_stale_staging(folder)
                 base, ext = os.path.splitext(os.path.basename(path))
                 try:
                     fd, tmp = tempfile.mkstemp(
-                        prefix=f".{base}.", suffix=f".partial{ext}", dir=folder
+                        prefix=f".{base}.{_owner_tag()}.", suffix=f".partial{ext}", dir=folder
                     )
                 except OSError as e:
                     raise _named(e, name) from None
@@ -149,14 +313,21 @@ class StagedFiles:
         if exc_type is not None:
             self._abort()
             return False
-        try:
-            mode = 0o666 & ~_umask()  # mkstemp makes 0600 files; give the usual permissions
-            for name, tmp in self.staging.items():
-                os.chmod(tmp, mode)
-                os.replace(tmp, self.targets[name])
-        except BaseException:
-            self._abort()
-            raise
+        with _signals_held():
+            try:
+                mode = 0o666 & ~_umask()  # mkstemp makes 0600 files; give the usual permissions
+                existed = [p for p in self.targets.values() if os.path.lexists(p)]
+                for name, tmp in self.staging.items():
+                    os.chmod(tmp, mode)
+                    os.replace(tmp, self.targets[name])
+            except BaseException:
+                self._abort()
+                raise
+            self.replaced = existed
+        if existed:
+            _announce(
+                "replaced the previous results: " + ", ".join(os.path.abspath(p) for p in existed)
+            )
         return False
 
 
@@ -197,9 +368,12 @@ class StagedDir:
     def __enter__(self):
         parent = os.path.dirname(self.out)
         self._created = _make_parents(parent, self.name)
+        remove_stale_staging(parent)
         try:
             self.path = tempfile.mkdtemp(
-                prefix=f".{os.path.basename(self.out)}.", suffix=".partial", dir=parent
+                prefix=f".{os.path.basename(self.out)}.{_owner_tag()}.",
+                suffix=".partial",
+                dir=parent,
             )
         except OSError as e:
             _remove_created(self._created)
@@ -217,23 +391,29 @@ class StagedDir:
         if exc_type is not None:
             self._abort()
             return False
-        try:
-            mask = _umask()
-            new = set(os.listdir(self.path))
-            for n in new:
-                os.chmod(os.path.join(self.path, n), 0o666 & ~mask)
-            if not os.path.exists(self.out):
-                os.chmod(self.path, 0o777 & ~mask)  # mkdtemp makes a 0700 folder
-                os.rename(self.path, self.out)
-                return False
-            for n in sorted(new):
-                os.replace(os.path.join(self.path, n), os.path.join(self.out, n))
-            for n in self.previous:
-                if n not in new:
-                    os.unlink(os.path.join(self.out, n))
-            self.replaced = list(self.previous)
-            os.rmdir(self.path)
-        except BaseException:
-            self._abort()
-            raise
+        with _signals_held():
+            try:
+                self._commit()
+            except BaseException:
+                self._abort()
+                raise
+        if self.replaced:
+            _announce(f"replaced the previous results in {self.out} ({', '.join(self.replaced)})")
         return False
+
+    def _commit(self):
+        mask = _umask()
+        new = set(os.listdir(self.path))
+        for n in new:
+            os.chmod(os.path.join(self.path, n), 0o666 & ~mask)
+        if not os.path.exists(self.out):
+            os.chmod(self.path, 0o777 & ~mask)  # mkdtemp makes a 0700 folder
+            os.rename(self.path, self.out)
+            return
+        for n in sorted(new):
+            os.replace(os.path.join(self.path, n), os.path.join(self.out, n))
+        for n in self.previous:
+            if n not in new:
+                os.unlink(os.path.join(self.out, n))
+        self.replaced = list(self.previous)
+        os.rmdir(self.path)

@@ -279,7 +279,18 @@ class _Steps:
 
 def _plot_response(path, responses: dict, truth=None, title="camera response"):
     """Plot g(Z) = ln to_linear(Z) per channel for each fitted response (and the truth,
-    shifted by the best constant ln offset, since the anchor is arbitrary)."""
+    shifted by the best constant ln offset, since the anchor is arbitrary) to ``path``."""
+    import matplotlib.pyplot as plt
+
+    fig = _response_figure(responses, truth, title)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _response_figure(responses: dict, truth=None, title="camera response"):
+    """The figure of :func:`_plot_response`. Only levels 1..255 where a curve is defined
+    (``to_linear > 0``) are drawn: at level 0 the exposure is 0 and ln 0 = -inf (clamping it
+    stretched the axis to -27 and flattened every curve), and the fits carry no data there."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -289,7 +300,11 @@ def _plot_response(path, responses: dict, truth=None, title="camera response"):
 
     def curve(resp):
         zz = np.ascontiguousarray(np.broadcast_to(z[:, None], (256, resp.channels)), np.float32)
-        return np.log(np.maximum(np.asarray(resp.to_linear_normalized(zz), np.float64), 1e-12))
+        lin = np.asarray(resp.to_linear_normalized(zz), np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = np.where(np.isfinite(lin) & (lin > 0), np.log(lin), np.nan)
+        g[0] = np.nan  # level 0: no exposure is known there
+        return g
 
     colors = ("tab:red", "tab:green", "tab:blue")
     styles = ["-", "--", "-.", ":"]
@@ -311,16 +326,16 @@ def _plot_response(path, responses: dict, truth=None, title="camera response"):
     if truth is not None:
         g = curve(truth)[:, min(1, truth.channels - 1)]
         sl = slice(10, 246)
-        g = g + np.mean(ref[sl] - g[sl]) if ref is not None else g
+        g = g + np.nanmean(ref[sl] - g[sl]) if ref is not None else g
         ax.plot(z * 255, g, color="k", lw=2.5, alpha=0.35, label="ground truth (G)")
+    ax.set_xlim(0, 255)
     ax.set_xlabel("pixel level Z (of 255)")
     ax.set_ylabel("g(Z) = ln relative exposure")
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
 
 
 def _plot_loo(path, loo):
