@@ -169,11 +169,20 @@ def _mesh_file(d, where, base_dir):
         raise ValueError(f"{where}.file: {e}") from None
 
 
-def _vertex_rows(x, where):
+def _numbers(x, where):
+    """``x`` as a float array; strings, booleans, ``None`` and ragged lists are one
+    ``ValueError`` naming ``where``."""
     try:
-        v = as_float_array(x, where)
-    except TypeError as e:
-        raise ValueError(str(e)) from None
+        a = np.asarray(x)
+    except (TypeError, ValueError):
+        a = None
+    if a is None or a.dtype.kind not in "iuf":
+        raise ValueError(f"{where}: expected numbers, got {x!r}")
+    return as_float_array(a, where)
+
+
+def _vertex_rows(x, where):
+    v = _numbers(x, where)
     if v.ndim != 2 or v.shape[1] != 3 or v.shape[0] == 0:
         raise ValueError(f"{where}: expected rows of 3 coordinates (V, 3), got shape {v.shape}")
     return check_finite(v, where)
@@ -220,10 +229,7 @@ def _index_error(where, j, n_vertices):
 
 
 def _mesh_scale(x, where):
-    try:
-        s = as_float_array(x, where)
-    except TypeError as e:
-        raise ValueError(str(e)) from None
+    s = _numbers(x, where)
     check_finite(s, where)
     if s.shape not in ((), (3,)) or not bool(jnp.all(s > 0)):
         got = s.tolist()
