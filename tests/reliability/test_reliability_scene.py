@@ -16,7 +16,6 @@ import pytest
 from jaxgfx.render import load_scene, render
 from jaxgfx.render.geometry import TriangleMesh
 from jaxgfx.render.geometry.mesh_io import mesh_from_generator
-from jaxgfx.render.scene.scene import parameter_names
 
 from ._util import assert_one_line_error, run_cli, snapshot
 
@@ -217,6 +216,8 @@ def test_parameter_path_hints(hint_scene, path, message):
 
 def test_every_hinted_name_is_a_valid_path(hint_scene):
     # the hint's names are exactly what a path may give after the object
+    from jaxgfx.render.scene.scene import parameter_names
+
     s = hint_scene
     objects = {
         "materials.metal": s.materials[s.material_names.index("metal")],
