@@ -2,8 +2,10 @@
 
 Research scripts in ``experiments/`` describe their options as frozen dataclasses and load
 them with :func:`load_config`. Unknown keys, wrong types and missing required fields raise
-``ValueError`` naming the offending field (with its dotted path), so a typo in a config file
-never silently falls back to a default.
+``ValueError`` naming the offending field (with its dotted path, also for the errors of a nested
+dataclass's ``validate``), so a typo in a config file never silently falls back to a default.
+:func:`read_yaml` refuses a key given twice in one mapping (YAML would keep the last one),
+naming the key, the file and both lines.
 
 Example::
 
@@ -26,13 +28,59 @@ from typing import Any, TypeVar
 
 import yaml
 
-__all__ = ["load_config", "config_to_dict", "read_yaml"]
+__all__ = ["load_config", "config_to_dict", "read_yaml", "safe_load_yaml"]
 
 T = TypeVar("T")
 
 
+class _DuplicateKey(yaml.YAMLError):
+    def __init__(self, key, line: int, first: int):
+        super().__init__(f"duplicate key {key!r}")
+        self.key, self.line, self.first = key, line, first
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses a key given twice in one mapping (at any depth)."""
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            seen: dict = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue  # `<<: *anchor`: explicit keys override merged ones by design
+                key = self.construct_object(key_node, deep=True)
+                line = key_node.start_mark.line + 1
+                try:  # compared as the dict compares them: 1, 1.0 and true are one key
+                    if key in seen:
+                        raise _DuplicateKey(key, line, seen[key])
+                    seen[key] = line
+                except TypeError:  # an unhashable key: the base class reports it
+                    continue
+        return super().construct_mapping(node, deep=deep)
+
+
+def safe_load_yaml(stream, name: str = "<yaml>"):
+    r"""``yaml.safe_load(stream)``, refusing duplicate keys: ``ValueError`` naming ``name``
+    (the file), the line and the key; other YAML errors as ``ValueError`` naming ``name``.
+
+    >>> safe_load_yaml("a: 1\nb: {c: 2, c: 3}\n", "x.yaml")
+    Traceback (most recent call last):
+    ...
+    ValueError: x.yaml:2: duplicate key 'c' (first given on line 2)
+    """
+    try:
+        return yaml.load(stream, Loader=_StrictLoader)  # noqa: S506 - a SafeLoader subclass
+    except _DuplicateKey as e:
+        raise ValueError(
+            f"{name}:{e.line}: duplicate key {e.key!r} (first given on line {e.first})"
+        ) from None
+    except yaml.YAMLError as e:
+        raise ValueError(f"{name}: not valid YAML ({' '.join(str(e).split())})") from None
+
+
 def read_yaml(path: str | os.PathLike) -> dict:
-    """Read a YAML mapping from ``path``; clear errors for missing or malformed files."""
+    """Read a YAML mapping from ``path``; clear errors for missing or malformed files and for
+    a key given twice in one mapping (``ValueError`` naming the file, line and key)."""
     path = os.fspath(path)
     if not os.path.exists(path):
         raise FileNotFoundError(f"config file not found: {path}")
@@ -40,9 +88,7 @@ def read_yaml(path: str | os.PathLike) -> dict:
         raise IsADirectoryError(21, "config: is a folder, expected a YAML file", path)
     with open(path, encoding="utf-8") as f:
         try:
-            data = yaml.safe_load(f)
-        except yaml.YAMLError as e:
-            raise ValueError(f"{path}: not valid YAML ({' '.join(str(e).split())})") from None
+            data = safe_load_yaml(f, path)
         except UnicodeDecodeError:
             raise ValueError(f"{path}: not a UTF-8 text (YAML) file") from None
     if data is None:
@@ -60,6 +106,9 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
     if origin in (typing.Union, types.UnionType):
         if value is None and type(None) in args:
             return None
+        options = [a for a in args if a is not type(None)]
+        if len(options) == 1:  # X | None: X's own error (a nested dataclass's names its key)
+            return _coerce(value, options[0], where)
         errors = []
         for a in args:
             if a is type(None):
@@ -67,7 +116,9 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
             try:
                 return _coerce(value, a, where)
             except (TypeError, ValueError) as e:
-                errors.append(str(e))
+                errors.append(_strip_where(str(e), where))
+        if type(None) in args:
+            errors.append("or null")
         raise ValueError(f"{where}: {value!r} matches none of {tp} ({'; '.join(errors)})")
     if origin is typing.Literal:
         if value not in args:
@@ -116,14 +167,39 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
     return value
 
 
+def _strip_where(message: str, where: str) -> str:
+    """``message`` without its leading ``where: `` (for messages nested in another)."""
+    return message[len(where) + 2 :] if where and message.startswith(f"{where}: ") else message
+
+
+def _under(message: str, where: str) -> str:
+    """``message`` of a nested ``validate`` under the path ``where``: unchanged when it already
+    starts with ``where``, else ``where.KEY: ...`` (a message that names a key) or
+    ``where: ...``."""
+    if (
+        not where
+        or message == where
+        or message.startswith((f"{where}.", f"{where}:", f"{where}[", f"{where} "))
+    ):
+        return message
+    head = message.split(":", 1)[0]
+    if (
+        ":" in message
+        and head
+        and all(p.isidentifier() for p in head.replace("[", ".").split(".") if not p.endswith("]"))
+    ):
+        return f"{where}.{message}"
+    return f"{where}: {message}"
+
+
 def _build(cls: type[T], data: Mapping, where: str) -> T:
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
-    unknown = sorted(set(data) - set(fields))
+    unknown = sorted((k for k in data if k not in fields), key=str)
     if unknown:
         prefix = f"{where}." if where else ""
         raise ValueError(
-            f"unknown config key(s) {', '.join(prefix + k for k in unknown)}; "
+            f"unknown config key(s) {', '.join(prefix + str(k) for k in unknown)}; "
             f"expected some of: {', '.join(sorted(fields))}"
         )
     kwargs = {}
@@ -136,16 +212,38 @@ def _build(cls: type[T], data: Mapping, where: str) -> T:
     obj = cls(**kwargs)
     check = getattr(obj, "validate", None)
     if callable(check):
-        check()
+        try:
+            check()
+        except (ValueError, TypeError) as e:
+            message = _under(str(e), where)
+            if message == str(e):
+                raise
+            raise type(e)(message) from None
     return obj
 
 
-def load_config(cls: type[T], source: str | os.PathLike | Mapping | None = None, **overrides) -> T:
+def load_config(
+    cls: type[T],
+    source: str | os.PathLike | Mapping | None = None,
+    *,
+    where: str = "",
+    **overrides,
+) -> T:
     """Build the frozen dataclass ``cls`` from a YAML path, a mapping, or nothing (defaults).
 
     ``overrides`` are applied on top (dotted keys like ``fit__method`` are not supported;
     pass nested mappings instead). Nested dataclass fields are built recursively. If the class
-    defines ``validate(self)``, it is called after construction.
+    defines ``validate(self)``, it is called after construction. ``where``: the dotted path of
+    this mapping inside a larger config (e.g. ``"params.materials.metal.alpha"``), prefixed to
+    every error message (the keys of a nested dataclass are prefixed with their own path).
+
+    >>> @dataclasses.dataclass(frozen=True)
+    ... class Spec:
+    ...     init: float = 0.0
+    >>> load_config(Spec, {"init": "abc"}, where="params.alpha")
+    Traceback (most recent call last):
+    ...
+    ValueError: params.alpha.init: expected a number, got 'abc'
     """
     if not (isinstance(cls, type) and dataclasses.is_dataclass(cls)):
         raise TypeError(f"cls: expected a dataclass type, got {cls!r}")
@@ -156,7 +254,7 @@ def load_config(cls: type[T], source: str | os.PathLike | Mapping | None = None,
     else:
         data = read_yaml(source)
     data.update(overrides)
-    return _build(cls, data, "")
+    return _build(cls, data, where)
 
 
 def config_to_dict(cfg) -> dict:

@@ -5,7 +5,7 @@ from typing import Literal
 
 import pytest
 
-from jaxgfx.config import config_to_dict, load_config
+from jaxgfx.config import config_to_dict, load_config, read_yaml
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,3 +64,91 @@ def test_bad_files(tmp_path):
     p.write_text("- 1\n- 2\n")
     with pytest.raises(ValueError, match="mapping"):
         load_config(Outer, p)
+
+
+# -- duplicate keys, dotted paths (issue 28) ---------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "text, needle",
+    [
+        ("name: a\nseed: 1\nseed: 2\n", "c.yaml:3: duplicate key 'seed' (first given on line 2)"),
+        (
+            "name: a\ninner:\n  lam: 1\n  method: debevec\n  lam: 2\n",
+            "c.yaml:5: duplicate key 'lam' (first given on line 3)",
+        ),
+        (
+            "name: a\ninner: {lam: 1, lam: 2}\n",
+            "c.yaml:2: duplicate key 'lam' (first given on line 2)",
+        ),
+        ("name: a\ntimes: [1, {x: 1, x: 2}]\n", "c.yaml:2: duplicate key 'x'"),
+    ],
+)
+def test_duplicate_yaml_keys_are_refused_at_every_level(tmp_path, text, needle):
+    # PyYAML keeps the last of two equal keys silently; read_yaml names the key, file and line
+    p = tmp_path / "c.yaml"
+    p.write_text(text)
+    with pytest.raises(ValueError) as e:
+        load_config(Outer, p)
+    assert needle in str(e.value)
+
+
+def test_yaml_merge_keys_are_not_duplicates(tmp_path):
+    p = tmp_path / "c.yaml"
+    p.write_text("name: a\nbase: &b {lam: 1.0, method: robertson}\n")
+    assert read_yaml(p)["base"] == {"lam": 1.0, "method": "robertson"}
+    p.write_text("name: a\ninner:\n  <<: {lam: 1.0, method: robertson}\n  lam: 2.0\n")
+    assert load_config(Outer, p).inner == Inner(lam=2.0, method="robertson")
+
+
+@dataclasses.dataclass(frozen=True)
+class Checked:
+    spp: int = 4
+
+    def validate(self):
+        if self.spp < 1:
+            raise ValueError(f"spp: expected >= 1, got {self.spp}")
+
+
+@dataclasses.dataclass(frozen=True)
+class Holder:
+    target: Checked = Checked()
+    other: Checked | None = None
+
+
+@pytest.mark.parametrize(
+    "data, where, message",
+    [
+        ({"target": {"spp": 0}}, "", "target.spp: expected >= 1, got 0"),
+        ({"other": {"spp": -1}}, "", "other.spp: expected >= 1, got -1"),
+        ({"target": {"spp": 0}}, "job", "job.target.spp: expected >= 1, got 0"),
+        ({"target": {"spp": "x"}}, "job", "job.target.spp: expected an integer, got 'x'"),
+        (
+            {"target": {"sp": 1}},
+            "job",
+            "unknown config key(s) job.target.sp; expected some of: spp",
+        ),
+        ({1: 2}, "", "unknown config key(s) 1; expected some of: other, target"),
+    ],
+)
+def test_errors_name_the_full_dotted_path(data, where, message):
+    with pytest.raises(ValueError) as e:
+        load_config(Holder, data, where=where)
+    assert str(e.value) == message
+
+
+def test_union_error_names_the_path_once():
+    with pytest.raises(ValueError) as e:
+        load_config(Outer, {"name": "a", "seed": "x"}, where="fit")
+    assert str(e.value) == "fit.seed: expected an integer, got 'x'"
+
+    @dataclasses.dataclass(frozen=True)
+    class Either:
+        value: float | tuple[float, ...] | None = None
+
+    with pytest.raises(ValueError) as e:
+        load_config(Either, {"value": "abc"}, where="params.p")
+    assert str(e.value) == (
+        "params.p.value: 'abc' matches none of float | tuple[float, ...] | None "
+        "(expected a number, got 'abc'; expected a list, got str; or null)"
+    )

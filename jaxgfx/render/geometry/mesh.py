@@ -35,23 +35,23 @@ class TriangleMesh(eqx.Module):
     uvs: Float[Array, "V 2"] | None = None
 
     def __init__(self, vertices, faces, normals=None, uvs=None):
-        v = as_points(vertices, "vertices", 3)
-        f = jnp.asarray(faces)
-        if not jnp.issubdtype(f.dtype, jnp.integer) or f.ndim != 2 or f.shape[-1] != 3:
+        v = as_points(_numeric(vertices, "vertices", "fiu"), "vertices", 3)
+        f = _numeric(faces, "faces", "iu")
+        if f.ndim != 2 or f.shape[-1] != 3:
             raise ValueError(
                 f"faces: expected an integer array of shape (F, 3), got {f.dtype}{f.shape}"
             )
         if f.shape[0] == 0:
             raise ValueError("faces: expected at least one triangle, got 0")
         if not isinstance(f, jax.core.Tracer):
-            fn = np.asarray(f)
+            fn = np.asarray(f)  # checked before the int32 cast (2**40 must not wrap around)
             if fn.min() < 0 or fn.max() >= v.shape[0]:
                 raise ValueError(
                     f"faces: indices must lie in [0, {v.shape[0] - 1}], "
                     f"got range [{fn.min()}, {fn.max()}]"
                 )
         self.vertices = v
-        self.faces = f.astype(jnp.int32)
+        self.faces = jnp.asarray(f).astype(jnp.int32)
         if normals is not None:
             normals = as_points(normals, "normals", 3).astype(v.dtype)
             if normals.shape[0] != v.shape[0]:
@@ -66,6 +66,23 @@ class TriangleMesh(eqx.Module):
     def triangles(self) -> Float[Array, "F 3 3"]:
         """Corner positions ``(F, 3, 3)`` (face, corner, xyz)."""
         return self.vertices[self.faces]
+
+
+def _numeric(x, name, kinds):
+    """``x`` as an array whose dtype kind is in ``kinds`` (``"f"`` float, ``"i"``/``"u"``
+    integer); ``ValueError`` naming ``name`` for strings, booleans, ragged lists, ``None``.
+    JAX arrays (and tracers) are returned as they are when their dtype fits."""
+    if not isinstance(x, (jax.Array, np.ndarray)):
+        try:
+            x = np.asarray(x)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"{name}: expected an array of numbers, got a ragged or non-numeric sequence"
+            ) from None
+    if x.dtype.kind not in kinds:
+        what = "an integer" if kinds == "iu" else "a numeric"
+        raise ValueError(f"{name}: expected {what} array, got dtype {x.dtype}")
+    return x
 
 
 TRIANGLE_INTERSECTORS = {

@@ -430,19 +430,43 @@ level: 5, seed: 0}}`` (the other keys are the generator's keyword arguments; ``i
 ``level``, ``uv_sphere`` ``n``, ``triangle_soup`` ``n``)."""
 
 
+_GENERATOR_POSITIVE = ("radius", "size", "extent")
+_GENERATOR_INTEGERS = ("level", "n", "lobes", "seed")
+
+
 def mesh_from_generator(spec, where: str = "generator") -> TriangleMesh:
     """The mesh of a ``{name: ..., **kwargs}`` generator description (:data:`MESH_GENERATORS`);
-    unknown names or arguments raise ``ValueError`` naming ``where``."""
+    unknown names or arguments, and bad values (``center``: 3 finite numbers; ``radius``,
+    ``size``, ``extent``: positive numbers; ``level``, ``n``, ``lobes``, ``seed``: integers)
+    raise ``ValueError`` naming ``where`` and the key (``generator.radius: ...``)."""
     if not isinstance(spec, dict) or "name" not in spec:
         raise ValueError(f"{where}: expected a mapping with a 'name' key, got {spec!r}")
     name = spec["name"]
     if name not in MESH_GENERATORS:
         raise ValueError(f"{where}.name: expected one of {sorted(MESH_GENERATORS)}, got {name!r}")
     kwargs = {k: v for k, v in spec.items() if k != "name"}
-    for k in ("center",):
-        if k in kwargs:
-            kwargs[k] = tuple(float(x) for x in kwargs[k])
+    for k, v in kwargs.items():
+        if k == "center":
+            try:
+                c = np.asarray(v, np.float64)
+            except (TypeError, ValueError):
+                c = None
+            if c is None or c.shape != (3,) or not np.all(np.isfinite(c)):
+                raise ValueError(f"{where}.center: expected 3 finite numbers, got {v!r}")
+            kwargs[k] = tuple(float(x) for x in c)
+        elif k in _GENERATOR_POSITIVE:
+            ok = isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+            if not (ok and np.isfinite(v) and v > 0):
+                raise ValueError(f"{where}.{k}: expected a positive number, got {v!r}")
+        elif k in _GENERATOR_INTEGERS and (
+            isinstance(v, bool) or not isinstance(v, (int, np.integer))
+        ):
+            raise ValueError(f"{where}.{k}: expected an integer, got {v!r}")
     try:
         return MESH_GENERATORS[name](**kwargs)
     except TypeError as e:
         raise ValueError(f"{where}: bad arguments for {name!r}: {e}") from None
+    except ValueError as e:  # the generator's own check names its argument: `level: ...`
+        message = str(e)
+        key = message.split(":", 1)[0]
+        raise ValueError(f"{where}.{message}" if key in kwargs else f"{where}: {message}") from None

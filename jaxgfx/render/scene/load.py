@@ -20,7 +20,7 @@ from jaxgfx.render.emitters import AreaLight, ConstantEnvironment, EnvironmentMa
 from jaxgfx.render.film import make_filter
 from jaxgfx.render.geometry import Rectangles, SDFShape, Spheres, area
 from jaxgfx.render.parameters import get_path
-from jaxgfx.render.scene.scene import Scene
+from jaxgfx.render.scene.scene import Scene, is_internal_name
 from jaxgfx.render.scene.schema import (
     EMITTER_TYPES,
     SCENE_KEYS,
@@ -120,6 +120,11 @@ def load_scene(desc, *, base_dir: str | None = None, accel: str = "auto", dtype=
         raise ValueError("materials: expected a mapping from names to material descriptions")
     names, materials = [], []
     for name, md in mats_desc.items():
+        if is_internal_name(name):
+            raise ValueError(
+                f"materials.{name}: names of the form __NAME__ are the loader's own "
+                "(__default__, __black__); rename the material"
+            )
         try:
             materials.append(material_from_desc(md, where="", base_dir=base_dir))
         except (ValueError, TypeError) as e:
@@ -133,8 +138,9 @@ def load_scene(desc, *, base_dir: str | None = None, accel: str = "auto", dtype=
                 names.append("__default__")
                 materials.append(make_bsdf({"type": "diffuse", "reflectance": 0.5}))
             return names.index("__default__")
-        if m not in names:
-            raise ValueError(f"{where}.material: unknown material {m!r}; have {names}")
+        if m not in names or is_internal_name(m):
+            have = [n for n in names if not is_internal_name(n)]
+            raise ValueError(f"{where}.material: unknown material {m!r}; have {have}")
         return names.index(m)
 
     shapes_desc = desc["shapes"]

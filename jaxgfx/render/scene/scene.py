@@ -45,9 +45,58 @@ from jaxgfx._checks import is_concrete
 from jaxgfx.render.bsdf.textured import Textured
 from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera
 from jaxgfx.render.emitters import ConstantEnvironment, EnvironmentMap, PointLights
-from jaxgfx.render.parameters import array_fields, get_path, parameter_paths, revalidate
+from jaxgfx.render.parameters import get_path, parameter_paths, revalidate
 
-__all__ = ["Scene"]
+__all__ = ["Scene", "parameter_names", "is_internal_name"]
+
+
+def is_internal_name(name: str) -> bool:
+    """Whether ``name`` is one of the loader's own material names (``__default__`` for shapes
+    without a material, ``__black__`` behind area lights): ``__NAME__``, refused in scene
+    descriptions and never listed in hints."""
+    return isinstance(name, str) and len(name) > 4 and name.startswith("__") and name.endswith("__")
+
+
+def _index(path, text, n, what):
+    """``int(text)`` when it indexes one of ``n`` objects (``what``: "an area light")."""
+    if n == 0:
+        raise ValueError(f"{path}: the scene has no {what.split(' ', 1)[1]}s")
+    if not text.isdigit() or not int(text) < n:
+        raise ValueError(f"{path}: expected {what} index in 0..{n - 1}, got {text!r}")
+    return int(text)
+
+
+def parameter_names(obj, *, aliases: bool = True) -> list[str]:
+    """The parameter names a path may give after ``obj`` (for hints): its class's
+    ``PARAMETER_ALIASES`` (``alpha``; a path resolves an alias only as its last name, so
+    those of nested modules are not listed), its float array fields and, dotted, those of
+    nested modules (``distribution.alpha_u``); a texture's own parameters as ``KEY.PARAM``
+    (``reflectance.color0``). Integer arrays (mesh faces) and the arrays of a traversal
+    structure (only its ``mesh.*`` is listed) are not parameters.
+
+    >>> from jaxgfx.render.bsdf import RoughConductor
+    >>> parameter_names(RoughConductor(0.3))
+    ['alpha', 'alpha_u', 'alpha_v', 'distribution.alpha_u', 'distribution.alpha_v', 'reflectance']
+    """
+    if isinstance(obj, Textured):
+        tex = [f"{k}.{p}" for k, t in obj.textures.items() for p in parameter_names(t)]
+        rest = [n for n in parameter_names(obj.bsdf) if n.split(".")[0] not in obj.textures]
+        return tex + rest
+    from jaxgfx.render.geometry import TriangleMesh
+
+    fields = vars(obj)
+    mesh = fields.get("mesh")
+    if isinstance(mesh, TriangleMesh) and not isinstance(obj, TriangleMesh):
+        return [f"mesh.{n}" for n in parameter_names(mesh, aliases=False)]  # BVH, Embree, Warp
+    out = list(getattr(type(obj), "PARAMETER_ALIASES", {})) if aliases else []
+    for name, v in fields.items():
+        if name.startswith("_"):
+            continue
+        if eqx.is_array(v) and jnp.issubdtype(v.dtype, jnp.inexact):
+            out.append(name)
+        elif isinstance(v, eqx.Module):
+            out += [f"{name}.{n}" for n in parameter_names(v, aliases=False)]
+    return list(dict.fromkeys(out))
 
 
 class Scene(eqx.Module):
@@ -115,11 +164,14 @@ class Scene(eqx.Module):
 
     # -- parameter access by name ------------------------------------------------------------
     def _locate(self, path: str):
+        if not isinstance(path, str):
+            raise TypeError(f"path: expected a dotted parameter path (str), got {path!r}")
         parts = path.split(".")
         head = parts[0]
         if head == "materials":
             if len(parts) < 2 or parts[1] not in self.material_names:
-                raise ValueError(f"{path}: unknown material; have {list(self.material_names)}")
+                have = [n for n in self.material_names if not is_internal_name(n)]
+                raise ValueError(f"{path}: unknown material; have {have}")
             idx = self.material_names.index(parts[1])
             getter = lambda s: s.materials[idx]  # noqa: E731
             rest = parts[2:]
@@ -132,9 +184,7 @@ class Scene(eqx.Module):
             getter = lambda s: s.point_lights  # noqa: E731
             rest = parts[2:]
         elif head == "emitters" and len(parts) >= 3 and parts[1] == "area":
-            i = int(parts[2])
-            if not 0 <= i < len(self.area_lights):
-                raise ValueError(f"{path}: area light index out of range")
+            i = _index(path, parts[2], len(self.area_lights), "an area light")
             getter = lambda s: s.area_lights[i]  # noqa: E731
             rest = parts[3:]
         elif head == "emitters" and len(parts) >= 2 and parts[1] == "environment":
@@ -143,7 +193,7 @@ class Scene(eqx.Module):
             getter = lambda s: s.environment  # noqa: E731
             rest = parts[2:]
         elif head == "shapes" and len(parts) >= 2:
-            i = int(parts[1])
+            i = _index(path, parts[1], len(self.shapes), "a shape")
             getter = lambda s: s.shapes[i]  # noqa: E731
             rest = parts[2:]
         else:
@@ -175,8 +225,9 @@ class Scene(eqx.Module):
         for fields in rest_list:
             o = obj
             for field in fields:
-                if not hasattr(o, field):
-                    raise ValueError(f"{path}: no parameter {field!r}; have {array_fields(o)}")
+                if not hasattr(o, field) or field.startswith("_"):
+                    have = parameter_names(getter(self))
+                    raise ValueError(f"{path}: no parameter {field!r}; have {have}")
                 o = getattr(o, field)
             if not eqx.is_array(o):
                 raise ValueError(f"{path}: {fields[-1]!r} is not an array parameter")

@@ -33,6 +33,7 @@ __all__ = [
     "rectangle_from_desc",
     "mesh_from_desc",
     "shape_from_desc",
+    "MESH_SOURCES",
 ]
 
 SHAPE_TYPES = ("sphere", "rectangle", "mesh", "sdf")
@@ -100,6 +101,20 @@ def rgb(x, where):
 
 
 def build_camera(d, where="camera"):
+    """The camera of a ``camera`` description; the constructors' errors (``width: ...``) are
+    prefixed with ``where`` (``camera.width: ...``)."""
+    if not isinstance(d, Mapping):
+        raise ValueError(f"{where}: expected a mapping, got {type(d).__name__}")
+    try:
+        return _build_camera(d, where)
+    except (ValueError, TypeError) as e:
+        message = str(e)
+        if message.startswith(f"{where}.") or message.startswith(f"{where}:"):
+            raise
+        raise type(e)(f"{where}.{message}") from None
+
+
+def _build_camera(d, where):
     if "view_proj_inverse" in d:
         expect_keys(d, where, ("view_proj_inverse", "width", "height"))
         return MatrixCamera.from_matrix(d["view_proj_inverse"], d["width"], d["height"])
@@ -120,7 +135,7 @@ def rectangle_from_desc(d, where):
     nn = float(jnp.linalg.norm(n))
     if nn == 0:
         raise ValueError(f"{where}.normal: expected a non-zero vector")
-    size = as_float_array(d.get("size", [2.0, 2.0]), f"{where}.size")
+    size = check_finite(as_float_array(d.get("size", [2.0, 2.0]), f"{where}.size"), f"{where}.size")
     if size.shape != (2,) or bool(jnp.any(size <= 0)):
         raise ValueError(f"{where}.size: expected two positive numbers")
     fr = frame_from_normal(n / nn)
@@ -129,34 +144,127 @@ def rectangle_from_desc(d, where):
     )
 
 
-def mesh_from_desc(d, where, base_dir):
+MESH_SOURCES = ("file", "vertices + faces", "generator")
+"""The ways a ``{type: mesh}`` shape gives its triangles (exactly one per shape)."""
+
+
+def _mesh_file(d, where, base_dir):
     from jaxgfx.render.geometry import mesh_io
 
+    path = d["file"]
+    if not isinstance(path, (str, os.PathLike)):
+        raise ValueError(f"{where}.file: expected a path, got {path!r}")
+    path = os.fspath(path)
+    if not os.path.isabs(path) and base_dir:
+        path = os.path.join(base_dir, path)
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in (".obj", ".ply"):
+        raise ValueError(f"{where}.file: expected an .obj or .ply file, got {path!r}")
+    if not os.path.isfile(path):
+        what = "is a directory" if os.path.isdir(path) else "no such file"
+        raise FileNotFoundError(2, f"{where}.file: {what}", path)
+    try:
+        return (mesh_io.load_obj if ext == ".obj" else mesh_io.load_ply)(path)
+    except ValueError as e:  # name the shape as well as the file
+        raise ValueError(f"{where}.file: {e}") from None
+
+
+def _numbers(x, where):
+    """``x`` as a float array; strings, booleans, ``None`` and ragged lists are one
+    ``ValueError`` naming ``where``."""
+    try:
+        a = np.asarray(x)
+    except (TypeError, ValueError):
+        a = None
+    if a is None or a.dtype.kind not in "iuf":
+        raise ValueError(f"{where}: expected numbers, got {x!r}")
+    return as_float_array(a, where)
+
+
+def _vertex_rows(x, where):
+    v = _numbers(x, where)
+    if v.ndim != 2 or v.shape[1] != 3 or v.shape[0] == 0:
+        raise ValueError(f"{where}: expected rows of 3 coordinates (V, 3), got shape {v.shape}")
+    return check_finite(v, where)
+
+
+def _index_triples(x, where, n_vertices):
+    """Faces ``(F, 3)`` int32 from a list of index triples (or an integer array), each index
+    an integer in ``[0, n_vertices)``: a float (``1.5`` is not truncated), a string or a
+    boolean is an error naming ``where[face]``."""
+    if not isinstance(x, (list, tuple, np.ndarray)) and hasattr(x, "__array__"):
+        x = np.asarray(x)  # a JAX array
+    if isinstance(x, np.ndarray):  # vectorised (a list is checked entry by entry below)
+        if x.dtype.kind not in "iu":
+            raise ValueError(f"{where}: expected integer vertex indices, got {x.dtype} values")
+        if x.ndim != 2 or x.shape[1] != 3 or x.shape[0] == 0:
+            raise ValueError(f"{where}: expected index triples (F, 3), F >= 1, got {x.shape}")
+        bad = np.argwhere((x < 0) | (x >= n_vertices))
+        if bad.size:
+            i, k = bad[0]
+            raise _index_error(f"{where}[{i}]", x[i, k], n_vertices)
+        return x.astype(np.int32)
+    if isinstance(x, (list, tuple)):
+        rows = x
+    else:
+        raise ValueError(f"{where}: expected a list of [i, j, k] vertex index triples, got {x!r}")
+    if not rows:
+        raise ValueError(f"{where}: expected at least one triangle, got none")
+    for i, row in enumerate(rows):
+        if not isinstance(row, (list, tuple, np.ndarray)) or len(row) != 3:
+            raise ValueError(f"{where}[{i}]: expected 3 vertex indices [i, j, k], got {row!r}")
+        for j in row:
+            if isinstance(j, (bool, np.bool_)) or not isinstance(j, (int, np.integer)):
+                raise ValueError(f"{where}[{i}]: expected integer vertex indices, got {j!r}")
+            if not 0 <= j < n_vertices:
+                raise _index_error(f"{where}[{i}]", j, n_vertices)
+    return np.asarray(rows, np.int32)
+
+
+def _index_error(where, j, n_vertices):
+    return ValueError(
+        f"{where}: vertex index {j} out of range [0, {n_vertices - 1}] "
+        f"({n_vertices} vertices; indices are 0-based)"
+    )
+
+
+def _mesh_scale(x, where):
+    s = _numbers(x, where)
+    check_finite(s, where)
+    if s.shape not in ((), (3,)) or not bool(jnp.all(s > 0)):
+        got = s.tolist()
+        raise ValueError(f"{where}: expected a positive number or 3 positive numbers, got {got}")
+    return s
+
+
+def mesh_from_desc(d, where, base_dir):
+    """The :class:`TriangleMesh` of a ``{type: mesh}`` description: exactly one source of
+    :data:`MESH_SOURCES`, then ``scale`` (positive: one number or one per axis) and
+    ``translate``. Each bad entry is one ``ValueError`` naming ``where`` and the key."""
+    from jaxgfx.render.geometry import mesh_io
+
+    inline = "vertices" in d or "faces" in d
+    given = [k for k in ("file", "vertices", "faces", "generator") if k in d]
+    if ("file" in d) + ("generator" in d) + inline > 1:
+        raise ValueError(
+            f"{where}: expected one mesh source ('file', 'vertices' + 'faces' or 'generator'), "
+            f"got {given}"
+        )
     if "file" in d:
-        path = d["file"]
-        if not os.path.isabs(path) and base_dir:
-            path = os.path.join(base_dir, path)
-        ext = os.path.splitext(path)[1].lower()
-        if ext not in (".obj", ".ply"):
-            raise ValueError(f"{where}.file: expected an .obj or .ply file, got {path!r}")
-        try:
-            m = (mesh_io.load_obj if ext == ".obj" else mesh_io.load_ply)(path)
-        except ValueError as e:  # name the shape as well as the file
-            raise ValueError(f"{where}.file: {e}") from None
-    elif "vertices" in d and "faces" in d:
-        v = check_finite(as_float_array(d["vertices"], f"{where}.vertices"), f"{where}.vertices")
-        f = np.asarray(d["faces"])
-        if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
-            raise ValueError(f"{where}: expected vertices (V, 3) and faces (F, 3)")
-        if f.min() < 0 or f.max() >= v.shape[0]:
-            raise ValueError(f"{where}.faces: vertex index out of range")
-        m = TriangleMesh(v, jnp.asarray(f, jnp.int32))
+        m = _mesh_file(d, where, base_dir)
+    elif inline:
+        if "vertices" not in d or "faces" not in d:
+            missing = "faces" if "vertices" in d else "vertices"
+            raise ValueError(f"{where}: inline mesh without {missing!r} (give both)")
+        v = _vertex_rows(d["vertices"], f"{where}.vertices")
+        f = _index_triples(d["faces"], f"{where}.faces", v.shape[0])
+        m = TriangleMesh(v, jnp.asarray(f))
     elif "generator" in d:  # procedural (jaxgfx.render.geometry.mesh_io.MESH_GENERATORS)
         m = mesh_io.mesh_from_generator(d["generator"], f"{where}.generator")
     else:
         raise ValueError(f"{where}: expected 'file', 'vertices' + 'faces' or 'generator'")
     if "translate" in d or "scale" in d:
-        s = as_float_array(d.get("scale", 1.0), f"{where}.scale")
+        s = _mesh_scale(d.get("scale", 1.0), f"{where}.scale")
         t = vec(d.get("translate", [0.0, 0.0, 0.0]), f"{where}.translate")
         normals = m.normals
         if normals is not None:  # normals transform with the inverse transpose: n / s
