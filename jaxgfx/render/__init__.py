@@ -1,8 +1,9 @@
 """jaxgfx.render: a Monte Carlo renderer in pure, jittable, differentiable JAX.
 
-Entry points: :func:`load_scene` (dict / YAML -> :class:`Scene`) and :func:`render`. The
-subpackages follow the data flow: ``scene/`` (description, schema, loader, parameter table,
-Mitsuba export) -> ``camera`` -> ``geometry/`` (rays, shapes, intersection tests, SDFs,
+Entry points: :func:`load_scene` (dict / YAML / Mitsuba 3 XML -> :class:`Scene`) and
+:func:`render`. The subpackages follow the data flow: ``scene/`` (description, schema,
+loader, parameter table, Mitsuba export and XML import) -> ``camera`` -> ``geometry/``
+(rays, shapes, intersection tests, SDFs,
 ``accel/``) -> ``bsdf/`` (BSDF models, microfacet distributions, Fresnel, textures) with
 ``emitters`` and ``warp`` (sampling) -> ``integrators/`` (integrator objects) -> ``film`` and
 ``render`` (``sampler``: counter-based uniform numbers). See docs/architecture.md,
@@ -44,6 +45,7 @@ from jaxgfx.render.integrators import WhittedIntegrator as WhittedIntegrator
 from jaxgfx.render.render import render as render
 from jaxgfx.render.scene import Scene as Scene
 from jaxgfx.render.scene import load_scene as load_scene
+from jaxgfx.render.scene import read_xml as read_xml
 
 __all__ = [
     "accel",
@@ -54,6 +56,7 @@ __all__ = [
     "GradStats",
     "decorrelated",
     "load_scene",
+    "read_xml",
     "Scene",
     "INTEGRATORS",
     "AOV_CHANNELS",

@@ -86,8 +86,12 @@ def _concat(shapes):
     )
 
 
-def load_scene(desc, *, base_dir: str | None = None, accel: str = "auto", dtype=None) -> Scene:
-    """Build a :class:`Scene` from a description mapping or a YAML file path.
+def load_scene(
+    desc, *, base_dir: str | None = None, accel: str = "auto", dtype=None, **params
+) -> Scene:
+    """Build a :class:`Scene` from a description mapping, a YAML file path or a Mitsuba 3 XML
+    file path (``.xml``; ``params`` replace its ``$name`` parameters, see
+    :func:`jaxgfx.render.scene.mitsuba_xml.read_xml` and docs/render_scenes.md).
 
     ``dtype``: the float dtype of every scene array and of the render (``float32`` or
     ``float64``); ``None`` is JAX's default float (float64 when ``jax_enable_x64`` is on, else
@@ -103,7 +107,14 @@ def load_scene(desc, *, base_dir: str | None = None, accel: str = "auto", dtype=
 
     accel = resolve_backend(accel)  # ValueError / ImportError before any work
     dtype = _float_dtype(dtype)
-    if isinstance(desc, (str, os.PathLike)):
+    is_xml = isinstance(desc, (str, os.PathLike)) and os.fspath(desc).lower().endswith(".xml")
+    if params and not is_xml:
+        raise TypeError(f"load_scene: parameters {sorted(params)} are for .xml scenes only")
+    if is_xml:  # Mitsuba 3 XML: translated into a description (absolute file paths)
+        from jaxgfx.render.scene.mitsuba_xml import read_xml
+
+        desc = read_xml(desc, **params).desc
+    elif isinstance(desc, (str, os.PathLike)):
         from jaxgfx.config import read_yaml
 
         base_dir = base_dir or os.path.dirname(os.path.abspath(os.fspath(desc)))

@@ -131,6 +131,11 @@ def _build_camera(d, where):
 
 
 def rectangle_from_desc(d, where):
+    if "edge_u" in d or "edge_v" in d:  # a parallelogram given by its full edge vectors
+        eu, ev = vec(d.get("edge_u"), f"{where}.edge_u"), vec(d.get("edge_v"), f"{where}.edge_v")
+        if not float(jnp.linalg.norm(jnp.cross(eu, ev))) > 0:
+            raise ValueError(f"{where}.edge_v: edge_u and edge_v must span a parallelogram")
+        return Rectangles(vec(d["center"], f"{where}.center")[None], eu[None], ev[None])
     n = vec(d["normal"], f"{where}.normal")
     nn = float(jnp.linalg.norm(n))
     if nn == 0:
@@ -258,7 +263,16 @@ def mesh_from_desc(d, where, base_dir):
             raise ValueError(f"{where}: inline mesh without {missing!r} (give both)")
         v = _vertex_rows(d["vertices"], f"{where}.vertices")
         f = _index_triples(d["faces"], f"{where}.faces", v.shape[0])
-        m = TriangleMesh(v, jnp.asarray(f))
+        extra = {}
+        for key, width in (("normals", 3), ("uvs", 2)):  # optional per-vertex attributes
+            if key in d:
+                a = check_finite(_numbers(d[key], f"{where}.{key}"), f"{where}.{key}")
+                if a.shape != (v.shape[0], width):
+                    raise ValueError(
+                        f"{where}.{key}: expected shape ({v.shape[0]}, {width}), got {a.shape}"
+                    )
+                extra[key] = a
+        m = TriangleMesh(v, jnp.asarray(f), extra.get("normals"), extra.get("uvs"))
     elif "generator" in d:  # procedural (jaxgfx.render.geometry.mesh_io.MESH_GENERATORS)
         m = mesh_io.mesh_from_generator(d["generator"], f"{where}.generator")
     else:
@@ -270,6 +284,17 @@ def mesh_from_desc(d, where, base_dir):
         if normals is not None:  # normals transform with the inverse transpose: n / s
             normals = safe_normalize(normals / s)
         m = TriangleMesh(m.vertices * s + t, m.faces, normals, m.uvs)
+    if "to_world" in d:  # 4x4 affine matrix (column vectors), after translate / scale
+        mat = check_finite(as_float_array(d["to_world"], f"{where}.to_world"), f"{where}.to_world")
+        if mat.shape != (4, 4) or not np.allclose(np.asarray(mat[3]), [0, 0, 0, 1]):
+            raise ValueError(f"{where}.to_world: expected a 4x4 affine matrix (last row 0 0 0 1)")
+        lin = mat[:3, :3]
+        if abs(float(jnp.linalg.det(lin))) == 0:
+            raise ValueError(f"{where}.to_world: the matrix is singular")
+        normals = m.normals
+        if normals is not None:  # normals transform with the inverse transpose
+            normals = safe_normalize(normals @ jnp.linalg.inv(lin))
+        m = TriangleMesh(m.vertices @ lin.T + mat[:3, 3], m.faces, normals, m.uvs)
     return m
 
 
@@ -283,14 +308,28 @@ def shape_from_desc(d, where, base_dir):
         r = num(d["radius"], f"{where}.radius", positive=True)
         return "sphere", Spheres(vec(d["center"], f"{where}.center")[None], r[None])
     if kind == "rectangle":
-        expect_keys(d, where, ("type", "center", "normal"), (*common, "size"))
+        if "edge_u" in d or "edge_v" in d:
+            expect_keys(d, where, ("type", "center", "edge_u", "edge_v"), common)
+        else:
+            expect_keys(d, where, ("type", "center", "normal"), (*common, "size"))
         return "rectangle", rectangle_from_desc(d, where)
     if kind == "mesh":
         expect_keys(
             d,
             where,
             ("type",),
-            (*common, "file", "vertices", "faces", "generator", "translate", "scale"),
+            (
+                *common,
+                "file",
+                "vertices",
+                "faces",
+                "normals",
+                "uvs",
+                "generator",
+                "translate",
+                "scale",
+                "to_world",
+            ),
         )
         return "mesh", mesh_from_desc(d, where, base_dir)
     if kind == "sdf":

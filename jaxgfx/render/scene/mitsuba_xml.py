@@ -1,0 +1,1239 @@
+"""Mitsuba 3 XML scenes -> jaxgfx scene descriptions (then the normal loader).
+
+:func:`read_xml` parses a Mitsuba 3 scene file (``<scene version=...>``) into an
+:class:`XMLScene`: the jaxgfx description dict (``desc``, what :func:`load_scene` builds a
+:class:`Scene` from) plus the render options the file states (``spp``, ``integrator``,
+``max_depth``, ``rr_depth``). ``load_scene("scene.xml", **params)`` calls it.
+
+Supported: ``<default>`` and ``$name`` substitution (keyword arguments override defaults),
+``<include>``, ``<path>``, ``id`` / ``<ref>``, nested ``to_world`` transforms (``translate``,
+``rotate``, ``scale``, ``matrix``, ``lookat``), the plugins and parameters listed in
+docs/render_scenes.md ("Mitsuba 3 XML scenes"). Everything else (an unknown plugin, tag,
+attribute or parameter) raises one ``ValueError`` naming it, the object's ``id`` and
+``file:line``, before anything is traced: a scene is never silently changed.
+
+Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsuba_xml*.py):
+
+* transforms: column vectors, each element left-multiplies the matrix so far; ``rotate`` is
+  right-handed about ``axis`` by ``angle`` degrees; ``matrix`` is row-major.
+* sensor: ``to_world`` must be rigid (rotation + translation, det +1); camera looks along its
+  local +z with +y up. ``fov_axis`` ``diagonal`` / ``smaller`` / ``larger`` are converted to an
+  x- or y-fov; without ``fov``, ``focal_length`` (default ``50mm``) is the diagonal fov of a
+  36 x 24 mm film. ``near_clip`` / ``far_clip`` are accepted only when no geometry lies where
+  they would clip camera rays (checked on bounding boxes).
+* OBJ texture coordinates are flipped (``v -> 1 - v``, Mitsuba's ``flip_tex_coords``); PLY's
+  are not. Meshes without vertex normals get Mitsuba's angle-weighted smooth normals unless
+  ``face_normals`` is true.
+* spectra: ``<spectrum value="v">`` is the constant ``v``; wavelength lists
+  ``"l1:v1, l2:v2, ..."`` are converted to linear sRGB as Mitsuba 3's RGB variants do
+  (piecewise-linear spectrum, zero outside the listed range, against the CIE 1931 2 degree
+  observer from colour-science, 1000 samples over 360-830 nm; reflectances weighted by D65 and
+  normalised by its luminance, emission normalised by the CMFs' y integral).
+* Mitsuba's one-sided BSDFs (``diffuse``, ``conductor``, ``roughconductor``, ``roughplastic``)
+  are shaded on both sides in jaxgfx: the image agrees where back faces are not seen
+  (``twosided`` is therefore a pass-through wrapper).
+* ``envmap``: same direction -> (u, v) map as jaxgfx (y up); Mitsuba places rows at
+  ``v = j / (H - 1)``, jaxgfx at ``(j + 1/2) / H'``: the map is resampled to ``H' = 4 H`` rows
+  with Mitsuba's linear interpolation along v (exact between Mitsuba's rows up to the
+  interpolation of the resampled grid, see :func:`envmap_from_mitsuba`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import re
+import xml.parsers.expat
+
+import numpy as np
+
+__all__ = [
+    "XMLScene",
+    "read_xml",
+    "IOR_TABLE",
+    "spectrum_to_rgb",
+    "envmap_from_mitsuba",
+    "transform_matrix",
+]
+
+# Mitsuba 3's named indices of refraction (src/render/ior.h, checked against Mitsuba 3.9.1)
+IOR_TABLE = {
+    "vacuum": 1.0,
+    "helium": 1.000036,
+    "hydrogen": 1.000132,
+    "air": 1.000277,
+    "carbon dioxide": 1.00045,
+    "water": 1.3330,
+    "acetone": 1.36,
+    "ethanol": 1.361,
+    "carbon tetrachloride": 1.461,
+    "glycerol": 1.4729,
+    "benzene": 1.501,
+    "silicone oil": 1.52045,
+    "bromine": 1.661,
+    "water ice": 1.31,
+    "fused quartz": 1.458,
+    "pyrex": 1.470,
+    "acrylic glass": 1.49,
+    "polypropylene": 1.49,
+    "bk7": 1.5046,
+    "sodium chloride": 1.544,
+    "amber": 1.55,
+    "pet": 1.5750,
+    "diamond": 2.419,
+}
+
+ENVMAP_ROW_FACTOR = 4
+DISK_SEGMENTS = 256
+
+
+@dataclasses.dataclass(frozen=True)
+class XMLScene:
+    """A translated Mitsuba scene: ``desc`` (the jaxgfx scene description; every file path in
+    it is absolute), the sampler's ``spp`` (``None`` without a sensor sampler), the jaxgfx
+    ``integrator`` name (``"path"`` or ``"direct"``), ``max_depth`` in the common convention
+    (``None``: Mitsuba's ``-1``, unbounded; jaxgfx needs a number), ``rr_depth``, and
+    ``files`` (every XML file read, in order)."""
+
+    desc: dict
+    spp: int | None
+    integrator: str
+    max_depth: int | None
+    rr_depth: int
+    files: tuple
+
+
+# ------------------------------------------------------------------------------------------
+# XML parsing with line numbers
+
+
+@dataclasses.dataclass
+class _Node:
+    tag: str
+    attrs: dict
+    file: str
+    line: int
+    children: list = dataclasses.field(default_factory=list)
+
+    @property
+    def at(self) -> str:
+        return f"{self.file}:{self.line}"
+
+
+def _parse(path: str) -> _Node:
+    parser = xml.parsers.expat.ParserCreate()
+    stack: list[_Node] = []
+    root: list[_Node] = []
+
+    def start(tag, attrs):
+        node = _Node(tag, dict(attrs), path, parser.CurrentLineNumber)
+        (stack[-1].children if stack else root).append(node)
+        stack.append(node)
+
+    def end(tag):
+        stack.pop()
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = end
+    try:
+        with open(path, "rb") as f:
+            parser.ParseFile(f)
+    except OSError as e:
+        raise ValueError(f"{path}: cannot read the scene file: {e.strerror or e}") from None
+    except xml.parsers.expat.ExpatError as e:
+        msg = xml.parsers.expat.ErrorString(e.code)
+        raise ValueError(f"{path}:{e.lineno}: XML syntax error: {msg}") from None
+    return root[0]
+
+
+# ------------------------------------------------------------------------------------------
+# values
+
+
+def _floats(text, where, n=None):
+    parts = [p for p in re.split(r"[,\s]+", str(text).strip()) if p]
+    try:
+        vals = [float(p) for p in parts]
+    except ValueError:
+        raise ValueError(f"{where}: expected numbers, got {text!r}") from None
+    if not vals or not all(math.isfinite(v) for v in vals):
+        raise ValueError(f"{where}: expected finite numbers, got {text!r}")
+    if n is not None and len(vals) not in n:
+        raise ValueError(f"{where}: expected {' or '.join(map(str, n))} numbers, got {text!r}")
+    return vals
+
+
+def spectrum_to_rgb(wavelengths, values, *, emission: bool) -> np.ndarray:
+    """Linear sRGB of a piecewise-linear spectrum as Mitsuba 3's RGB variants compute it.
+
+    The spectrum is zero outside ``[wavelengths[0], wavelengths[-1]]`` (nm). ``emission``:
+    integrate against the CIE 1931 2 degree CMFs and divide by the integral of y-bar (radiance,
+    intensity); else weight by illuminant D65 and divide by the luminance of D65
+    (reflectances). 1000 samples over 360-830 nm, XYZ -> linear sRGB.
+
+    Example: a constant reflectance 0.5 from 360 to 830 nm gives about (0.5, 0.5, 0.5).
+    """
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        import colour
+
+        cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
+        lam = np.linspace(360.0, 830.0, 1000)
+        xyz = np.asarray(cmfs[lam], np.float64)
+        w = np.ones_like(lam) if emission else np.asarray(colour.SDS_ILLUMINANTS["D65"][lam])
+    wl, v = np.asarray(wavelengths, np.float64), np.asarray(values, np.float64)
+    s = np.interp(lam, wl, v)
+    s[(lam < wl[0]) | (lam > wl[-1])] = 0.0
+    total = (xyz * (s * w)[:, None]).sum(0) / (xyz[:, 1] * w).sum()
+    to_srgb = np.array(
+        [
+            [3.240479, -1.537150, -0.498535],
+            [-0.969256, 1.875991, 0.041556],
+            [0.055648, -0.204043, 1.057311],
+        ]
+    )
+    return to_srgb @ total
+
+
+def _rot(axis, angle_deg):
+    a = np.asarray(axis, np.float64)
+    a = a / np.linalg.norm(a)
+    c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    m = np.eye(4)
+    m[:3, :3] = c * np.eye(3) + s * k + (1 - c) * np.outer(a, a)
+    return m
+
+
+def _look_at(origin, target, up):
+    o, t, u = (np.asarray(x, np.float64) for x in (origin, target, up))
+    d = t - o
+    if not np.linalg.norm(d) > 0:
+        raise ValueError("origin and target coincide")
+    d = d / np.linalg.norm(d)
+    left = np.cross(u, d)
+    if not np.linalg.norm(left) > 0:
+        raise ValueError("up is parallel to the viewing direction")
+    left /= np.linalg.norm(left)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, np.cross(d, left), d, o
+    return m
+
+
+def transform_matrix(ops) -> np.ndarray:
+    """The 4x4 matrix of a list of ``(op, kwargs)`` transform elements, applied in order (each
+    left-multiplies): ``("translate", {"v": (x, y, z)})``, ``("scale", {"v": (x, y, z)})``,
+    ``("rotate", {"axis": a, "angle": deg})``, ``("matrix", {"m": 4x4})``,
+    ``("lookat", {"origin", "target", "up"})``.
+
+    Example: ``transform_matrix([("translate", {"v": (1, 2, 3)})])[:3, 3]`` is ``[1, 2, 3]``.
+    """
+    m = np.eye(4)
+    for op, kw in ops:
+        if op == "translate":
+            t = np.eye(4)
+            t[:3, 3] = kw["v"]
+        elif op == "scale":
+            t = np.diag([*kw["v"], 1.0])
+        elif op == "rotate":
+            t = _rot(kw["axis"], kw["angle"])
+        elif op == "matrix":
+            t = np.asarray(kw["m"], np.float64)
+        elif op == "lookat":
+            t = _look_at(kw["origin"], kw["target"], kw["up"])
+        else:  # pragma: no cover - the parser only produces the ops above
+            raise ValueError(op)
+        m = t @ m
+    return m
+
+
+def envmap_from_mitsuba(image, factor: int = ENVMAP_ROW_FACTOR) -> np.ndarray:
+    """Resample a Mitsuba 3 lat-long map ``(H, W, 3)`` (rows at ``v = j / (H - 1)``) for
+    jaxgfx's lookup (texel centres at ``v = (i + 1/2) / H'``): ``H' = factor * H`` rows, row
+    ``i`` = Mitsuba's linear interpolation at ``(i + 1/2) / H'``. Columns are unchanged (both
+    place them at ``(k + 1/2) / W``). jaxgfx then interpolates linearly between these samples
+    of Mitsuba's piecewise-linear profile; the two differ only in the sub-rows around each of
+    Mitsuba's rows (the resampled profile cuts the corner) and in the half sub-row next to each
+    pole (clamped).
+
+    Example: a 2-row map with rows 0 and 1 and ``factor=1`` gives rows 0.25 and 0.75.
+    """
+    img = np.asarray(image, np.float64)[..., :3]
+    h = img.shape[0]
+    n = factor * h
+    v = (np.arange(n) + 0.5) / n * (h - 1)
+    j0 = np.clip(np.floor(v).astype(int), 0, h - 2)
+    f = (v - j0)[:, None, None]
+    return ((1 - f) * img[j0] + f * img[j0 + 1]).astype(np.float32)
+
+
+# ------------------------------------------------------------------------------------------
+# the document: substitution, includes, objects
+
+
+_VALUE_TAGS = ("float", "integer", "boolean", "string", "rgb", "spectrum", "point", "vector")
+_OBJECT_TAGS = ("bsdf", "texture", "shape", "emitter", "sensor", "film", "sampler", "rfilter",
+                "integrator")  # fmt: skip
+_UNSUPPORTED_TAGS = ("medium", "phase", "volume", "alias")
+
+
+@dataclasses.dataclass
+class _Prop:
+    kind: str
+    value: object
+    node: _Node
+    used: bool = False
+
+
+@dataclasses.dataclass
+class _Obj:
+    tag: str
+    type: str
+    id: str | None
+    node: _Node
+    props: dict = dataclasses.field(default_factory=dict)
+    children: list = dataclasses.field(default_factory=list)
+    converted: object = None  # the BSDF's material name once converted
+
+    @property
+    def label(self) -> str:
+        ident = f" id={self.id!r}" if self.id else ""
+        return f"<{self.tag} type={self.type!r}{ident}>"
+
+    @property
+    def where(self) -> str:
+        return f"{self.node.at}: {self.label}"
+
+
+class _Doc:
+    def __init__(self, path, params):
+        self.params = {str(k): str(v).lower() if isinstance(v, bool) else str(v)
+                       for k, v in params.items()}  # fmt: skip
+        self.given = set(self.params)
+        self.used: set[str] = set()
+        self.ids: dict[str, _Obj] = {}
+        self.files: list[str] = []
+        self.search: list[str] = []
+        self.stack: list[str] = []
+
+    def sub(self, node: _Node) -> dict:
+        """The node's attributes with ``$name`` replaced by the parameters."""
+        out = {}
+        for k, v in node.attrs.items():
+
+            def rep(m, k=k, v=v):
+                name = m.group(1)
+                if name not in self.params:
+                    raise ValueError(
+                        f"{node.at}: <{node.tag}> attribute {k}={v!r}: undefined parameter "
+                        f"${name} (give it as a keyword argument or a <default>)"
+                    )
+                self.used.add(name)
+                return self.params[name]
+
+            out[k] = re.sub(r"\$([A-Za-z_][A-Za-z0-9_]*)", rep, v)
+        return out
+
+    def resolve(self, name, node, label=None):
+        label = label or f"<{node.tag}>"
+        name = os.path.expanduser(name)
+        if os.path.isabs(name):
+            if os.path.isfile(name):
+                return name
+            raise ValueError(f"{node.at}: {label} filename {name!r}: no such file")
+        for d in self.search:
+            p = os.path.join(d, name)
+            if os.path.isfile(p):
+                return os.path.abspath(p)
+        raise ValueError(
+            f"{node.at}: {label} filename {name!r}: no such file (searched {self.search})"
+        )
+
+
+def _attrs(node, attrs, required=(), optional=(), what=None):
+    unknown = sorted(set(attrs) - set(required) - set(optional))
+    what = what or f"<{node.tag}>"
+    if unknown:
+        raise ValueError(f"{node.at}: {what}: unsupported attribute(s) {unknown}")
+    missing = [a for a in required if a not in attrs]
+    if missing:
+        raise ValueError(f"{node.at}: {what}: missing attribute(s) {missing}")
+
+
+def _xyz(attrs, node, default):
+    if "value" in attrs:
+        if any(k in attrs for k in "xyz"):
+            raise ValueError(f"{node.at}: <{node.tag}>: give either value or x/y/z")
+        v = _floats(attrs["value"], f"{node.at}: <{node.tag}> value", (1, 3))
+        return v * 3 if len(v) == 1 else v
+    return [_floats(attrs.get(k, str(default)), f"{node.at}: <{node.tag}> {k}", (1,))[0]
+            for k in "xyz"]  # fmt: skip
+
+
+def _transform(doc, node) -> np.ndarray:
+    ops = []
+    for c in node.children:
+        a = doc.sub(c)
+        at = f"{c.at}: <{c.tag}>"
+        if c.tag == "translate":
+            _attrs(c, a, (), ("x", "y", "z", "value"))
+            ops.append(("translate", {"v": _xyz(a, c, 0.0)}))
+        elif c.tag == "scale":
+            _attrs(c, a, (), ("x", "y", "z", "value"))
+            ops.append(("scale", {"v": _xyz(a, c, 1.0)}))
+        elif c.tag == "rotate":
+            _attrs(c, a, ("angle",), ("x", "y", "z", "value"))
+            if "value" in a:
+                axis = _floats(a["value"], f"{at} value", (3,))
+            else:
+                axis = _xyz(a, c, 0.0)
+            if not np.linalg.norm(axis) > 0:
+                raise ValueError(f"{at}: the rotation axis is zero")
+            angle = _floats(a["angle"], f"{at} angle", (1,))[0]
+            ops.append(("rotate", {"axis": axis, "angle": angle}))
+        elif c.tag == "matrix":
+            _attrs(c, a, ("value",))
+            v = _floats(a["value"], f"{at} value", (9, 16))
+            if len(v) == 9:
+                m = np.eye(4)
+                m[:3, :3] = np.reshape(v, (3, 3))
+            else:
+                m = np.reshape(v, (4, 4))
+            ops.append(("matrix", {"m": m}))
+        elif c.tag == "lookat":
+            _attrs(c, a, ("origin", "target", "up"))
+            kw = {k: _floats(a[k], f"{at} {k}", (3,)) for k in ("origin", "target", "up")}
+            try:
+                _look_at(**kw)
+            except ValueError as e:
+                raise ValueError(f"{at}: {e}") from None
+            ops.append(("lookat", kw))
+        else:
+            raise ValueError(f"{c.at}: <{c.tag}> inside <transform>: unsupported transform")
+    m = transform_matrix(ops)
+    if not np.all(np.isfinite(m)) or abs(np.linalg.det(m[:3, :3])) < 1e-300:
+        raise ValueError(f"{node.at}: <transform>: the matrix is singular or not finite")
+    return m
+
+
+def _value(doc, node, a):
+    """(kind, value) of a value element (attributes already substituted)."""
+    tag, at = node.tag, f"{node.at}: <{node.tag} name={a.get('name')!r}>"
+    if tag in ("float", "integer", "boolean", "string"):
+        _attrs(node, a, ("name", "value"), what=at)
+        v = a["value"]
+        if tag == "float":
+            return "float", _floats(v, at, (1,))[0]
+        if tag == "integer":
+            try:
+                return "integer", int(v)
+            except ValueError:
+                raise ValueError(f"{at}: expected an integer, got {v!r}") from None
+        if tag == "boolean":
+            if v.lower() not in ("true", "false"):
+                raise ValueError(f"{at}: expected true or false, got {v!r}")
+            return "boolean", v.lower() == "true"
+        return "string", v
+    if tag == "rgb":
+        _attrs(node, a, ("name", "value"), what=at)
+        v = _floats(a["value"], at, (1, 3))
+        return "rgb", np.asarray(v * 3 if len(v) == 1 else v, np.float64)
+    if tag == "spectrum":
+        _attrs(node, a, ("name",), ("value", "filename"), what=at)
+        if "value" not in a:
+            raise ValueError(f"{at}: spectra from files are not supported (give value=...)")
+        text = a["value"].strip()
+        if ":" not in text:
+            v = _floats(text, at, (1,))[0]
+            return "spectrum", ("const", v)
+        wl, vals = [], []
+        for item in [p for p in re.split(r"\s*,\s*|\s+", text) if p]:
+            lv = item.split(":")
+            if len(lv) != 2:
+                raise ValueError(f"{at}: expected 'wavelength:value' pairs, got {item!r}")
+            w, x = (_floats(t, at, (1,))[0] for t in lv)
+            wl.append(w)
+            vals.append(x)
+        if len(wl) < 2 or any(b <= a_ for a_, b in zip(wl, wl[1:], strict=False)):
+            raise ValueError(f"{at}: expected at least two increasing wavelengths")
+        return "spectrum", ("list", wl, vals)
+    if tag in ("point", "vector"):
+        _attrs(node, a, ("name",), ("x", "y", "z", "value"), what=at)
+        if "value" in a:
+            return tag, _floats(a["value"], at, (3,))
+        return tag, _xyz(a, node, 0.0)
+    raise AssertionError(tag)  # pragma: no cover
+
+
+def _object(doc, node) -> _Obj:
+    """An object element (``<bsdf type=...>`` ...) with its properties and children."""
+    a = doc.sub(node)
+    _attrs(node, a, ("type",), ("id", "name"))
+    obj = _Obj(node.tag, a["type"], a.get("id"), node)
+    for c in node.children:
+        ca = doc.sub(c)
+        if c.tag in _VALUE_TAGS:
+            kind, v = _value(doc, c, ca)
+            _set(obj, ca["name"], _Prop(kind, v, c))
+        elif c.tag == "transform":
+            _attrs(c, ca, ("name",))
+            _set(obj, ca["name"], _Prop("transform", _transform(doc, c), c))
+        elif c.tag == "ref":
+            _attrs(c, ca, ("id",), ("name",))
+            if ca["id"] not in doc.ids:
+                raise ValueError(
+                    f"{c.at}: <ref id={ca['id']!r}>: unknown id (defined so far: {sorted(doc.ids)})"
+                )
+            target = doc.ids[ca["id"]]
+            if "name" in ca:
+                _set(obj, ca["name"], _Prop("object", target, c))
+            else:
+                obj.children.append(target)
+        elif c.tag in _OBJECT_TAGS:
+            child = _object(doc, c)
+            if child.id:
+                _register(doc, child)
+            cname = doc.sub(c).get("name")
+            if cname is not None:
+                _set(obj, cname, _Prop("object", child, c))
+            else:
+                obj.children.append(child)
+        else:
+            raise ValueError(f"{c.at}: <{c.tag}> inside {obj.where}: unsupported element")
+    return obj
+
+
+def _set(obj, name, prop):
+    if name in obj.props:
+        raise ValueError(f"{prop.node.at}: {obj.where}: parameter {name!r} given twice")
+    obj.props[name] = prop
+
+
+def _register(doc, obj):
+    if obj.id in doc.ids:
+        raise ValueError(f"{obj.where}: id {obj.id!r} already defined at "
+                         f"{doc.ids[obj.id].node.at}")  # fmt: skip
+    doc.ids[obj.id] = obj
+
+
+def _walk_scene(doc, node, out: list):
+    """Top-level objects of ``node`` (a ``<scene>``) in order, with includes spliced in."""
+    for c in node.children:
+        if c.tag == "default":
+            a = doc.sub(c)
+            _attrs(c, a, ("name", "value"))
+            doc.params.setdefault(a["name"], a["value"])
+            if a["name"] in doc.given:
+                doc.used.add(a["name"])
+        elif c.tag == "path":
+            a = doc.sub(c)
+            _attrs(c, a, ("value",))
+            p = os.path.expanduser(a["value"])
+            p = p if os.path.isabs(p) else os.path.join(os.path.dirname(c.file), p)
+            if not os.path.isdir(p):
+                raise ValueError(f"{c.at}: <path value={a['value']!r}>: no such folder")
+            doc.search.insert(0, os.path.abspath(p))
+        elif c.tag == "include":
+            a = doc.sub(c)
+            _attrs(c, a, ("filename",))
+            path = doc.resolve(a["filename"], c)
+            if path in doc.stack:
+                raise ValueError(f"{c.at}: <include filename={a['filename']!r}>: include cycle")
+            _read_file(doc, path, out)
+        elif c.tag in _OBJECT_TAGS:
+            obj = _object(doc, c)
+            if obj.id:
+                _register(doc, obj)
+            out.append(obj)
+        elif c.tag in _UNSUPPORTED_TAGS:
+            raise ValueError(f"{c.at}: <{c.tag}>: not supported (jaxgfx renders surfaces only)")
+        else:
+            raise ValueError(f"{c.at}: <{c.tag}>: unsupported element in <scene>")
+
+
+def _read_file(doc, path, out):
+    path = os.path.abspath(path)
+    root = _parse(path)
+    if root.tag != "scene":
+        raise ValueError(f"{root.at}: expected a <scene> root element, got <{root.tag}>")
+    a = doc.sub(root)
+    _attrs(root, a, ("version",))
+    try:
+        major = int(a["version"].split(".")[0])
+    except ValueError:
+        raise ValueError(f"{root.at}: <scene version={a['version']!r}>: bad version") from None
+    if major < 2:
+        raise ValueError(
+            f"{root.at}: <scene version={a['version']!r}>: Mitsuba 0.x scenes (camelCase "
+            "names) are not supported; upgrade the file to version 2 or 3"
+        )
+    doc.files.append(path)
+    if not doc.search:
+        doc.search.append(os.path.dirname(path))
+    doc.stack.append(path)
+    _walk_scene(doc, root, out)
+    doc.stack.pop()
+
+
+# ------------------------------------------------------------------------------------------
+# reading an object's parameters
+
+
+class _Params:
+    """Typed access to an object's parameters; :meth:`done` refuses the ones never read."""
+
+    def __init__(self, obj: _Obj, doc: _Doc):
+        self.obj, self.doc = obj, doc
+
+    def _get(self, name, kinds):
+        p = self.obj.props.get(name)
+        if p is None:
+            return None
+        p.used = True
+        if p.kind not in kinds:
+            raise ValueError(
+                f"{p.node.at}: {self.obj.where}: parameter {name!r}: expected "
+                f"{' or '.join(kinds)}, got <{p.node.tag}>"
+            )
+        return p
+
+    def err(self, name, msg):
+        p = self.obj.props.get(name)
+        at = f"{p.node.at}: " if p is not None and p.node is not self.obj.node else ""
+        return ValueError(f"{at}{self.obj.where}: parameter {name!r}: {msg}")
+
+    def float(self, name, default=None, *, positive=False):
+        p = self._get(name, ("float", "integer"))
+        if p is None:
+            return default
+        if positive and not p.value > 0:
+            raise self.err(name, f"expected a positive number, got {p.value}")
+        return float(p.value)
+
+    def int(self, name, default=None):
+        p = self._get(name, ("integer",))
+        return default if p is None else int(p.value)
+
+    def bool(self, name, default=None):
+        p = self._get(name, ("boolean",))
+        return default if p is None else bool(p.value)
+
+    def string(self, name, default=None, choices=None):
+        p = self._get(name, ("string",))
+        if p is None:
+            return default
+        if choices is not None and p.value not in choices:
+            raise self.err(name, f"{p.value!r} is not supported; expected one of {choices}")
+        return p.value
+
+    def vec(self, name, default=None):
+        p = self._get(name, ("point", "vector"))
+        return default if p is None else [float(x) for x in p.value]
+
+    def transform(self, name):
+        p = self._get(name, ("transform",))
+        return None if p is None else p.value
+
+    def color(self, name, default=None, *, emission=False, texture=False):
+        """RGB list, or a texture description (``texture=True``)."""
+        kinds = ("float", "rgb", "spectrum") + (("object",) if texture else ())
+        p = self.obj.props.get(name)
+        if p is not None and p.kind == "object" and not texture:
+            p.used = True
+            raise self.err(name, "textures are not supported for this parameter")
+        p = self._get(name, kinds)
+        if p is None:
+            return default
+        if p.kind == "float":
+            return [p.value] * 3
+        if p.kind == "rgb":
+            return [float(x) for x in p.value]
+        if p.kind == "spectrum":
+            if p.value[0] == "const":
+                return [p.value[1]] * 3
+            return [float(x) for x in spectrum_to_rgb(p.value[1], p.value[2], emission=emission)]
+        if p.value.tag != "texture":
+            raise self.err(name, f"expected a texture, got {p.value.where}")
+        return _texture(p.value, self.doc)
+
+    def scalar_or_texture(self, name, default=None):
+        p = self.obj.props.get(name)
+        if p is not None and p.kind == "object":
+            return self.color(name, texture=True)
+        return self.float(name, default)
+
+    def ior(self, name, default):
+        p = self._get(name, ("float", "string"))
+        if p is None:
+            return IOR_TABLE[default]
+        if p.kind == "float":
+            if not p.value > 0:
+                raise self.err(name, f"expected a positive number, got {p.value}")
+            return float(p.value)
+        key = p.value.lower()
+        if key not in IOR_TABLE:
+            raise self.err(name, f"unknown IOR name {p.value!r}; expected one of "
+                                 f"{sorted(IOR_TABLE)}")  # fmt: skip
+        return IOR_TABLE[key]
+
+    def done(self, children_ok=0):
+        for name, p in self.obj.props.items():
+            if not p.used:
+                raise ValueError(
+                    f"{p.node.at}: {self.obj.where}: parameter {name!r} is not supported"
+                )
+        if len(self.obj.children) > children_ok:
+            c = self.obj.children[children_ok]
+            raise ValueError(
+                f"{c.node.at}: {self.obj.where}: nested <{c.tag} type={c.type!r}> is not "
+                "supported here"
+            )
+
+
+# ------------------------------------------------------------------------------------------
+# textures and BSDFs
+
+
+def _uv_scale(p: _Params, name="to_uv"):
+    m = p.transform(name)
+    if m is None:
+        return None
+    lin, off = m[:3, :3], m[:3, 3]
+    if not (np.allclose(lin, np.diag(np.diag(lin))) and np.allclose(off, 0)
+            and math.isclose(lin[0, 0], lin[1, 1])):  # fmt: skip
+        raise p.err(name, "only a uniform scale of the texture coordinates is supported")
+    return float(lin[0, 0])
+
+
+def _texture(obj: _Obj, doc) -> dict:
+    p = _Params(obj, doc)
+    if obj.type == "bitmap":
+        path = (
+            doc.resolve(p.string("filename"), obj.props["filename"].node, obj.label)
+            if "filename" in obj.props
+            else None
+        )
+        if path is None:
+            raise ValueError(f"{obj.where}: missing parameter 'filename'")
+        d = {"type": "bitmap", "file": path}
+        d["filter"] = p.string("filter_type", "bilinear", ("bilinear", "nearest"))
+        d["wrap"] = p.string("wrap_mode", "repeat", ("repeat", "mirror", "clamp"))
+        d["raw"] = p.bool("raw", False)
+        s = _uv_scale(p)
+        if s is not None and s != 1.0:
+            raise p.err("to_uv", "bitmap textures with a uv transform are not supported")
+        p.done()
+        return d
+    if obj.type == "checkerboard":
+        d = {"type": "checkerboard", "color0": p.color("color0", [0.4] * 3),
+             "color1": p.color("color1", [0.2] * 3)}  # fmt: skip
+        s = _uv_scale(p)
+        if s is not None:
+            if not s > 0:
+                raise p.err("to_uv", "expected a positive scale")
+            d["scale"] = s
+        p.done()
+        return d
+    raise ValueError(f"{obj.where}: texture plugin {obj.type!r} is not supported "
+                     "(bitmap, checkerboard)")  # fmt: skip
+
+
+def _distribution(p: _Params):
+    dist = p.string("distribution", "beckmann", ("beckmann", "ggx"))
+    alpha = p.scalar_or_texture("alpha", None)
+    au, av = p.float("alpha_u"), p.float("alpha_v")
+    if au is not None or av is not None:
+        if alpha is not None:
+            raise p.err("alpha", "give either alpha or alpha_u / alpha_v")
+        if au is None or av is None or au != av:
+            raise p.err("alpha_u", "anisotropic roughness is not supported (the tangent "
+                                   "frames of jaxgfx and Mitsuba differ)")  # fmt: skip
+        alpha = au
+    out = {"distribution": dist, "alpha": 0.1 if alpha is None else alpha,
+           "sample_visible": p.bool("sample_visible", True)}  # fmt: skip
+    return out
+
+
+def _conductor(p: _Params) -> dict:
+    material = p.string("material", "none")
+    if material != "none":
+        raise p.err("material", f"named conductor {material!r} is not supported (no IOR "
+                                "tables in jaxgfx); give eta and k")  # fmt: skip
+    out = {"reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True)}
+    eta, k = p.color("eta"), p.color("k")
+    if eta is None and k is None:
+        out["fresnel"] = "none"
+    else:
+        out.update(fresnel="conductor", eta=eta or [0.0] * 3, k=k or [1.0] * 3)
+    return out
+
+
+def _bsdf(obj: _Obj, doc, desc, *, textured_ok=True) -> str:
+    """The material name of a BSDF object (converted once, shared by references)."""
+    if obj.converted is not None:
+        return obj.converted
+    p = _Params(obj, doc)
+    if obj.type == "twosided":
+        if len(obj.children) != 1 or obj.children[0].tag != "bsdf":
+            raise ValueError(f"{obj.where}: expected exactly one nested <bsdf> (different "
+                             "front and back BSDFs are not supported)")  # fmt: skip
+        p.done(children_ok=1)
+        name = _bsdf(obj.children[0], doc, desc)
+        obj.converted = name
+        return name
+    t = obj.type
+    if t == "diffuse":
+        m = {"type": "diffuse", "reflectance": p.color("reflectance", [0.5] * 3, texture=True)}
+    elif t == "conductor":
+        m = {"type": "conductor", **_conductor(p)}
+    elif t == "roughconductor":
+        m = {"type": "roughconductor", **_distribution(p), **_conductor(p)}
+    elif t == "dielectric":
+        eta = p.ior("int_ior", "bk7") / p.ior("ext_ior", "air")
+        m = {"type": "dielectric", "eta": eta,
+             "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
+             "specular_transmittance": p.color("specular_transmittance", [1.0] * 3,
+                                               texture=True)}  # fmt: skip
+    elif t == "roughplastic":
+        m = {"type": "roughplastic", **_distribution(p),
+             "eta": p.ior("int_ior", "polypropylene") / p.ior("ext_ior", "air"),
+             "diffuse_reflectance": p.color("diffuse_reflectance", [0.5] * 3, texture=True),
+             "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
+             "nonlinear": p.bool("nonlinear", False)}  # fmt: skip
+    else:
+        hint = " (jaxgfx has roughplastic only)" if t == "plastic" else ""
+        raise ValueError(f"{obj.where}: BSDF plugin {t!r} is not supported{hint}")
+    p.done()
+    name = obj.id or f"bsdf_{len(desc['materials'])}"
+    while name in desc["materials"]:
+        name += "_"
+    desc["materials"][name] = m
+    obj.converted = name
+    return name
+
+
+# ------------------------------------------------------------------------------------------
+# shapes
+
+
+def _angle_weighted_normals(v, f):
+    n = np.zeros_like(v)
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    ln = np.linalg.norm(fn, axis=1, keepdims=True)
+    fn = fn / np.where(ln > 0, ln, 1.0)
+    for k in range(3):
+        e1 = v[f[:, (k + 1) % 3]] - v[f[:, k]]
+        e2 = v[f[:, (k + 2) % 3]] - v[f[:, k]]
+        c = np.sum(e1 * e2, 1) / np.maximum(
+            np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1), 1e-300
+        )
+        ang = np.arccos(np.clip(c, -1.0, 1.0))
+        np.add.at(n, f[:, k], fn * ang[:, None])
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    return n / np.where(ln > 0, ln, 1.0)
+
+
+def _cube():
+    v, f, n, uv = [], [], [], []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            nn = np.zeros(3)
+            nn[axis] = sign
+            a, b = [i for i in range(3) if i != axis]
+            base = len(v)
+            for s, t in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+                p = np.zeros(3)
+                p[axis], p[a], p[b] = sign, s, t
+                v.append(p)
+                n.append(nn)
+                uv.append(((s + 1) / 2, (t + 1) / 2))
+            q = [(0, 1, 2), (0, 2, 3)]
+            # counter-clockwise seen from outside: e_a x e_b = +axis for one orientation
+            flip = np.dot(np.cross(np.eye(3)[a], np.eye(3)[b]), nn) < 0
+            f += [(base + i, base + (k if not flip else j), base + (j if not flip else k))
+                  for i, j, k in q]  # fmt: skip
+    return np.array(v), np.array(f), np.array(n), np.array(uv)
+
+
+def _disk(n_seg=DISK_SEGMENTS):
+    ang = 2 * np.pi * np.arange(n_seg) / n_seg
+    v = np.concatenate([[[0.0, 0.0, 0.0]], np.stack([np.cos(ang), np.sin(ang),
+                                                       np.zeros(n_seg)], 1)])  # fmt: skip
+    f = np.array([(0, 1 + i, 1 + (i + 1) % n_seg) for i in range(n_seg)])
+    return v, f, np.tile([0.0, 0.0, 1.0], (n_seg + 1, 1))
+
+
+def _is_textured(desc, name):
+    from jaxgfx.render.bsdf.textured import is_texture_desc
+
+    m = desc["materials"].get(name, {})
+    return any(is_texture_desc(v) for v in m.values())
+
+
+def _shape(obj: _Obj, doc, desc, ctx):
+    """Append the shape (or area light) of ``obj`` to ``desc``."""
+    p = _Params(obj, doc)
+    m = p.transform("to_world")
+    m = np.eye(4) if m is None else m
+    bsdfs = [c for c in obj.children if c.tag == "bsdf"]
+    emitters = [c for c in obj.children if c.tag == "emitter"]
+    other = [c for c in obj.children if c.tag not in ("bsdf", "emitter")]
+    if other:
+        c = other[0]
+        raise ValueError(f"{c.node.at}: {obj.where}: nested <{c.tag} type={c.type!r}> is not "
+                         "supported in a shape")  # fmt: skip
+    if len(bsdfs) > 1 or len(emitters) > 1:
+        raise ValueError(f"{obj.where}: expected at most one <bsdf> and one <emitter>")
+    if p.bool("flip_normals", False):
+        raise p.err("flip_normals", "flipped normals are not supported")
+    if bsdfs:
+        mat = _bsdf(bsdfs[0], doc, desc)
+    else:  # Mitsuba's default BSDF
+        mat = "__mitsuba_default__"
+        desc["materials"].setdefault(mat, {"type": "diffuse", "reflectance": [0.5] * 3})
+    lin, det = m[:3, :3], float(np.linalg.det(m[:3, :3]))
+    t = obj.type
+    if t == "sphere":
+        center = np.asarray(p.vec("center", [0.0, 0.0, 0.0]))
+        radius = p.float("radius", 1.0, positive=True)
+        mm = m @ np.diag([radius, radius, radius, 1.0])
+        mm[:3, 3] = m[:3, :3] @ center + m[:3, 3]
+        ml = mm[:3, :3]
+        s = float(np.linalg.norm(ml[:, 0]))
+        if not np.allclose(ml.T @ ml, s * s * np.eye(3), rtol=1e-6, atol=1e-9 * s * s):
+            raise p.err("to_world", "a sphere's to_world must be a rotation, uniform scale "
+                                    "and translation (no ellipsoids)")  # fmt: skip
+        if _is_textured(desc, mat) and not np.allclose(ml / s, np.eye(3), atol=1e-9):
+            raise p.err("to_world", "rotated textured spheres are not supported (jaxgfx's "
+                                    "sphere uv is in world axes)")  # fmt: skip
+        sd = {"type": "sphere", "center": mm[:3, 3].tolist(), "radius": float(s)}
+        bbox = np.stack([mm[:3, 3] - s, mm[:3, 3] + s])
+    elif t == "rectangle":
+        if emitters and det < 0:
+            raise p.err("to_world", "a mirroring to_world (det < 0) on an emitting rectangle "
+                                    "flips its emitting side; not supported")  # fmt: skip
+        sd = {"type": "rectangle", "center": m[:3, 3].tolist(),
+              "edge_u": (2 * lin[:, 0]).tolist(), "edge_v": (2 * lin[:, 1]).tolist()}  # fmt: skip
+        corners = np.array([[x, y, 0, 1] for x in (-1, 1) for y in (-1, 1)]) @ m.T
+        bbox = np.stack([corners[:, :3].min(0), corners[:, :3].max(0)])
+    elif t in ("obj", "ply", "cube", "disk"):
+        from jaxgfx.render.geometry import mesh_io
+
+        uvs = normals = None
+        if t in ("obj", "ply"):
+            fname = p.string("filename")
+            if fname is None:
+                raise ValueError(f"{obj.where}: missing parameter 'filename'")
+            path = doc.resolve(fname, obj.props["filename"].node, obj.label)
+            try:
+                mesh = (mesh_io.load_obj if t == "obj" else mesh_io.load_ply)(path)
+            except ValueError as e:
+                raise p.err("filename", str(e)) from None
+            v = np.asarray(mesh.vertices, np.float64)
+            f = np.asarray(mesh.faces)
+            if mesh.uvs is not None:
+                uvs = np.asarray(mesh.uvs, np.float64)
+                if t == "obj" and p.bool("flip_tex_coords", True):
+                    uvs = np.stack([uvs[:, 0], 1.0 - uvs[:, 1]], 1)
+            if p.bool("face_normals", False):
+                normals = None
+            elif mesh.normals is not None:
+                normals = np.asarray(mesh.normals, np.float64)
+            else:
+                normals = _angle_weighted_normals(v, f)
+        elif t == "cube":
+            if _is_textured(desc, mat):
+                raise ValueError(f"{obj.where}: textured cubes are not supported (uv layout)")
+            v, f, _, _ = _cube()
+        else:
+            if _is_textured(desc, mat):
+                raise ValueError(f"{obj.where}: textured disks are not supported (uv layout)")
+            v, f, normals = _disk()
+        if emitters and det < 0:
+            raise p.err("to_world", "a mirroring to_world (det < 0) on an emitting mesh "
+                                    "flips its emitting side; not supported")  # fmt: skip
+        sd = {"type": "mesh", "vertices": v.tolist(), "faces": np.asarray(f).tolist()}
+        if normals is not None:
+            sd["normals"] = normals.tolist()
+        if uvs is not None:
+            sd["uvs"] = uvs.tolist()
+        if not np.allclose(m, np.eye(4)):
+            sd["to_world"] = m.tolist()
+        vw = v @ lin.T + m[:3, 3]
+        bbox = np.stack([vw.min(0), vw.max(0)])
+    else:
+        raise ValueError(f"{obj.where}: shape plugin {t!r} is not supported "
+                         "(obj, ply, sphere, rectangle, cube, disk)")  # fmt: skip
+    p.done(children_ok=len(obj.children))
+    ctx["bboxes"].append((bbox, obj))
+    if emitters:
+        e = emitters[0]
+        ep = _Params(e, doc)
+        if e.type != "area":
+            raise ValueError(f"{e.where}: only 'area' emitters can be attached to a shape")
+        rad = ep.color("radiance", [1.0] * 3, emission=True)
+        ep.done()
+        desc["emitters"].append({"type": "area", "shape": sd, "radiance": rad, "material": mat})
+    else:
+        sd["material"] = mat
+        desc["shapes"].append(sd)
+
+
+# ------------------------------------------------------------------------------------------
+# emitters, sensor, integrator
+
+
+def _emitter(obj: _Obj, doc, desc):
+    p = _Params(obj, doc)
+    t = obj.type
+    if t == "point":
+        pos = p.vec("position")
+        m = p.transform("to_world")
+        if m is not None:
+            if pos is not None:
+                raise p.err("position", "give either position or to_world")
+            pos = m[:3, 3].tolist()
+        d = {"type": "point", "position": pos or [0.0, 0.0, 0.0],
+             "intensity": p.color("intensity", [1.0] * 3, emission=True)}  # fmt: skip
+    elif t == "constant":
+        d = {"type": "constant", "radiance": p.color("radiance", [1.0] * 3, emission=True)}
+    elif t == "envmap":
+        from jaxgfx import io
+
+        path = (
+            doc.resolve(p.string("filename"), obj.props["filename"].node, obj.label)
+            if "filename" in obj.props
+            else None
+        )
+        if path is None:
+            raise ValueError(f"{obj.where}: missing parameter 'filename'")
+        m = p.transform("to_world")
+        if m is not None and not np.allclose(m, np.eye(4), atol=1e-9):
+            raise p.err("to_world", "rotated environment maps are not supported")
+        p.string("filter_type", "bilinear", ("bilinear",))
+        try:
+            img = io.read_any(path)
+        except (ValueError, OSError) as e:
+            raise p.err("filename", f"cannot read {path!r}: {e}") from None
+        if img.ndim != 3 or img.shape[-1] < 3 or min(img.shape[:2]) < 2:
+            raise p.err("filename", f"expected an RGB image of at least 2x2, got {img.shape}")
+        d = {"type": "envmap", "image": envmap_from_mitsuba(img),
+             "scale": p.float("scale", 1.0)}  # fmt: skip
+    else:
+        raise ValueError(f"{obj.where}: emitter plugin {t!r} is not supported "
+                         "(area, point, constant, envmap)")  # fmt: skip
+    p.done()
+    desc["emitters"].append(d)
+
+
+def _fov_x_or_y(p: _Params, width, height):
+    aspect = width / height
+    fov = p.float("fov")
+    if fov is None:
+        fl = p.string("focal_length", "50mm")
+        mt = re.fullmatch(r"\s*([0-9.]+)\s*(mm)?\s*", fl)
+        if mt is None or not float(mt.group(1)) > 0:
+            raise p.err("focal_length", f"expected e.g. '50mm', got {fl!r}")
+        fov = 2 * math.degrees(math.atan(math.hypot(36.0, 24.0) / (2 * float(mt.group(1)))))
+        axis = "diagonal"
+    else:
+        axis = p.string("fov_axis", "x", ("x", "y", "diagonal", "smaller", "larger"))
+    if not 0 < fov < 180:
+        raise p.err("fov", f"expected 0 < fov < 180, got {fov}")
+    if axis == "smaller":
+        axis = "y" if aspect > 1 else "x"
+    elif axis == "larger":
+        axis = "x" if aspect > 1 else "y"
+    if axis == "diagonal":
+        w = 2 * math.tan(math.radians(fov) / 2) / math.sqrt(1 + 1 / aspect**2)
+        return 2 * math.degrees(math.atan(w / 2)), "x"
+    return fov, axis
+
+
+def _sensor(obj: _Obj, doc, ctx) -> dict:
+    p = _Params(obj, doc)
+    if obj.type != "perspective":
+        raise ValueError(f"{obj.where}: sensor plugin {obj.type!r} is not supported "
+                         "(perspective)")  # fmt: skip
+    films = [c for c in obj.children if c.tag == "film"]
+    samplers = [c for c in obj.children if c.tag == "sampler"]
+    for c in obj.children:
+        if c.tag not in ("film", "sampler"):
+            raise ValueError(f"{c.node.at}: {obj.where}: nested <{c.tag}> is not supported")
+    width, height, film = 768, 576, {}
+    if films:
+        fo = films[0]
+        fp = _Params(fo, doc)
+        if fo.type != "hdrfilm":
+            raise ValueError(f"{fo.where}: film plugin {fo.type!r} is not supported (hdrfilm)")
+        width, height = fp.int("width", 768), fp.int("height", 576)
+        if width < 1 or height < 1:
+            raise fp.err("width", f"expected positive width and height, got {width}x{height}")
+        fp.string("pixel_format", "rgb", ("rgb", "rgba", "luminance", "luminance_alpha"))
+        fp.string("component_format", "float16", ("float16", "float32", "uint32"))
+        fp.string("file_format", "openexr", ("openexr", "exr", "rgbe", "pfm"))
+        rfs = [c for c in fo.children if c.tag == "rfilter"]
+        rf = rfs[0] if rfs else None
+        if rf is None or rf.type == "gaussian":
+            stddev = 0.5
+            if rf is not None:
+                rp = _Params(rf, doc)
+                stddev = rp.float("stddev", 0.5, positive=True)
+                rp.done()
+            film = {"filter": "gaussian", "stddev": stddev, "radius": 4 * stddev}
+        elif rf.type == "box":
+            _Params(rf, doc).done()
+            film = {"filter": "box"}
+        else:
+            raise ValueError(f"{rf.where}: reconstruction filter {rf.type!r} is not supported "
+                             "(box, gaussian)")  # fmt: skip
+        fp.done(children_ok=len(rfs))
+        if len(rfs) > 1:
+            raise ValueError(f"{fo.where}: expected at most one <rfilter>")
+    spp = None
+    if samplers:
+        so = samplers[0]
+        sp = _Params(so, doc)
+        ok = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
+        if so.type not in ok:
+            raise ValueError(f"{so.where}: sampler plugin {so.type!r} is not supported {ok}")
+        spp = sp.int("sample_count", 4)
+        sp.int("seed")
+        if so.type in ("stratified", "multijitter", "orthogonal"):
+            sp.bool("jitter")
+        sp.done()
+        if spp < 1:
+            raise sp.err("sample_count", f"expected a positive integer, got {spp}")
+    fov, axis = _fov_x_or_y(p, width, height)
+    m = p.transform("to_world")
+    m = np.eye(4) if m is None else m
+    r = m[:3, :3]
+    if not (np.allclose(r.T @ r, np.eye(3), atol=1e-6) and np.linalg.det(r) > 0):
+        raise p.err("to_world", "the camera's to_world must be a rotation and translation "
+                                "(no scale, shear or mirroring)")  # fmt: skip
+    near, far = p.float("near_clip", 1e-2, positive=True), p.float("far_clip", 1e4)
+    if not far > near:
+        raise p.err("far_clip", f"expected far_clip > near_clip, got {far} <= {near}")
+    for name in ("principal_point_offset_x", "principal_point_offset_y"):
+        if p.float(name, 0.0) != 0.0:
+            raise p.err(name, "an off-centre principal point is not supported")
+    if len(films) > 1 or len(samplers) > 1:
+        raise ValueError(f"{obj.where}: expected at most one <film> and one <sampler>")
+    p.done(children_ok=len(obj.children))
+    o = m[:3, 3]
+    cam = {"origin": o.tolist(), "target": (o + r[:, 2]).tolist(), "up": r[:, 1].tolist(),
+           "fov": fov, "fov_axis": axis, "width": width, "height": height}  # fmt: skip
+    tx = math.tan(math.radians(fov) / 2)
+    tx, ty = (tx, tx * height / width) if axis == "x" else (tx * width / height, tx)
+    ctx["clip"] = (o, near, far, math.sqrt(1 + tx * tx + ty * ty), obj)
+    return cam, film, spp
+
+
+def _integrator(obj: _Obj, doc):
+    p = _Params(obj, doc)
+    if obj.type == "moment":  # its first channels are the nested integrator's image
+        if len(obj.children) != 1 or obj.children[0].tag != "integrator":
+            raise ValueError(f"{obj.where}: expected exactly one nested <integrator>")
+        p.done(children_ok=1)
+        return _integrator(obj.children[0], doc)
+    if obj.type not in ("path", "direct"):
+        raise ValueError(f"{obj.where}: integrator plugin {obj.type!r} is not supported "
+                         "(path, direct, moment)")  # fmt: skip
+    if p.bool("hide_emitters", False):
+        raise p.err("hide_emitters", "hidden emitters are not supported")
+    if obj.type == "path":
+        depth = p.int("max_depth", -1)
+        rr = p.int("rr_depth", 5)
+        if depth == 0 or depth < -1 or rr < 1:
+            raise p.err("max_depth", f"expected max_depth -1 or >= 1 and rr_depth >= 1, got "
+                                     f"{depth}, {rr}")  # fmt: skip
+        p.done()
+        return "path", (None if depth == -1 else depth), rr
+    for name in ("emitter_samples", "bsdf_samples"):
+        if p.int(name, 1) != 1:
+            raise p.err(name, "only 1 sample per strategy is supported (jaxgfx direct MIS)")
+    p.done()
+    return "direct", 2, 5
+
+
+def _check_clip(ctx):
+    if "clip" not in ctx:
+        return
+    o, near, far, k, sensor = ctx["clip"]
+    for bbox, obj in ctx["bboxes"]:
+        lo, hi = bbox
+        dmin = float(np.linalg.norm(np.maximum(0.0, np.maximum(lo - o, o - hi))))
+        dmax = float(np.linalg.norm(np.maximum(np.abs(lo - o), np.abs(hi - o))))
+        if dmin < near * k:
+            raise ValueError(
+                f"{sensor.where}: near_clip={near}: {obj.where} comes closer than "
+                f"{near * k:.4g} to the camera, where Mitsuba may clip it (jaxgfx does not clip)"
+            )
+        if dmax > far:
+            raise ValueError(
+                f"{sensor.where}: far_clip={far}: {obj.where} reaches beyond it (Mitsuba clips "
+                "it, jaxgfx does not)"
+            )
+
+
+def read_xml(path, **params) -> XMLScene:
+    """Translate a Mitsuba 3 XML scene file into a jaxgfx :class:`XMLScene`.
+
+    ``params`` replace ``$name`` in attribute values and override ``<default name value>``
+    (like ``mitsuba.load_file(path, name=value)``); a parameter that no ``<default>`` declares
+    and no attribute uses is an error. Relative file names are resolved as Mitsuba does: the
+    ``<path>`` folders (relative to the XML file that names them, latest first), then the
+    folder of the top-level file. Raises ``ValueError`` naming ``file:line`` and the object
+    for anything the translation cannot reproduce.
+
+    Example: ``read_xml("cbox.xml", spp=16).desc["camera"]["fov"]``.
+    """
+    path = os.fspath(path)
+    doc = _Doc(path, params)
+    objs: list[_Obj] = []
+    _read_file(doc, path, objs)
+    unused = sorted(doc.given - doc.used)
+    if unused:
+        raise ValueError(f"{path}: parameter(s) {unused} are neither declared by a <default> "
+                         "nor used as $name in the scene")  # fmt: skip
+    desc: dict = {"materials": {}, "shapes": [], "emitters": []}
+    ctx: dict = {"bboxes": []}
+    sensors = [o for o in objs if o.tag == "sensor"]
+    integ = [o for o in objs if o.tag == "integrator"]
+    if not sensors:
+        raise ValueError(f"{path}: the scene has no <sensor> (jaxgfx needs a camera)")
+    if len(sensors) > 1:
+        raise ValueError(f"{sensors[1].where}: only one sensor is supported")
+    if len(integ) > 1:
+        raise ValueError(f"{integ[1].where}: only one integrator is supported")
+    cam, film, spp = _sensor(sensors[0], doc, ctx)
+    desc["camera"] = cam
+    if film:
+        desc["film"] = film
+    integrator, depth, rr = _integrator(integ[0], doc) if integ else ("path", None, 5)
+    for o in objs:
+        if o.tag == "shape":
+            _shape(o, doc, desc, ctx)
+        elif o.tag == "emitter":
+            _emitter(o, doc, desc)
+        elif o.tag == "bsdf":
+            if not o.id:
+                raise ValueError(f"{o.where}: a top-level <bsdf> needs an id")
+            _bsdf(o, doc, desc)
+        elif o.tag == "texture":
+            if not o.id:
+                raise ValueError(f"{o.where}: a top-level <texture> needs an id")
+            _texture(o, doc)  # validated; used where referenced
+        elif o.tag in ("sensor", "integrator"):
+            continue
+        else:
+            raise ValueError(f"{o.where}: a top-level <{o.tag}> is not supported")
+    if not desc["shapes"] and not any(e["type"] == "area" for e in desc["emitters"]):
+        raise ValueError(f"{path}: the scene has no shapes")
+    _check_clip(ctx)
+    if not desc["emitters"]:
+        del desc["emitters"]
+    return XMLScene(desc, spp, integrator, depth, rr, tuple(doc.files))
