@@ -213,3 +213,57 @@ def test_masked_pixels_do_not_change_the_loss():
     assert value(hidden, mask) == v0
     assert abs(value(visible, mask) - v0) > 1e-4 * v0
     assert value(codes, np.ones_like(mask)) == pytest.approx(value(codes, None), rel=1e-6)
+
+
+def test_a_parameter_driven_out_of_its_domain_is_named_before_any_preview():
+    """lr 1000 without bounds drove α to -5302 and only the final preview failed, discarding
+    the run: the fitted values are checked first and the message names the parameter, its
+    value and the cure."""
+    from jaxgfx.pipelines.fit.job import _check_fitted
+
+    cfg = load_config(
+        FitConfig,
+        {
+            "scene": SCENE,
+            "target": {"synthetic": {}},
+            "params": {"materials.metal.alpha": {"init": 0.5}},
+            "optimizer": {"lr": 1000.0},
+        },
+    )
+    prep = prepare_fit(cfg)
+    _check_fitted(prep, {"materials.metal.alpha": np.float32(0.3)}, cfg)  # valid: no error
+    with pytest.raises(ValueError, match=r"params.materials.metal.alpha: the fit drove it to "
+                       r"-5302.0, outside its valid range .*bounds.*optimizer.lr \(1000.0\)"):
+        _check_fitted(prep, {"materials.metal.alpha": np.float32(-5302.0)}, cfg)
+    with pytest.raises(FloatingPointError, match="non-finite"):
+        _check_fitted(prep, {"materials.metal.alpha": np.float32(np.nan)}, cfg)
+
+
+@pytest.mark.parametrize(
+    ("over", "match"),
+    [
+        ({"loss": {"kind": "l3"}}, r"loss.kind: expected one of \('l2'"),
+        ({"loss": {"space": "xyz"}}, r"loss.space: expected one of"),
+        ({"render": {"width": 0}}, r"render.width: expected a positive integer, got 0"),
+        ({"render": {"integrator": "bdpt"}}, r"render.integrator: expected one of"),
+        ({"target": {"synthetic": {}, "spp": 0}}, r"target.spp: expected a positive integer"),
+        ({"optimizer": {"name": "lm"}}, r"optimizer.name: expected one of \('adam'"),
+        ({"optimizer": {"lr": 0.01, "lr_final": 0.1}}, r"optimizer.lr_final: expected 0 < "),
+        ({"params": {"materials.metal.alpha": {"init": "x"}}}, r"params.materials.metal.alpha"
+         r".init: 'x'"),
+        ({"seed": 1.5}, r"seed: expected an integer"),
+    ],
+)
+def test_config_errors_carry_their_section(over, match):
+    base = {"scene": SCENE, "target": {"synthetic": {}},
+            "params": {"materials.metal.alpha": {"init": 0.5}}}  # fmt: skip
+    base.update(over)
+    with pytest.raises(ValueError, match=match):
+        prepare_fit(load_config(FitConfig, base))
+
+
+def test_configs_built_in_python_are_validated_too():
+    from jaxgfx.pipelines.fit import OptimizerConfig
+
+    with pytest.raises(ValueError, match="optimizer.lr_final"):
+        OptimizerConfig(lr=0.01, lr_final=0.1)

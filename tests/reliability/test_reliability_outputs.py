@@ -64,7 +64,7 @@ def _run_and_signal(names, files, tmp_path):
     runs = {
         "render": (signal.SIGTERM, "jaxgfx.render:render",
                    ["render", files["scene"], tmp_path / "r" / "out.exr"]),
-        "fit": (signal.SIGHUP, "jaxgfx.pipelines.fit:_fit_and_write",
+        "fit": (signal.SIGHUP, "jaxgfx.pipelines.fit.job:_fit_and_write",
                 ["fit", FIT_CONFIG, "--out", tmp_path / "f" / "out", "--quiet"]),
         "calibrate": (signal.SIGKILL, "jaxgfx.pipelines.calibrate:_load_ldr",
                       ["calibrate", "--out", tmp_path / "c" / "out", "--quiet"]),
@@ -129,7 +129,7 @@ def test_a_signal_mid_job_removes_the_staging(command, sig, files, tmp_path, mon
                                               fake_jobs):  # fmt: skip
     """In process (cheap): the job signals itself while inside its staging."""
     import jaxgfx.render
-    from jaxgfx.pipelines import fit as fit_mod
+    from jaxgfx.pipelines.fit import job as fit_mod
 
     seen = []
 
@@ -225,7 +225,7 @@ def fake_render(monkeypatch):
 def fake_jobs(monkeypatch, tmp_path):
     """calibrate and fit with their computation replaced by fixed results (what they write is
     under test here, not the science); returns the small calibrate config."""
-    from jaxgfx.pipelines import fit as fit_mod
+    from jaxgfx.pipelines.fit import job as fit_mod
 
     rad = np.full((16, 16, 3), 0.5, np.float32)
 

@@ -101,10 +101,7 @@ def _param_spec(path, raw) -> FitParam:
         raw = {}
     if not isinstance(raw, dict):
         raise ValueError(f"params.{path}: expected a mapping with init/min/max, got {raw!r}")
-    try:
-        return load_config(FitParam, raw)
-    except ValueError as e:
-        raise ValueError(f"params.{path}.{e}") from None
+    return load_config(FitParam, raw, where=f"params.{path}")
 
 
 def _check_value(path, scene_value, value, what):

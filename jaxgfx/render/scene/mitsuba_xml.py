@@ -892,7 +892,7 @@ def _shape(obj: _Obj, doc, desc, ctx):
     if bsdfs:
         mat = _bsdf(bsdfs[0], doc, desc)
     else:  # Mitsuba's default BSDF
-        mat = "__mitsuba_default__"
+        mat = "mitsuba_default"
         desc["materials"].setdefault(mat, {"type": "diffuse", "reflectance": [0.5] * 3})
     lin, det = m[:3, :3], float(np.linalg.det(m[:3, :3]))
     t = obj.type
