@@ -22,7 +22,7 @@ reach alpha within 2 % of the truth (``time_to_2pct_alpha``: from when on the me
 5 iterates stays within 2 % until the end, null if it does not settle;
 ``time_to_first_2pct_alpha``: the first iterate within 2 %, which a noisy Adam iterate passes
 through), and the final errors (mean of the last 10 iterates). ``jaxgfx_lm``: jaxgfx's route
-to 2 % on a fixed key (``experiments.alpha_precision``: Levenberg-Marquardt at 128 spp, then 3
+to 2 % on a fixed key (``jaxgfx.testing.problems.lm_polish``: Levenberg-Marquardt at 128 spp, then 3
 Gauss-Newton steps at 4096 spp from its solution, key 0; ``time_to_2pct_alpha`` = compile +
 solve seconds of both stages when the result is within 2 %); Mitsuba 3 has no least-squares
 solver, so this row has no peer. Also the relative RMSE between the two targets (conventions
@@ -100,11 +100,13 @@ def run_jaxgfx(cfg: dict) -> dict:
 
 def run_jaxgfx_lm(coarse: int, fine: int, seed: int = 0) -> dict:
     """jaxgfx's route to 2 %: LM at ``coarse`` spp, then at ``fine`` spp from its solution
-    (experiments.alpha_precision, the same problem and target as the example's fit)."""
-    from experiments.alpha_precision import TRUE_ALBEDO, TRUE_ALPHA, _problem, run_lm_polish
+    (jaxgfx.testing.problems, the same problem and target as the example's fit)."""
+    from jaxgfx.testing.problems import TRUE_ALBEDO, TRUE_ALPHA, inverse_example, lm_polish
 
-    with_params, target = _problem()
-    r = run_lm_polish(with_params, target, coarse, fine, [seed])[0]
+    with_params, target = inverse_example(
+        read_yaml(os.path.join(ROOT, "configs", "scenes", "inverse.yaml"))
+    )
+    r = lm_polish(with_params, target, coarse, fine, [seed])[0]
     total = r["route_seconds"] + r["compile_seconds"] + r["coarse"]["compile_seconds"]
     return {
         "route": f"LM {coarse} spp, then 3 Gauss-Newton steps at {fine} spp",

@@ -38,32 +38,18 @@ import sys
 import numpy as np
 
 from experiments._common import emit_json, log
+from jaxgfx.testing.problems import (
+    TRUE_ALBEDO,
+    TRUE_ALPHA,
+    inverse_example,
+    lm_polish,
+    lm_solve,
+    lm_start,
+)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "configs", "inverse_material.yaml")
-TRUE_ALPHA = 0.15
-TRUE_ALBEDO = (0.7, 0.3, 0.15)
-
-
-def _problem():
-    import jax
-    import jax.numpy as jnp
-
-    from jaxgfx.config import read_yaml
-    from jaxgfx.render import load_scene, render
-
-    d = read_yaml(os.path.join(ROOT, "configs", "scenes", "inverse.yaml"))
-    d["camera"]["width"] = d["camera"]["height"] = 32
-    scene = load_scene(d)
-
-    def with_params(p):
-        s = scene.replace("materials.metal.alpha", p["alpha"])
-        return s.replace("materials.clay.reflectance", p["albedo"])
-
-    truth = {"alpha": jnp.float32(TRUE_ALPHA), "albedo": jnp.asarray(TRUE_ALBEDO, jnp.float32)}
-    # the example's target: seed 7, 256 spp (configs/inverse_material.yaml)
-    target = render(with_params(truth), jax.random.key(7), spp=256, integrator="direct")
-    return with_params, target
+SCENE = os.path.join(ROOT, "configs", "scenes", "inverse.yaml")
 
 
 def loss_curve(with_params, target, grid=(0.13, 0.14, 0.145, 0.15, 0.155, 0.16, 0.17)):
@@ -118,88 +104,18 @@ def run_adam(seeds):
     return out
 
 
-_RESIDUALS = {}
-
-
-def _residuals(with_params, spp):
-    # one function object per spp, so fit_least_squares compiles one solve per spp
-    if spp not in _RESIDUALS:
-        from jaxgfx.optim import decorrelated_residuals
-        from jaxgfx.render import render
-
-        def residuals(p, args):
-            tgt, key = args
-            s = with_params(p)
-            return decorrelated_residuals(
-                lambda k: render(s, k, spp=spp, integrator="direct"), tgt, key
-            ).ravel()
-
-        _RESIDUALS[spp] = residuals
-    return _RESIDUALS[spp]
-
-
-def _lm(with_params, target, spp, seed, start, *, solver="lm", max_steps=40):
-    import jax
-
-    from jaxgfx.optim import fit_least_squares
-
-    res = fit_least_squares(
-        _residuals(with_params, spp),
-        start,
-        solver=solver,
-        args=(target, jax.random.key(seed)),
-        bounds={"alpha": (0.01, 1.0), "albedo": (0.0, 1.0)},
-        max_steps=max_steps,
-    )
-    a = float(res.params["alpha"])
-    rec = {
-        "spp": spp,
-        "seed": seed,
-        "solver": solver,
-        "alpha": a,
-        "rel_error": abs(a - TRUE_ALPHA) / TRUE_ALPHA,
-        "albedo": np.asarray(res.params["albedo"]).tolist(),
-        "iterations": res.n_steps,
-        "stop_reason": res.stop_reason,
-        "compile_seconds": res.compile_seconds,
-        "solve_seconds": float(np.sum(res.seconds)),
-    }
-    return res.params, rec
-
-
-def _start():
-    import jax.numpy as jnp
-
-    return {"alpha": jnp.float32(0.5), "albedo": jnp.full(3, 0.5, jnp.float32)}
-
-
 def run_lm(with_params, target, spps, seeds):
     out = []
     for spp in spps:
         for seed in seeds:
-            rec = _lm(with_params, target, spp, seed, _start())[1]
+            rec = lm_solve(with_params, target, spp, seed, lm_start())[1]
             log("lm", rec)
             out.append(rec)
     return out
 
 
-def run_lm_polish(with_params, target, coarse, fine, seeds, *, solver="gauss_newton", steps=3):
-    """LM at ``coarse`` spp from the start, then ``steps`` iterations of ``solver`` at ``fine``
-    spp from its solution (another key): the solution's noise is that of the fine image, the
-    iterations from far away are coarse. Measured (docs/inverse.md §4): LM run to convergence
-    at 4096 spp from the 128-spp solution took 15 iterations (748 s on the loaded machine);
-    the fine stage only has to move a few per cent, which Gauss-Newton does in 2-3 steps."""
-    out = []
-    for seed in seeds:
-        p, rec0 = _lm(with_params, target, coarse, seed, _start())
-        log("lm polish, coarse stage", rec0)
-        rec = _lm(with_params, target, fine, 1000 + seed, p, solver=solver, max_steps=steps)[1]
-        rec["coarse"] = rec0
-        # the route's cost: both solves (compilation reported separately: once per spp)
-        rec["route_seconds"] = rec0["solve_seconds"] + rec["solve_seconds"]
-        log("lm polish", rec)
-        out.append(rec)
-    return out
+def run_lm_polish(with_params, target, coarse, fine, seeds, **kw):
+    return lm_polish(with_params, target, coarse, fine, seeds, log=log, **kw)
 
 
 def plot(path, out):
@@ -290,7 +206,9 @@ def main(argv=None) -> int:
         plot(os.path.join(a.plot or ".", "alpha_precision.png"), out)
         return 0
     ints = lambda s: [int(x) for x in s.split(",") if x]  # noqa: E731
-    with_params, target = _problem()
+    from jaxgfx.config import read_yaml
+
+    with_params, target = inverse_example(read_yaml(SCENE))
     out = {"truth": {"alpha": TRUE_ALPHA, "albedo": TRUE_ALBEDO}}
     if not a.no_curve:
         out["loss_curve"] = loss_curve(with_params, target)

@@ -167,7 +167,10 @@ def _render_arguments(p):
     )
     p.add_argument("--spp", type=int, default=64)
     p.add_argument("--integrator", default="path", help="path | direct | whitted | aov")
-    p.add_argument("--max-depth", type=int, default=3)
+    p.add_argument(
+        "--max-depth", type=int, default=None,
+        help="path length, Mitsuba's convention (path, whitted: default 3; direct: 2)",
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument(
         "--preview", default=None, help="preview .png path, or 'none' (default: OUT's stem.png)"

@@ -33,8 +33,10 @@ from .spaces import xyz_to_lab as xyz_to_lab
 from .spaces import xyz_to_rgb as xyz_to_rgb
 from .spaces import xyz_to_xyY as xyz_to_xyY
 from .spaces import yiq_to_rgb as yiq_to_rgb
+from .transfer import ACES_NARKOWICZ2015 as ACES_NARKOWICZ2015
 from .transfer import ADOBE_RGB_GAMMA as ADOBE_RGB_GAMMA
 from .transfer import TRANSFER_FUNCTIONS as TRANSFER_FUNCTIONS
+from .transfer import aces_narkowicz2015 as aces_narkowicz2015
 from .transfer import adobe_rgb_to_linear as adobe_rgb_to_linear
 from .transfer import gamma_decode as gamma_decode
 from .transfer import gamma_encode as gamma_encode
@@ -77,6 +79,8 @@ __all__ = [
     "transfer_encode",
     "transfer_decode",
     "TRANSFER_FUNCTIONS",
+    "ACES_NARKOWICZ2015",
+    "aces_narkowicz2015",
     "ADOBE_RGB_GAMMA",
     "WHITEPOINTS",
     "RGB_SPACES",

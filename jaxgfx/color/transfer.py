@@ -38,6 +38,8 @@ __all__ = [
     "transfer_decode",
     "TRANSFER_FUNCTIONS",
     "ADOBE_RGB_GAMMA",
+    "ACES_NARKOWICZ2015",
+    "aces_narkowicz2015",
 ]
 
 #: Adobe RGB (1998) exponent, 2 + 51/256 (Adobe RGB (1998) Color Image Encoding, 2005, §4.3.1.2).
@@ -277,3 +279,23 @@ def transfer_decode(v, *, curve="srgb"):
     """Decode code values to linear light with the transfer function named ``curve``."""
     check_choice(curve, "curve", TRANSFER_FUNCTIONS)
     return TRANSFER_FUNCTIONS[curve][1](v)
+
+
+# --- ACES filmic fit (Narkowicz 2015) --------------------------------------------------------
+
+ACES_NARKOWICZ2015 = (2.51, 0.03, 2.43, 0.59, 0.14)
+"""Coefficients ``(a, b, c, d, e)`` of :func:`aces_narkowicz2015`."""
+
+
+def aces_narkowicz2015(x):
+    """Narkowicz's (2015) rational fit of the ACES reference rendering + output transform:
+    ``f(x) = x (a x + b) / (x (c x + d) + e)`` with ``(a, b, c, d, e) = (2.51, 0.03, 2.43, 0.59,
+    0.14)`` (:data:`ACES_NARKOWICZ2015`), for scene-linear ``x >= 0``; ``f(0) = 0``, ``f → 1.03``
+    as ``x → ∞``. The one definition: the ``"filmic"`` tone mapper and the ``"filmic"`` camera
+    response (``f(4 x) / f(4)``) are built on it. Traceable, differentiable.
+
+    Example: ``aces_narkowicz2015(1.0)`` → ``2.54 / 3.16 = 0.8037…``.
+    """
+    a, b, c, d, e = ACES_NARKOWICZ2015
+    return x * (a * x + b) / (x * (c * x + d) + e)
+

@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 
 from .._math import safe_pow, safe_sqrt
+from ..color.transfer import aces_narkowicz2015, linear_to_srgb, srgb_to_linear
 
 __all__ = [
     "base_to_linear",
@@ -49,19 +50,16 @@ _SC = 1.0 + _SK**_SS
 _LOG_A = 100.0
 
 
-def _aces(x):
-    return x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14)
-
-
-_ACES4 = float(_aces(4.0))
+_aces = aces_narkowicz2015  # the ACES fit (jaxgfx.color), as the "filmic" response's shoulder
+_ACES4 = 4.0 * (2.51 * 4.0 + 0.03) / (4.0 * (2.43 * 4.0 + 0.59) + 0.14)  # _aces(4) in Python
 
 
 def _srgb_fwd(x):
-    return jnp.where(x <= 0.0031308, 12.92 * x, 1.055 * safe_pow(x, 1.0 / 2.4) - 0.055)
+    return linear_to_srgb(x)  # the sRGB OETF of jaxgfx.color
 
 
 def _srgb_inv(z):
-    return jnp.where(z <= 0.04045, z / 12.92, safe_pow((z + 0.055) / 1.055, 2.4))
+    return srgb_to_linear(z)
 
 
 def _scurve_fwd(x):

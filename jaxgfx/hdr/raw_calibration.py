@@ -24,6 +24,7 @@ import numpy as np
 from jaxgfx._checks import as_float_array, check_choice, check_finite, is_concrete
 from jaxgfx._math import safe_div, safe_log, safe_sqrt
 from jaxgfx.hdr.noise import NoiseModel, fit_noise_from_bracket, fit_photon_transfer
+from jaxgfx.image.bayer import BAYER_PATTERNS
 
 __all__ = [
     "CFA_PATTERNS",
@@ -42,7 +43,7 @@ __all__ = [
     "calibrate_raw_stack",
 ]
 
-CFA_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
+CFA_PATTERNS = BAYER_PATTERNS  # the Bayer tiles of jaxgfx.image.bayer (one list)
 
 
 def _jsonable(x):

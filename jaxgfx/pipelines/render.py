@@ -40,7 +40,7 @@ class RenderJob:
     output: str
     spp: int = 64
     integrator: str = "path"
-    max_depth: int = 3
+    max_depth: int | None = None  # None: the integrator's own default (path/whitted: 3)
     seed: int = 0
     preview: str | None = None
     overwrite: bool = False
@@ -51,6 +51,8 @@ class RenderJob:
 
         for name in ("spp", "max_depth"):
             v = getattr(self, name)
+            if v is None and name == "max_depth":
+                continue
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"{name}: expected a positive integer, got {v!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:

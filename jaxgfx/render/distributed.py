@@ -17,9 +17,9 @@ Two ways to split the work, chosen by ``shard``:
   passes. ``spp`` need not divide by ``n`` (padded passes have weight 0, so some devices idle
   for one pass). Use it when the image is small and ``spp`` large.
 
-Both modes call :func:`jaxgfx.render.render.render_partial` (the unnormalised sum over some rows
+Both modes call :func:`jaxgfx.render.estimator.render_partial` (the unnormalised sum over some rows
 and passes that :func:`~jaxgfx.render.render` itself runs over all of them) with the options
-resolved by :func:`jaxgfx.render.render.resolve_integrator`, so the sample layout and the
+resolved by :func:`jaxgfx.render.estimator.resolve_integrator`, so the sample layout and the
 option handling are defined once.
 
 The work runs in ``jax.shard_map`` over all axes of ``mesh`` (default: every device of
@@ -45,8 +45,8 @@ from jax.sharding import Mesh
 from jax.sharding import PartitionSpec as P
 
 from jaxgfx._checks import check_choice, check_positive_int
+from jaxgfx.render.estimator import render_partial, resolve_integrator
 from jaxgfx.render.integrators import Integrator
-from jaxgfx.render.render import render_partial, resolve_integrator
 
 __all__ = ["render_sharded", "SHARDS", "default_mesh"]
 

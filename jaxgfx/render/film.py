@@ -16,7 +16,7 @@ import jax.numpy as jnp
 from jax.scipy.special import erf, erfinv
 
 from jaxgfx._checks import check_positive
-from jaxgfx.render.sampler import _uniform
+from jaxgfx.render.sampler import uniform
 
 __all__ = ["BoxFilter", "GaussianFilter", "make_filter", "pixel_samples", "FILTERS"]
 
@@ -58,29 +58,31 @@ def make_filter(name: str = "box", **kwargs):
     return FILTERS[name](**kwargs)
 
 
-def pixel_samples(key, width: int, height: int, spp: int, rfilter=None, *, dtype=jnp.float32):
+def pixel_samples(
+    key, width: int, height: int, spp: int, rfilter=None, *, rows=None, dtype=jnp.float32
+):
     """Continuous sample positions ``(height, width, spp, 2)`` (x, y) in pixels, of float
     ``dtype`` (the renderer draws them in the scene's dtype).
 
     Stratified per pixel when ``spp`` is a perfect square (jittered grid), otherwise
     independent uniform samples; offsets then warped by the reconstruction filter.
-    """
-    return _pixel_samples(key, width, height, spp, rfilter, dtype=dtype)
-
-
-def _pixel_samples(
-    key, width: int, height: int, spp: int, rfilter=None, *, rows=None, dtype=jnp.float32
-):
-    """``pixel_samples(key, width, height, spp, rfilter)[rows]`` (package-internal).
-
     ``rows``: ``None`` (the whole image) or global row indices ``(R,)`` (may be traced): only
-    those rows' samples are drawn (``sampler._uniform(..., rows=rows)``), and they equal the
-    whole image's. :func:`jaxgfx.render.render.render_partial` draws its samples here, in the
-    scene's float ``dtype``.
+    those rows' samples are drawn (:func:`~jaxgfx.render.sampler.uniform` with ``rows``), and
+    they equal the whole image's. :func:`jaxgfx.render.estimator.render_partial` draws its
+    samples here, in the scene's float ``dtype``. The one draw that grows with a user option:
+    more than 2**32 numbers raise ``ValueError`` naming ``spp`` (the ``render`` argument and
+    the CLI's ``--spp``) and the largest that fits.
     """
+    size = height * width * spp * 2
+    if size > 2**32:
+        raise ValueError(
+            f"spp: {spp} samples per pixel at {width}x{height} pixels need {size} random "
+            f"numbers, more than the 2**32 of one key; use spp <= {2**32 // (height * width * 2)}"
+            " (and average renders made with split keys for more)"
+        )
     rfilter = rfilter or BoxFilter()
     n = int(round(spp**0.5))
-    u = _uniform(key, (height, width, spp, 2), dtype, rows=rows)
+    u = uniform(key, (height, width, spp, 2), dtype, rows=rows)
     if n * n == spp and spp > 1:
         iy, ix = jnp.divmod(jnp.arange(spp), n)
         u = (jnp.stack([ix, iy], -1) + u) / n

@@ -30,30 +30,22 @@ def pcg_hash(v):
     return (word >> 22) ^ word
 
 
-def uniform(key, shape, dtype=jnp.float32):
+def uniform(key, shape, dtype=jnp.float32, *, rows=None):
     """Uniform numbers in ``[0, 1)`` of ``shape`` from a JAX key (counter-based hash).
 
     Float32 numbers have 24 random bits (multiples of 2^-24, max ``1 - 2^-24``); float64 numbers
     32 bits. At most 2^32 numbers per key (split or ``fold_in`` the key for more).
+
+    ``rows``: ``None`` (every row) or global indices ``(R,)`` into the first axis of ``shape``
+    (integer, may be traced; indices ``>= shape[0]`` continue the counter, as if ``shape`` had
+    more rows): ``uniform(key, shape)[rows]`` without drawing the other rows. Each number hashes
+    its flat index in ``shape``; the flat index of entry ``(r, *t)`` is
+    ``r * prod(shape[1:]) + flat(t)``, so a row's numbers depend only on its global index
+    (``render_sharded`` draws a device's rows this way).
     """
     size = int(np.prod(shape)) if len(shape) else 1
     if size > 2**32:
-        raise ValueError(f"shape: at most 2**32 numbers per key, got {size} (shape {shape})")
-    return _uniform(key, shape, dtype)
-
-
-def _uniform(key, shape, dtype=jnp.float32, *, rows=None):
-    """``uniform(key, shape, dtype)[rows]`` without drawing the other rows (package-internal).
-
-    ``rows``: ``None`` (every row: ``uniform`` itself) or global indices ``(R,)`` into the first
-    axis of ``shape`` (integer, may be traced; indices ``>= shape[0]`` continue the counter, as
-    if ``shape`` had more rows). Each number hashes its flat index in ``shape``; the flat index
-    of entry ``(r, *t)`` is ``r * prod(shape[1:]) + flat(t)``, so a row's numbers depend only on
-    its global index (``render_sharded`` draws a device's rows this way).
-    """
-    size = int(np.prod(shape)) if len(shape) else 1
-    if size > 2**32:
-        raise ValueError(_too_many_message(shape, size))
+        raise ValueError(f"shape: at most 2**32 numbers per key, got {size} (shape {tuple(shape)})")
     seed = pcg_hash(jax.random.bits(key, (), jnp.uint32))
     if rows is None:
         counter = jax.lax.iota(jnp.uint32, size).reshape(shape)
@@ -66,19 +58,3 @@ def _uniform(key, shape, dtype=jnp.float32, *, rows=None):
     if jnp.dtype(dtype) == jnp.float64:
         return bits.astype(jnp.float64) * (2.0**-32)
     return (bits >> 8).astype(dtype) * jnp.asarray(2.0**-24, dtype)
-
-
-def _too_many_message(shape, size) -> str:
-    """The error for more than 2**32 numbers from one key. The renderer's pixel samples,
-    ``(height, width, spp, 2)`` (``film._pixel_samples``), are the one draw that grows with a
-    user option: that message names ``spp`` (the ``render`` argument and the CLI's ``--spp``)
-    and the largest that fits."""
-    if len(shape) == 4 and shape[-1] == 2:
-        h, w, spp, _ = shape
-        most = 2**32 // (h * w * 2)
-        return (
-            f"spp: {spp} samples per pixel at {w}x{h} pixels need {size} random numbers, "
-            f"more than the 2**32 of one key; use spp <= {most} (and average renders made "
-            "with split keys for more)"
-        )
-    return f"shape: at most 2**32 numbers per key, got {size} (shape {tuple(shape)})"

@@ -24,7 +24,8 @@ Both use the same estimator: uniform (stratified) samples of the circle paramete
 ``ΔL = L_in − L_out`` evaluated with common random numbers and no derivative, the length element
 ``|∂x/∂φ|`` and the outward normal ``n`` at the current parameters, and the boundary point
 ``x(φ; θ)`` itself attached, so that ``b = Σ stop_gradient(ΔL |∂x/∂φ| / pdf · n) · x(φ; θ)`` has
-``∂b/∂θ`` equal to the boundary integral. :func:`render_with_edges` adds ``b`` to the image with
+``∂b/∂θ`` equal to the boundary integral. :class:`EdgeSampling` (composed by
+:func:`jaxgfx.render.render`) adds ``b`` to the image with
 :func:`~jaxgfx.render.integrators._common.replace_grad` (value of the image, derivative of
 ``image + b``): images are bit-identical, and a forward render never computes ``b``.
 See docs/render_gradients.md ("Visibility") for the derivation, measurements and what remains
@@ -42,13 +43,14 @@ import numpy as np
 
 from jaxgfx._math import safe_div, safe_normalize, safe_sqrt, sum_last
 from jaxgfx.render.camera import PerspectiveCamera, look_at_basis
+from jaxgfx.render.estimator import pass_scan
 from jaxgfx.render.film import BoxFilter
 from jaxgfx.render.geometry.mesh import TriangleMesh
 from jaxgfx.render.geometry.rectangle import Rectangles
 from jaxgfx.render.geometry.sphere import Spheres
 from jaxgfx.render.integrators import _common as C
 from jaxgfx.render.integrators.path import DirectIntegrator, PathIntegrator
-from jaxgfx.render.sampler import _uniform
+from jaxgfx.render.sampler import uniform
 
 __all__ = [
     "VISIBILITY",
@@ -57,7 +59,8 @@ __all__ = [
     "project",
     "edge_boundary",
     "edge_multiplicity_weights",
-    "render_with_edges",
+    "EdgeSampling",
+    "edge_sampling",
 ]
 
 VISIBILITY = ("edge",)
@@ -261,7 +264,7 @@ def _primary_pass(scene, scene_sg, key, integrator, spheres):
     m = w * h
     k = centers.shape[0]
     dtype = centers.dtype
-    u = _uniform(key, (m, 2), dtype)
+    u = uniform(key, (m, 2), dtype)
     kk = jnp.minimum((u[:, 0] * k).astype(jnp.int32), k - 1)
     phi = (2 * math.pi / m) * (jnp.arange(m, dtype=dtype) + u[:, 1])  # stratified
     c, r = centers[kk], radii[kk]
@@ -287,7 +290,7 @@ def _primary_pass(scene, scene_sg, key, integrator, spheres):
     d_out = safe_normalize(t0 + off - o)
     uu = None
     if integrator.random_shape is not None:
-        uu = _uniform(jax.random.fold_in(key, 1), (m, *integrator.random_shape), dtype)
+        uu = uniform(jax.random.fold_in(key, 1), (m, *integrator.random_shape), dtype)
     both = integrator(
         scene_sg,
         jnp.concatenate([o, o]),
@@ -313,7 +316,7 @@ def _primary_segments_pass(scene, scene_sg, key, integrator, segments):
     m = w * h
     e = ends.shape[0]
     dtype = ends.dtype
-    u = _uniform(key, (m, 2), dtype)
+    u = uniform(key, (m, 2), dtype)
     kk, t, per = _deal(m, e, u[0, 0], u[:, 1])
     a, b = ends[kk, 0], ends[kk, 1]
 
@@ -330,7 +333,7 @@ def _primary_segments_pass(scene, scene_sg, key, integrator, segments):
     o, d = cam_sg.generate_ray(jnp.concatenate([x0 - eps * n, x0 + eps * n]))
     uu = None
     if integrator.random_shape is not None:
-        uu = _uniform(jax.random.fold_in(key, 1), (m, *integrator.random_shape), dtype)
+        uu = uniform(jax.random.fold_in(key, 1), (m, *integrator.random_shape), dtype)
         uu = jnp.concatenate([uu, uu])
     both = integrator(scene_sg, o.astype(dtype), d.astype(dtype), uu)
     dl = both[:m] - both[m:]
@@ -365,7 +368,7 @@ def _deal(m: int, e: int, u_off, u_t):
 def _first_vertex(scene_sg, key, dtype):
     """One camera ray per pixel (uniform in the pixel) and its first vertex's shading data."""
     w, h = scene_sg.width, scene_sg.height
-    u = _uniform(key, (h, w, 4), dtype)
+    u = uniform(key, (h, w, 4), dtype)
     jj, ii = jnp.meshgrid(jnp.arange(w), jnp.arange(h))
     px = jnp.stack([jj, ii], -1).astype(dtype) + u[..., :2]
     o, d = scene_sg.camera.generate_ray(px)
@@ -382,7 +385,7 @@ def _jump(scene_sg, key, integrator, vertex, w_minus, w_plus):
     _, hit, mat, frame, ng, wo = vertex
     h = w_minus.shape[0]
     sub = _sub_integrator(integrator)
-    uu = _uniform(key, (*w_minus.shape[:-1], *sub.random_shape), w_minus.dtype)
+    uu = uniform(key, (*w_minus.shape[:-1], *sub.random_shape), w_minus.dtype)
     fs, os_, ds = [], [], []
     for wi in (w_minus, w_plus):
         fs.append(
@@ -491,20 +494,22 @@ def edge_boundary(scene, key, integrator, *, spp: int):
             b = b + _shadow_segments_pass(scene, scene_sg, k3, integrator, occ_segs)
         return b
 
-    one_pass = jax.checkpoint(one_pass, prevent_cse=False)
-
-    def body(acc, s):
-        return acc + one_pass(s), None
-
-    acc, _ = jax.lax.scan(body, jnp.zeros((h, w, nc), dtype), jnp.arange(spp))
+    acc = pass_scan(one_pass, jnp.arange(spp), jnp.zeros((h, w, nc), dtype))
     return acc / spp
 
 
-@eqx.filter_jit
-def render_with_edges(scene, key, spp, integrator):
-    """``render``'s image with the derivative of ``image + edge_boundary(...)``."""
-    from jaxgfx.render.render import render_partial
+class EdgeSampling(eqx.Module):
+    """The boundary-term layer of :func:`jaxgfx.render.render` (``visibility="edge"``):
+    ``boundary(scene, key, integrator, spp=spp)`` is :func:`edge_boundary` on samples drawn
+    from ``fold_in(key, _SALT)`` (the image's own samples are unchanged); the renderer returns
+    the image with the derivative of ``image + boundary``."""
 
-    image = render_partial(scene, key, integrator, spp=spp) / spp
-    b = edge_boundary(scene, jax.random.fold_in(key, _SALT), integrator, spp=spp)
-    return C.replace_grad(image, image + b.astype(image.dtype))
+    def __call__(self, scene, key, integrator, *, spp: int):
+        return edge_boundary(scene, jax.random.fold_in(key, _SALT), integrator, spp=spp)
+
+
+def edge_sampling(visibility, scene, integrator) -> EdgeSampling | None:
+    """The boundary layer for ``render(..., visibility=...)``: ``None`` for ``None``, an
+    :class:`EdgeSampling` for ``"edge"`` (after :func:`check_visibility`)."""
+    check_visibility(visibility, scene, integrator)
+    return None if visibility is None else EdgeSampling()

@@ -261,18 +261,18 @@ def test_shadow_boundary_matches_occluded_cap():
 
 
 def _front_desc(size):
-    from experiments.visibility_bias import scene_desc
+    from jaxgfx.testing.problems import visibility_scene_desc
 
-    return scene_desc(size)
+    return visibility_scene_desc(size)
 
 
 @pytest.mark.slow  # issue 10: ~60 s on the shared 2-core machine (two gradient programs)
 def test_edge_gradient_matches_finite_differences():
     """Sphere moving in front of an area light over a lit floor (silhouette over the light and
     the floor, shadow edge on the floor), direct lighting, 8², fixed-weight image sum."""
-    from experiments.visibility_bias import measure
+    from jaxgfx.testing.problems import measure_visibility_bias
 
-    res = measure(8, keys=16, spp=16, h=0.05, integrator="direct")
+    res = measure_visibility_bias(8, keys=16, spp=16, h=0.05, integrator="direct")
     d, p = res["edge_minus_fd"], res["plain_minus_fd"]
     # AD with edges vs same-key FD: within 4 standard errors of the paired difference (FD's
     # O(h²) bias is below its noise at h = 0.05: measured at h = 0.03 and 0.05 alike)

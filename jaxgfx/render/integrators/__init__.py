@@ -26,17 +26,31 @@ INTEGRATORS: dict[str, type[Integrator]] = {
 
 
 def make_integrator(name: str, **options) -> Integrator:
-    """The integrator registered as ``name``, built from the ``options`` its class takes
-    (``max_depth``, ``rr_depth``, ``strategy``); options the class does not take are ignored,
-    as ``render(..., integrator="direct", max_depth=5)`` always has.
+    """The integrator registered as ``name``, built from ``options`` (``max_depth``,
+    ``rr_depth``, ``strategy``, ``sampling``, ...). An option its class does not take is a
+    ``TypeError`` naming it and what the class takes — never silently dropped
+    (``DirectIntegrator``'s depth is fixed: ``max_depth=2`` is accepted, another is an error).
 
-    >>> make_integrator("whitted", max_depth=2, strategy="mis")
+    >>> make_integrator("whitted", max_depth=2)
     WhittedIntegrator(max_depth=2)
     """
     if name not in INTEGRATORS:
         raise ValueError(f"integrator: expected one of {tuple(INTEGRATORS)}, got {name!r}")
     cls = INTEGRATORS[name]
-    fields = {f for f in cls.__dataclass_fields__}
+    fields = set(cls.__dataclass_fields__)
+    fixed = {k: getattr(cls, k) for k in options if k not in fields and hasattr(cls, k)}
+    fixed = {k: v.fget(cls) if isinstance(v, property) else v for k, v in fixed.items()}
+    bad = sorted(
+        k for k in options if k not in fields and (k not in fixed or fixed[k] != options[k])
+    )
+    if bad:
+        detail = "; ".join(
+            f"{k}: the {name!r} integrator has {k} = {fixed[k]}" if k in fixed else
+            f"{k}: not an option of the {name!r} integrator"
+            for k in bad
+        )
+        takes = sorted(fields) or ["none"]
+        raise TypeError(f"{detail} (it takes: {', '.join(takes)})")
     return cls(**{k: v for k, v in options.items() if k in fields})
 
 
