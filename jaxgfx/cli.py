@@ -206,7 +206,7 @@ def _render_run(args) -> int:
 # tests/tonemap/test_pipeline_tonemap.py checks the two agree)
 TONEMAP_CLI_PARAMS = (
     "alpha beta bias color_adapt contrast epsilon exposure gamma intensity k key ld_max "
-    "light_adapt phi saturation shoulder sigma sigma_range white"
+    "light_adapt phi saturation shoulder sigma sigma_range strength white"
 ).split()
 
 

@@ -50,6 +50,9 @@ class TonemapJob:
                 )
             if not isinstance(value, (int, float)) or not np.isfinite(value):
                 raise ValueError(f"--{name.replace('_', '-')}: expected a number, got {value!r}")
+        if not os.path.isfile(self.input):
+            what = "is a directory" if os.path.isdir(self.input) else "no such file"
+            raise FileNotFoundError(2, f"input: {what}", self.input)
         ext = os.path.splitext(os.fspath(self.input))[1].lower()
         if ext not in _INPUT_EXT:
             raise ValueError(
@@ -57,9 +60,6 @@ class TonemapJob:
                 f"expected {' '.join(_INPUT_EXT)}, got {ext or '(no extension)'!r} "
                 "(display images are not linear; INPUT comes before OUTPUT)"
             )
-        if not os.path.isfile(self.input):
-            what = "is a directory" if os.path.isdir(self.input) else "no such file"
-            raise FileNotFoundError(2, f"input: {what}", self.input)
         check_output_extension(self.output, "output", _DISPLAY_EXT)
 
 

@@ -112,7 +112,8 @@ _SPECS = {
         "saturation": _SAT,
     },
     "contrast_inversion": {
-        "k": ("positive", "surround darkening strength k (0 = global curve only)"),
+        "k": ("positive", "divisor k (the log-average maps to 1 / (1 + k))"),
+        "strength": ("unit", "exponent c of the blurred surround, in (0, 1]"),
         "sigma": ("positive", "surround blur sigma in pixels"),
         "saturation": _SAT,
     },
