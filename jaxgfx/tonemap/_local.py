@@ -285,9 +285,10 @@ def tonemap_Durand2002(
     illumination, edges kept) from the *detail* (texture, reflectance). Only the base is
     compressed, to a contrast of ``contrast : 1``, and the detail is added back::
 
-        log L_d = (base - max base) * log10(contrast) / (max base - min base) + detail
+        log L_d = (base - max base) * min(1, log10(contrast) / (max base - min base)) + detail
 
-    so the brightest base value maps to 1.
+    so the brightest base value maps to 1; a base spanning less than ``contrast`` is kept,
+    not stretched (a constant image is white).
 
     Args:
         contrast: > 1, target contrast of the base layer (paper and pfstmo: 5).
@@ -300,7 +301,8 @@ def tonemap_Durand2002(
         range_bins: static range cells of the grid.
         saturation, encode, weights: see :func:`tonemap_Drago2003`.
 
-    Zeros are offset by ``1e-4 * mean(L)`` before the logarithm (4 decades below the mean).
+    The logarithm is taken of ``L + delta``, ``delta = 1e-4 * mean(L)``, and the result is
+    multiplied by ``L / (L + delta)``: exact zeros display black.
 
     Example:
         >>> float(tonemap_Durand2002(jnp.ones((4, 4)), encode="linear")[0, 0])
@@ -441,9 +443,12 @@ def tonemap_Fattal2002(
     ``phi_k = (alpha_k / |grad H_k|) (|grad H_k| / alpha_k)^beta`` and ``alpha_k = alpha *
     mean |grad H_k|``; the attenuated field ``G = Phi grad H`` is integrated back by solving
     ``Laplacian(I) = div G`` with Neumann borders, exactly, with a DCT
-    (:func:`solve_poisson_neumann`; gradients by implicit differentiation). Then
-    ``L_out = exp(gamma I)``, normalised so the ``black_point`` / ``1 - white_point``
-    quantiles map to 0 / 1 (pfstmo's defaults: 0.1 % and 0.5 %), colour with ``s = 0.8``.
+    (:func:`solve_poisson_neumann`; gradients by implicit differentiation), as
+    ``I = c H + J``: ``c`` is the least-squares scale of ``grad H`` onto ``G`` and ``J`` solves
+    the screened equation for ``G - c grad H`` (:func:`fattal_screen`), so that thin images do
+    not drift. Then ``L_out = exp(gamma I) L / (L + delta)`` (zeros black), normalised so the
+    ``black_point`` / ``1 - white_point`` quantiles map to 0 / 1 (pfstmo's defaults: 0.1 %
+    and 0.5 %), colour with ``s = 0.8``.
 
     Args:
         alpha: > 0, gradient magnitude (relative to the mean) left unchanged (paper: 0.1).
