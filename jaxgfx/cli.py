@@ -214,14 +214,16 @@ def _rate(per_second: float) -> str:
 # every name in jaxgfx.tonemap.TONEMAP_PARAMETERS (kept here so --help needs no jax import;
 # tests/tonemap/test_pipeline_tonemap.py checks the two agree)
 TONEMAP_CLI_PARAMS = (
-    "alpha beta bias color_adapt contrast exposure gamma intensity k key ld_max "
-    "light_adapt saturation shoulder sigma sigma_range white"
+    "alpha beta bias color_adapt contrast epsilon exposure gamma intensity k key ld_max "
+    "light_adapt phi saturation shoulder sigma sigma_range strength white"
 ).split()
 
 
 def _tonemap_arguments(p):
     p.add_argument("input", nargs="?", help="linear HDR image (.exr or .hdr)")
-    p.add_argument("output", nargs="?", help="display image (.png .jpg .tif), sRGB")
+    p.add_argument(
+        "output", nargs="?", help="display image, sRGB: .png/.jpg 8-bit, .tif 16-bit integer"
+    )
     p.add_argument("--op", default="drago", help="operator name (see --list)")
     p.add_argument("--list", action="store_true", help="list operators and their parameters")
     for name in TONEMAP_CLI_PARAMS:
@@ -241,7 +243,11 @@ def _tonemap_run(args) -> int:
     }
     job = TonemapJob(args.input, args.output, args.op, params, overwrite=args.overwrite)
     res = run_tonemap(job)
-    print(f"wrote {res['outputs']['output']} ({args.op}, {res['seconds']:.2f} s incl. compile)")
+    neg = res["negative_clamped"]
+    note = f"; clamped {neg} negative values to 0" if neg else ""
+    print(
+        f"wrote {res['outputs']['output']} ({args.op}, {res['seconds']:.2f} s incl. compile{note})"
+    )
     return 0
 
 

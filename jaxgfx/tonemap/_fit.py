@@ -167,7 +167,7 @@ def fit_tonemap(
         if n not in specs:
             raise ValueError(f"fit: {n!r} is not a parameter of {op_name!r} ({sorted(specs)})")
     init = dict(init or {})
-    free0 = {n: _to_free(init.get(n, specs[n].default), specs[n].constraint) for n in names}
+    free0 = {n: _to_free(init.get(n, specs[n].initial), specs[n].constraint) for n in names}
     kinds = {n: specs[n].constraint for n in names}
     static = {**_static_options(op_name, x, names), **(fixed or {})}
     residual = _residual_fn(

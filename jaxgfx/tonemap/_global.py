@@ -388,7 +388,7 @@ def tonemap_Reinhard2005(
     x = check_hdr(hdr)
     check_encode(encode)
     check_weights(weights)
-    check_scalar(intensity, "intensity")
+    check_scalar(intensity, "intensity", lo=-8.0, hi=8.0, lo_open=False, hi_open=False)
     check_scalar(light_adapt, "light_adapt", lo=0.0, hi=1.0, lo_open=False, hi_open=False)
     check_scalar(color_adapt, "color_adapt", lo=0.0, hi=1.0, lo_open=False, hi_open=False)
     return _reinhard2005(

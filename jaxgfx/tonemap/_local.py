@@ -11,9 +11,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._math import safe_div, safe_log, safe_sqrt
+from .._math import safe_div, safe_log, safe_pow, safe_sqrt
 from ..image.filters import bilateral_filter, gaussian_blur
 from ._common import (
+    LOG_DELTA,
     check_encode,
     check_hdr,
     check_scalar,
@@ -157,44 +158,64 @@ def tonemap_Reinhard2002_local(
 
 
 @functools.partial(jax.jit, static_argnames=("radius", "encode", "weights"))
-def _contrast_inversion(x, k, sigma, saturation, *, radius, encode, weights):
+def _contrast_inversion(x, k, strength, sigma, saturation, *, radius, encode, weights):
     L, kind = split_luminance(x, weights)
     Lw = safe_div(L, log_average(L))
-    blur = _blur(Lw, sigma, radius=radius)
-    Ld = safe_div(Lw, k * blur)
+    # the offset keeps B^c smooth at B = 0 (black neighbourhoods); scale invariant like Lw
+    blur = _blur(Lw, sigma, radius=radius) + LOG_DELTA * image_mean(Lw)
+    y = safe_div(Lw, k * safe_pow(blur, strength))
+    Ld = y / (1.0 + y)
     return encode_display(recolor(x, L, Ld, saturation, kind), encode)
 
 
 def tonemap_contrast_inversion(
-    hdr, *, k=2.0, sigma=8.0, radius=None, saturation=1.0, encode="srgb", weights="rec709"
+    hdr,
+    *,
+    k=4.0,
+    strength=0.3,
+    sigma=8.0,
+    radius=None,
+    saturation=1.0,
+    encode="srgb",
+    weights="rec709",
 ):
-    """The lecture's local operator: ``L_d = L_w / (k * blur_sigma(L_w))``.
+    """The lecture's contrast inversion, order-keeping: ``y = L_w / (k * B^c)``,
+    ``L_d = y / (1 + y)``, with ``B = blur_sigma(L_w)`` and ``L_w = L / L_avg``.
 
-    Each pixel is divided by ``k`` times its Gaussian-blurred neighbourhood (``L_w = L /
-    L_avg``). Flat regions go to ``1/k``; next to a bright source the surround is pushed
-    darker than the flat level -- the "contrast inversion" painters (Kuindzhi) use to make the
-    sun look brighter than the sky although both are displayed at similar levels. Output is
-    clipped to [0, 1] (the source itself saturates).
+    The lecture divides each pixel by ``k`` times its Gaussian-blurred neighbourhood
+    (``c = 1``): next to a bright source the surround is pushed darker than the flat level --
+    the "contrast inversion" painters (Kuindzhi) use to make the sun look brighter than the sky.
+    But with ``c = 1`` every flat region goes to the same ``1/k``, so the order of whole
+    regions is lost (a window larger than ``sigma`` ends as dark as the wall, its border
+    darker). Here the division is partial, ``B^c`` with ``0 < c <= 1``: a flat region at
+    ``L_w = v`` goes to ``y = v^(1-c) / k`` (a global power-law compression that keeps the
+    order of regions), and the surround of a source ``S`` times brighter is still darkened by
+    about ``(f S)^-c`` (``f``: the source's share of the blur window). ``y / (1 + y)`` replaces
+    the lecture's clipping, so bright regions stay ordered instead of all saturating. Zeros stay
+    black.
 
     Args:
-        k: > 0, ``1/k`` is the display level of flat regions.
+        k: > 0; the log-average maps to ``1 / (1 + k)`` (4: 0.2, a mid grey).
+        strength: ``c`` in (0, 1]: how much of the neighbourhood is divided out (1: the
+            lecture's formula, order of regions lost; default 0.3).
         sigma: > 0, blur in pixels; may be traced when ``radius`` (static) is given.
         radius: static blur radius (default ``ceil(3 sigma)``).
 
     Example:
         >>> float(tonemap_contrast_inversion(jnp.ones((5, 5)), encode="linear")[2, 2])
-        0.5
+        0.2
     """
     x = _prepare(hdr, saturation, encode, weights)
     saturation = static_saturation(saturation)
     check_scalar(k, "k", lo=0.0)
+    check_scalar(strength, "strength", lo=0.0, hi=1.0, hi_open=False)
     check_scalar(sigma, "sigma", lo=0.0)
     if radius is None:
         if isinstance(sigma, jax.core.Tracer):
             raise ValueError("radius: sigma is traced; pass a static radius=int")
         radius = max(1, int(math.ceil(3.0 * float(sigma))))
     return _contrast_inversion(
-        x, k, sigma, saturation, radius=int(radius), encode=encode, weights=weights
+        x, k, strength, sigma, saturation, radius=int(radius), encode=encode, weights=weights
     )
 
 
@@ -224,8 +245,11 @@ def _durand(
     detail = logL - base
     bmax = jnp.max(base, axis=(-2, -1), keepdims=True)
     bmin = jnp.min(base, axis=(-2, -1), keepdims=True)
-    cf = safe_div(jnp.log10(contrast), bmax - bmin)
-    Ld = jnp.power(10.0, (base - bmax) * cf + detail)
+    # compress, never expand: a base spanning less than log10(contrast) decades (a constant
+    # image: only rounding noise of the grid) keeps its contrast instead of being stretched
+    cf = jnp.minimum(safe_div(jnp.log10(contrast), bmax - bmin, fill=1.0), 1.0)
+    # L / (L + delta): exact zeros come back to black (the offset only keeps the log finite)
+    Ld = jnp.power(10.0, (base - bmax) * cf + detail) * safe_div(L, L + delta)
     return encode_display(recolor(x, L, Ld, saturation, kind), encode)
 
 
@@ -261,9 +285,10 @@ def tonemap_Durand2002(
     illumination, edges kept) from the *detail* (texture, reflectance). Only the base is
     compressed, to a contrast of ``contrast : 1``, and the detail is added back::
 
-        log L_d = (base - max base) * log10(contrast) / (max base - min base) + detail
+        log L_d = (base - max base) * min(1, log10(contrast) / (max base - min base)) + detail
 
-    so the brightest base value maps to 1.
+    so the brightest base value maps to 1; a base spanning less than ``contrast`` is kept,
+    not stretched (a constant image is white).
 
     Args:
         contrast: > 1, target contrast of the base layer (paper and pfstmo: 5).
@@ -276,7 +301,8 @@ def tonemap_Durand2002(
         range_bins: static range cells of the grid.
         saturation, encode, weights: see :func:`tonemap_Drago2003`.
 
-    Zeros are offset by ``1e-4 * mean(L)`` before the logarithm (4 decades below the mean).
+    The logarithm is taken of ``L + delta``, ``delta = 1e-4 * mean(L)``, and the result is
+    multiplied by ``L / (L + delta)``: exact zeros display black.
 
     Example:
         >>> float(tonemap_Durand2002(jnp.ones((4, 4)), encode="linear")[0, 0])
@@ -338,9 +364,21 @@ def _quantile_hw(y, q):
     return jnp.quantile(flat, q, axis=-1)[..., None, None]
 
 
-@functools.partial(jax.jit, static_argnames=("levels", "encode", "weights"))
+@functools.partial(jax.jit, static_argnames=("levels", "screen", "encode", "weights"))
 def _fattal(
-    x, alpha, beta, gamma, noise, black_point, white_point, saturation, *, levels, encode, weights
+    x,
+    alpha,
+    beta,
+    gamma,
+    noise,
+    black_point,
+    white_point,
+    saturation,
+    *,
+    levels,
+    screen,
+    encode,
+    weights,
 ):
     L, kind = split_luminance(x, weights)
     delta = 1e-4 * image_mean(L) + 1e-30
@@ -359,12 +397,30 @@ def _fattal(
         else:
             Phi = jax.image.resize(Phi, phi.shape, "linear") * phi
     gx, gy = forward_gradients(H0)
-    I = solve_poisson_neumann(divergence(gx * Phi, gy * Phi))
-    Lout = jnp.exp(gamma * (I - jnp.max(I, axis=(-2, -1), keepdims=True)))
+    Gx, Gy = gx * Phi, gy * Phi
+    # global compression c: the least-squares scale of grad H0 onto G; I = c H0 + J, where J
+    # integrates what is left, screened beyond ~screen_length px (long thin images: no drift)
+    axes = (-2, -1)
+    c = safe_div(
+        jnp.sum(Gx * gx + Gy * gy, axis=axes, keepdims=True),
+        jnp.sum(gx * gx + gy * gy, axis=axes, keepdims=True),
+    )
+    J = solve_poisson_neumann(divergence(Gx - c * gx, Gy - c * gy), screen)
+    I = c * (H0 - jnp.mean(H0, axis=axes, keepdims=True)) + J
+    # L / (L + delta): exact zeros come back to black (the offset only keeps the log finite)
+    Lout = jnp.exp(gamma * (I - jnp.max(I, axis=axes, keepdims=True))) * safe_div(L, L + delta)
     lo = _quantile_hw(Lout, black_point)
     hi = _quantile_hw(Lout, 1.0 - white_point)
-    Ld = jnp.where(hi > lo, (Lout - lo) / jnp.where(hi > lo, hi - lo, 1.0), 1.0)
+    # degenerate (constant or black) images: scale by the upper quantile (white / black)
+    Ld = jnp.where(hi > lo, (Lout - lo) / jnp.where(hi > lo, hi - lo, 1.0), safe_div(Lout, hi))
     return encode_display(recolor(x, L, Ld, saturation, kind), encode)
+
+
+def fattal_screen(H: int, W: int) -> float:
+    """Static screening ``1 / l^2`` of the Poisson solve, ``l = max(min(H, W), 32)`` px: small
+    on ordinary images (the shorter side), it bounds the random-walk drift of the integrated
+    field along the long axis of a thin image (where every attenuated field is integrable)."""
+    return 1.0 / float(max(min(H, W), 32)) ** 2
 
 
 def tonemap_Fattal2002(
@@ -387,9 +443,12 @@ def tonemap_Fattal2002(
     ``phi_k = (alpha_k / |grad H_k|) (|grad H_k| / alpha_k)^beta`` and ``alpha_k = alpha *
     mean |grad H_k|``; the attenuated field ``G = Phi grad H`` is integrated back by solving
     ``Laplacian(I) = div G`` with Neumann borders, exactly, with a DCT
-    (:func:`solve_poisson_neumann`; gradients by implicit differentiation). Then
-    ``L_out = exp(gamma I)``, normalised so the ``black_point`` / ``1 - white_point``
-    quantiles map to 0 / 1 (pfstmo's defaults: 0.1 % and 0.5 %), colour with ``s = 0.8``.
+    (:func:`solve_poisson_neumann`; gradients by implicit differentiation), as
+    ``I = c H + J``: ``c`` is the least-squares scale of ``grad H`` onto ``G`` and ``J`` solves
+    the screened equation for ``G - c grad H`` (:func:`fattal_screen`), so that thin images do
+    not drift. Then ``L_out = exp(gamma I) L / (L + delta)`` (zeros black), normalised so the
+    ``black_point`` / ``1 - white_point`` quantiles map to 0 / 1 (pfstmo's defaults: 0.1 %
+    and 0.5 %), colour with ``s = 0.8``.
 
     Args:
         alpha: > 0, gradient magnitude (relative to the mean) left unchanged (paper: 0.1).
@@ -424,6 +483,7 @@ def tonemap_Fattal2002(
         white_point,
         saturation,
         levels=levels,
+        screen=fattal_screen(*L_shape[-2:]),
         encode=encode,
         weights=weights,
     )

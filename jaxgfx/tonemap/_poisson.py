@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 from jax.scipy.fft import dctn, idctn
@@ -32,17 +34,17 @@ def _eigenvalues(H, W, dtype):
     return ly[:, None] + lx[None, :]
 
 
-def _solve(b):
+def _solve(b, screen=0.0):
     H, W = b.shape[-2:]
-    lam = _eigenvalues(H, W, b.dtype)
+    lam = _eigenvalues(H, W, b.dtype) - screen
     lam_safe = jnp.where(lam == 0, 1.0, lam)
     B = dctn(b, type=2, axes=(-2, -1), norm="ortho")
     X = jnp.where(lam == 0, 0.0, B / lam_safe)
     return idctn(X, type=2, axes=(-2, -1), norm="ortho")
 
 
-@jax.custom_jvp
-def solve_poisson_neumann(b):
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
+def solve_poisson_neumann(b, screen: float = 0.0):
     """Zero-mean solution ``I`` of ``Laplacian(I) = b - mean(b)`` with Neumann boundaries.
 
     The 5-point Laplacian with reflecting borders (``divergence(forward_gradients(I))``) is
@@ -51,6 +53,10 @@ def solve_poisson_neumann(b):
     ``O(HW log HW)``, exact up to rounding. The constant mode (eigenvalue 0) is dropped, so
     the solution has zero mean and ``b``'s mean is ignored (it is not in the operator's range).
 
+    With ``screen = s > 0`` (static) it solves the *screened* equation ``(Laplacian - s) I = b``
+    instead (eigenvalues shifted by ``-s``; no mode dropped): variations longer than about
+    ``1 / sqrt(s)`` pixels are damped.
+
     Derivatives by implicit differentiation, not by differentiating the transform's internals:
     the solution operator ``S = A^+`` is linear, so the JVP is ``S`` applied to the tangent
     (one more solve; forward mode works, e.g. for Levenberg-Marquardt Jacobians) and reverse
@@ -58,14 +64,15 @@ def solve_poisson_neumann(b):
 
     Args:
         b: ``(..., H, W)`` right-hand side.
+        screen: static ``s >= 0``.
 
     Returns:
-        ``(..., H, W)`` zero-mean solution.
+        ``(..., H, W)`` solution (zero-mean for ``screen = 0``).
     """
-    return _solve(b)
+    return _solve(b, screen)
 
 
 @solve_poisson_neumann.defjvp
-def _jvp(primals, tangents):
+def _jvp(screen, primals, tangents):
     (b,), (t,) = primals, tangents
-    return _solve(b), _solve(t)
+    return _solve(b, screen), _solve(t, screen)

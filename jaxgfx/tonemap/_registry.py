@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 from typing import NamedTuple
 
 from .._checks import check_choice
@@ -47,68 +48,90 @@ ADAPTIVE_METHODS = ("drago", "reinhard", "filmic", "hable", "reinhard_local")
 class ParamSpec(NamedTuple):
     """A continuous operator parameter: default and constraint for fitting.
 
+    ``default`` is the operator's own keyword default (read from its signature, the one
+    source of truth; ``None`` means "from the image", e.g. Reinhard's ``white``);
     ``constraint``: ``"real"``, ``"positive"`` (> 0, fitted in log), ``"unit"`` (in (0, 1),
-    fitted by logit) or ``"above1"`` (> 1, fitted as log(p - 1)).
+    fitted by logit) or ``"above1"`` (> 1, fitted as log(p - 1)); ``start``: where
+    :func:`fit_tonemap` starts when ``default`` is ``None``.
     """
 
-    default: float
+    default: float | None
     constraint: str
     help: str
+    start: float | None = None
+
+    @property
+    def initial(self) -> float:
+        """The fit's starting value: ``default``, or ``start`` for an image-dependent one."""
+        return self.start if self.default is None else self.default
 
 
-_SAT = ParamSpec(1.0, "positive", "colour saturation exponent s of (C/L)^s")
+def _defaults(fn, specs: dict[str, tuple]) -> dict[str, ParamSpec]:
+    """``ParamSpec``s whose defaults are ``fn``'s keyword defaults (never a second copy)."""
+    sig = inspect.signature(fn).parameters
+    return {name: ParamSpec(sig[name].default, *rest) for name, rest in specs.items()}
 
-TONEMAP_PARAMETERS: dict[str, dict[str, ParamSpec]] = {
+
+_SAT = ("positive", "colour saturation exponent s of (C/L)^s")
+
+_SPECS = {
     "exposure": {
-        "exposure": ParamSpec(0.0, "real", "exposure in stops"),
-        "gamma": ParamSpec(1.0, "positive", "display gamma on luminance"),
+        "exposure": ("real", "exposure in stops"),
+        "gamma": ("positive", "display gamma on luminance"),
         "saturation": _SAT,
     },
     "drago": {
-        "bias": ParamSpec(0.85, "unit", "bias b of the adaptive logarithm"),
-        "ld_max": ParamSpec(100.0, "positive", "display maximum, cd/m^2"),
+        "bias": ("unit", "bias b of the adaptive logarithm"),
+        "ld_max": ("positive", "display maximum, cd/m^2"),
         "saturation": _SAT,
     },
     "reinhard": {
-        "key": ParamSpec(0.18, "positive", "key a (mid-grey level)"),
-        "white": ParamSpec(4.0, "positive", "L_white in scaled units (default: image maximum)"),
+        "key": ("positive", "key a (mid-grey level)"),
+        "white": ("positive", "L_white in scaled units (default: the image maximum)", 4.0),
         "saturation": _SAT,
     },
     "reinhard_devlin": {
-        "intensity": ParamSpec(0.0, "real", "intensity f"),
-        "light_adapt": ParamSpec(1.0, "unit", "light adaptation c"),
-        "color_adapt": ParamSpec(0.0, "unit", "chromatic adaptation a"),
+        "intensity": ("real", "intensity f in [-8, 8]"),
+        "light_adapt": ("unit", "light adaptation c in [0, 1]"),
+        "color_adapt": ("unit", "chromatic adaptation a in [0, 1]"),
     },
     "filmic": {
-        "exposure": ParamSpec(0.0, "real", "exposure in stops (after auto-exposure)"),
+        "exposure": ("real", "exposure in stops (after auto-exposure)"),
         "saturation": _SAT,
     },
     "hable": {
-        "exposure": ParamSpec(0.0, "real", "exposure in stops (after auto-exposure)"),
-        "shoulder": ParamSpec(0.15, "positive", "shoulder strength A"),
-        "white": ParamSpec(11.2, "positive", "linear white point W"),
+        "exposure": ("real", "exposure in stops (after auto-exposure)"),
+        "shoulder": ("positive", "shoulder strength A"),
+        "white": ("positive", "linear white point W"),
         "saturation": _SAT,
     },
     "reinhard_local": {
-        "key": ParamSpec(0.18, "positive", "key a"),
+        "key": ("positive", "key a"),
+        "phi": ("real", "sharpening phi (scale selection; zero gradient a.e.)"),
+        "epsilon": ("positive", "activity threshold (scale selection; zero gradient a.e.)"),
         "saturation": _SAT,
     },
     "contrast_inversion": {
-        "k": ParamSpec(2.0, "positive", "divisor k (flat regions -> 1/k)"),
-        "sigma": ParamSpec(8.0, "positive", "blur sigma in pixels"),
+        "k": ("positive", "divisor k (the log-average maps to 1 / (1 + k))"),
+        "strength": ("unit", "exponent c of the blurred surround, in (0, 1]"),
+        "sigma": ("positive", "surround blur sigma in pixels"),
         "saturation": _SAT,
     },
     "durand": {
-        "contrast": ParamSpec(5.0, "above1", "target contrast of the base layer"),
-        "sigma_range": ParamSpec(0.4, "positive", "range sigma, log10 units"),
+        "contrast": ("above1", "target contrast of the base layer"),
+        "sigma_range": ("positive", "range sigma, log10 units"),
         "saturation": _SAT,
     },
     "fattal": {
-        "alpha": ParamSpec(0.1, "positive", "gradient threshold relative to the mean"),
-        "beta": ParamSpec(0.85, "positive", "attenuation exponent"),
-        "gamma": ParamSpec(0.8, "positive", "output gamma"),
-        "saturation": ParamSpec(0.8, "positive", "colour saturation exponent"),
+        "alpha": ("positive", "gradient threshold relative to the mean"),
+        "beta": ("positive", "attenuation exponent"),
+        "gamma": ("positive", "output gamma"),
+        "saturation": ("positive", "colour saturation exponent"),
     },
+}
+
+TONEMAP_PARAMETERS: dict[str, dict[str, ParamSpec]] = {
+    name: _defaults(TONEMAP_METHODS[name], specs) for name, specs in _SPECS.items()
 }
 """Continuous parameters of each operator (fitted by :func:`fit_tonemap`, exposed by the CLI).
 Other keyword options (``encode``, ``sigma_spatial``, ``num_scales``...) are static."""

@@ -57,6 +57,10 @@ def files(tmp_path_factory):
     io.write_png(str(p["one_px_png"]), np.full((1, 1, 3), 7, np.uint8))
     p["exr"] = root / "in.exr"
     io.write_exr(str(p["exr"]), np.ascontiguousarray(img.astype(np.float32) / 255 * 4))
+    bad = img.astype(np.float32) / 255 * 4
+    bad[3, 4, 0], bad[9, 1, 2] = np.inf, np.nan
+    p["inf_exr"] = root / "inf.exr"
+    io.write_exr(str(p["inf_exr"]), bad)
     frames, times = _bracket()
     p["stack"] = _stack_dir(root, "stack", frames, times)
     p["saturated"] = _stack_dir(root, "saturated", [np.full((16, 16, 3), 255, np.uint8)] * 3, times)

@@ -358,7 +358,17 @@ add(
 add(
     "tonemap-in-ldr",
     lambda f, t: ["tonemap", f["png"], t / "o.png"],
-    ["input", "unsupported extension"],
+    ["input: cannot read", "in.png", "as linear radiance"],
+)
+add(
+    "tonemap-in-nonfinite",
+    lambda f, t: ["tonemap", f["inf_exr"], t / "o.png"],
+    ["inf.exr", "2 of 256 pixels hold NaN or Inf"],
+)
+add(
+    "tonemap-intensity-range",
+    lambda f, t: ["tonemap", f["exr"], t / "o.png", "--op", "reinhard_devlin", "--intensity", "100"],
+    ["--intensity", "<= 8.0"],
 )
 add("tonemap-in-dir", lambda f, t: ["tonemap", t, t / "o.png"], ["input: is a directory"])
 add("tonemap-in-garbage", lambda f, t: ["tonemap", f["garbage.exr"], t / "o.png"], ["garbage.exr"])

@@ -30,6 +30,48 @@ def synthetic_hdr(H=32, W=48, *, seed=0, zeros=False, dynamic_range=1e4):
     return img.astype(np.float32)
 
 
+def hard_scenes(n=96, block=16, seed=0):
+    """Issue 27: HDR scenes with exact-zero backgrounds, ~10^9:1 range and a 10^6 sun, built
+    from ``block``-sized regions (for block-mean order checks); positions scale with ``n``.
+    ``{name: (n, n, 3) float32}``."""
+    rng = np.random.default_rng(seed)
+    nb = n // block
+    yy, xx = np.mgrid[0:n, 0:n] * (96.0 / n)  # layout drawn on a 96 x 96 canvas
+    r2 = (96.0 / n) ** 2  # one pixel, squared, in canvas units
+    out = {}
+    # 1: patchwork of flat regions 1e-3..1e3 (a third exactly zero) and a sun
+    lev = 10.0 ** rng.uniform(-3, 3, (nb, nb))
+    lev[rng.random((nb, nb)) < 0.33] = 0.0
+    img = np.kron(lev, np.ones((block, block)))
+    img = img * np.exp(0.05 * rng.standard_normal((n, n)))
+    img[(yy - 40) ** 2 + (xx - 56) ** 2 < max(25, 2 * r2)] = 1e6
+    out["patches_sun"] = img
+    # 2: black sky with stars (3 x 3 canvas-px dots 1..1e5) and a moon
+    img = np.zeros((n, n))
+    for _ in range(24):
+        y, x = rng.integers(2, 93, 2)
+        img[(np.abs(yy - y) <= max(1, 0.5 * 96 / n)) & (np.abs(xx - x) <= max(1, 0.5 * 96 / n))] = (
+            10.0 ** rng.uniform(0, 5)
+        )
+    img[(yy - 20) ** 2 + (xx - 70) ** 2 < max(36, 2 * r2)] = 1e6
+    out["stars"] = img
+    # 3: zero background, a lit room (1e-2..1) with a window (1e2) and a sun (1e6)
+    img = np.zeros((n, n))
+    room = (yy >= 16) & (yy < 80) & (xx >= 8) & (xx < 88)
+    img[room] = 0.02 * np.exp(3.0 * xx[room] / 96.0)
+    img[(yy >= 24) & (yy < 56) & (xx >= 48) & (xx < 80)] = 100.0
+    img[(yy - 40) ** 2 + (xx - 64) ** 2 < max(16, 2 * r2)] = 1e6
+    out["room"] = img * np.exp(0.05 * rng.standard_normal((n, n)))
+    col = np.array([1.0, 0.9, 0.7])
+    return {k: (v[..., None] * col).astype(np.float32) for k, v in out.items()}
+
+
+def block_means(a, block=16):
+    """Means of the ``block`` x ``block`` tiles of ``(H, W)`` ``a``, flattened."""
+    H, W = a.shape
+    return a.reshape(H // block, block, W // block, block).mean((1, 3)).ravel()
+
+
 def psnr(a, b, peak=1.0):
     mse = float(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2))
     return float("inf") if mse == 0 else 10 * np.log10(peak**2 / mse)
