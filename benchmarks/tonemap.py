@@ -32,32 +32,7 @@ from benchmarks._report import emit, machine
 from benchmarks._timing import median_time, time_jax
 from jaxgfx import tonemap as tm
 from jaxgfx.hdr import exposure_fusion
-
-
-def hdr_scene(H, W, seed=0):
-    """A synthetic HDR scene: sky gradient with a sun (1e5:1), textured ground, a dark
-    interior with a window, coloured patches; ~5 decades of luminance."""
-    rng = np.random.default_rng(seed)
-    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
-    yy /= H - 1
-    xx /= W - 1
-    sky = (np.exp(3.0 * (1 - yy)) * 2.0)[..., None] * np.array([0.55, 0.75, 1.0], np.float32)
-    ground = (0.3 + 0.15 * np.sin(60 * xx) * np.cos(45 * yy))[..., None] * np.array(
-        [0.55, 0.45, 0.3], np.float32
-    )
-    img = np.where((yy > 0.6)[..., None], ground, sky)
-    room = (xx < 0.35) & (yy > 0.25)
-    img = np.where(room[..., None], 0.02 * img / img.mean(), img)
-    window = room & (np.abs(xx - 0.17) < 0.06) & (np.abs(yy - 0.45) < 0.08)
-    img = np.where(window[..., None], np.array([3.0, 3.2, 3.5], np.float32) * 8, img)
-    for i, c in enumerate(([0.8, 0.1, 0.1], [0.1, 0.6, 0.1], [0.1, 0.2, 0.8], [0.8, 0.8, 0.1])):
-        patch = (np.abs(xx - (0.5 + 0.12 * i)) < 0.04) & (np.abs(yy - 0.8) < 0.06)
-        img = np.where(patch[..., None], np.array(c, np.float32), img)
-    sun = (yy - 0.2) ** 2 + ((xx - 0.75) * W / H) ** 2 < 0.0015
-    img = np.where(sun[..., None], np.array([1.0, 0.95, 0.85], np.float32) * 2e4, img)
-    img = img * np.exp(0.05 * rng.standard_normal((H, W, 1))).astype(np.float32)
-    return img.astype(np.float32)
-
+from jaxgfx.hdr.synthetic import outdoor_hdr_scene as hdr_scene
 
 JAX_CASES = {
     "drago": (tm.tonemap_Drago2003, {}),

@@ -48,7 +48,7 @@ class TonemapFitConfig:
 
 
 def synthetic_scene(H, W):
-    from benchmarks.tonemap import hdr_scene
+    from jaxgfx.hdr.synthetic import outdoor_hdr_scene as hdr_scene
 
     return hdr_scene(H, W)
 

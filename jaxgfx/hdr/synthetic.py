@@ -12,6 +12,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._checks import check_choice, check_nonnegative, check_positive
 from ._curves import ANALYTIC_KINDS
@@ -27,6 +28,9 @@ __all__ = [
     "SYNTHETIC_RESPONSES",
     "jpeg_roundtrip",
     "make_jpeg_stack",
+    "outdoor_hdr_scene",
+    "smooth_hdr_scene",
+    "hard_hdr_scenes",
 ]
 
 SYNTHETIC_RESPONSES = ("gamma2.2", *(k for k in ANALYTIC_KINDS if k != "linear"))
@@ -282,3 +286,89 @@ def make_jpeg_stack(
         )
     imgs = jpeg_roundtrip(st.images, quality=quality, subsampling=subsampling)
     return st._replace(images=jnp.asarray(imgs))
+
+# ----------------------------------------------------------------------------------------
+# host-side NumPy HDR scenes for tone mapping (benchmarks, figures, tests: one owner)
+
+
+def outdoor_hdr_scene(H: int, W: int, seed: int = 0):
+    """A synthetic HDR scene: sky gradient with a sun (1e5:1), textured ground, a dark
+    interior with a window, coloured patches; ~5 decades of luminance. Host-side NumPy
+    ``(H, W, 3)`` float32 (the tone-mapping benchmark's and figure's scene)."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    yy /= H - 1
+    xx /= W - 1
+    sky = (np.exp(3.0 * (1 - yy)) * 2.0)[..., None] * np.array([0.55, 0.75, 1.0], np.float32)
+    ground = (0.3 + 0.15 * np.sin(60 * xx) * np.cos(45 * yy))[..., None] * np.array(
+        [0.55, 0.45, 0.3], np.float32
+    )
+    img = np.where((yy > 0.6)[..., None], ground, sky)
+    room = (xx < 0.35) & (yy > 0.25)
+    img = np.where(room[..., None], 0.02 * img / img.mean(), img)
+    window = room & (np.abs(xx - 0.17) < 0.06) & (np.abs(yy - 0.45) < 0.08)
+    img = np.where(window[..., None], np.array([3.0, 3.2, 3.5], np.float32) * 8, img)
+    for i, c in enumerate(([0.8, 0.1, 0.1], [0.1, 0.6, 0.1], [0.1, 0.2, 0.8], [0.8, 0.8, 0.1])):
+        patch = (np.abs(xx - (0.5 + 0.12 * i)) < 0.04) & (np.abs(yy - 0.8) < 0.06)
+        img = np.where(patch[..., None], np.array(c, np.float32), img)
+    sun = (yy - 0.2) ** 2 + ((xx - 0.75) * W / H) ** 2 < 0.0015
+    img = np.where(sun[..., None], np.array([1.0, 0.95, 0.85], np.float32) * 2e4, img)
+    img = img * np.exp(0.05 * rng.standard_normal((H, W, 1))).astype(np.float32)
+    return img.astype(np.float32)
+
+
+def smooth_hdr_scene(H=32, W=48, *, seed=0, zeros=False, dynamic_range=1e4):
+    """A smooth HDR scene: sky gradient, a bright disc ("sun"), textured ground, coloured
+    patches; ``dynamic_range`` ~ max / min of the non-zero pixels; ``zeros``: a black corner.
+    Host-side NumPy ``(H, W, 3)`` float32."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float64)
+    yy /= max(H - 1, 1)
+    xx /= max(W - 1, 1)
+    sky = np.exp(np.log(dynamic_range) * 0.35 * (1.0 - yy))[..., None] * np.array([0.6, 0.8, 1.0])
+    ground = (0.05 + 0.04 * np.sin(40 * xx) * np.cos(30 * yy))[..., None] * np.array(
+        [0.7, 0.55, 0.35]
+    )
+    img = np.where((yy > 0.55)[..., None], ground, sky)
+    d2 = (yy - 0.25) ** 2 + (xx - 0.7) ** 2
+    img += (d2 < 0.01)[..., None] * dynamic_range * 0.3 * np.array([1.0, 0.95, 0.8])
+    img *= np.exp(0.1 * rng.standard_normal((H, W, 1)))
+    if zeros:
+        img[-max(H // 6, 1) :, : max(W // 3, 1)] = 0.0
+    return img.astype(np.float32)
+
+
+def hard_hdr_scenes(n=96, block=16, seed=0):
+    """Issue 27: HDR scenes with exact-zero backgrounds, ~10^9:1 range and a 10^6 sun, built
+    from ``block``-sized regions (for block-mean order checks); positions scale with ``n``.
+    ``{name: (n, n, 3) float32}``."""
+    rng = np.random.default_rng(seed)
+    nb = n // block
+    yy, xx = np.mgrid[0:n, 0:n] * (96.0 / n)  # layout drawn on a 96 x 96 canvas
+    r2 = (96.0 / n) ** 2  # one pixel, squared, in canvas units
+    out = {}
+    # 1: patchwork of flat regions 1e-3..1e3 (a third exactly zero) and a sun
+    lev = 10.0 ** rng.uniform(-3, 3, (nb, nb))
+    lev[rng.random((nb, nb)) < 0.33] = 0.0
+    img = np.kron(lev, np.ones((block, block)))
+    img = img * np.exp(0.05 * rng.standard_normal((n, n)))
+    img[(yy - 40) ** 2 + (xx - 56) ** 2 < max(25, 2 * r2)] = 1e6
+    out["patches_sun"] = img
+    # 2: black sky with stars (3 x 3 canvas-px dots 1..1e5) and a moon
+    img = np.zeros((n, n))
+    for _ in range(24):
+        y, x = rng.integers(2, 93, 2)
+        img[(np.abs(yy - y) <= max(1, 0.5 * 96 / n)) & (np.abs(xx - x) <= max(1, 0.5 * 96 / n))] = (
+            10.0 ** rng.uniform(0, 5)
+        )
+    img[(yy - 20) ** 2 + (xx - 70) ** 2 < max(36, 2 * r2)] = 1e6
+    out["stars"] = img
+    # 3: zero background, a lit room (1e-2..1) with a window (1e2) and a sun (1e6)
+    img = np.zeros((n, n))
+    room = (yy >= 16) & (yy < 80) & (xx >= 8) & (xx < 88)
+    img[room] = 0.02 * np.exp(3.0 * xx[room] / 96.0)
+    img[(yy >= 24) & (yy < 56) & (xx >= 48) & (xx < 80)] = 100.0
+    img[(yy - 40) ** 2 + (xx - 64) ** 2 < max(16, 2 * r2)] = 1e6
+    out["room"] = img * np.exp(0.05 * rng.standard_normal((n, n)))
+    col = np.array([1.0, 0.9, 0.7])
+    return {k: (v[..., None] * col).astype(np.float32) for k, v in out.items()}

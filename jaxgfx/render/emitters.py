@@ -25,7 +25,7 @@ from jaxgfx._checks import as_float_array, check_finite, check_nonnegative
 from jaxgfx._math import safe_arccos, safe_atan2, safe_div, safe_sqrt, sincos, sum_last, take_rows
 from jaxgfx.color import LUMINANCE_WEIGHTS
 from jaxgfx.render.bsdf import rgb_param
-from jaxgfx.render.warp import Distribution2D
+from jaxgfx.render.sampling import Distribution2D
 
 __all__ = [
     "PointLights",

@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 
 from .._math import safe_div, safe_pow
+from ..color.transfer import ACES_NARKOWICZ2015
 from ._common import (
     check_encode,
     check_hdr,
@@ -69,7 +70,7 @@ def reinhard_curve(L, la, mx, *, key, white):
     return Lm * (1.0 + safe_div(Lm, Lwhite * Lwhite)) / (1.0 + Lm)
 
 
-_ACES = (2.51, 0.03, 2.43, 0.59, 0.14)
+_ACES = ACES_NARKOWICZ2015  # the one definition: jaxgfx.color.aces_narkowicz2015
 
 
 def aces_curve(L, la, mx, *, exposure):

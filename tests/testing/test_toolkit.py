@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgfx.render import warp
+from jaxgfx.render import sampling as warp
 from jaxgfx.render.bsdf import Diffuse
 from jaxgfx.testing import check_grads_fd, chi2_test, furnace
 

@@ -14,7 +14,7 @@ from jaxgfx.render.bsdf._base import (
     prep_u,
     rgb_field,
 )
-from jaxgfx.render.warp import square_to_cosine_hemisphere
+from jaxgfx.render.sampling import square_to_cosine_hemisphere
 
 __all__ = ["Diffuse"]
 

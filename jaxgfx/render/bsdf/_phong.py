@@ -21,7 +21,7 @@ from jaxgfx.render.bsdf._base import (
     sample_setup,
 )
 from jaxgfx.render.geometry.frame import frame_from_normal, reflect, to_world
-from jaxgfx.render.warp import square_to_cosine_hemisphere, square_to_phong_lobe
+from jaxgfx.render.sampling import square_to_cosine_hemisphere, square_to_phong_lobe
 
 __all__ = ["Phong"]
 

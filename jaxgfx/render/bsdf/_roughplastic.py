@@ -27,7 +27,7 @@ from jaxgfx.render.bsdf.microfacet import (
     reflection_pdf,
 )
 from jaxgfx.render.geometry.frame import reflect
-from jaxgfx.render.warp import square_to_cosine_hemisphere
+from jaxgfx.render.sampling import square_to_cosine_hemisphere
 
 __all__ = ["RoughPlastic"]
 

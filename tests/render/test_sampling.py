@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgfx.render import warp
+from jaxgfx.render import sampling as warp
 from jaxgfx.testing import chi2_test
 
 U_GRID = np.stack(
