@@ -84,7 +84,7 @@ def test_canny_default_sigma_is_skimages():
 # ------------------------------------------------------------------ optim.fit
 
 
-def test_fit_default_optimizer_and_learning_rate_first_step():
+def test_fit_default_adam_first_step():
     # Adam's first update is lr * g / (|g| + eps) = lr (bias-corrected moments, any |g|);
     # SGD would move by lr * g = 0.01 * 600 = 6
     res = fit(
