@@ -11,6 +11,9 @@ _SDF_HIT = (
     "        t = t - safe_div(f_live - sg(f_live), gd)"
 )
 
+_RR = "tests/test_defaults_render.py::test_path_russian_roulette_starts_after_five_bounces"
+RR_NAME, RR_OBJECT = _RR + "[name]", _RR + "[object]"
+
 MUTANTS = [
     # ------------------------------------------------------------------ colour
     {
@@ -279,5 +282,61 @@ MUTANTS = [
         "new": "    patience: int = 9,",
         "tests": ["tests/test_defaults.py::test_fit_default_patience_with_tol"],
         "why": "a default changed (10 steps)",
+    },
+    {
+        "name": "defaults.render.integrator_direct",
+        "file": "jaxgfx/render/render.py",
+        "old": 'integrator: str | Integrator = "path",',
+        "new": 'integrator: str | Integrator = "direct",',
+        "tests": ["tests/test_defaults_render.py::test_render_default_integrator_is_path_depth_3"],
+        "why": "a default changed (the path tracer)",
+    },
+    {
+        "name": "defaults.PathIntegrator.max_depth_4",
+        "file": "jaxgfx/render/integrators/path.py",
+        "old": "    max_depth: int = eqx.field(static=True, default=3)\n    rr_depth",
+        "new": "    max_depth: int = eqx.field(static=True, default=4)\n    rr_depth",
+        "tests": ["tests/test_defaults_render.py::test_render_default_integrator_is_path_depth_3"],
+        "why": "a default changed (Mitsuba depth 3: one indirect bounce)",
+    },
+    {
+        "name": "defaults.PathIntegrator.rr_depth_4",
+        "file": "jaxgfx/render/integrators/path.py",
+        "old": "default=3)\n    rr_depth: int = eqx.field(static=True, default=5)",
+        "new": "default=3)\n    rr_depth: int = eqx.field(static=True, default=4)",
+        "tests": [RR_OBJECT],
+        "why": "a default changed (Russian roulette after 5 bounces, as Mitsuba)",
+    },
+    {
+        "name": "defaults.PathIntegrator.rr_depth_6",
+        "file": "jaxgfx/render/integrators/path.py",
+        "old": "default=3)\n    rr_depth: int = eqx.field(static=True, default=5)",
+        "new": "default=3)\n    rr_depth: int = eqx.field(static=True, default=6)",
+        "tests": [RR_OBJECT],
+        "why": "a default changed (Russian roulette after 5 bounces, as Mitsuba)",
+    },
+    {
+        "name": "defaults.render.max_depth_4",
+        "file": "jaxgfx/render/render.py",
+        "old": '"max_depth": 3 if max_depth is None else max_depth,',
+        "new": '"max_depth": 4 if max_depth is None else max_depth,',
+        "tests": ["tests/test_defaults_render.py::test_render_default_integrator_is_path_depth_3"],
+        "why": "a default changed (Mitsuba depth 3: one indirect bounce)",
+    },
+    {
+        "name": "defaults.render.rr_depth_4",
+        "file": "jaxgfx/render/render.py",
+        "old": '"rr_depth": 5 if rr_depth is None else rr_depth,',
+        "new": '"rr_depth": 4 if rr_depth is None else rr_depth,',
+        "tests": [RR_NAME],
+        "why": "a default changed (Russian roulette after 5 bounces, as Mitsuba)",
+    },
+    {
+        "name": "defaults.render.rr_depth_6",
+        "file": "jaxgfx/render/render.py",
+        "old": '"rr_depth": 5 if rr_depth is None else rr_depth,',
+        "new": '"rr_depth": 6 if rr_depth is None else rr_depth,',
+        "tests": [RR_NAME],
+        "why": "a default changed (Russian roulette after 5 bounces, as Mitsuba)",
     },
 ]
