@@ -35,17 +35,20 @@ DOC_FILES = [ROOT / "README.md"] + sorted(
 )
 _FENCE = re.compile(r"^([ \t]*)```([\w-]*)\s*$")
 
-# Blocks too slow for the default run, by (file, a text only that block contains): the cost of
-# the block alone, measured on the shared 2-core machine (load average ~7) with a cold
-# compilation cache; nearly all of it is XLA compiling the renderer (and its gradient).
+# Blocks too slow for the default run (all in `make test-slow`), by (file, a text only that
+# block contains), with the cost of the block measured on the shared 2-core machine (load
+# average 7-8) from a cold compilation cache; nearly all of it is XLA compiling the renderer
+# and its gradient. The default run keeps README.md's library block (8 s; 24 s at that load:
+# blur, its gradient, a synthetic stack, Debevec, merge) and docs/tonemap.md's (3 s; 8 s).
 SLOW = {
     ("README.md", "R.load_scene("): "120 s: path tracer at 16 spp and its gradient",
-    ("docs/render.md", "img = render(scene, jax.random.key(0), spp=64"): "80 s: path + grad",
-    ("docs/render.md", "PathIntegrator(max_depth=3"): "path tracer, 64 spp (~40 s)",
-    ("docs/render.md", "render_sharded"): "sharded render and its gradient (~60 s)",
-    ("docs/render_backends.md", "build_traversal"): "mesh scene, three backends (~60 s)",
-    ("docs/render_gradients.md", "grad_stats"): "200 s: 8 gradient estimates + FD",
-    ("docs/render_gradients.md", 'visibility="edge"'): "edge-sampled direct gradient (~60 s)",
+    ("docs/render.md", "img = render(scene, jax.random.key(0), spp=64"): "54 s: path + grad",
+    # the same path program as the block above: 3 s after it in one process
+    ("docs/render.md", "PathIntegrator(max_depth=3"): "two 64-spp path renders",
+    ("docs/render.md", "render_sharded"): "132 s: sharded render and its gradient",
+    ("docs/render_backends.md", "build_traversal"): "64 s: mesh scene, three backends",
+    ("docs/render_gradients.md", "grad_stats"): "104 s: 8 gradient estimates + FD",
+    ("docs/render_gradients.md", 'visibility="edge"'): "182 s: edge-sampled gradient",
     ("docs/inverse.md", "fit(loss"): "106 s: 100 Adam steps through the renderer",
     ("docs/inverse.md", "fit_least_squares(residuals"): "260 s: LM through a 512-spp render",
 }
