@@ -11,6 +11,9 @@ _SDF_HIT = (
     "        t = t - safe_div(f_live - sg(f_live), gd)"
 )
 
+_RR = "tests/test_defaults_render.py::test_path_russian_roulette_starts_after_five_bounces"
+RR_NAME, RR_OBJECT = _RR + "[name]", _RR + "[object]"
+
 MUTANTS = [
     # ------------------------------------------------------------------ colour
     {
@@ -229,5 +232,111 @@ MUTANTS = [
         "new": "return lo + (hi - lo) * jax.nn.sigmoid(1.05 * u)",
         "tests": ["tests/optim/test_transforms.py::test_forward_and_derivative_closed_form"],
         "why": "a constant off by 5 %",
+    },
+    # ------------------------------------------------------------------ defaults (issue 28)
+    # defaults set on purpose by earlier fixes: a changed default must fail a test
+    {
+        "name": "defaults.merge_radiance.time_power_1",
+        "file": "jaxgfx/hdr/merge.py",
+        "old": "    time_power: float = 2.0,\n):",
+        "new": "    time_power: float = 1.0,\n):",
+        "tests": ["tests/test_defaults.py::test_merge_default_is_hat_times_t_squared"],
+        "why": "a default changed (hat x t^2 weights, commit 2b64734)",
+    },
+    {
+        "name": "defaults.merge_radiance.weighting_gaussian",
+        "file": "jaxgfx/hdr/merge.py",
+        "old": '    weighting: str = "hat",\n    noise=None,',
+        "new": '    weighting: str = "gaussian",\n    noise=None,',
+        "tests": ["tests/test_defaults.py::test_merge_default_is_hat_times_t_squared"],
+        "why": "a default changed (Debevec's hat)",
+    },
+    {
+        "name": "defaults.canny.sigma_1.1",
+        "file": "jaxgfx/image/edges.py",
+        "old": "    sigma=1.0,\n    low=None,",
+        "new": "    sigma=1.1,\n    low=None,",
+        "tests": ["tests/test_defaults.py::test_canny_default_sigma_is_skimages"],
+        "why": "a default changed (scikit-image's sigma 1)",
+    },
+    {
+        "name": "defaults.fit.optimizer_sgd",
+        "file": "jaxgfx/optim/_loop.py",
+        "old": '    optimizer="adam",\n    steps: int,',
+        "new": '    optimizer="sgd",\n    steps: int,',
+        "tests": ["tests/test_defaults.py::test_fit_default_adam_first_step"],
+        "why": "a default changed (Adam)",
+    },
+    {
+        "name": "defaults.fit.learning_rate_x2",
+        "file": "jaxgfx/optim/_loop.py",
+        "old": "learning_rate: float | Callable[[int], float] = 1e-2,",
+        "new": "learning_rate: float | Callable[[int], float] = 2e-2,",
+        "tests": ["tests/test_defaults.py::test_fit_default_adam_first_step"],
+        "why": "a default changed (1e-2)",
+    },
+    {
+        "name": "defaults.fit.patience_9",
+        "file": "jaxgfx/optim/_loop.py",
+        "old": "    patience: int = 10,",
+        "new": "    patience: int = 9,",
+        "tests": ["tests/test_defaults.py::test_fit_default_patience_with_tol"],
+        "why": "a default changed (10 steps)",
+    },
+    {
+        "name": "defaults.render.integrator_direct",
+        "file": "jaxgfx/render/render.py",
+        "old": 'integrator: str | Integrator = "path",',
+        "new": 'integrator: str | Integrator = "direct",',
+        "tests": ["tests/test_defaults_render.py::test_render_default_integrator_is_path_depth_3"],
+        "why": "a default changed (the path tracer)",
+    },
+    {
+        "name": "defaults.PathIntegrator.max_depth_4",
+        "file": "jaxgfx/render/integrators/path.py",
+        "old": "    max_depth: int = eqx.field(static=True, default=3)\n    rr_depth",
+        "new": "    max_depth: int = eqx.field(static=True, default=4)\n    rr_depth",
+        "tests": ["tests/test_defaults_render.py::test_render_default_integrator_is_path_depth_3"],
+        "why": "a default changed (Mitsuba depth 3: one indirect bounce)",
+    },
+    {
+        "name": "defaults.PathIntegrator.rr_depth_4",
+        "file": "jaxgfx/render/integrators/path.py",
+        "old": "default=3)\n    rr_depth: int = eqx.field(static=True, default=5)",
+        "new": "default=3)\n    rr_depth: int = eqx.field(static=True, default=4)",
+        "tests": [RR_OBJECT],
+        "why": "a default changed (Russian roulette after 5 bounces, as Mitsuba)",
+    },
+    {
+        "name": "defaults.PathIntegrator.rr_depth_6",
+        "file": "jaxgfx/render/integrators/path.py",
+        "old": "default=3)\n    rr_depth: int = eqx.field(static=True, default=5)",
+        "new": "default=3)\n    rr_depth: int = eqx.field(static=True, default=6)",
+        "tests": [RR_OBJECT],
+        "why": "a default changed (Russian roulette after 5 bounces, as Mitsuba)",
+    },
+    {
+        "name": "defaults.render.max_depth_4",
+        "file": "jaxgfx/render/render.py",
+        "old": '"max_depth": 3 if max_depth is None else max_depth,',
+        "new": '"max_depth": 4 if max_depth is None else max_depth,',
+        "tests": ["tests/test_defaults_render.py::test_render_default_integrator_is_path_depth_3"],
+        "why": "a default changed (Mitsuba depth 3: one indirect bounce)",
+    },
+    {
+        "name": "defaults.render.rr_depth_4",
+        "file": "jaxgfx/render/render.py",
+        "old": '"rr_depth": 5 if rr_depth is None else rr_depth,',
+        "new": '"rr_depth": 4 if rr_depth is None else rr_depth,',
+        "tests": [RR_NAME],
+        "why": "a default changed (Russian roulette after 5 bounces, as Mitsuba)",
+    },
+    {
+        "name": "defaults.render.rr_depth_6",
+        "file": "jaxgfx/render/render.py",
+        "old": '"rr_depth": 5 if rr_depth is None else rr_depth,',
+        "new": '"rr_depth": 6 if rr_depth is None else rr_depth,',
+        "tests": [RR_NAME],
+        "why": "a default changed (Russian roulette after 5 bounces, as Mitsuba)",
     },
 ]
