@@ -71,8 +71,7 @@ class CameraResponse(eqx.Module):
     diagnostics: dict = eqx.field(default_factory=dict)
 
     def __check_init__(self):
-        if self.kind not in RESPONSE_KINDS:
-            raise ValueError(f"kind: expected one of {RESPONSE_KINDS}, got {self.kind!r}")
+        check_choice(self.kind, "kind", RESPONSE_KINDS)
 
     # -- constructors -----------------------------------------------------------------------
     @classmethod

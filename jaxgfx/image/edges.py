@@ -266,8 +266,8 @@ def _border_mask(shape):
 def canny(
     image,
     sigma=1.0,
-    low=None,
-    high=None,
+    low=0.1,
+    high=0.2,
     *,
     use_quantiles: bool = False,
     padding: str = "reflect",
@@ -293,7 +293,7 @@ def canny(
     Args:
         image: ``(H, W)`` or ``(..., H, W, C)``.
         sigma: blur width in pixels, >= 0.
-        low, high: thresholds, ``0 <= low <= high``.
+        low, high: thresholds, ``0 <= low <= high`` (``None``: the defaults 0.1, 0.2).
 
     Returns:
         Boolean ``(..., H, W)``.

@@ -13,6 +13,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from jaxgfx._checks import check_choice
+
 __all__ = [
     "FILTER_OPS",
     "FilterOp",
@@ -26,10 +28,30 @@ __all__ = [
 
 @dataclasses.dataclass(frozen=True)
 class FilterOp:
+    """A ``jaxgfx filter`` operation: ``fn(image, *params)``, its parameter names, the defaults
+    of parameters the library function has none for (``cli_defaults``), and ``source``: the
+    library function (``"image.canny"``) whose signature gives every other default — one
+    source of truth, so the CLI cannot drift from the library."""
+
     fn: Callable
     params: tuple[str, ...]
-    defaults: dict
+    cli_defaults: dict
     doc: str
+    source: str | None = None
+
+    @property
+    def defaults(self) -> dict:
+        out = dict(self.cli_defaults)
+        if self.source is not None:
+            import inspect
+
+            mod, name = self.source.split(".")
+            fn = getattr(_image() if mod == "image" else _color(), name)
+            for k, prm in inspect.signature(fn).parameters.items():
+                if k in self.params and prm.default is not inspect.Parameter.empty:
+                    if prm.default is not None:
+                        out[k] = prm.default
+        return out
 
 
 def _image():
@@ -57,20 +79,23 @@ FILTER_OPS: dict[str, FilterOp] = {
     "gaussian": FilterOp(
         lambda im, sigma, padding: _image().gaussian_blur(im, sigma, padding=padding),
         ("sigma", "padding"),
-        {"sigma": 2.0, "padding": "reflect"},
+        {"sigma": 2.0},
         "Gaussian blur (truncated at 3 sigma)",
+        "image.gaussian_blur",
     ),
     "box": FilterOp(
         lambda im, radius, padding: _image().box_blur(im, 2 * int(radius) + 1, padding=padding),
         ("radius", "padding"),
-        {"radius": 2, "padding": "reflect"},
+        {"radius": 2},
         "box (mean) filter of size 2r+1",
+        "image.box_blur",
     ),
     "median": FilterOp(
         lambda im, size, padding: _image().median_filter(im, size, padding=padding),
         ("size", "padding"),
-        {"size": 3, "padding": "reflect"},
+        {"size": 3},
         "exact median filter",
+        "image.median_filter",
     ),
     "bilateral": FilterOp(
         lambda im, sigma_spatial, sigma_range: _image().bilateral_filter(
@@ -113,14 +138,16 @@ FILTER_OPS: dict[str, FilterOp] = {
     "canny": FilterOp(
         lambda im, sigma, low, high: _edge_map(_image().canny(im, sigma, low, high)),
         ("sigma", "low", "high"),
-        {"sigma": 1.5, "low": 0.05, "high": 0.15},
+        {},
         "Canny edges (white on black)",
+        "image.canny",
     ),
     "stretch": FilterOp(
         lambda im, low, high: _image().stretch_contrast(im, low=low, high=high),
         ("low", "high"),
-        {"low": 0.05, "high": 0.95},
+        {},
         "linear contrast stretch between quantiles",
+        "image.stretch_contrast",
     ),
     "gamma": FilterOp(
         lambda im, gamma: _image().gamma_correct(im, gamma),
@@ -161,8 +188,9 @@ FILTER_OPS: dict[str, FilterOp] = {
     "demosaic": FilterOp(
         lambda im, pattern: _image().demosaic(im[..., 0] if im.ndim == 3 else im, pattern),
         ("pattern",),
-        {"pattern": "RGGB"},
+        {},
         "Malvar-He-Cutler demosaicing of a single-channel Bayer mosaic",
+        "image.demosaic",
     ),
 }
 
@@ -170,8 +198,7 @@ FILTER_OPS: dict[str, FilterOp] = {
 def check_filter_params(op: str, params: dict) -> dict:
     """The keyword arguments for ``op``: defaults updated with ``params``. Raises
     ``ValueError`` for an unknown op or parameter, naming it (``--radius``, ...)."""
-    if op not in FILTER_OPS:
-        raise ValueError(f"op: expected one of {sorted(FILTER_OPS)}, got {op!r}")
+    check_choice(op, "op", sorted(FILTER_OPS))
     spec = FILTER_OPS[op]
     unknown = sorted(set(params) - set(spec.params))
     if unknown:

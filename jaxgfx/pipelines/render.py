@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 
+from jaxgfx._checks import check_choice
 from jaxgfx.pipelines._output import StagedFiles, check_output_extension
 
 __all__ = ["RenderJob", "run_render", "render_output_paths"]
@@ -57,10 +58,7 @@ class RenderJob:
                 raise ValueError(f"{name}: expected a positive integer, got {v!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ValueError(f"seed: expected an integer >= 0, got {self.seed!r}")
-        if self.integrator not in INTEGRATORS:
-            raise ValueError(
-                f"integrator: expected one of {', '.join(INTEGRATORS)}, got {self.integrator!r}"
-            )
+        check_choice(self.integrator, "integrator", INTEGRATORS)
         from jaxgfx.render.geometry.accel import resolve_backend
 
         resolve_backend(self.accel)  # ValueError / ImportError naming `accel`

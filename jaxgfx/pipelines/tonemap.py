@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 
+from jaxgfx._checks import check_choice
 from jaxgfx.pipelines._output import HDR_EXTENSIONS, StagedFiles, check_output_extension
 
 __all__ = ["TonemapJob", "run_tonemap", "tonemap_image", "prepare_radiance", "operator_help"]
@@ -39,8 +40,7 @@ class TonemapJob:
     def validate(self):
         from jaxgfx.tonemap import TONEMAP_METHODS, TONEMAP_PARAMETERS
 
-        if self.op not in TONEMAP_METHODS:
-            raise ValueError(f"op: expected one of {', '.join(TONEMAP_METHODS)}, got {self.op!r}")
+        check_choice(self.op, "op", TONEMAP_METHODS)
         known = TONEMAP_PARAMETERS[self.op]
         for name, value in self.params.items():
             if name not in known:

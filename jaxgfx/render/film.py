@@ -15,7 +15,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jax.scipy.special import erf, erfinv
 
-from jaxgfx._checks import check_positive
+from jaxgfx._checks import check_choice, check_positive
 from jaxgfx.render.sampler import uniform
 
 __all__ = ["BoxFilter", "GaussianFilter", "make_filter", "pixel_samples", "FILTERS"]
@@ -51,8 +51,7 @@ FILTERS = {"box": BoxFilter, "gaussian": GaussianFilter}
 
 def make_filter(name: str = "box", **kwargs):
     """Filter from its name (``box`` | ``gaussian``) and keyword options."""
-    if name not in FILTERS:
-        raise ValueError(f"filter: expected one of {sorted(FILTERS)}, got {name!r}")
+    check_choice(name, "filter", sorted(FILTERS))
     for k, v in kwargs.items():
         check_positive(v, f"filter.{k}")
     return FILTERS[name](**kwargs)

@@ -64,3 +64,37 @@ def test_the_one_parser_and_sorter():
     order = io.exposure_order(t)
     np.testing.assert_array_equal(order, [3, 1, 0, 2])  # stable for equal times
     np.testing.assert_array_equal(t[order], np.sort(t))
+
+
+def test_filter_defaults_are_the_library_functions_defaults():
+    """One source of truth (issue 21: the CLI's Canny sigma was 1.5 where the function's is
+    1.0): every default a library function defines is the CLI's default, checked through the
+    output (the CLI's canny equals image.canny with no arguments) and for every op."""
+    import inspect
+
+    import numpy as np
+
+    from jaxgfx import color, image
+    from jaxgfx.pipelines.filter_ops import FILTER_OPS, apply_filter
+
+    rng = np.random.default_rng(0)
+    img = np.zeros((24, 24, 3), np.float32)
+    img[:, 12:] = 1.0
+    img += 0.05 * rng.standard_normal(img.shape).astype(np.float32)
+    np.testing.assert_array_equal(
+        np.asarray(apply_filter(img, "canny")), np.asarray(image.canny(img), np.float32)
+    )
+    checked = 0
+    for name, op in FILTER_OPS.items():
+        if op.source is None:
+            continue
+        mod, fn = op.source.split(".")
+        sig = inspect.signature(getattr(image if mod == "image" else color, fn))
+        for k in op.params:
+            if k not in sig.parameters:
+                continue
+            d = sig.parameters[k].default
+            if d is not inspect.Parameter.empty and d is not None:
+                assert op.defaults[k] == d, (name, k)
+                checked += 1
+    assert checked >= 3

@@ -30,7 +30,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgfx._checks import as_float_array, check_finite
+from jaxgfx._checks import as_float_array, check_choice, check_finite
 from jaxgfx.color import LUMINANCE_WEIGHTS
 from jaxgfx.render.bsdf.texture import TEXTURE_FILTERS, TEXTURE_WRAP_MODES, Texture, lookup
 from jaxgfx.render.parameters import get_path, parameter_paths
@@ -183,10 +183,8 @@ def texture_from_dict(d, where="texture", *, base_dir=None, channels=3):
         _expect(d, where, ("type", "file", "image", "wrap", "filter", "raw"))
         wrap = d.get("wrap", "repeat")
         filt = d.get("filter", "bilinear")
-        if wrap not in TEXTURE_WRAP_MODES:
-            raise ValueError(f"{where}.wrap: expected one of {TEXTURE_WRAP_MODES}, got {wrap!r}")
-        if filt not in TEXTURE_FILTERS:
-            raise ValueError(f"{where}.filter: expected one of {TEXTURE_FILTERS}, got {filt!r}")
+        check_choice(wrap, f"{where}.wrap", TEXTURE_WRAP_MODES)
+        check_choice(filt, f"{where}.filter", TEXTURE_FILTERS)
         if ("file" in d) == ("image" in d):
             raise ValueError(f"{where}: expected exactly one of 'file' or 'image'")
         if "file" in d:

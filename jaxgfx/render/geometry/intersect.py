@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgfx._checks import check_choice
 from jaxgfx._math import fusion_barrier
 from jaxgfx.render.geometry.mesh import TRIANGLE_INTERSECTORS, TriangleMesh, mesh_hit
 from jaxgfx.render.geometry.ray import Hit, empty_hit, merge_hits, prepare_rays
@@ -88,10 +89,7 @@ def closest_t(shape, o, d, tmin, tmax, *, method: str = "MollerTrumbore1997"):
             sg(shape.centers), sg(shape.edge_u), sg(shape.edge_v), ob, db, tmin_b, tmax_b
         )[0]
     elif isinstance(shape, TriangleMesh):
-        if method not in TRIANGLE_INTERSECTORS:
-            raise ValueError(
-                f"method: expected one of {tuple(TRIANGLE_INTERSECTORS)}, got {method!r}"
-            )
+        check_choice(method, "method", TRIANGLE_INTERSECTORS)
         ts = TRIANGLE_INTERSECTORS[method](sg(shape.triangles), o, d, tmin_b, tmax_b)
     else:
         raise TypeError(f"shape: expected Spheres, Rectangles or TriangleMesh, got {type(shape)}")

@@ -11,6 +11,7 @@ import os
 
 import numpy as np
 
+from jaxgfx._checks import check_choice
 from jaxgfx.render.geometry.mesh import TriangleMesh
 
 __all__ = [
@@ -442,8 +443,7 @@ def mesh_from_generator(spec, where: str = "generator") -> TriangleMesh:
     if not isinstance(spec, dict) or "name" not in spec:
         raise ValueError(f"{where}: expected a mapping with a 'name' key, got {spec!r}")
     name = spec["name"]
-    if name not in MESH_GENERATORS:
-        raise ValueError(f"{where}.name: expected one of {sorted(MESH_GENERATORS)}, got {name!r}")
+    check_choice(name, f"{where}.name", sorted(MESH_GENERATORS))
     kwargs = {k: v for k, v in spec.items() if k != "name"}
     for k, v in kwargs.items():
         if k == "center":

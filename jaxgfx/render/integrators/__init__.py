@@ -6,6 +6,7 @@ Each is an ``eqx.Module`` whose options are static fields; :func:`jaxgfx.render.
 an instance (``integrator=PathIntegrator(max_depth=3)``) or a registered name.
 """
 
+from jaxgfx._checks import check_choice
 from jaxgfx.render.integrators.aov import AOV_CHANNELS as AOV_CHANNELS
 from jaxgfx.render.integrators.aov import AOVIntegrator as AOVIntegrator
 from jaxgfx.render.integrators.aov import aov as aov
@@ -34,8 +35,7 @@ def make_integrator(name: str, **options) -> Integrator:
     >>> make_integrator("whitted", max_depth=2)
     WhittedIntegrator(max_depth=2)
     """
-    if name not in INTEGRATORS:
-        raise ValueError(f"integrator: expected one of {tuple(INTEGRATORS)}, got {name!r}")
+    check_choice(name, "integrator", tuple(INTEGRATORS))
     cls = INTEGRATORS[name]
     fields = set(cls.__dataclass_fields__)
     fixed = {k: getattr(cls, k) for k in options if k not in fields and hasattr(cls, k)}
