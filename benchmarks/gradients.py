@@ -6,7 +6,7 @@
    parameter of the scene) vs one forward render at the same spp, on
    ``configs/scenes/example.yaml`` (path, depth 3) and a mesh scene (the example with its metal
    sphere replaced by a 6 240-triangle UV-sphere mesh); also the decorrelated gradient
-   (``jaxgfx.render.gradients.decorrelated``: one extra forward pass). One warm-up call each,
+   (``jaxgfx.optim.decorrelated``: one extra forward pass). One warm-up call each,
    then the medians of ``repeat`` rounds calling each in turn (the machine may be shared:
    compare ratios within one run).
 2. Memory: XLA's temporary buffer size (``jit(grad).lower().compile().memory_analysis()``) of
@@ -41,9 +41,9 @@ from benchmarks._report import emit, machine
 from benchmarks._timing import interleaved_times
 from jaxgfx.config import read_yaml
 from jaxgfx.render.geometry.mesh_io import make_uv_sphere
-from jaxgfx.render.gradients import grad_stats
 from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
+from jaxgfx.testing import grad_stats
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXAMPLE = os.path.join(ROOT, "configs", "scenes", "example.yaml")
@@ -80,7 +80,7 @@ def _apply(scene, params):
 
 
 def speed(desc, *, spp, depth, repeat):
-    from jaxgfx.render.gradients import decorrelated
+    from jaxgfx.optim import decorrelated
 
     scene = load_scene(desc)
     key = jax.random.key(0)

@@ -5,6 +5,7 @@ This package never imports :mod:`jaxgfx.render`; losses that render are written 
 (or by :mod:`jaxgfx.pipelines.fit`) and passed to :func:`fit`.
 """
 
+from ._estimators import decorrelated as decorrelated
 from ._estimators import decorrelated_loss as decorrelated_loss
 from ._estimators import decorrelated_residuals as decorrelated_residuals
 from ._loop import LEAST_SQUARES_SOLVERS as LEAST_SQUARES_SOLVERS
@@ -26,6 +27,7 @@ from ._transforms import to_unconstrained as to_unconstrained
 __all__ = [
     "fit",
     "fit_least_squares",
+    "decorrelated",
     "decorrelated_loss",
     "decorrelated_residuals",
     "FitResult",

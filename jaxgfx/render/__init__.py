@@ -5,7 +5,8 @@ Entry points: :func:`load_scene` (dict / YAML / Mitsuba 3 XML -> :class:`Scene`)
 loader, parameter table, Mitsuba export and XML import) -> ``camera`` -> ``geometry/``
 (rays, shapes, intersection tests, SDFs,
 ``accel/``) -> ``bsdf/`` (BSDF models, microfacet distributions, Fresnel, textures) with
-``emitters`` and ``warp`` (sampling) -> ``integrators/`` (integrator objects) -> ``film`` and
+``emitters`` and ``sampling`` (warps with pdf and inverse) -> ``integrators/`` (integrator objects)
+-> ``film``, ``estimator`` (the sample layout and pass scan) and
 ``render`` (``sampler``: counter-based uniform numbers). See docs/architecture.md,
 docs/render.md, docs/render_bsdf.md, docs/render_geometry.md and docs/render_scenes.md.
 """
@@ -32,9 +33,6 @@ from jaxgfx.render.geometry import intersect_scene as intersect_scene
 from jaxgfx.render.geometry import spawn_ray as spawn_ray
 from jaxgfx.render.geometry.mesh_io import load_obj as load_obj
 from jaxgfx.render.geometry.mesh_io import load_ply as load_ply
-from jaxgfx.render.gradients import GradStats as GradStats
-from jaxgfx.render.gradients import decorrelated as decorrelated
-from jaxgfx.render.gradients import grad_stats as grad_stats
 from jaxgfx.render.integrators import AOV_CHANNELS as AOV_CHANNELS
 from jaxgfx.render.integrators import INTEGRATORS as INTEGRATORS
 from jaxgfx.render.integrators import AOVIntegrator as AOVIntegrator
@@ -52,9 +50,6 @@ __all__ = [
     "bsdf",
     "render",
     "render_sharded",
-    "grad_stats",
-    "GradStats",
-    "decorrelated",
     "load_scene",
     "read_xml",
     "Scene",

@@ -14,9 +14,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgfx.render.gradients import decorrelated, grad_stats
+from jaxgfx.optim import decorrelated
 from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
+from jaxgfx.testing import grad_stats
 
 from ._scenes import area_light, camera, diffuse, rectangle
 
