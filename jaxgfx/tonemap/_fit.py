@@ -5,14 +5,13 @@ from __future__ import annotations
 import functools
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
-import optax
-import optimistix as optx
 
 from .._checks import check_choice, check_image
 from ..color.spaces import rgb_to_xyz, xyz_to_lab
 from ..color.transfer import srgb_to_linear
+from ..optim import fit as optim_fit
+from ..optim import fit_least_squares
 from ._common import check_hdr
 from ._local import durand_range_bins
 from ._registry import TONEMAP_METHODS, TONEMAP_PARAMETERS
@@ -32,25 +31,9 @@ class TonemapFit(NamedTuple):
     loss: float
 
 
-def _to_free(v, kind):
-    v = jnp.asarray(v, jnp.result_type(float))
-    if kind == "positive":
-        return jnp.log(v)
-    if kind == "unit":
-        return jnp.log(v) - jnp.log1p(-v)
-    if kind == "above1":
-        return jnp.log(v - 1.0)
-    return v
-
-
-def _from_free(u, kind):
-    if kind == "positive":
-        return jnp.exp(u)
-    if kind == "unit":
-        return jax.nn.sigmoid(u)
-    if kind == "above1":
-        return 1.0 + jnp.exp(u)
-    return u
+_CONSTRAINT_BOUNDS = {"positive": (0.0, None), "unit": (0.0, 1.0), "above1": (1.0, None)}
+"""Each :class:`ParamSpec` constraint as bounds of :func:`jaxgfx.optim.fit` (its smooth
+bijections: softplus for one-sided, sigmoid for two-sided bounds; ``"real"``: none)."""
 
 
 def _lab(display, encode):
@@ -59,14 +42,13 @@ def _lab(display, encode):
 
 
 @functools.lru_cache(maxsize=64)
-def _residual_fn(op_name, kinds, static, loss, encode):
+def _residual_fn(op_name, static, loss, encode):
     """One residual closure per configuration, so repeated fits reuse the compiled program."""
     op = TONEMAP_METHODS[op_name]
-    kinds = dict(kinds)
     static = dict(static)
 
-    def residual(free, hdr, target):
-        params = {k: _from_free(free[k], kinds[k]) for k in free}
+    def residual(params, args):
+        hdr, target = args
         y = op(hdr, encode=encode, **static, **params)
         if loss == "lab":
             r = _lab(y, encode) - _lab(target, encode)
@@ -77,35 +59,13 @@ def _residual_fn(op_name, kinds, static, loss, encode):
     return residual
 
 
-@functools.partial(jax.jit, static_argnames=("residual", "steps", "lr"))
-def _adam(free0, hdr, target, *, residual, steps, lr):
-    opt = optax.adam(lr)
-
-    def loss_fn(free):
-        r = residual(free, hdr, target)
+@functools.lru_cache(maxsize=64)
+def _mse_fn(residual):
+    def mse(params, args):
+        r = residual(params, args)
         return jnp.mean(r * r)
 
-    def step(carry, _):
-        free, state = carry
-        value, g = jax.value_and_grad(loss_fn)(free)
-        updates, state = opt.update(g, state, free)
-        return (optax.apply_updates(free, updates), state), value
-
-    (free, _), hist = jax.lax.scan(step, (free0, opt.init(free0)), None, length=steps)
-    return free, jnp.concatenate([hist, loss_fn(free)[None]])
-
-
-@functools.partial(jax.jit, static_argnames=("residual", "steps"))
-def _lm(free0, hdr, target, *, residual, steps):
-    solver = optx.LevenbergMarquardt(rtol=1e-8, atol=1e-10)
-
-    def fn(free, args):
-        return residual(free, *args)
-
-    sol = optx.least_squares(fn, solver, free0, (hdr, target), max_steps=steps, throw=False)
-    r0 = residual(free0, hdr, target)
-    r1 = residual(sol.value, hdr, target)
-    return sol.value, jnp.stack([jnp.mean(r0 * r0), jnp.mean(r1 * r1)])
+    return mse
 
 
 def _static_options(op_name, hdr, fit_names):
@@ -134,9 +94,10 @@ def fit_tonemap(
 
     Minimises the mean squared CIELAB difference (``loss="lab"``: ``mean ΔE76^2`` of the
     display images decoded to linear sRGB) or of display values (``"l2"``) over the
-    operator's continuous parameters (:data:`TONEMAP_PARAMETERS`), optimised in an
-    unconstrained space (log for positive, logit for (0, 1) parameters) by Adam (optax,
-    ``steps`` iterations, ``learning_rate``) or Levenberg-Marquardt (optimistix, at most
+    operator's continuous parameters (:data:`TONEMAP_PARAMETERS`), each kept in its range by
+    the bijections of :mod:`jaxgfx.optim` (softplus for positive / > 1, sigmoid for (0, 1)
+    parameters), by :func:`jaxgfx.optim.fit` with Adam (``steps`` iterations,
+    ``learning_rate``) or :func:`jaxgfx.optim.fit_least_squares` (Levenberg-Marquardt, at most
     ``steps`` iterations). E.g. recover the curve a camera applied to its JPEG from the RAW.
 
     Args:
@@ -167,15 +128,25 @@ def fit_tonemap(
         if n not in specs:
             raise ValueError(f"fit: {n!r} is not a parameter of {op_name!r} ({sorted(specs)})")
     init = dict(init or {})
-    free0 = {n: _to_free(init.get(n, specs[n].initial), specs[n].constraint) for n in names}
-    kinds = {n: specs[n].constraint for n in names}
+    params0 = {
+        n: jnp.asarray(init.get(n, specs[n].initial), jnp.result_type(float)) for n in names
+    }
+    bounds = {n: _CONSTRAINT_BOUNDS.get(specs[n].constraint) for n in names}
     static = {**_static_options(op_name, x, names), **(fixed or {})}
-    residual = _residual_fn(
-        op_name, tuple(kinds.items()), tuple(sorted(static.items())), loss, encode
-    )
+    residual = _residual_fn(op_name, tuple(sorted(static.items())), loss, encode)
+    mse = _mse_fn(residual)
+    args = (x, t)
     if solver == "adam":
-        free, hist = _adam(free0, x, t, residual=residual, steps=int(steps), lr=learning_rate)
+        res = optim_fit(  # `fit` is this function's argument (the names to fit)
+            mse, params0, optimizer="adam", steps=int(steps), learning_rate=learning_rate,
+            args=args, bounds=bounds, progress=False, keep_history=False,
+        )  # fmt: skip
+        hist = jnp.concatenate([jnp.asarray(res.loss), mse(res.params, args)[None]])
     else:
-        free, hist = _lm(free0, x, t, residual=residual, steps=int(steps))
-    params = {n: float(_from_free(free[n], kinds[n])) for n in names}
+        res = fit_least_squares(
+            residual, params0, solver="lm", args=args, bounds=bounds, max_steps=int(steps),
+            rtol=1e-8, atol=1e-10,
+        )  # fmt: skip
+        hist = jnp.stack([mse(params0, args), mse(res.params, args)])
+    params = {n: float(res.params[n]) for n in names}
     return TonemapFit(params, hist, float(hist[-1]))
