@@ -1,5 +1,5 @@
-"""Parametric response fits by Levenberg–Marquardt (optimistix): gamma, Mitsunaga–Nayar
-polynomial (with exposure ratios), and a monotone log-domain spline.
+"""Parametric response fits by Levenberg–Marquardt (:func:`jaxgfx.optim.least_squares_solve`):
+gamma, Mitsunaga–Nayar polynomial (with exposure ratios), and a monotone log-domain spline.
 
 All three minimise the same log-domain, variable-projection objective: for each sampled
 pixel ``i`` the per-frame estimates ``h_ij = ln base(z_ij) − ln t_j`` should agree; the pixel
@@ -12,10 +12,10 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
 from .._checks import check_nonnegative
 from .._math import safe_log
+from ..optim import least_squares_solve
 from ._curves import base_to_linear, table_lookup
 from ._model import CameraResponse, resolve_anchor
 from ._sampling import select_samples
@@ -53,9 +53,8 @@ def _prep(z, key, n_samples):
 
 def _solve(fn, y0, args, max_steps):
     rtol, atol = _tols(jax.tree_util.tree_leaves(y0)[0].dtype)
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-    sol = optx.least_squares(fn, solver, y0, args, max_steps=max_steps, throw=False)
-    return sol
+    return least_squares_solve(fn, y0, args, solver="lm", rtol=rtol, atol=atol,
+                               max_steps=max_steps)  # fmt: skip
 
 
 def _fit_gamma(samples, w, log_t, max_steps):
@@ -91,8 +90,8 @@ def _diag(res, sol):
     rms = jnp.sqrt(jnp.sum(res.reshape(c, -1) ** 2, axis=1))
     return {
         "residual_rms": rms,
-        "steps": sol.stats["num_steps"],
-        "converged": sol.result == optx.RESULTS.successful,
+        "steps": sol.num_steps,
+        "converged": sol.converged,
     }
 
 
@@ -233,8 +232,8 @@ def recover_spline(
         return (
             table_of(sol.value),
             res,
-            sol.stats["num_steps"],
-            sol.result == optx.RESULTS.successful,
+            sol.num_steps,
+            sol.converged,
         )
 
     tab, res, steps, conv = jax.vmap(one)(samples, w, gam)

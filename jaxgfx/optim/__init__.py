@@ -11,8 +11,10 @@ from ._estimators import decorrelated_residuals as decorrelated_residuals
 from ._loop import LEAST_SQUARES_SOLVERS as LEAST_SQUARES_SOLVERS
 from ._loop import OPTIMIZERS as OPTIMIZERS
 from ._loop import FitResult as FitResult
+from ._loop import LeastSquaresSolution as LeastSquaresSolution
 from ._loop import fit as fit
 from ._loop import fit_least_squares as fit_least_squares
+from ._loop import least_squares_solve as least_squares_solve
 from ._losses import LOSS_SPACES as LOSS_SPACES
 from ._losses import LOSSES as LOSSES
 from ._losses import censored_l2_loss as censored_l2_loss
@@ -32,6 +34,8 @@ __all__ = [
     "decorrelated_residuals",
     "FitResult",
     "OPTIMIZERS",
+    "least_squares_solve",
+    "LeastSquaresSolution",
     "LEAST_SQUARES_SOLVERS",
     "l2_loss",
     "relative_l2_loss",

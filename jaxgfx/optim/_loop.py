@@ -12,7 +12,7 @@ import dataclasses
 import functools
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -23,7 +23,15 @@ import optimistix as optx
 from .._checks import check_choice
 from ._transforms import _map, check_bounds, from_unconstrained, to_unconstrained
 
-__all__ = ["fit", "fit_least_squares", "FitResult", "OPTIMIZERS", "LEAST_SQUARES_SOLVERS"]
+__all__ = [
+    "fit",
+    "fit_least_squares",
+    "least_squares_solve",
+    "LeastSquaresSolution",
+    "FitResult",
+    "OPTIMIZERS",
+    "LEAST_SQUARES_SOLVERS",
+]
 
 OPTIMIZERS: dict[str, Callable[..., optax.GradientTransformation]] = {
     "adam": optax.adam,
@@ -313,6 +321,33 @@ def fit(
     )
 
 
+class LeastSquaresSolution(NamedTuple):
+    """Result of :func:`least_squares_solve`: the solution ``value`` (pytree like ``y0``),
+    ``converged`` (bool array), ``num_steps`` and the solver's ``result`` code."""
+
+    value: Any
+    converged: Any
+    num_steps: Any
+    result: Any
+
+
+def least_squares_solve(fn, y0, args=None, *, solver="lm", rtol=1e-8, atol=1e-8,
+                        max_steps: int = 256) -> LeastSquaresSolution:  # fmt: skip
+    """The traceable core of :func:`fit_least_squares`: ``min ½ Σ fn(y, args)²`` from ``y0`` by
+    an optimistix least-squares solver (``solver``: a name of :data:`LEAST_SQUARES_SOLVERS` or a
+    solver object), never raising on non-convergence (``converged`` says). Callable inside
+    ``jit`` / ``vmap`` (the response fits of :mod:`jaxgfx.hdr` solve one curve per channel
+    under ``vmap``); no bounds (write the parametrisation into ``fn``).
+    """
+    if isinstance(solver, str):
+        check_choice(solver, "solver", tuple(LEAST_SQUARES_SOLVERS))
+        solver = LEAST_SQUARES_SOLVERS[solver](rtol, atol)
+    sol = optx.least_squares(fn, solver, y0, args=args, max_steps=max_steps, throw=False)
+    return LeastSquaresSolution(
+        sol.value, sol.result == optx.RESULTS.successful, sol.stats["num_steps"], sol.result
+    )
+
+
 def _ls_residuals(u, a, residuals, spec, has_args):
     p = _unconstrained_to_params(u, spec)
     return residuals(p, a) if has_args else residuals(p)
@@ -329,9 +364,9 @@ def _solve_ls(u0, a, *, residuals, solver, spec, max_steps, has_args):
     def fn(u, a):
         return _ls_residuals(u, a, residuals, spec, has_args)
 
-    sol = optx.least_squares(fn, solver, u0, args=a, max_steps=max_steps, throw=False)
+    sol = least_squares_solve(fn, u0, a, solver=solver, max_steps=max_steps)
     l0, l1 = _half_sq(fn(u0, a)), _half_sq(fn(sol.value, a))
-    return sol.value, sol.result, sol.stats["num_steps"], l0, l1
+    return sol.value, sol.result, sol.num_steps, l0, l1
 
 
 def fit_least_squares(
