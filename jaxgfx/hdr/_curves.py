@@ -10,7 +10,12 @@ import jax
 import jax.numpy as jnp
 
 from .._math import safe_pow, safe_sqrt
-from ..color.transfer import aces_narkowicz2015, linear_to_srgb, srgb_to_linear
+from ..color.transfer import (
+    ACES_NARKOWICZ2015,
+    aces_narkowicz2015,
+    linear_to_srgb,
+    srgb_to_linear,
+)
 
 __all__ = [
     "base_to_linear",
@@ -51,7 +56,8 @@ _LOG_A = 100.0
 
 
 _aces = aces_narkowicz2015  # the ACES fit (jaxgfx.color), as the "filmic" response's shoulder
-_ACES4 = 4.0 * (2.51 * 4.0 + 0.03) / (4.0 * (2.43 * 4.0 + 0.59) + 0.14)  # _aces(4) in Python
+_A, _B, _C, _D, _E = ACES_NARKOWICZ2015
+_ACES4 = 4.0 * (_A * 4.0 + _B) / (4.0 * (_C * 4.0 + _D) + _E)  # _aces(4), a Python float
 
 
 def _srgb_fwd(x):
@@ -79,9 +85,9 @@ def _filmic_fwd(x):
 
 def _filmic_inv(z):
     y = jnp.clip(z, 0.0, 1.0) * _ACES4
-    a = 2.51 - 2.43 * y
-    b = 0.03 - 0.59 * y
-    c = -0.14 * y
+    a = _A - _C * y  # the quadratic x (a x + b) = y (x (c x + d) + e) solved for x
+    b = _B - _D * y
+    c = -_E * y
     return (-b + safe_sqrt(b * b - 4.0 * a * c)) / (2.0 * a) / 4.0
 
 

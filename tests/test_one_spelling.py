@@ -1,0 +1,76 @@
+"""One spelling per concept (docs/architecture.md, "Who owns which concept"): the names that
+must survive in two places are the same object as their owner's, and the owner's constants are
+not retyped anywhere else in the library (a scan of the source)."""
+
+import os
+import re
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def test_aliases_are_their_owners_objects():
+    from jaxgfx import color, hdr, io
+    from jaxgfx.hdr import raw_calibration
+    from jaxgfx.image import bayer
+    from jaxgfx.pipelines import fit
+    from jaxgfx.render.bsdf import textured
+    from jaxgfx.tonemap import _global
+
+    assert raw_calibration.CFA_PATTERNS is bayer.BAYER_PATTERNS
+    assert _global._ACES is color.ACES_NARKOWICZ2015
+    assert textured._LUMA is color.LUMINANCE_WEIGHTS["rec709"]
+    assert set(hdr.SYNTHETIC_RESPONSES) - {"gamma2.2"} == set(hdr.ANALYTIC_RESPONSES) - {"linear"}
+    assert fit.RESPONSE_MODELS == ("gamma", *hdr.ANALYTIC_RESPONSES)
+    assert set(hdr.RESPONSE_KINDS) == {"table", "gamma", "polynomial", *hdr.ANALYTIC_RESPONSES}
+    assert io.kind_of("a.NRW") == "raw" and io.kind_of("x.exr") == "hdr"
+    assert io.kind_of("y.jpeg") == "ldr" and io.kind_of("z.npy") == "npy"
+    assert io.kind_of("w.txt") is None
+
+
+def test_the_filmic_response_is_the_aces_fit():
+    """hdr's "filmic" camera curve is the colour module's ACES fit, f(4x) / f(4)."""
+    import jax.numpy as jnp
+    import numpy as np
+
+    from jaxgfx import color, hdr
+
+    x = jnp.linspace(0.0, 1.0, 11)
+    r = hdr.CameraResponse.analytic("filmic", anchor="unit")
+    want = color.aces_narkowicz2015(4.0 * x) / color.aces_narkowicz2015(4.0)
+    np.testing.assert_allclose(np.asarray(r.from_linear_normalized(x[:, None]))[:, 0], want,
+                               rtol=1e-6, atol=1e-7)  # fmt: skip
+
+
+# (constant, where it may be written): retyping it elsewhere is a second spelling
+OWNED = [
+    (r"0\.2126\b", ("jaxgfx/color/",)),  # Rec. 709 luminance weights
+    (r"0\.0031308\b|0\.04045\b", ("jaxgfx/color/",)),  # sRGB knees
+    (r"\b2\.51\b", ("jaxgfx/color/",)),  # the ACES fit's coefficients
+    (r"\"BGGR\"", ("jaxgfx/image/bayer.py",)),  # Bayer tiles
+    (r"\"\.nef\"|\"\.cr2\"", ("jaxgfx/io/_dispatch.py",)),  # camera raw extensions
+]
+
+
+@pytest.mark.parametrize(("pattern", "owners"), OWNED)
+def test_owned_constants_are_not_retyped(pattern, owners):
+    rx = re.compile(pattern)
+    bad = []
+    for dp, dirs, files in os.walk(os.path.join(ROOT, "jaxgfx")):
+        dirs[:] = [d for d in dirs if d != "__pycache__"]
+        for f in files:
+            if not f.endswith(".py"):
+                continue
+            path = os.path.join(dp, f)
+            rel = os.path.relpath(path, ROOT).replace(os.sep, "/")
+            if rel.startswith(owners):
+                continue
+            with open(path, encoding="utf-8") as fh:
+                for n, line in enumerate(fh, 1):
+                    code = line.split("#")[0]
+                    if rx.search(code) and '``' not in code and not code.strip().startswith(
+                        ('"', "'", "f(x)")
+                    ):
+                        bad.append(f"{rel}:{n}: {line.strip()}")
+    assert bad == []
