@@ -17,11 +17,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # which jaxgfx subpackages each layer may import (besides the foundation and itself);
 # the data flows of docs/architecture.md: io -> image -> color -> hdr -> tonemap, render uses
 # io / image / color, optim never imports render, pipelines compose all, cli calls pipelines
-FOUNDATION = {"_checks", "_math", "typing", "config", "_jaxcache", "(root)"}
+FOUNDATION = {"_checks", "_math", "config", "_jaxcache", "(root)"}
 ALLOWED = {
     "_checks": set(),
     "_math": set(),
-    "typing": set(),
     "config": set(),
     "_jaxcache": set(),
     "io": set(),

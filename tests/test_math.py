@@ -107,22 +107,6 @@ def test_checks_raise_with_names():
     assert check_image(np.ones((3, 3), np.uint8)).dtype == jnp.float32
 
 
-def test_typing_aliases_import():
-    import jaxgfx.typing as t
-
-    # the aliases check shapes and dtypes (isinstance works on jaxtyping annotations)
-    assert isinstance(jnp.zeros((2, 4, 5, 3)), t.Image)
-    assert isinstance(jnp.zeros((4, 5, 3)), t.Image)
-    assert not isinstance(jnp.zeros((4, 5)), t.Image)  # no channel axis
-    assert not isinstance(jnp.zeros((4, 5, 3), jnp.int32), t.Image)
-    assert isinstance(jnp.zeros((4, 5)), t.Gray) and isinstance(jnp.zeros((7,)), t.AnyImage)
-    assert isinstance(jnp.zeros((8, 3)), t.Vec3) and not isinstance(jnp.zeros((8, 4)), t.Vec3)
-    assert isinstance(jnp.eye(3), t.Mat33) and not isinstance(jnp.zeros((3, 4)), t.Mat33)
-    assert isinstance(jnp.float32(1.0), t.Scalar) and not isinstance(jnp.zeros(2), t.Scalar)
-    assert isinstance(jnp.zeros((4, 5), bool), t.Mask)
-    assert not isinstance(jnp.zeros((4, 5)), t.Mask)
-
-
 # ---------------------------------------------------------------- fusion-friendly helpers
 
 
