@@ -48,6 +48,16 @@ import xml.parsers.expat
 
 import numpy as np
 
+from jaxgfx.render.scene.mitsuba_conventions import (
+    CONDUCTOR_IOR,
+    DEFAULTS,
+    IOR_TABLE,
+    envmap_from_mitsuba,
+    look_at_matrix,
+    plugin_status,
+    spectrum_to_rgb,
+)
+
 __all__ = [
     "XMLScene",
     "read_xml",
@@ -57,34 +67,6 @@ __all__ = [
     "transform_matrix",
 ]
 
-# Mitsuba 3's named indices of refraction (src/render/ior.h, checked against Mitsuba 3.9.1)
-IOR_TABLE = {
-    "vacuum": 1.0,
-    "helium": 1.000036,
-    "hydrogen": 1.000132,
-    "air": 1.000277,
-    "carbon dioxide": 1.00045,
-    "water": 1.3330,
-    "acetone": 1.36,
-    "ethanol": 1.361,
-    "carbon tetrachloride": 1.461,
-    "glycerol": 1.4729,
-    "benzene": 1.501,
-    "silicone oil": 1.52045,
-    "bromine": 1.661,
-    "water ice": 1.31,
-    "fused quartz": 1.458,
-    "pyrex": 1.470,
-    "acrylic glass": 1.49,
-    "polypropylene": 1.49,
-    "bk7": 1.5046,
-    "sodium chloride": 1.544,
-    "amber": 1.55,
-    "pet": 1.5750,
-    "diamond": 2.419,
-}
-
-ENVMAP_ROW_FACTOR = 4
 DISK_SEGMENTS = 256
 
 
@@ -164,40 +146,6 @@ def _floats(text, where, n=None):
     return vals
 
 
-def spectrum_to_rgb(wavelengths, values, *, emission: bool) -> np.ndarray:
-    """Linear sRGB of a piecewise-linear spectrum as Mitsuba 3's RGB variants compute it.
-
-    The spectrum is zero outside ``[wavelengths[0], wavelengths[-1]]`` (nm). ``emission``:
-    integrate against the CIE 1931 2 degree CMFs and divide by the integral of y-bar (radiance,
-    intensity); else weight by illuminant D65 and divide by the luminance of D65
-    (reflectances). 1000 samples over 360-830 nm, XYZ -> linear sRGB.
-
-    Example: a constant reflectance 0.5 from 360 to 830 nm gives about (0.5, 0.5, 0.5).
-    """
-    import warnings
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        import colour
-
-        cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
-        lam = np.linspace(360.0, 830.0, 1000)
-        xyz = np.asarray(cmfs[lam], np.float64)
-        w = np.ones_like(lam) if emission else np.asarray(colour.SDS_ILLUMINANTS["D65"][lam])
-    wl, v = np.asarray(wavelengths, np.float64), np.asarray(values, np.float64)
-    s = np.interp(lam, wl, v)
-    s[(lam < wl[0]) | (lam > wl[-1])] = 0.0
-    total = (xyz * (s * w)[:, None]).sum(0) / (xyz[:, 1] * w).sum()
-    to_srgb = np.array(
-        [
-            [3.240479, -1.537150, -0.498535],
-            [-0.969256, 1.875991, 0.041556],
-            [0.055648, -0.204043, 1.057311],
-        ]
-    )
-    return to_srgb @ total
-
-
 def _rot(axis, angle_deg):
     a = np.asarray(axis, np.float64)
     a = a / np.linalg.norm(a)
@@ -205,21 +153,6 @@ def _rot(axis, angle_deg):
     k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
     m = np.eye(4)
     m[:3, :3] = c * np.eye(3) + s * k + (1 - c) * np.outer(a, a)
-    return m
-
-
-def _look_at(origin, target, up):
-    o, t, u = (np.asarray(x, np.float64) for x in (origin, target, up))
-    d = t - o
-    if not np.linalg.norm(d) > 0:
-        raise ValueError("origin and target coincide")
-    d = d / np.linalg.norm(d)
-    left = np.cross(u, d)
-    if not np.linalg.norm(left) > 0:
-        raise ValueError("up is parallel to the viewing direction")
-    left /= np.linalg.norm(left)
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, np.cross(d, left), d, o
     return m
 
 
@@ -243,31 +176,11 @@ def transform_matrix(ops) -> np.ndarray:
         elif op == "matrix":
             t = np.asarray(kw["m"], np.float64)
         elif op == "lookat":
-            t = _look_at(kw["origin"], kw["target"], kw["up"])
+            t = look_at_matrix(kw["origin"], kw["target"], kw["up"])
         else:  # pragma: no cover - the parser only produces the ops above
             raise ValueError(op)
         m = t @ m
     return m
-
-
-def envmap_from_mitsuba(image, factor: int = ENVMAP_ROW_FACTOR) -> np.ndarray:
-    """Resample a Mitsuba 3 lat-long map ``(H, W, 3)`` (rows at ``v = j / (H - 1)``) for
-    jaxgfx's lookup (texel centres at ``v = (i + 1/2) / H'``): ``H' = factor * H`` rows, row
-    ``i`` = Mitsuba's linear interpolation at ``(i + 1/2) / H'``. Columns are unchanged (both
-    place them at ``(k + 1/2) / W``). jaxgfx then interpolates linearly between these samples
-    of Mitsuba's piecewise-linear profile; the two differ only in the sub-rows around each of
-    Mitsuba's rows (the resampled profile cuts the corner) and in the half sub-row next to each
-    pole (clamped).
-
-    Example: a 2-row map with rows 0 and 1 and ``factor=1`` gives rows 0.25 and 0.75.
-    """
-    img = np.asarray(image, np.float64)[..., :3]
-    h = img.shape[0]
-    n = factor * h
-    v = (np.arange(n) + 0.5) / n * (h - 1)
-    j0 = np.clip(np.floor(v).astype(int), 0, h - 2)
-    f = (v - j0)[:, None, None]
-    return ((1 - f) * img[j0] + f * img[j0 + 1]).astype(np.float32)
 
 
 # ------------------------------------------------------------------------------------------
@@ -407,7 +320,7 @@ def _transform(doc, node) -> np.ndarray:
             _attrs(c, a, ("origin", "target", "up"))
             kw = {k: _floats(a[k], f"{at} {k}", (3,)) for k in ("origin", "target", "up")}
             try:
-                _look_at(**kw)
+                look_at_matrix(**kw)
             except ValueError as e:
                 raise ValueError(f"{at}: {e}") from None
             ops.append(("lookat", kw))
@@ -473,6 +386,7 @@ def _object(doc, node) -> _Obj:
     a = doc.sub(node)
     _attrs(node, a, ("type",), ("id", "name"))
     obj = _Obj(node.tag, a["type"], a.get("id"), node)
+    plugin_status(obj.tag, obj.type, obj.where)  # PLUGINS: refused / unknown plugins
     for c in node.children:
         ca = doc.sub(c)
         if c.tag in _VALUE_TAGS:
@@ -742,7 +656,7 @@ def _texture(obj: _Obj, doc) -> dict:
 
 
 def _distribution(p: _Params):
-    dist = p.string("distribution", "beckmann", ("beckmann", "ggx"))
+    dist = p.string("distribution", DEFAULTS["distribution"], ("beckmann", "ggx"))
     alpha = p.scalar_or_texture("alpha", None)
     au, av = p.float("alpha_u"), p.float("alpha_v")
     if au is not None or av is not None:
@@ -752,19 +666,24 @@ def _distribution(p: _Params):
             raise p.err("alpha_u", "anisotropic roughness is not supported (the tangent "
                                    "frames of jaxgfx and Mitsuba differ)")  # fmt: skip
         alpha = au
-    out = {"distribution": dist, "alpha": 0.1 if alpha is None else alpha,
-           "sample_visible": p.bool("sample_visible", True)}  # fmt: skip
+    out = {"distribution": dist, "alpha": DEFAULTS["alpha"] if alpha is None else alpha,
+           "sample_visible": p.bool("sample_visible", DEFAULTS["sample_visible"])}  # fmt: skip
     return out
 
 
 def _conductor(p: _Params) -> dict:
-    material = p.string("material", "none")
-    if material != "none":
-        raise p.err("material", f"named conductor {material!r} is not supported (no IOR "
-                                "tables in jaxgfx); give eta and k")  # fmt: skip
+    material = p.string("material", DEFAULTS["conductor.material"])
     out = {"reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True)}
     eta, k = p.color("eta"), p.color("k")
-    if eta is None and k is None:
+    if material != "none":
+        if material not in CONDUCTOR_IOR:
+            raise p.err("material", f"unknown conductor {material!r}; expected 'none' or one "
+                                    f"of {sorted(CONDUCTOR_IOR)}")  # fmt: skip
+        if eta is not None or k is not None:
+            raise p.err("material", "give either a named material or eta / k, not both")
+        e, kk = CONDUCTOR_IOR[material]
+        out.update(fresnel="conductor", eta=list(e), k=list(kk))
+    elif eta is None and k is None:
         out["fresnel"] = "none"
     else:
         out.update(fresnel="conductor", eta=eta or [0.0] * 3, k=k or [1.0] * 3)
@@ -786,21 +705,26 @@ def _bsdf(obj: _Obj, doc, desc, *, textured_ok=True) -> str:
         return name
     t = obj.type
     if t == "diffuse":
-        m = {"type": "diffuse", "reflectance": p.color("reflectance", [0.5] * 3, texture=True)}
+        rho = [DEFAULTS["diffuse.reflectance"]] * 3
+        m = {"type": "diffuse", "reflectance": p.color("reflectance", rho, texture=True)}
     elif t == "conductor":
         m = {"type": "conductor", **_conductor(p)}
     elif t == "roughconductor":
         m = {"type": "roughconductor", **_distribution(p), **_conductor(p)}
     elif t == "dielectric":
-        eta = p.ior("int_ior", "bk7") / p.ior("ext_ior", "air")
+        eta = p.ior("int_ior", DEFAULTS["dielectric.int_ior"]) / p.ior(
+            "ext_ior", DEFAULTS["dielectric.ext_ior"])
         m = {"type": "dielectric", "eta": eta,
              "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
              "specular_transmittance": p.color("specular_transmittance", [1.0] * 3,
                                                texture=True)}  # fmt: skip
     elif t == "roughplastic":
         m = {"type": "roughplastic", **_distribution(p),
-             "eta": p.ior("int_ior", "polypropylene") / p.ior("ext_ior", "air"),
-             "diffuse_reflectance": p.color("diffuse_reflectance", [0.5] * 3, texture=True),
+             "eta": p.ior("int_ior", DEFAULTS["roughplastic.int_ior"])
+             / p.ior("ext_ior", DEFAULTS["roughplastic.ext_ior"]),
+             "diffuse_reflectance": p.color("diffuse_reflectance",
+                                             [DEFAULTS["roughplastic.diffuse_reflectance"]] * 3,
+                                             texture=True),
              "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
              "nonlinear": p.bool("nonlinear", False)}  # fmt: skip
     else:
@@ -893,7 +817,8 @@ def _shape(obj: _Obj, doc, desc, ctx):
         mat = _bsdf(bsdfs[0], doc, desc)
     else:  # Mitsuba's default BSDF
         mat = "mitsuba_default"
-        desc["materials"].setdefault(mat, {"type": "diffuse", "reflectance": [0.5] * 3})
+        desc["materials"].setdefault(
+            mat, {"type": "diffuse", "reflectance": [DEFAULTS["diffuse.reflectance"]] * 3})
     lin, det = m[:3, :3], float(np.linalg.det(m[:3, :3]))
     t = obj.type
     if t == "sphere":
@@ -1063,7 +988,7 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
     for c in obj.children:
         if c.tag not in ("film", "sampler"):
             raise ValueError(f"{c.node.at}: {obj.where}: nested <{c.tag}> is not supported")
-    width, height, film = 768, 576, {}
+    width, height, film = DEFAULTS["film.width"], DEFAULTS["film.height"], {}
     if films:
         fo = films[0]
         fp = _Params(fo, doc)
