@@ -204,7 +204,11 @@ def test_integrator_mapping():
             r"shapes\[0\]\.radius",
         ),
         # the same error as load_scene
-        ({"shapes": [{"type": "mesh", "file": "nowhere.obj"}]}, FileNotFoundError, r"shapes\[0\]\.file"),
+        (
+            {"shapes": [{"type": "mesh", "file": "nowhere.obj"}]},
+            FileNotFoundError,
+            r"shapes\[0\]\.file",
+        ),
         ({"camera": {**_camera(), "fov": 200}}, ValueError, "fov"),
         ({"cameras": {}}, ValueError, "cameras"),
         (

@@ -66,6 +66,7 @@ from jaxgfx.render.scene.mitsuba_conventions import (
 
 __all__ = [
     "to_mitsuba_dict",
+    "scene_to_desc",
     "mitsuba_integrator",
     "render_mitsuba",
     "envmap_for_mitsuba",
@@ -286,7 +287,7 @@ class _WorkDir:
 # public API
 
 
-def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
+def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) -> dict:
     """Convert a jaxgfx scene description into a Mitsuba 3 ``load_dict`` dictionary.
 
     ``desc``: the mapping or YAML path :func:`jaxgfx.render.scene.load_scene` accepts (relative
@@ -295,7 +296,10 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
     re-gridded environment map, PLYs of inline meshes); a fresh temporary folder by default.
     ``mi``: the imported ``mitsuba`` module (with a variant set) to wrap 4x4 transforms in
     ``mi.ScalarTransform4f``; without it transforms are nested lists (row-major, column vectors)
-    and this function imports nothing from Mitsuba.
+    and this function imports nothing from Mitsuba. ``refs``: every material becomes a
+    top-level BSDF keyed by its name, referenced by the shapes (``{"type": "ref", "id":
+    name}``; what :func:`jaxgfx.render.scene.mitsuba_xml.save_scene` writes); else each shape
+    holds a copy of its BSDF.
 
     Returns ``{"type": "scene", "sensor": ..., "<shape or emitter id>": ...}`` without an
     integrator (see :func:`mitsuba_integrator`). The sensor's sampler has ``sample_count`` 16;
@@ -384,7 +388,14 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
                 f"{where}.material: anisotropic {name!r} on a {shape_type}: the tangent frames "
                 "of jaxgfx and Mitsuba differ there (rectangles only)"
             )
-        return mats[name]
+        return {"type": "ref", "id": name} if refs else mats[name]
+
+    if refs:
+        for name, m in mats.items():
+            reserved = name in ("type", "sensor", "integrator")
+            if reserved or re.fullmatch(r"(shape|emitter)_\d+", name):
+                raise ValueError(f"materials.{name}: the name clashes with a Mitsuba object id")
+            out[name] = m
 
     # -- shapes
     shapes = desc["shapes"]
@@ -444,6 +455,137 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
         else:
             raise ValueError(f"{where}.type: expected one of {S.EMITTER_TYPES}, got {kind!r}")
     return out
+
+
+def _list(x):
+    return np.asarray(x, np.float64).tolist()
+
+
+def _bsdf_desc(m, where) -> dict:
+    """The description (``make_bsdf`` keys) of a BSDF object."""
+    from jaxgfx.render import bsdf as B
+    from jaxgfx.render.bsdf.textured import Textured
+
+    if isinstance(m, Textured):
+        raise NotImplementedError(f"{where}: textured materials are not exported (yet)")
+    if isinstance(m, B.Diffuse):
+        return {"type": "diffuse", "reflectance": _list(m.reflectance)}
+    conductor = {}
+    if isinstance(m, (B.Mirror, B.RoughConductor)):
+        conductor = {"reflectance": _list(m.reflectance), "fresnel": m.fresnel}
+        if m.eta is not None:
+            conductor["eta"] = _list(m.eta)
+        if m.k is not None:
+            conductor["k"] = _list(m.k)
+    if isinstance(m, B.Mirror):
+        return {"type": "conductor", **conductor}
+    if isinstance(m, (B.RoughConductor, B.RoughPlastic)):
+        dist = m.distribution
+        micro = {"distribution": dist.type, "alpha": _list(dist.alpha_u),
+                 "sample_visible": bool(dist.sample_visible)}  # fmt: skip
+        if isinstance(m, B.RoughConductor):
+            return {"type": "roughconductor", **micro, "alpha_v": _list(dist.alpha_v), **conductor}
+        return {"type": "roughplastic", **micro, "eta": _list(m.eta),
+                "diffuse_reflectance": _list(m.diffuse_reflectance),
+                "specular_reflectance": _list(m.specular_reflectance),
+                "nonlinear": bool(m.nonlinear)}  # fmt: skip
+    if isinstance(m, B.SmoothDielectric):
+        return {"type": "dielectric", "eta": _list(m.eta),
+                "specular_reflectance": _list(m.specular_reflectance),
+                "specular_transmittance": _list(m.specular_transmittance)}  # fmt: skip
+    raise NotImplementedError(f"{where}: {type(m).__name__} has no Mitsuba 3 mapping")
+
+
+def scene_to_desc(scene) -> dict:
+    """A description (what :func:`jaxgfx.render.scene.load_scene` takes) of a built
+    :class:`~jaxgfx.render.scene.Scene`, with its current parameter values: a fitted scene can
+    be saved (:func:`jaxgfx.render.scene.mitsuba_xml.save_scene`) or exported. Spheres and
+    rectangles become one shape each (rectangles by ``edge_u`` / ``edge_v``), a mesh one
+    inline mesh per material it uses, the loader's own ``__default__`` / ``__black__``
+    materials ``jaxgfx_default`` / ``jaxgfx_black``. Matrix cameras, SDF shapes, Phong and
+    textured materials raise ``NotImplementedError`` naming the object. Host function.
+
+    Example: ``load_scene(scene_to_desc(load_scene(desc)))`` renders like ``desc``.
+    """
+    from jaxgfx.render.camera import PerspectiveCamera
+    from jaxgfx.render.emitters import ConstantEnvironment
+    from jaxgfx.render.film import GaussianFilter
+    from jaxgfx.render.geometry import Rectangles, Spheres, TriangleMesh
+    cam = scene.camera
+    if not isinstance(cam, PerspectiveCamera):
+        raise NotImplementedError("camera: only look-at cameras are exported")
+    desc = {
+        "camera": {"origin": _list(cam.origin), "target": _list(cam.target), "up": _list(cam.up),
+                   "fov": float(cam.fov), "fov_axis": cam.fov_axis, "width": int(cam.width),
+                   "height": int(cam.height)},  # fmt: skip
+        "materials": {},
+        "shapes": [],
+        "emitters": [],
+    }
+    rf = scene.rfilter
+    if isinstance(rf, GaussianFilter):
+        desc["film"] = {"filter": "gaussian", "stddev": float(rf.stddev),
+                        "radius": float(rf.radius)}  # fmt: skip
+    else:
+        desc["film"] = {"filter": "box", "radius": float(rf.radius)}
+    internal = {"__default__": "jaxgfx_default", "__black__": "jaxgfx_black"}
+    names = [internal.get(n, n) for n in scene.material_names]
+    for n, m in zip(names, scene.materials, strict=True):
+        desc["materials"][n] = _bsdf_desc(m, f"materials.{n}")
+
+    def one(shape, mats, where, keep):
+        """Shape descriptions of ``shape``, each with a material when ``keep`` says so."""
+        mats = np.asarray(mats)
+        mesh = getattr(shape, "mesh", shape)
+        out = []
+        if isinstance(shape, Spheres):
+            for j in range(shape.radii.shape[0]):
+                out.append(({"type": "sphere", "center": _list(shape.centers[j]),
+                             "radius": float(shape.radii[j])}, mats[j]))  # fmt: skip
+        elif isinstance(shape, Rectangles):
+            for j in range(shape.centers.shape[0]):
+                out.append(({"type": "rectangle", "center": _list(shape.centers[j]),
+                             "edge_u": _list(shape.edge_u[j]),
+                             "edge_v": _list(shape.edge_v[j])}, mats[j]))  # fmt: skip
+        elif isinstance(mesh, TriangleMesh):
+            faces = np.asarray(mesh.faces)
+            for mi_ in dict.fromkeys(mats.tolist()):
+                d = {"type": "mesh", "vertices": _list(mesh.vertices),
+                     "faces": faces[mats == mi_].tolist()}  # fmt: skip
+                if mesh.normals is not None:
+                    d["normals"] = _list(mesh.normals)
+                if mesh.uvs is not None:
+                    d["uvs"] = _list(mesh.uvs)
+                out.append((d, mi_))
+        else:
+            raise NotImplementedError(f"{where}: {type(shape).__name__} has no Mitsuba 3 mapping")
+        return [(d, names[int(k)]) for d, k in out] if keep else [(d, None) for d, _ in out]
+
+    lit = {a.shape_index: a for a in scene.area_lights}
+    for i, (shape, mats) in enumerate(zip(scene.shapes, scene.shape_materials, strict=True)):
+        if i in lit:
+            for d, name in one(shape, mats, f"emitters.area.{i}", True):
+                e = {"type": "area", "shape": d, "radiance": _list(lit[i].radiance)}
+                if name != "jaxgfx_black":
+                    e["material"] = name
+                desc["emitters"].append(e)
+            continue
+        for d, name in one(shape, mats, f"shapes.{i}", True):
+            d["material"] = name
+            desc["shapes"].append(d)
+    pl = scene.point_lights
+    if pl is not None:
+        for p_, q in zip(np.asarray(pl.positions), np.asarray(pl.intensities), strict=True):
+            desc["emitters"].append({"type": "point", "position": _list(p_), "intensity": _list(q)})
+    env = scene.environment
+    if isinstance(env, ConstantEnvironment):
+        desc["emitters"].append({"type": "constant", "radiance": _list(env.radiance)})
+    elif env is not None:
+        desc["emitters"].append({"type": "envmap", "image": np.asarray(env.image, np.float32),
+                                 "scale": float(env.scale)})  # fmt: skip
+    used = {d.get("material") for d in desc["shapes"] + desc["emitters"]}
+    desc["materials"] = {k: v for k, v in desc["materials"].items() if k in used}
+    return desc
 
 
 def mitsuba_integrator(name: str = "path", *, max_depth: int = 3, rr_depth: int = 5) -> dict:

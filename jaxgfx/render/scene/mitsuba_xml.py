@@ -65,6 +65,8 @@ __all__ = [
     "spectrum_to_rgb",
     "envmap_from_mitsuba",
     "transform_matrix",
+    "save_scene",
+    "to_xml",
 ]
 
 DISK_SEGMENTS = 256
@@ -690,8 +692,9 @@ def _conductor(p: _Params) -> dict:
     return out
 
 
-def _bsdf(obj: _Obj, doc, desc, *, textured_ok=True) -> str:
-    """The material name of a BSDF object (converted once, shared by references)."""
+def _bsdf(obj: _Obj, doc, desc, *, textured_ok=True, name=None) -> str:
+    """The material name of a BSDF object (converted once, shared by references): its ``id``,
+    else ``name`` (the id of an enclosing ``twosided``), else ``bsdf_N``."""
     if obj.converted is not None:
         return obj.converted
     p = _Params(obj, doc)
@@ -700,7 +703,7 @@ def _bsdf(obj: _Obj, doc, desc, *, textured_ok=True) -> str:
             raise ValueError(f"{obj.where}: expected exactly one nested <bsdf> (different "
                              "front and back BSDFs are not supported)")  # fmt: skip
         p.done(children_ok=1)
-        name = _bsdf(obj.children[0], doc, desc)
+        name = _bsdf(obj.children[0], doc, desc, name=obj.id or name)
         obj.converted = name
         return name
     t = obj.type
@@ -731,7 +734,7 @@ def _bsdf(obj: _Obj, doc, desc, *, textured_ok=True) -> str:
         hint = " (jaxgfx has roughplastic only)" if t == "plastic" else ""
         raise ValueError(f"{obj.where}: BSDF plugin {t!r} is not supported{hint}")
     p.done()
-    name = obj.id or f"bsdf_{len(desc['materials'])}"
+    name = obj.id or name or f"bsdf_{len(desc['materials'])}"
     while name in desc["materials"]:
         name += "_"
     desc["materials"][name] = m
@@ -1000,6 +1003,7 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
         fp.string("pixel_format", "rgb", ("rgb", "rgba", "luminance", "luminance_alpha"))
         fp.string("component_format", "float16", ("float16", "float32", "uint32"))
         fp.string("file_format", "openexr", ("openexr", "exr", "rgbe", "pfm"))
+        fp.bool("sample_border")  # jaxgfx always samples the border (see the filter notes)
         rfs = [c for c in fo.children if c.tag == "rfilter"]
         rf = rfs[0] if rfs else None
         if rf is None or rf.type == "gaussian":
@@ -1162,3 +1166,150 @@ def read_xml(path, **params) -> XMLScene:
     if not desc["emitters"]:
         del desc["emitters"]
     return XMLScene(desc, spp, integrator, depth, rr, tuple(doc.files))
+
+
+# ------------------------------------------------------------------------------------------
+# writing: jaxgfx description -> Mitsuba 3 XML
+
+
+def _xml_attr(x) -> str:
+    from xml.sax.saxutils import quoteattr
+
+    return quoteattr(str(x))
+
+
+def _num(x) -> str:
+    """Shortest text that reads back to ``x`` (to its float32 value when it is one)."""
+    x = float(x)
+    x32 = np.float32(x)
+    return str(x32) if float(x32) == x and np.isfinite(x32) else repr(x)
+
+
+def _xml_object(tag, d, indent, name=None, ident=None) -> list[str]:
+    from jaxgfx.render.scene.mitsuba_conventions import PLUGINS
+
+    pad = "    " * indent
+    attrs = f" type={_xml_attr(d['type'])}"
+    if ident is not None:
+        attrs += f" id={_xml_attr(ident)}"
+    if name is not None:
+        attrs += f" name={_xml_attr(name)}"
+    body = []
+    for k, v in d.items():
+        if k == "type":
+            continue
+        q = "    " * (indent + 1)
+        if isinstance(v, dict) and v.get("type") == "rgb":
+            body.append(f'{q}<rgb name={_xml_attr(k)} value="{", ".join(map(_num, v["value"]))}"/>')
+        elif isinstance(v, dict) and v.get("type") == "ref":
+            body.append(f"{q}<ref id={_xml_attr(v['id'])}/>")
+        elif isinstance(v, dict):
+            tags = [t for (t, ty) in PLUGINS if ty == v["type"]]
+            if not tags:  # pragma: no cover - the exporter writes known plugins only
+                raise ValueError(f"{k}: plugin {v['type']!r} has no XML tag")
+            nested_name = k if tags[0] == "texture" else None
+            body += _xml_object(tags[0], v, indent + 1, name=nested_name)
+        elif isinstance(v, bool):
+            body.append(f"{q}<boolean name={_xml_attr(k)} value=\"{str(v).lower()}\"/>")
+        elif isinstance(v, (int, np.integer)):
+            body.append(f'{q}<integer name={_xml_attr(k)} value="{int(v)}"/>')
+        elif isinstance(v, (float, np.floating)):
+            body.append(f'{q}<float name={_xml_attr(k)} value="{_num(v)}"/>')
+        elif isinstance(v, str):
+            body.append(f"{q}<string name={_xml_attr(k)} value={_xml_attr(v)}/>")
+        elif k == "to_world":
+            m = np.asarray(v, np.float64).reshape(-1)
+            body.append(f'{q}<transform name="to_world"><matrix value="'
+                        f'{" ".join(map(_num, m))}"/></transform>')  # fmt: skip
+        elif np.shape(v) == (3,):
+            body.append(f'{q}<point name={_xml_attr(k)} value="{", ".join(map(_num, v))}"/>')
+        else:  # pragma: no cover - the exporter writes the kinds above only
+            raise ValueError(f"{k}: cannot write {v!r} as Mitsuba XML")
+    if not body:
+        return [f"{pad}<{tag}{attrs}/>"]
+    return [f"{pad}<{tag}{attrs}>", *body, f"{pad}</{tag}>"]
+
+
+def to_xml(mitsuba_dict: dict) -> str:
+    """Mitsuba 3 XML text of a ``load_dict`` dictionary as :func:`to_mitsuba_dict` builds it
+    (transforms as nested lists, ``mi=None``): each top-level entry becomes an object whose
+    ``id`` is its key; ``{"type": "rgb"}`` values become ``<rgb>``, ``{"type": "ref"}``
+    ``<ref>``, 4x4 ``to_world`` a ``<matrix>``, 3-vectors ``<point>``.
+
+    Example: ``to_xml({"type": "scene", "s": {"type": "sphere", "radius": 1.0}})`` contains
+    ``<shape type="sphere" id="s">``.
+    """
+    from jaxgfx.render.scene.mitsuba_conventions import PLUGINS
+
+    if mitsuba_dict.get("type") != "scene":
+        raise ValueError("mitsuba_dict: expected a {'type': 'scene', ...} dictionary")
+    lines = ['<scene version="3.0.0">']
+    for key, v in mitsuba_dict.items():
+        if key == "type":
+            continue
+        tag = next(t for (t, ty) in PLUGINS if ty == v["type"])
+        lines += _xml_object(tag, v, 1, ident=key)
+    lines.append("</scene>")
+    return "\n".join(lines) + "\n"
+
+
+def save_scene(
+    scene,
+    path,
+    *,
+    spp: int = 16,
+    integrator: str = "path",
+    max_depth: int | None = None,
+    rr_depth: int = 5,
+    base_dir=None,
+) -> str:
+    """Write a jaxgfx scene as a Mitsuba 3 XML file that Mitsuba loads to the same image.
+
+    ``scene``: a description mapping or YAML path (as :func:`load_scene` takes), or a
+    :class:`Scene` (converted by :func:`jaxgfx.render.scene.mitsuba.scene_to_desc`). The
+    conventions are :func:`jaxgfx.render.scene.mitsuba.to_mitsuba_dict`'s (one table,
+    :mod:`jaxgfx.render.scene.mitsuba_conventions`); materials become top-level ``<bsdf>``
+    objects whose ``id`` is the material name (so :func:`read_xml` gives the same names back).
+    Files Mitsuba needs that the description does not provide (PLYs of inline or generated
+    meshes, the re-gridded environment map) are written into ``<stem>_files/`` next to
+    ``path`` and referenced relatively; mesh files the description names are referenced by
+    absolute path. ``spp`` -> the ``independent`` sampler, ``integrator`` / ``max_depth``
+    (``None``: Mitsuba's ``-1``, unbounded) / ``rr_depth`` as
+    :func:`jaxgfx.render.scene.mitsuba.mitsuba_integrator`. Returns ``path``. Features Mitsuba
+    lacks raise ``NotImplementedError`` naming the field (as ``to_mitsuba_dict``).
+
+    Example: ``save_scene("configs/scenes/example.yaml", "/tmp/example.xml", spp=64)``.
+    """
+    from jaxgfx.render.scene import mitsuba as M
+    from jaxgfx.render.scene.scene import Scene
+
+    if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)) or spp < 1:
+        raise ValueError(f"spp: expected a positive integer, got {spp!r}")
+    if max_depth is None:
+        integ = M.mitsuba_integrator(integrator, max_depth=1, rr_depth=rr_depth)
+        integ["max_depth"] = 2 if integrator == "direct" else -1
+    else:
+        integ = M.mitsuba_integrator(integrator, max_depth=max_depth, rr_depth=rr_depth)
+    if isinstance(scene, Scene):
+        scene = M.scene_to_desc(scene)
+    path = os.path.abspath(os.fspath(path))
+    if not path.lower().endswith(".xml"):
+        raise ValueError(f"path: expected a .xml file name, got {path!r}")
+    folder = os.path.dirname(path)
+    files = os.path.splitext(path)[0] + "_files"
+    d = M.to_mitsuba_dict(scene, base_dir=base_dir, work_dir=files, refs=True)
+    d["sensor"]["sampler"]["sample_count"] = int(spp)
+    d["integrator"] = integ
+
+    def relative(x):
+        if isinstance(x, dict):
+            return {k: (os.path.relpath(v, folder) if k == "filename" and
+                        os.path.dirname(v) == files else relative(v))
+                    for k, v in x.items()}  # fmt: skip
+        return x
+
+    text = to_xml(relative(d))
+    os.makedirs(folder, exist_ok=True)
+    with open(path, "w") as f:
+        f.write(text)
+    return path
