@@ -257,7 +257,7 @@ def test_named_conductors_equal_mitsubas(mi):
             err = np.abs(np.array(got) - np.array(want)) / np.maximum(np.abs(want), 0.05)
             worst = max(worst, float(err.max()))
     # Mitsuba integrates its own fit of the CIE 1931 CMFs, colour-science the tabulated ones:
-    # measured max 2.4e-3 (relative, or absolute below 0.05) over the 71 names x 6 values
+    # measured max 2.9e-3 (relative, or absolute below 0.05; Cu) over the 71 names x 6 values
     assert worst < 5e-3, worst
 
 
@@ -283,7 +283,8 @@ def test_mitsuba_loads_the_written_xml_to_the_same_objects(mi, tmp_path):
         if k.endswith("vertex_positions") and "rectangle" not in k
     )
     assert len(theirs) == len(ours) and np.allclose(theirs, ours, rtol=1e-5, atol=1e-5)
-    eta = np.array(p["gold.bsdf.eta.value"])
+    (key,) = [k for k in p.keys() if k.startswith("gold") and k.endswith("eta.value")]
+    eta = np.array(p[key])
     np.testing.assert_allclose(eta, CONDUCTOR_IOR["Au"][0], rtol=1e-5)
 
 
@@ -300,7 +301,7 @@ def _jaxgfx_replicates(desc, base_dir, max_depth):
 
 
 @pytest.mark.mitsuba
-@pytest.mark.slow  # 45 s measured here (two scenes, 16², 4 x 64 spp each side; compile dominates)
+@pytest.mark.slow  # 78 s measured here (32 s + 46 s; 16², 4 x 64 spp each side; compile dominates)
 @pytest.mark.parametrize("name", ["example", "inverse"])
 def test_yaml_scene_saved_as_xml_renders_in_mitsuba_like_jaxgfx(mi, tmp_path, name):
     desc = _small_yaml(name, RES)
