@@ -203,7 +203,12 @@ def test_integrator_mapping():
             ValueError,
             r"shapes\[0\]\.radius",
         ),
-        ({"shapes": [{"type": "mesh", "file": "nowhere.obj"}]}, ValueError, r"shapes\[0\]\.file"),
+        # the same error as load_scene
+        (
+            {"shapes": [{"type": "mesh", "file": "nowhere.obj"}]},
+            FileNotFoundError,
+            r"shapes\[0\]\.file",
+        ),
         ({"camera": {**_camera(), "fov": 200}}, ValueError, "fov"),
         ({"cameras": {}}, ValueError, "cameras"),
         (

@@ -427,7 +427,7 @@ def test_disk_is_a_fan_of_256_triangles(tmp_path):
         (
             '<bsdf type="plastic" id="p"/>',
             10,
-            "<bsdf type='plastic' id='p'>: BSDF plugin "
+            "<bsdf type='plastic' id='p'>: bsdf plugin "
             "'plastic' is not supported (jaxgfx has roughplastic only)",
         ),  # fmt: skip
         (
@@ -459,10 +459,10 @@ def test_disk_is_a_fan_of_256_triangles(tmp_path):
             "parameter 'alpha_u': anisotropic roughness is not supported",
         ),  # fmt: skip
         (
-            '<shape type="sphere"><bsdf type="conductor"><string name="material" value="Au"/>'
+            '<shape type="sphere"><bsdf type="conductor"><string name="material" value="Xx"/>'
             "</bsdf></shape>",
             10,
-            "parameter 'material': named conductor 'Au' is not supported",
+            "parameter 'material': unknown conductor 'Xx'; expected 'none' or one of ['Ag', ",
         ),
         (
             '<shape type="sphere"><transform name="to_world"><scale x="2"/></transform></shape>',
@@ -509,3 +509,39 @@ def test_load_scene_dispatches_on_xml_and_checks_parameters(tmp_path):
     assert scene.camera.width == 8 and scene.camera.height == 6
     with pytest.raises(TypeError, match=rx("load_scene: parameters ['spp'] are for .xml")):
         load_scene(os.path.join(os.path.dirname(p), "x.yaml"), spp=8)
+
+
+# ---------------------------------------------------------------------------- plugin registry
+
+
+def test_docs_plugin_table_is_the_registry():
+    from jaxgfx.render.scene.mitsuba_conventions import PLUGINS
+
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    with open(os.path.join(root, "docs", "render_scenes.md"), encoding="utf-8") as f:
+        text = f.read()
+    body = text.split("<!-- plugin-table -->\n", 1)[1].split("<!-- /plugin-table -->", 1)[0]
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in body.splitlines()[2:]]
+    assert [(t, p.strip("`"), s) for t, p, s in rows] == [(t, p, s) for (t, p), s in
+                                                          PLUGINS.items()]  # fmt: skip
+
+
+def _refused():
+    from jaxgfx.render.scene.mitsuba_conventions import PLUGINS
+
+    return [(t, p, s.split(": ", 1)[1]) for (t, p), s in PLUGINS.items() if s.startswith("ref")]
+
+
+@pytest.mark.parametrize("tag,plugin,why", _refused())
+def test_every_refused_plugin_is_refused_with_its_reason(tmp_path, tag, plugin, why):
+    p = write(tmp_path, scene_xml(f'<{tag} type="{plugin}"/>'))
+    msg = f"{p}:10: <{tag} type='{plugin}'>: {tag} plugin '{plugin}' is not supported ({why})"
+    with pytest.raises(ValueError, match=rx(msg)):
+        read_xml(p)
+
+
+def test_unknown_plugin_names_the_supported_ones(tmp_path):
+    p = write(tmp_path, scene_xml('<shape type="teapot"/>'))
+    with pytest.raises(ValueError, match=rx("shape plugin 'teapot' is not supported (unknown "
+                                            "plugin; supported: obj, ply, sphere, rectangle")):
+        read_xml(p)

@@ -72,11 +72,17 @@ def resolve_path(path: str, base: str | None, what: str) -> str:
 
 
 def load_fit_scene(cfg: FitConfig, base: str | None):
-    """The scene of ``cfg`` (``render.width/height`` override the camera's resolution)."""
+    """The scene of ``cfg``, a YAML or Mitsuba 3 XML file (``render.width/height`` override
+    the camera's resolution)."""
     from jaxgfx.render import load_scene
 
     spath = resolve_path(cfg.scene, base, "scene")
-    desc = read_yaml(spath)
+    if spath.lower().endswith(".xml"):  # Mitsuba 3 XML (absolute file paths in the desc)
+        from jaxgfx.render.scene.mitsuba_xml import read_xml
+
+        desc = read_xml(spath).desc
+    else:
+        desc = read_yaml(spath)
     if cfg.render.width is not None or cfg.render.height is not None:
         cam = dict(desc.get("camera", {}))
         if cfg.render.width is not None:

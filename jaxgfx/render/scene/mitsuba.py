@@ -55,9 +55,18 @@ from collections.abc import Mapping
 import numpy as np
 
 from jaxgfx.render.parameters import get_path
+from jaxgfx.render.scene.mitsuba_conventions import (
+    BSDF_TO_MITSUBA,
+    DEFAULTS,
+    ONE_SIDED_BSDFS,
+    envmap_for_mitsuba,
+    look_at_matrix,
+    rectangle_to_world,
+)
 
 __all__ = [
     "to_mitsuba_dict",
+    "scene_to_desc",
     "mitsuba_integrator",
     "render_mitsuba",
     "envmap_for_mitsuba",
@@ -95,18 +104,6 @@ def _transform(m, mi):
     return mi.ScalarTransform4f(m.tolist())
 
 
-def _look_at_matrix(origin, target, up):
-    """Mitsuba's ``Transform4f.look_at``: columns (left, up', dir, origin)."""
-    o, t, u = (np.asarray(v, np.float64) for v in (origin, target, up))
-    d = (t - o) / np.linalg.norm(t - o)
-    left = np.cross(u, d)
-    left /= np.linalg.norm(left)
-    new_up = np.cross(d, left)
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, new_up, d, o
-    return m
-
-
 def _frame_from_normal(n):
     """The (s, t) tangents jaxgfx builds for a rectangle's unit normal (Duff et al. 2017)."""
     from jaxgfx.render.geometry.frame import frame_from_normal
@@ -115,38 +112,13 @@ def _frame_from_normal(n):
     return np.asarray(fr.s, np.float64), np.asarray(fr.t, np.float64)
 
 
-def envmap_for_mitsuba(image) -> np.ndarray:
-    """Re-grid a jaxgfx lat-long map ``(H, W, 3)`` so Mitsuba 3's lookup reproduces jaxgfx's.
-
-    jaxgfx interpolates bilinearly between texel centres ``v_j = (j + 0.5) / H`` and clamps
-    beyond the first/last centre; Mitsuba 3 interpolates between rows at ``v_j = j / (H' - 1)``.
-    The returned ``(2H + 1, W, 3)`` map holds, at ``v = k / 2H``: the clamped first row
-    (``k = 0``), the texel rows (odd ``k``), the averages of neighbouring rows (even ``k``) and
-    the clamped last row (``k = 2H``). jaxgfx's lookup is linear in v between these knots, so
-    Mitsuba's piecewise-linear interpolation equals it exactly. Columns (u) already agree.
-    Negative values are clamped to 0 as in :class:`jaxgfx.render.emitters.EnvironmentMap`.
-
-    Example: a 2-row map with rows 0 and 1 becomes rows ``[0, 0, 0.5, 1, 1]``.
-    """
-    img = np.asarray(image, np.float32)
-    if img.ndim != 3 or img.shape[-1] < 3 or min(img.shape[:2]) < 2:
-        raise ValueError(f"envmap.image: expected (H>=2, W>=2, 3), got shape {img.shape}")
-    img = np.maximum(img[..., :3], 0.0)
-    h, w = img.shape[:2]
-    out = np.empty((2 * h + 1, w, 3), np.float32)
-    out[0] = img[0]
-    out[1::2] = img
-    out[2:-1:2] = 0.5 * (img[:-1] + img[1:])
-    out[-1] = img[-1]
-    return out
-
-
 # -------------------------------------------------------------------------------------------
 # materials
 
 
 def _twosided(bsdf: dict) -> dict:
-    return {"type": "twosided", "bsdf": bsdf}
+    """``bsdf`` wrapped in ``twosided`` when Mitsuba's plugin is one-sided (ONE_SIDED_BSDFS)."""
+    return {"type": "twosided", "bsdf": bsdf} if bsdf["type"] in ONE_SIDED_BSDFS else bsdf
 
 
 def _conductor_fresnel(m, where) -> dict:
@@ -202,42 +174,37 @@ def _material(md, where) -> dict:
         m = B.make_bsdf(dict(md))
     except (ValueError, TypeError) as e:
         raise ValueError(f"{where}: {e}") from None
-    if isinstance(m, B.Diffuse):
-        return _twosided({"type": "diffuse", "reflectance": _rgb(m.reflectance)})
-    if isinstance(m, B.Mirror):
-        return _twosided({"type": "conductor", **_conductor_fresnel(m, where)})
-    if isinstance(m, B.RoughConductor):
-        return _twosided(
-            {
-                "type": "roughconductor",
-                **_distribution(m, where),
-                **_conductor_fresnel(m, where),
-            }
-        )
-    if isinstance(m, B.SmoothDielectric):
-        return {
-            "type": "dielectric",
+    kind = BSDF_TO_MITSUBA.get(type(m).__name__)
+    if kind == "diffuse":
+        out = {"type": kind, "reflectance": _rgb(m.reflectance)}
+    elif kind == "conductor":
+        out = {"type": kind, **_conductor_fresnel(m, where)}
+    elif kind == "roughconductor":
+        out = {"type": kind, **_distribution(m, where), **_conductor_fresnel(m, where)}
+    elif kind == "dielectric":
+        out = {
+            "type": kind,
             "int_ior": _float(m.eta),
             "ext_ior": 1.0,
             "specular_reflectance": _rgb(m.specular_reflectance),
             "specular_transmittance": _rgb(m.specular_transmittance),
         }
-    if isinstance(m, B.RoughPlastic):
+    elif kind == "roughplastic":
         dist = _distribution(m, where)
         if "alpha_u" in dist:
             raise NotImplementedError(f"{where}.alpha: Mitsuba's roughplastic is isotropic")
-        return _twosided(
-            {
-                "type": "roughplastic",
-                **dist,
-                "int_ior": _float(m.eta),
-                "ext_ior": 1.0,
-                "diffuse_reflectance": _rgb(m.diffuse_reflectance),
-                "specular_reflectance": _rgb(m.specular_reflectance),
-                "nonlinear": bool(m.nonlinear),
-            }
-        )
-    raise NotImplementedError(f"{where}.type: {md.get('type')!r} has no Mitsuba 3 mapping")
+        out = {
+            "type": kind,
+            **dist,
+            "int_ior": _float(m.eta),
+            "ext_ior": 1.0,
+            "diffuse_reflectance": _rgb(m.diffuse_reflectance),
+            "specular_reflectance": _rgb(m.specular_reflectance),
+            "nonlinear": bool(m.nonlinear),
+        }
+    else:
+        raise NotImplementedError(f"{where}.type: {md.get('type')!r} has no Mitsuba 3 mapping")
+    return _twosided(out)
 
 
 # -------------------------------------------------------------------------------------------
@@ -259,55 +226,45 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
         r = float(S.num(d["radius"], f"{where}.radius", positive=True))
         return {"type": "sphere", "center": c.tolist(), "radius": r}
     if kind == "rectangle":
-        S.expect_keys(d, where, ("type", "center", "normal"), (*common, "size"))
-        c = np.asarray(S.vec(d["center"], f"{where}.center"), np.float64)
-        n = np.asarray(S.vec(d["normal"], f"{where}.normal"), np.float64)
-        if np.linalg.norm(n) == 0:
-            raise ValueError(f"{where}.normal: expected a non-zero vector")
-        n = n / np.linalg.norm(n)
-        size = np.asarray(d.get("size", [2.0, 2.0]), np.float64)
-        if size.shape != (2,) or np.any(~(size > 0)):
-            raise ValueError(f"{where}.size: expected two positive numbers")
-        s, t = _frame_from_normal(n)
-        m = np.eye(4)
-        m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = s * size[0] / 2, t * size[1] / 2, n, c
+        if "edge_u" in d or "edge_v" in d:
+            S.expect_keys(d, where, ("type", "center", "edge_u", "edge_v"), common)
+        else:
+            S.expect_keys(d, where, ("type", "center", "normal"), (*common, "size"))
+        r = S.rectangle_from_desc(d, where)  # validated as load_scene does
+        m = rectangle_to_world(r.centers[0], r.edge_u[0], r.edge_v[0])
         return {"type": "rectangle", "to_world": _transform(m, mi)}
     if kind == "mesh":
-        S.expect_keys(
-            d,
-            where,
-            ("type",),
-            (*common, "file", "vertices", "faces", "generator", "translate", "scale"),
-        )
+        sources = ("file", "vertices", "faces", "normals", "uvs", "generator")
+        S.expect_keys(d, where, ("type",), (*common, *sources, "translate", "scale", "to_world"))
         from jaxgfx.render.geometry import mesh_io
 
+        # validated exactly as load_scene does (the untransformed mesh: to_world is Mitsuba's)
+        m = S.mesh_from_desc({k: d[k] for k in sources if k in d}, where, base_dir)
         if "file" in d:
             path = os.fspath(d["file"])
             if not os.path.isabs(path) and base_dir:
                 path = os.path.join(base_dir, path)
             ext = os.path.splitext(path)[1].lower()
-            if ext not in (".obj", ".ply"):
-                raise ValueError(f"{where}.file: expected an .obj or .ply file, got {path!r}")
-            if not os.path.isfile(path):
-                raise ValueError(f"{where}.file: no such file {path!r}")
-            m = (mesh_io.load_obj if ext == ".obj" else mesh_io.load_ply)(path)
             out = {"type": ext[1:], "filename": os.path.abspath(path)}
-        elif ("vertices" in d and "faces" in d) or "generator" in d:
-            # validated (or generated) exactly as load_scene does, then written as a PLY
-            keys = ("generator",) if "generator" in d else ("vertices", "faces")
-            m = S.mesh_from_desc({k: d[k] for k in keys}, where, base_dir)
+            if ext == ".obj":  # jaxgfx reads the file's v as is; Mitsuba flips it by default
+                out["flip_tex_coords"] = False
+        else:  # inline or generated: written as a PLY (with its normals and uvs)
             name = re.sub(r"[^A-Za-z0-9]+", "_", where).strip("_")
             path = os.path.join(work_dir(), f"{name}.ply")
             mesh_io.save_ply(path, m)
             out = {"type": "ply", "filename": path}
-        else:
-            raise ValueError(f"{where}: expected 'file' or 'vertices' + 'faces'")
         out["face_normals"] = m.normals is None
+        mat = np.eye(4)
         if "translate" in d or "scale" in d:
             sc = np.broadcast_to(np.asarray(d.get("scale", 1.0), np.float64), (3,))
             tr = np.asarray(S.vec(d.get("translate", [0.0, 0.0, 0.0]), f"{where}.translate"))
             mat = np.diag([*sc, 1.0])
             mat[:3, 3] = tr
+        if "to_world" in d:  # applied after translate / scale (as schema.mesh_from_desc)
+            S.mesh_from_desc({"vertices": [[0.0, 0, 0]], "faces": [[0, 0, 0]],
+                              "to_world": d["to_world"]}, where, None)  # fmt: skip
+            mat = np.asarray(d["to_world"], np.float64) @ mat
+        if not np.allclose(mat, np.eye(4)):
             out["to_world"] = _transform(mat, mi)
         return out
     raise ValueError(f"{where}.type: expected one of {S.SHAPE_TYPES}, got {kind!r}")
@@ -330,7 +287,7 @@ class _WorkDir:
 # public API
 
 
-def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
+def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) -> dict:
     """Convert a jaxgfx scene description into a Mitsuba 3 ``load_dict`` dictionary.
 
     ``desc``: the mapping or YAML path :func:`jaxgfx.render.scene.load_scene` accepts (relative
@@ -339,7 +296,10 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
     re-gridded environment map, PLYs of inline meshes); a fresh temporary folder by default.
     ``mi``: the imported ``mitsuba`` module (with a variant set) to wrap 4x4 transforms in
     ``mi.ScalarTransform4f``; without it transforms are nested lists (row-major, column vectors)
-    and this function imports nothing from Mitsuba.
+    and this function imports nothing from Mitsuba. ``refs``: every material becomes a
+    top-level BSDF keyed by its name, referenced by the shapes (``{"type": "ref", "id":
+    name}``; what :func:`jaxgfx.render.scene.mitsuba_xml.save_scene` writes); else each shape
+    holds a copy of its BSDF.
 
     Returns ``{"type": "scene", "sensor": ..., "<shape or emitter id>": ...}`` without an
     integrator (see :func:`mitsuba_integrator`). The sensor's sampler has ``sample_count`` 16;
@@ -399,7 +359,7 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
         "fov": float(cam["fov"]),
         "fov_axis": str(cam.get("fov_axis", "x")),
         "to_world": _transform(
-            _look_at_matrix(cam["origin"], cam["target"], cam.get("up", [0.0, 1.0, 0.0])), mi
+            look_at_matrix(cam["origin"], cam["target"], cam.get("up", [0.0, 1.0, 0.0])), mi
         ),
         "film": film,
         "sampler": {"type": "independent", "sample_count": 16},
@@ -411,7 +371,7 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
     if not isinstance(mats_desc, Mapping):
         raise ValueError("materials: expected a mapping from names to material descriptions")
     mats = {str(k): _material(v, f"materials.{k}") for k, v in mats_desc.items()}
-    default = _twosided({"type": "diffuse", "reflectance": _rgb(0.5)})
+    default = _twosided({"type": "diffuse", "reflectance": _rgb(DEFAULTS["diffuse.reflectance"])})
     black = {"type": "diffuse", "reflectance": _rgb(0.0)}
 
     def material_of(d, where, fallback, shape_type=None):
@@ -428,7 +388,14 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
                 f"{where}.material: anisotropic {name!r} on a {shape_type}: the tangent frames "
                 "of jaxgfx and Mitsuba differ there (rectangles only)"
             )
-        return mats[name]
+        return {"type": "ref", "id": name} if refs else mats[name]
+
+    if refs:
+        for name, m in mats.items():
+            reserved = name in ("type", "sensor", "integrator")
+            if reserved or re.fullmatch(r"(shape|emitter)_\d+", name):
+                raise ValueError(f"materials.{name}: the name clashes with a Mitsuba object id")
+            out[name] = m
 
     # -- shapes
     shapes = desc["shapes"]
@@ -488,6 +455,137 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None) -> dict:
         else:
             raise ValueError(f"{where}.type: expected one of {S.EMITTER_TYPES}, got {kind!r}")
     return out
+
+
+def _list(x):
+    return np.asarray(x, np.float64).tolist()
+
+
+def _bsdf_desc(m, where) -> dict:
+    """The description (``make_bsdf`` keys) of a BSDF object."""
+    from jaxgfx.render import bsdf as B
+    from jaxgfx.render.bsdf.textured import Textured
+
+    if isinstance(m, Textured):
+        raise NotImplementedError(f"{where}: textured materials are not exported (yet)")
+    if isinstance(m, B.Diffuse):
+        return {"type": "diffuse", "reflectance": _list(m.reflectance)}
+    conductor = {}
+    if isinstance(m, (B.Mirror, B.RoughConductor)):
+        conductor = {"reflectance": _list(m.reflectance), "fresnel": m.fresnel}
+        if m.eta is not None:
+            conductor["eta"] = _list(m.eta)
+        if m.k is not None:
+            conductor["k"] = _list(m.k)
+    if isinstance(m, B.Mirror):
+        return {"type": "conductor", **conductor}
+    if isinstance(m, (B.RoughConductor, B.RoughPlastic)):
+        dist = m.distribution
+        micro = {"distribution": dist.type, "alpha": _list(dist.alpha_u),
+                 "sample_visible": bool(dist.sample_visible)}  # fmt: skip
+        if isinstance(m, B.RoughConductor):
+            return {"type": "roughconductor", **micro, "alpha_v": _list(dist.alpha_v), **conductor}
+        return {"type": "roughplastic", **micro, "eta": _list(m.eta),
+                "diffuse_reflectance": _list(m.diffuse_reflectance),
+                "specular_reflectance": _list(m.specular_reflectance),
+                "nonlinear": bool(m.nonlinear)}  # fmt: skip
+    if isinstance(m, B.SmoothDielectric):
+        return {"type": "dielectric", "eta": _list(m.eta),
+                "specular_reflectance": _list(m.specular_reflectance),
+                "specular_transmittance": _list(m.specular_transmittance)}  # fmt: skip
+    raise NotImplementedError(f"{where}: {type(m).__name__} has no Mitsuba 3 mapping")
+
+
+def scene_to_desc(scene) -> dict:
+    """A description (what :func:`jaxgfx.render.scene.load_scene` takes) of a built
+    :class:`~jaxgfx.render.scene.Scene`, with its current parameter values: a fitted scene can
+    be saved (:func:`jaxgfx.render.scene.mitsuba_xml.save_scene`) or exported. Spheres and
+    rectangles become one shape each (rectangles by ``edge_u`` / ``edge_v``), a mesh one
+    inline mesh per material it uses, the loader's own ``__default__`` / ``__black__``
+    materials ``jaxgfx_default`` / ``jaxgfx_black``. Matrix cameras, SDF shapes, Phong and
+    textured materials raise ``NotImplementedError`` naming the object. Host function.
+
+    Example: ``load_scene(scene_to_desc(load_scene(desc)))`` renders like ``desc``.
+    """
+    from jaxgfx.render.camera import PerspectiveCamera
+    from jaxgfx.render.emitters import ConstantEnvironment
+    from jaxgfx.render.film import GaussianFilter
+    from jaxgfx.render.geometry import Rectangles, Spheres, TriangleMesh
+    cam = scene.camera
+    if not isinstance(cam, PerspectiveCamera):
+        raise NotImplementedError("camera: only look-at cameras are exported")
+    desc = {
+        "camera": {"origin": _list(cam.origin), "target": _list(cam.target), "up": _list(cam.up),
+                   "fov": float(cam.fov), "fov_axis": cam.fov_axis, "width": int(cam.width),
+                   "height": int(cam.height)},  # fmt: skip
+        "materials": {},
+        "shapes": [],
+        "emitters": [],
+    }
+    rf = scene.rfilter
+    if isinstance(rf, GaussianFilter):
+        desc["film"] = {"filter": "gaussian", "stddev": float(rf.stddev),
+                        "radius": float(rf.radius)}  # fmt: skip
+    else:
+        desc["film"] = {"filter": "box", "radius": float(rf.radius)}
+    internal = {"__default__": "jaxgfx_default", "__black__": "jaxgfx_black"}
+    names = [internal.get(n, n) for n in scene.material_names]
+    for n, m in zip(names, scene.materials, strict=True):
+        desc["materials"][n] = _bsdf_desc(m, f"materials.{n}")
+
+    def one(shape, mats, where, keep):
+        """Shape descriptions of ``shape``, each with a material when ``keep`` says so."""
+        mats = np.asarray(mats)
+        mesh = getattr(shape, "mesh", shape)
+        out = []
+        if isinstance(shape, Spheres):
+            for j in range(shape.radii.shape[0]):
+                out.append(({"type": "sphere", "center": _list(shape.centers[j]),
+                             "radius": float(shape.radii[j])}, mats[j]))  # fmt: skip
+        elif isinstance(shape, Rectangles):
+            for j in range(shape.centers.shape[0]):
+                out.append(({"type": "rectangle", "center": _list(shape.centers[j]),
+                             "edge_u": _list(shape.edge_u[j]),
+                             "edge_v": _list(shape.edge_v[j])}, mats[j]))  # fmt: skip
+        elif isinstance(mesh, TriangleMesh):
+            faces = np.asarray(mesh.faces)
+            for mi_ in dict.fromkeys(mats.tolist()):
+                d = {"type": "mesh", "vertices": _list(mesh.vertices),
+                     "faces": faces[mats == mi_].tolist()}  # fmt: skip
+                if mesh.normals is not None:
+                    d["normals"] = _list(mesh.normals)
+                if mesh.uvs is not None:
+                    d["uvs"] = _list(mesh.uvs)
+                out.append((d, mi_))
+        else:
+            raise NotImplementedError(f"{where}: {type(shape).__name__} has no Mitsuba 3 mapping")
+        return [(d, names[int(k)]) for d, k in out] if keep else [(d, None) for d, _ in out]
+
+    lit = {a.shape_index: a for a in scene.area_lights}
+    for i, (shape, mats) in enumerate(zip(scene.shapes, scene.shape_materials, strict=True)):
+        if i in lit:
+            for d, name in one(shape, mats, f"emitters.area.{i}", True):
+                e = {"type": "area", "shape": d, "radiance": _list(lit[i].radiance)}
+                if name != "jaxgfx_black":
+                    e["material"] = name
+                desc["emitters"].append(e)
+            continue
+        for d, name in one(shape, mats, f"shapes.{i}", True):
+            d["material"] = name
+            desc["shapes"].append(d)
+    pl = scene.point_lights
+    if pl is not None:
+        for p_, q in zip(np.asarray(pl.positions), np.asarray(pl.intensities), strict=True):
+            desc["emitters"].append({"type": "point", "position": _list(p_), "intensity": _list(q)})
+    env = scene.environment
+    if isinstance(env, ConstantEnvironment):
+        desc["emitters"].append({"type": "constant", "radiance": _list(env.radiance)})
+    elif env is not None:
+        desc["emitters"].append({"type": "envmap", "image": np.asarray(env.image, np.float32),
+                                 "scale": float(env.scale)})  # fmt: skip
+    used = {d.get("material") for d in desc["shapes"] + desc["emitters"]}
+    desc["materials"] = {k: v for k, v in desc["materials"].items() if k in used}
+    return desc
 
 
 def mitsuba_integrator(name: str = "path", *, max_depth: int = 3, rr_depth: int = 5) -> dict:

@@ -37,6 +37,8 @@ sets both ``alpha_u`` and ``alpha_v``).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -47,7 +49,42 @@ from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera
 from jaxgfx.render.emitters import ConstantEnvironment, EnvironmentMap, PointLights
 from jaxgfx.render.parameters import get_path, parameter_paths, revalidate
 
-__all__ = ["Scene", "parameter_names", "is_internal_name"]
+__all__ = ["Scene", "Parameter", "parameter_names", "is_internal_name", "PARAMETER_BOUNDS"]
+
+PARAMETER_BOUNDS = {
+    "fov": (0.0, 180.0),
+    "reflectance": (0.0, 1.0),
+    "diffuse_reflectance": (0.0, 1.0),
+    "specular_reflectance": (0.0, 1.0),
+    "specular_transmittance": (0.0, 1.0),
+    "kd": (0.0, 1.0),
+    "ks": (0.0, 1.0),
+    "color0": (0.0, 1.0),
+    "color1": (0.0, 1.0),
+    "alpha": (0.0, float("inf")),
+    "alpha_u": (0.0, float("inf")),
+    "alpha_v": (0.0, float("inf")),
+    "exponent": (0.0, float("inf")),
+    "eta": (0.0, float("inf")),
+    "k": (0.0, float("inf")),
+    "radii": (0.0, float("inf")),
+    "radiance": (0.0, float("inf")),
+    "intensities": (0.0, float("inf")),
+    "scale": (0.0, float("inf")),
+}
+"""``(lower, upper)`` of a parameter by its last field name (what the constructors accept;
+reflectances at most 1 for energy conservation); others are unbounded."""
+
+
+class Parameter(NamedTuple):
+    """One differentiable leaf of a scene: ``path`` (for :meth:`Scene.get` / ``replace`` and
+    ``jaxgfx fit``), ``shape``, ``dtype`` and ``bounds`` ``(lower, upper)``."""
+
+    path: str
+    shape: tuple
+    dtype: object
+    bounds: tuple
+
 
 
 def is_internal_name(name: str) -> bool:
@@ -237,6 +274,55 @@ class Scene(eqx.Module):
 
             getters.append(where)
         return getters, getter
+
+    def parameters(self) -> list[Parameter]:
+        """Every differentiable (float array) leaf with its path, shape, dtype and bounds,
+        like Mitsuba's ``mi.traverse``: ``camera.*``, ``materials.NAME.*`` (named as in the
+        description or by the XML ``id``; the loader's own ``__default__`` / ``__black__`` are
+        not listed), ``emitters.point.*``, ``emitters.area.I.*``, ``emitters.environment.*``
+        and ``shapes.I.*`` (``I`` indexes :attr:`shapes`; a mesh's ``mesh.vertices``). Each
+        leaf once, by its field path (``distribution.alpha_u``, not the alias ``alpha``).
+        Every path works with :meth:`get` and :meth:`replace`.
+
+        >>> from jaxgfx.render.scene import load_scene
+        >>> s = load_scene({"camera": {"origin": [0, 0, 5], "target": [0, 0, 0], "fov": 40,
+        ...     "width": 4, "height": 4}, "shapes": [{"type": "sphere", "center": [0, 0, 0],
+        ...     "radius": 1, "material": "m"}], "materials": {"m": {"type": "diffuse"}}})
+        >>> [p.path for p in s.parameters()][4:]
+        ['materials.m.reflectance', 'shapes.0.centers', 'shapes.0.radii']
+        >>> s.parameters()[-1]
+        Parameter(path='shapes.0.radii', shape=(1,), dtype=dtype('float32'), bounds=(0.0, inf))
+        """
+        objs = [("camera", self.camera)]
+        named = zip(self.material_names, self.materials, strict=True)
+        objs += [(f"materials.{n}", m) for n, m in named if not is_internal_name(n)]
+        if self.point_lights is not None:
+            objs.append(("emitters.point", self.point_lights))
+        objs += [(f"emitters.area.{i}", a) for i, a in enumerate(self.area_lights)]
+        if self.environment is not None:
+            objs.append(("emitters.environment", self.environment))
+        objs += [(f"shapes.{i}", s) for i, s in enumerate(self.shapes)]
+        out = []
+        for prefix, obj in objs:
+            if isinstance(obj, Textured):  # texels, then the fields no texture overrides
+                from jaxgfx.render.bsdf.textured import texturable_paths
+
+                over = {".".join(p) for k in obj.textures for p in texturable_paths(obj.bsdf, k)}
+                names = [f"{k}.{p}" for k, t in obj.textures.items() for p in parameter_names(t)]
+                names += [n for n in parameter_names(obj.bsdf, aliases=False) if n not in over]
+            else:
+                names = parameter_names(obj, aliases=False)
+            for name in names:
+                path = f"{prefix}.{name}"
+                try:
+                    v = self.get(path)
+                except ValueError:  # not addressable (e.g. an SDF's internal constants)
+                    continue
+                parts = name.split(".")
+                last = parts[-2] if parts[-1] == "image" and len(parts) > 1 else parts[-1]
+                bounds = PARAMETER_BOUNDS.get(last, (-float("inf"), float("inf")))
+                out.append(Parameter(path, tuple(v.shape), v.dtype, bounds))
+        return out
 
     def get(self, path: str):
         """The array at a dotted parameter path (see :meth:`replace`)."""
