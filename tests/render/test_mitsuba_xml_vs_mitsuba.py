@@ -69,6 +69,9 @@ def test_roughplastic_eval_difference_is_as_documented():
                        "eta": 1.5046 / 1.000277, "diffuse_reflectance": rgb["value"]})  # fmt: skip
         fj = float(np.asarray(j.eval(jnp.array(wo), jnp.array(wi)))[1])
         got[alpha] = (fj, fm)
-    np.testing.assert_allclose(got[0.01], (0.0549, 0.0537), atol=2e-4)
-    np.testing.assert_allclose(got[0.4], (0.0708, 0.0487), atol=2e-4)
-    np.testing.assert_allclose(got[1.0], (0.0573, 0.0223), atol=2e-4)
+    # before the rough coat's tables (bsdf/_coating.py) jaxgfx gave 0.0549 / 0.0708 / 0.0573
+    for alpha, (fj, fm) in got.items():
+        assert fj == pytest.approx(fm, rel=2e-3), alpha
+    np.testing.assert_allclose(
+        [got[a][1] for a in (0.01, 0.4, 1.0)], (0.0537, 0.0487, 0.0223), atol=2e-4
+    )

@@ -17,7 +17,9 @@ from jaxgfx.render.bsdf._conductor import Mirror as Mirror
 from jaxgfx.render.bsdf._dielectric import SmoothDielectric as SmoothDielectric
 from jaxgfx.render.bsdf._diffuse import Diffuse as Diffuse
 from jaxgfx.render.bsdf._phong import Phong as Phong
+from jaxgfx.render.bsdf._plastic import SmoothPlastic as SmoothPlastic
 from jaxgfx.render.bsdf._roughconductor import RoughConductor as RoughConductor
+from jaxgfx.render.bsdf._roughdielectric import RoughDielectric as RoughDielectric
 from jaxgfx.render.bsdf._roughplastic import RoughPlastic as RoughPlastic
 
 __all__ = [
@@ -27,7 +29,9 @@ __all__ = [
     "Mirror",
     "Phong",
     "RoughConductor",
+    "RoughDielectric",
     "SmoothDielectric",
+    "SmoothPlastic",
     "RoughPlastic",
     "BSDF_TYPES",
     "make_bsdf",
@@ -40,6 +44,8 @@ BSDF_TYPES = {
     "conductor": Mirror,
     "roughconductor": RoughConductor,
     "dielectric": SmoothDielectric,
+    "roughdielectric": RoughDielectric,
+    "plastic": SmoothPlastic,
     "roughplastic": RoughPlastic,
     "phong": Phong,
 }

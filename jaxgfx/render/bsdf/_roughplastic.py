@@ -20,7 +20,8 @@ from jaxgfx.render.bsdf._base import (
     sample_setup,
     to_rgb,
 )
-from jaxgfx.render.bsdf.fresnel import fresnel_dielectric, fresnel_diffuse_reflectance
+from jaxgfx.render.bsdf._coating import CoatingTerms
+from jaxgfx.render.bsdf.fresnel import fresnel_dielectric
 from jaxgfx.render.bsdf.microfacet import (
     DISTRIBUTION_ALIASES,
     MicrofacetDistribution,
@@ -33,22 +34,20 @@ __all__ = ["RoughPlastic"]
 
 
 class RoughPlastic(BSDF):
-    """Rough plastic after Mitsuba's ``roughplastic`` (Weidlich & Wilkie 2007 layering).
+    """Rough plastic after Mitsuba 3's ``roughplastic`` (Weidlich & Wilkie 2007 layering).
 
     ``eval = F(wo·h) D G / (4 cos θ_o) · ks
-    + kd / (1 - [kd] F_dr,int) · T(cos θ_o) T(cos θ_i) cos θ_i / (π η²)``
+    + kd / (1 - [kd] R_int) · T(cos θ_o) T(cos θ_i) cos θ_i / (π η²)``
 
     * specular term: microfacet dielectric reflection of the coat (``alpha``, ``distribution``
       static ``"ggx"``/``"beckmann"``, ``eta`` = interior/exterior IOR, default 1.49 / 1.000277
       as Mitsuba), times ``specular_reflectance`` ks;
-    * diffuse term: the base ``diffuse_reflectance`` kd, with internal inter-reflections
-      ``1 / (1 - F_dr,int)`` (``F_dr,int = fresnel_diffuse_reflectance(1/η)``; ``nonlinear=True``
-      uses ``1 / (1 - kd F_dr,int)`` as Mitsuba's option), entering and leaving through the
-      coat with transmittance ``T(μ) = 1 - F_dielectric(μ, η)``.
-
-    Documented simplification: Mitsuba 3 tabulates the *rough* interface's transmittance and
-    internal reflectance; here the smooth-interface values are used (identical as α → 0, the
-    difference is a few percent at α ~ 0.3).
+    * diffuse term: the base ``diffuse_reflectance`` kd, entering and leaving through the
+      *rough* coat with its directional transmittance ``T(μ)`` (albedo of the interface's
+      transmission lobe) and bouncing inside with the rough interface's internal diffuse
+      reflectance ``R_int`` (``nonlinear=True``: ``1 / (1 - kd R_int)``), both tabulated as
+      Mitsuba 3 does (:mod:`jaxgfx.render.bsdf._coating`), as functions of ``alpha`` and
+      ``eta`` (differentiable). As ``alpha → 0``: ``T → 1 - F``, ``R_int → F_dr(1/η)``.
 
     Sampling (Mitsuba 3): specular lobe with probability ``∝ (1 - T(cos θ_o)) w_s``, diffuse
     (cosine) with ``∝ T(cos θ_o)(1 - w_s)``, ``w_s = mean(ks) / (mean(kd) + mean(ks))``.
@@ -95,11 +94,14 @@ class RoughPlastic(BSDF):
         ms = jnp.mean(self.specular_reflectance, axis=-1)
         return safe_div(ms, md + ms, fill=0.5)
 
-    def _T(self, cos):
-        return 1.0 - fresnel_dielectric(cos, self.eta).r
+    def _coating(self):
+        return CoatingTerms(self.distribution, self.eta)
 
     def eval(self, wo, wi):
         wo, wi = prep_dirs(wo, wi)
+        return self._eval(wo, wi, self._coating())
+
+    def _eval(self, wo, wi, coat):
         co, ci = wo[..., 2], wi[..., 2]
         valid = (co > 0) & (ci > 0)
         h = safe_normalize(wo + wi)
@@ -107,15 +109,15 @@ class RoughPlastic(BSDF):
         F = fresnel_dielectric(vdot(wo, h), self.eta).r
         spec = safe_div(F * d.eval(h) * d.G(wo, wi, h), 4.0 * co)
         kd = self.diffuse_reflectance
-        fdr = fresnel_diffuse_reflectance(1.0 / self.eta)[..., None]
-        diff = kd / (1.0 - (kd * fdr if self.nonlinear else fdr))
-        t = self._T(co) * self._T(ci) * ci * INV_PI / (self.eta * self.eta)
+        r_int = coat.r_int[..., None]
+        diff = kd / (1.0 - (kd * r_int if self.nonlinear else r_int))
+        t = coat.T(co) * coat.T(ci) * ci * INV_PI / (self.eta * self.eta)
         val = spec[..., None] * self.specular_reflectance + diff * t[..., None]
         return mask3(valid, val)
 
-    def _probs(self, co):
+    def _probs(self, co, coat=None):
         ws = self._spec_weight()
-        t = self._T(co)
+        t = (coat or self._coating()).T(co)
         ps = (1.0 - t) * ws
         pd = t * (1.0 - ws)
         return safe_div(ps, ps + pd, fill=0.5)
@@ -125,10 +127,13 @@ class RoughPlastic(BSDF):
 
     def pdf(self, wo, wi):
         wo, wi = prep_dirs(wo, wi)
+        return self._pdf(wo, wi, self._coating())
+
+    def _pdf(self, wo, wi, coat):
         co, ci = wo[..., 2], wi[..., 2]
         valid = (co > 0) & (ci > 0)
         h = safe_normalize(wo + wi)
-        ps = self._probs(co)
+        ps = self._probs(co, coat)
         p = ps * self._pdf_spec(wo, h) + (1.0 - ps) * ci * INV_PI
         return jnp.where(valid, p, 0.0)
 
@@ -139,8 +144,9 @@ class RoughPlastic(BSDF):
         m, _ = self.distribution.sample(wo_up, u2)
         spec_dir = reflect(wo, m)
         diff_dir = square_to_cosine_hemisphere(u2)
-        wi = jnp.where((u1 < self._probs(co))[..., None], spec_dir, diff_dir)
-        pdf = self.pdf(wo, wi)
+        coat = self._coating()
+        wi = jnp.where((u1 < self._probs(co, coat))[..., None], spec_dir, diff_dir)
+        pdf = self._pdf(wo, wi, coat)
         valid = (co > 0) & (wi[..., 2] > 0) & (pdf > 0)
-        weight = self.eval(wo, wi) / jnp.where(valid, pdf, 1.0)[..., None]
+        weight = self._eval(wo, wi, coat) / jnp.where(valid, pdf, 1.0)[..., None]
         return glossy_sample(wi, pdf, weight, valid, shape, wo.dtype)
