@@ -15,6 +15,7 @@ from .response import MIN_USABLE_PIXELS as MIN_USABLE_PIXELS
 from .response import RESPONSE_METHODS as RESPONSE_METHODS
 from .response import check_response_options as check_response_options
 from .response import recover_response as recover_response
+from .synthetic import CANON_EOS_5D_MARK_II as CANON_EOS_5D_MARK_II
 from .synthetic import SYNTHETIC_RESPONSES as SYNTHETIC_RESPONSES
 from .synthetic import BracketedStack as BracketedStack
 from .synthetic import jpeg_roundtrip as jpeg_roundtrip
@@ -22,6 +23,7 @@ from .synthetic import make_bracketed_stack as make_bracketed_stack
 from .synthetic import make_jpeg_stack as make_jpeg_stack
 from .synthetic import synthetic_radiance as synthetic_radiance
 from .synthetic import synthetic_response as synthetic_response
+from .synthetic import write_dng_bracket as write_dng_bracket
 from .weighting import WEIGHTINGS as WEIGHTINGS
 from .weighting import weight_gaussian as weight_gaussian
 from .weighting import weight_hat as weight_hat
@@ -34,6 +36,8 @@ __all__ = [
     "RESPONSE_METHODS",
     "WEIGHTINGS",
     "SYNTHETIC_RESPONSES",
+    "write_dng_bracket",
+    "CANON_EOS_5D_MARK_II",
     "BracketedStack",
     "Camera",
     "CAMERA_BITS",

@@ -89,7 +89,10 @@ def test_raw_dng_stack(tmp_path):
         dn = 256 + x * (4095 - 256) + rng.normal(0, 1.5, x.shape)
         mosaic = np.clip(np.round(dn), 0, 4095).astype(np.uint16)
         p = str(tmp_path / f"img{i}.dng")
-        io.write_dng(p, mosaic, black_level=256, white_level=4095, exposure_time=nominal[i])
+        io.write_dng(
+            p, mosaic, black_level=256, white_level=4095, exposure_time=nominal[i],
+            camera_whitebalance=(1.0, 1.0, 1.0),
+        )  # fmt: skip
         files.append(p)
     rep = run_calibrate(CalibrateConfig(), files, str(tmp_path / "out"), progress=False)
     ratios = rep["raw_calibration"]["exposure_ratios"]

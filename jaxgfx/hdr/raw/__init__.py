@@ -31,6 +31,18 @@ from .calibration import exposure_ratios_step as exposure_ratios_step
 from .calibration import linearity_step as linearity_step
 from .calibration import noise_step as noise_step
 from .calibration import white_level_step as white_level_step
+from .color import COLORSPACES as COLORSPACES
+from .color import ILLUMINANT_CCT as ILLUMINANT_CCT
+from .color import RAW_WHITE_BALANCES as RAW_WHITE_BALANCES
+from .color import ColorTransform as ColorTransform
+from .color import DngColorProfile as DngColorProfile
+from .color import apply_color_transform as apply_color_transform
+from .color import color_transform as color_transform
+from .color import dng_camera_to_xyz_d50 as dng_camera_to_xyz_d50
+from .color import dng_neutral_to_xy as dng_neutral_to_xy
+from .color import dng_xyz_to_camera as dng_xyz_to_camera
+from .color import exr_chromaticities as exr_chromaticities
+from .color import xyz_d50_to_space_matrix as xyz_d50_to_space_matrix
 from .levels import Measurement as Measurement
 from .levels import WhiteLevel as WhiteLevel
 from .levels import estimate_black_level as estimate_black_level
@@ -64,4 +76,16 @@ __all__ = [
     "linearity_step",
     "exposure_ratios_step",
     "noise_step",
+    "COLORSPACES",
+    "RAW_WHITE_BALANCES",
+    "ILLUMINANT_CCT",
+    "DngColorProfile",
+    "ColorTransform",
+    "dng_xyz_to_camera",
+    "dng_neutral_to_xy",
+    "dng_camera_to_xyz_d50",
+    "xyz_d50_to_space_matrix",
+    "color_transform",
+    "apply_color_transform",
+    "exr_chromaticities",
 ]

@@ -4,7 +4,8 @@ construction (``__post_init__``), so a config built in Python, read from YAML
 Choices are checked with :func:`jaxgfx._checks.check_choice` against the library's own
 registries (:data:`jaxgfx.hdr.RESPONSE_METHODS`, :data:`jaxgfx.hdr.merge.MERGE_WEIGHTINGS`,
 :data:`jaxgfx.hdr.ALIGN_METHODS`, :data:`jaxgfx.image.DEMOSAIC_METHODS`,
-:data:`jaxgfx.tonemap.TONEMAP_METHODS`, :data:`jaxgfx.hdr.SYNTHETIC_RESPONSES`), never
+:data:`jaxgfx.tonemap.TONEMAP_METHODS`, :data:`jaxgfx.hdr.SYNTHETIC_RESPONSES`,
+:data:`jaxgfx.hdr.raw.COLORSPACES`, :data:`jaxgfx.hdr.raw.RAW_WHITE_BALANCES`), never
 against a retyped list."""
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 from jaxgfx._checks import check_choice
 from jaxgfx.hdr.align import ALIGN_METHODS
 from jaxgfx.hdr.merge import MERGE_WEIGHTINGS
+from jaxgfx.hdr.raw.color import COLORSPACES, RAW_WHITE_BALANCES
 from jaxgfx.hdr.response import RESPONSE_METHODS, check_response_options
 from jaxgfx.hdr.synthetic import SYNTHETIC_RESPONSES
 from jaxgfx.image.bayer import DEMOSAIC_METHODS
@@ -112,9 +114,13 @@ class CalibrateConfig:
     demosaic: str = "malvar"
     preview_key: float = 0.18
     tonemap: tuple[str, ...] = ()
+    colorspace: str = "rec709"
+    white_balance: str = "as_shot"
 
     def __post_init__(self):
         check_choice(self.demosaic, "demosaic", DEMOSAIC_METHODS)
+        check_choice(self.colorspace, "colorspace", COLORSPACES)
+        check_choice(self.white_balance, "white_balance", RAW_WHITE_BALANCES)
         for i, op in enumerate(self.tonemap):
             check_choice(op, f"tonemap[{i}]", TONEMAP_METHODS)
         if not (np.isfinite(self.preview_key) and self.preview_key > 0):

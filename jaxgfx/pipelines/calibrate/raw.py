@@ -1,6 +1,8 @@
 """The RAW path: read the bracket, calibrate the sensor (:func:`jaxgfx.hdr.calibrate_raw_stack`),
 merge the normalised mosaics with the measured exposure ratios and noise model (one call,
-:func:`merge_mosaics`), demosaic."""
+:func:`merge_mosaics`), demosaic, then white-balance and convert camera RGB to
+``config.colorspace`` (:func:`jaxgfx.hdr.raw.color_transform`: the DNG colour tags, or
+LibRaw's matrix)."""
 
 from __future__ import annotations
 
@@ -60,9 +62,15 @@ def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
     var_rgb = np.asarray(
         image.demosaic(np.asarray(var)[..., 0], pattern, method="bilinear"), np.float32
     )
+    steps.start("colour")
+    ct = hdr.raw.color_transform(
+        raws[0], rgb, colorspace=cfg.colorspace, white_balance=cfg.white_balance
+    )
+    rgb, var_rgb = hdr.raw.apply_color_transform(rgb, ct, var_rgb)
     return CalibrateResult(
-        radiance=rgb.astype(np.float32),
-        variance=var_rgb,
+        radiance=np.asarray(rgb, np.float32),
+        variance=np.asarray(var_rgb, np.float32),
+        color=ct,
         times=times,
         image_shape=mosaics.shape,
         raw_calibration=cal,

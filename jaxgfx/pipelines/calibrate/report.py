@@ -77,15 +77,21 @@ class CalibrateResult:
     loo: Any = None  # hdr.LeaveOneOut self-check (LDR)
     alignment_shifts: Any = None
     synthetic: dict | None = None
+    color: Any = None  # hdr.raw.ColorTransform (RAW): camera RGB -> the output colour space
 
 
 def write_outputs(folder, result: CalibrateResult, cfg) -> list[str]:
     """Write the images and the plot into ``folder``; returns the file names written."""
     from jaxgfx import io
+    from jaxgfx.hdr.raw import exr_chromaticities
 
     radiance, variance = result.radiance, result.variance
-    io.write_exr(os.path.join(folder, "radiance.exr"), np.ascontiguousarray(radiance, np.float32))
-    io.write_exr(os.path.join(folder, "variance.exr"), np.ascontiguousarray(variance, np.float32))
+    chroma = None if result.color is None else exr_chromaticities(result.color.colorspace)
+    header = None if chroma is None else {"chromaticities": chroma}
+    for name, img in (("radiance.exr", radiance), ("variance.exr", variance)):
+        io.write_exr(
+            os.path.join(folder, name), np.ascontiguousarray(img, np.float32), header=header
+        )
     rel = np.sqrt(np.maximum(variance, 0)) / np.maximum(np.abs(radiance), 1e-12)
     conf = np.clip(1.0 - rel.mean(axis=-1) / 0.1, 0.0, 1.0)  # 0 at >= 10% relative std. error
     io.write_png(os.path.join(folder, "confidence.png"), conf.astype(np.float32))
@@ -137,6 +143,8 @@ def build_report(job, files, result: CalibrateResult, timings: dict, outputs):
         report["alignment_shifts_px"] = np.asarray(result.alignment_shifts).tolist()
     if result.raw_calibration is not None:
         report["raw_calibration"] = _jsonable(result.raw_calibration.to_dict())
+    if result.color is not None:
+        report["color"] = result.color.to_dict()
     if result.response is not None:
         report["response"] = {
             "method": cfg.response.method,
