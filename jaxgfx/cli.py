@@ -105,6 +105,17 @@ def _calibrate_arguments(p):
         default=None,
         help="comma-separated tone-mapping operators; writes tonemap_<op>.png per operator",
     )
+    p.add_argument(
+        "--colorspace",
+        default=None,
+        help="RAW output space: rec709 (default) | srgb | xyz | aces2065-1 | acescg | prophoto "
+        "| rec2020 | camera (no white balance, no matrix)",
+    )
+    p.add_argument(
+        "--white-balance",
+        default=None,
+        help="RAW white balance: as_shot (default) | grey_world | white_patch",
+    )
 
 
 def calibrate_job(args):
@@ -128,6 +139,9 @@ def calibrate_job(args):
             overrides["response"] = {**section, "method": args.method}
     if getattr(args, "tonemap", None):
         overrides["tonemap"] = [t.strip() for t in args.tonemap.split(",") if t.strip()]
+    for key in ("colorspace", "white_balance"):
+        if getattr(args, key, None) is not None:
+            overrides[key] = getattr(args, key)
     cfg = load_config(CalibrateConfig, args.config, **overrides)
     return CalibrateJob(
         config=cfg,
@@ -168,7 +182,9 @@ def _render_arguments(p):
     p.add_argument("--spp", type=int, default=64)
     p.add_argument("--integrator", default="path", help="path | direct | whitted | aov")
     p.add_argument(
-        "--max-depth", type=int, default=None,
+        "--max-depth",
+        type=int,
+        default=None,
         help="path length, Mitsuba's convention (path, whitted: default 3; direct: 2)",
     )
     p.add_argument("--seed", type=int, default=0)
@@ -238,9 +254,7 @@ def _tonemap_run(args) -> int:
         return 0
     if not args.input or not args.output:
         raise _UsageError("INPUT and OUTPUT are required")
-    params = {
-        k: getattr(args, k) for k in TONEMAP_CLI_PARAMS if getattr(args, k) is not None
-    }
+    params = {k: getattr(args, k) for k in TONEMAP_CLI_PARAMS if getattr(args, k) is not None}
     job = TonemapJob(args.input, args.output, args.op, params, overwrite=args.overwrite)
     res = run_tonemap(job)
     neg = res["negative_clamped"]

@@ -33,6 +33,9 @@ from .spaces import xyz_to_lab as xyz_to_lab
 from .spaces import xyz_to_rgb as xyz_to_rgb
 from .spaces import xyz_to_xyY as xyz_to_xyY
 from .spaces import yiq_to_rgb as yiq_to_rgb
+from .temperature import ROBERTSON1968 as ROBERTSON1968
+from .temperature import cct_to_xy as cct_to_xy
+from .temperature import xy_to_cct as xy_to_cct
 from .transfer import ACES_NARKOWICZ2015 as ACES_NARKOWICZ2015
 from .transfer import ADOBE_RGB_GAMMA as ADOBE_RGB_GAMMA
 from .transfer import TRANSFER_FUNCTIONS as TRANSFER_FUNCTIONS
@@ -123,4 +126,7 @@ __all__ = [
     "white_balance_von_kries_matrix",
     "white_balance",
     "WHITE_BALANCE_METHODS",
+    "ROBERTSON1968",
+    "xy_to_cct",
+    "cct_to_xy",
 ]

@@ -61,6 +61,8 @@ WHITEPOINTS: dict[str, tuple[float, float]] = {
     "D65": (0.3127, 0.3290),
     "D75": (0.29903, 0.31488),
     "E": (1.0 / 3.0, 1.0 / 3.0),
+    # the ACES white (~D60), SMPTE ST 2065-1:2012 / Academy TB-2014-004
+    "ACES": (0.32168, 0.33767),
 }
 
 
@@ -73,13 +75,17 @@ class RGBSpace(NamedTuple):
 
 
 #: Named RGB spaces. ``"srgb"`` and ``"rec709"`` share primaries/white (they differ only in the
-#: transfer function). ProPhoto is ROMM RGB (ISO 22028-2:2013), D50.
+#: transfer function). ProPhoto is ROMM RGB (ISO 22028-2:2013), D50; ``"aces2065-1"`` (AP0)
+#: and ``"acescg"`` (AP1) are the scene-linear ACES spaces with the ACES white.
 RGB_SPACES: dict[str, RGBSpace] = {
     "srgb": RGBSpace(((0.64, 0.33), (0.30, 0.60), (0.15, 0.06)), "D65", "srgb"),
     "rec709": RGBSpace(((0.64, 0.33), (0.30, 0.60), (0.15, 0.06)), "D65", "rec709"),
     "rec2020": RGBSpace(((0.708, 0.292), (0.170, 0.797), (0.131, 0.046)), "D65", "linear"),
     "adobe_rgb": RGBSpace(((0.64, 0.33), (0.21, 0.71), (0.15, 0.06)), "D65", "adobe_rgb"),
     "prophoto": RGBSpace(((0.7347, 0.2653), (0.1596, 0.8404), (0.0366, 0.0001)), "D50", "prophoto"),
+    # ACES AP0 (SMPTE ST 2065-1:2012) and AP1 (ACEScg, Academy S-2014-004), scene-linear
+    "aces2065-1": RGBSpace(((0.7347, 0.2653), (0.0, 1.0), (0.0001, -0.0770)), "ACES", "linear"),
+    "acescg": RGBSpace(((0.713, 0.293), (0.165, 0.830), (0.128, 0.044)), "ACES", "linear"),
 }
 
 #: Luma weights: Rec. ITU-R BT.709 (= sRGB matrix Y row, rounded) and BT.601 (the seed's YIQ Y).

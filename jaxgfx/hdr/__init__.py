@@ -15,6 +15,7 @@ from .response import MIN_USABLE_PIXELS as MIN_USABLE_PIXELS
 from .response import RESPONSE_METHODS as RESPONSE_METHODS
 from .response import check_response_options as check_response_options
 from .response import recover_response as recover_response
+from .synthetic import CANON_EOS_5D_MARK_II as CANON_EOS_5D_MARK_II
 from .synthetic import SYNTHETIC_RESPONSES as SYNTHETIC_RESPONSES
 from .synthetic import BracketedStack as BracketedStack
 from .synthetic import jpeg_roundtrip as jpeg_roundtrip
@@ -22,6 +23,7 @@ from .synthetic import make_bracketed_stack as make_bracketed_stack
 from .synthetic import make_jpeg_stack as make_jpeg_stack
 from .synthetic import synthetic_radiance as synthetic_radiance
 from .synthetic import synthetic_response as synthetic_response
+from .synthetic import write_dng_bracket as write_dng_bracket
 from .weighting import WEIGHTINGS as WEIGHTINGS
 from .weighting import weight_gaussian as weight_gaussian
 from .weighting import weight_hat as weight_hat
@@ -34,6 +36,8 @@ __all__ = [
     "RESPONSE_METHODS",
     "WEIGHTINGS",
     "SYNTHETIC_RESPONSES",
+    "write_dng_bracket",
+    "CANON_EOS_5D_MARK_II",
     "BracketedStack",
     "Camera",
     "CAMERA_BITS",
@@ -70,12 +74,12 @@ from .encodings import rgbe_decode as rgbe_decode
 from .encodings import rgbe_encode as rgbe_encode
 from .noise import NoiseModel as NoiseModel
 from .noise import fit_photon_transfer as fit_photon_transfer
-from .raw_calibration import RawCalibration as RawCalibration
-from .raw_calibration import calibrate_raw_stack as calibrate_raw_stack
-from .raw_calibration import estimate_black_level as estimate_black_level
-from .raw_calibration import estimate_exposure_ratios as estimate_exposure_ratios
-from .raw_calibration import estimate_white_level as estimate_white_level
-from .raw_calibration import linearity_check as linearity_check
+from .raw import RawCalibration as RawCalibration
+from .raw import calibrate_raw_stack as calibrate_raw_stack
+from .raw import estimate_black_level as estimate_black_level
+from .raw import estimate_exposure_ratios as estimate_exposure_ratios
+from .raw import estimate_white_level as estimate_white_level
+from .raw import linearity_check as linearity_check
 from .selfcheck import LOO_BANDS as LOO_BANDS
 from .selfcheck import LeaveOneOut as LeaveOneOut
 from .selfcheck import leave_one_out as leave_one_out

@@ -31,6 +31,8 @@ __all__ = [
     "outdoor_hdr_scene",
     "smooth_hdr_scene",
     "hard_hdr_scenes",
+    "CANON_EOS_5D_MARK_II",
+    "write_dng_bracket",
 ]
 
 SYNTHETIC_RESPONSES = ("gamma2.2", *(k for k in ANALYTIC_KINDS if k != "linear"))
@@ -287,6 +289,7 @@ def make_jpeg_stack(
     imgs = jpeg_roundtrip(st.images, quality=quality, subsampling=subsampling)
     return st._replace(images=jnp.asarray(imgs))
 
+
 # ----------------------------------------------------------------------------------------
 # host-side NumPy HDR scenes for tone mapping (benchmarks, figures, tests: one owner)
 
@@ -372,3 +375,137 @@ def hard_hdr_scenes(n=96, block=16, seed=0):
     out["room"] = img * np.exp(0.05 * rng.standard_normal((n, n)))
     col = np.array([1.0, 0.9, 0.7])
     return {k: (v[..., None] * col).astype(np.float32) for k, v in out.items()}
+
+
+#: Canon EOS 5D Mark II colour tags as Adobe DNG Converter writes them (ColorMatrix1 for
+#: standard light A, ColorMatrix2 for D65; ColorMatrix2 equals dcraw's ``adobe_coeff`` entry
+#: {4716, 603, -830, -7798, 15474, 2480, -1496, 1937, 6651} / 10000). Values as published in
+#: colour-hdri's documentation and tests (BSD-3-Clause), which read them from such a DNG.
+CANON_EOS_5D_MARK_II = {
+    "color_matrix1": (
+        (0.5309, -0.0229, -0.0336),
+        (-0.6241, 1.3265, 0.3337),
+        (-0.0817, 0.1215, 0.6664),
+    ),
+    "color_matrix2": (
+        (0.4716, 0.0603, -0.0830),
+        (-0.7798, 1.5474, 0.2480),
+        (-0.1496, 0.1937, 0.6651),
+    ),
+    "calibration_illuminant1": 17,
+    "calibration_illuminant2": 21,
+}
+
+
+def _patch_scene(rng, height, width, patch, dynamic_range):
+    """Linear Rec.709 radiance: ``patch``-pixel squares of random in-gamut colours (saturated
+    to near-grey) whose luminances span ``dynamic_range``, plus a smooth colour ramp band."""
+    gh, gw = -(-height // patch), -(-width // patch)
+    rgb = rng.uniform(0.0, 1.0, (gh, gw, 3)) ** 2
+    grey = rng.uniform(0.0, 1.0, (gh, gw, 1))
+    rgb = grey * rgb.mean(-1, keepdims=True) + (1 - grey) * rgb + 0.01
+    y = rgb @ np.array([0.2126, 0.7152, 0.0722])
+    lum = np.exp(rng.uniform(np.log(1.0 / dynamic_range), 0.0, (gh, gw)))
+    rgb = rgb * (lum / y)[..., None]
+    img = np.kron(rgb, np.ones((patch, patch, 1)))[:height, :width]
+    band = slice(0, max(2, height // 8))  # a smooth hue ramp: demosaicing has edges to fight
+    u = np.linspace(0, 2 * np.pi, width)
+    ramp = 0.5 + 0.4 * np.stack([np.cos(u), np.cos(u - 2.1), np.cos(u + 2.1)], -1)
+    img[band] = 0.3 * ramp[None]
+    return img
+
+
+def write_dng_bracket(
+    folder,
+    *,
+    seed: int = 0,
+    height: int = 64,
+    width: int = 96,
+    exposure_times=(1.0, 4.0, 16.0),
+    camera: dict = CANON_EOS_5D_MARK_II,
+    scene_white: str = "D65",
+    dynamic_range: float = 300.0,
+    patch: int = 8,
+    black: int = 512,
+    white: int = 15000,
+    electrons_at_white: float | None = 60000.0,
+    read_dn: float = 2.0,
+    cfa_pattern: str = "RGGB",
+):
+    """Write a synthetic bracket of DNGs carrying a camera's colour tags and as-shot neutral,
+    rendered from a radiance map of known colours; returns ``(paths, rgb709)``.
+
+    The scene (:func:`_patch_scene`, seeded) is linear Rec.709 under ``scene_white``; the
+    sensor sees ``XYZtoCamera(scene_white) · XYZ``, with ``XYZtoCamera`` the camera's
+    ColorMatrix1/2 interpolated at the white's temperature
+    (:func:`jaxgfx.hdr.raw.dng_xyz_to_camera`), scaled so the white (Y = 1) gives the neutral
+    with max 1; the brightest patch reaches the white level in the longest frame. Each frame:
+    Bayer sampling, shot noise (``electrons_at_white`` at the white level, about a
+    full-frame sensor's full well at base ISO; ``None``: none) and read noise (``read_dn``),
+    rounding, clipping. AsShotNeutral is the white's camera response.
+    ``rgb709`` ``(H, W, 3)`` is the scene in the units of ``radiance.exr`` for the default
+    colour space (normalised signal per second of exposure).
+    """
+    import os
+
+    import jax.numpy as jnp
+
+    from jaxgfx import color, io
+    from jaxgfx.image.bayer import BAYER_PATTERNS
+
+    from .raw.color import DngColorProfile, dng_xyz_to_camera
+
+    if cfa_pattern not in BAYER_PATTERNS:
+        raise ValueError(f"cfa_pattern: expected one of {BAYER_PATTERNS}, got {cfa_pattern!r}")
+    rng = np.random.default_rng(seed)
+    rgb = _patch_scene(rng, height, width, patch, dynamic_range)
+    m709 = color.rgb_to_xyz_matrix("rec709")
+    wxy = np.asarray(color.WHITEPOINTS[scene_white], np.float64)
+    wxyz = np.array([wxy[0] / wxy[1], 1.0, (1 - wxy.sum()) / wxy[1]])
+    tags = {k: np.ravel(v).astype(np.float64) for k, v in camera.items()}
+    prof = DngColorProfile.from_tags(tags, "camera")
+    xyz_to_cam = np.asarray(dng_xyz_to_camera(prof, jnp.asarray(wxy)), np.float64)
+    # the scene's colours seen under its white: adapt from D65 (Rec.709's white) to it
+    cat = np.asarray(
+        color.chromatic_adaptation_matrix("D65", jnp.asarray(wxy, jnp.float32)), np.float64
+    )
+    cam_white = xyz_to_cam @ wxyz
+    scale = 1.0 / cam_white.max()
+    cam = np.einsum("ij,hwj->hwi", scale * xyz_to_cam @ cat @ m709, rgb)
+    neutral = cam_white * scale
+    times = np.asarray(exposure_times, np.float64)
+    k = 1.0 / (cam.max() * times.max()) * 1.05  # the brightest patch clips in the longest frame
+    ch = {"R": 0, "G": 1, "B": 2}
+    idx = np.zeros((height, width), int)
+    for i, c in enumerate(cfa_pattern):
+        idx[i // 2 :: 2, i % 2 :: 2] = ch[c]
+    plane = np.take_along_axis(cam, idx[..., None], -1)[..., 0]
+    os.makedirs(folder, exist_ok=True)
+    paths = []
+    for n, t in enumerate(times):
+        sig = plane * k * t  # normalised signal, 1 at the white level
+        e = np.clip(sig, 0, 2)
+        if electrons_at_white is not None:
+            e = rng.poisson(e * electrons_at_white) / electrons_at_white
+        dn = black + e * (white - black) + rng.normal(0, read_dn, sig.shape)
+        mosaic = np.clip(np.round(dn), 0, white).astype(np.uint16)
+        path = os.path.join(os.fspath(folder), f"frame{n}.dng")
+        io.write_dng(
+            path,
+            mosaic,
+            cfa_pattern=cfa_pattern,
+            black_level=black,
+            white_level=white,
+            exposure_time=float(t),
+            camera_whitebalance=neutral[1] / neutral,
+            color_matrix=np.reshape(tags["color_matrix1"], (3, 3)),
+            calibration_illuminant1=int(tags["calibration_illuminant1"][0]),
+            color_matrix2=None
+            if "color_matrix2" not in tags
+            else np.reshape(tags["color_matrix2"], (3, 3)),
+            calibration_illuminant2=int(tags.get("calibration_illuminant2", [17])[0]),
+            make="Canon",
+            model="EOS 5D Mark II (synthetic)",
+        )
+        paths.append(path)
+    return paths, rgb * k

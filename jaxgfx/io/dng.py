@@ -64,6 +64,15 @@ def write_dng(
     f_number: float | None = None,
     camera_whitebalance=None,
     color_matrix=None,
+    color_matrix2=None,
+    calibration_illuminant1: int = 21,
+    calibration_illuminant2: int = 17,
+    forward_matrix1=None,
+    forward_matrix2=None,
+    camera_calibration1=None,
+    camera_calibration2=None,
+    analog_balance=None,
+    color_tags: bool = True,
     make: str = "jaxgfx",
     model: str = "synthetic",
 ) -> None:
@@ -74,7 +83,13 @@ def write_dng(
     ``cfa_pattern`` order), ``white_level``: saturation value (<= 65535). ``exposure_time`` (s),
     ``iso``, ``f_number``: EXIF exposure tags (omitted when ``None``). ``camera_whitebalance``:
     per-channel (R, G, B) multipliers; stored as AsShotNeutral = 1 / multiplier (normalised to
-    green = 1). ``color_matrix``: 3x3 XYZ(D65) → camera matrix (ColorMatrix1); default identity.
+    green = 1). ``color_matrix``: 3x3 XYZ → camera matrix (ColorMatrix1) for
+    ``calibration_illuminant1`` (an EXIF LightSource code, default 21 = D65); default identity.
+    ``color_matrix2``: ColorMatrix2 for ``calibration_illuminant2`` (default 17 = Standard
+    light A). ``forward_matrix1/2`` (camera → XYZ D50, ForwardMatrix1/2),
+    ``camera_calibration1/2`` (CameraCalibration1/2) and ``analog_balance`` (3 values) are
+    written when given. ``color_tags=False`` writes no colour tags at all (a DNG that is
+    invalid for colour management, for tests of the refusal).
     H and W must be even and at least 22 (LibRaw's minimum). Values above ``white_level`` are
     allowed (stored as given).
 
@@ -123,9 +138,31 @@ def write_dng(
         (50713, _SHORT, 2, (2, 2), True),  # BlackLevelRepeatDim
         (50714, _RATIONAL, 4, tuple(_rationals(black)), True),  # BlackLevel
         (50717, _LONG, 1, (int(white_level),), True),  # WhiteLevel
-        (50721, _SRATIONAL, 9, tuple(_rationals(cm, signed=True)), True),  # ColorMatrix1
-        (50778, _SHORT, 1, (21,), True),  # CalibrationIlluminant1: D65
     ]
+    if color_tags:
+        tags += [
+            (50721, _SRATIONAL, 9, tuple(_rationals(cm, signed=True)), True),  # ColorMatrix1
+            (50778, _SHORT, 1, (int(calibration_illuminant1),), True),  # CalibrationIlluminant1
+        ]
+        for code, value, name in (
+            (50722, color_matrix2, "color_matrix2"),
+            (50723, camera_calibration1, "camera_calibration1"),
+            (50724, camera_calibration2, "camera_calibration2"),
+            (50964, forward_matrix1, "forward_matrix1"),
+            (50965, forward_matrix2, "forward_matrix2"),
+        ):
+            if value is not None:
+                m = np.asarray(value, np.float64)
+                if m.shape != (3, 3) or not np.all(np.isfinite(m)):
+                    raise ValueError(f"{name}: expected a finite 3x3 matrix, got shape {m.shape}")
+                tags.append((code, _SRATIONAL, 9, tuple(_rationals(m, signed=True)), True))
+        if color_matrix2 is not None:
+            tags.append((50779, _SHORT, 1, (int(calibration_illuminant2),), True))
+        if analog_balance is not None:
+            ab = np.asarray(analog_balance, np.float64).ravel()
+            if ab.shape != (3,) or not np.all(ab > 0) or not np.all(np.isfinite(ab)):
+                raise ValueError(f"analog_balance: expected 3 positive values, got {ab}")
+            tags.append((50727, _RATIONAL, 3, tuple(_rationals(ab)), True))  # AnalogBalance
     if camera_whitebalance is not None:
         wb = np.asarray(camera_whitebalance, np.float64).ravel()
         if wb.shape != (3,) or not np.all(wb > 0) or not np.all(np.isfinite(wb)):
@@ -133,7 +170,8 @@ def write_dng(
                 f"camera_whitebalance: expected 3 positive multipliers (R, G, B), got {wb}"
             )
         neutral = wb[1] / wb
-        tags.append((50728, _RATIONAL, 3, tuple(_rationals(neutral)), True))  # AsShotNeutral
+        if color_tags:
+            tags.append((50728, _RATIONAL, 3, tuple(_rationals(neutral)), True))  # AsShotNeutral
     for code, value, name in (
         (33434, exposure_time, "exposure_time"),
         (33437, f_number, "f_number"),

@@ -29,6 +29,23 @@ _EXIF_TAGS = {
 }
 
 
+#: DNG colour tags read into :attr:`RawImage.dng_color` (flat float64 arrays; illuminants as
+#: EXIF LightSource codes). Adobe, DNG Specification 1.4, chapter 6.
+_DNG_COLOR_TAGS = {
+    50721: "color_matrix1",
+    50722: "color_matrix2",
+    50723: "camera_calibration1",
+    50724: "camera_calibration2",
+    50727: "analog_balance",
+    50728: "as_shot_neutral",
+    50729: "as_shot_white_xy",
+    50778: "calibration_illuminant1",
+    50779: "calibration_illuminant2",
+    50964: "forward_matrix1",
+    50965: "forward_matrix2",
+}
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class RawImage:
     """An undemosaiced RAW frame (host NumPy data).
@@ -54,6 +71,10 @@ class RawImage:
         make, model: camera make and model strings ("" when unknown).
         path: the file read.
         exif_fields: names among ``exposure_time, iso, f_number`` that were found.
+        is_dng: the file is a DNG (has the DNGVersion tag).
+        dng_color: the DNG colour tags found (``color_matrix1/2``, ``forward_matrix1/2``,
+            ``camera_calibration1/2``, ``analog_balance``, ``as_shot_neutral``,
+            ``as_shot_white_xy``, ``calibration_illuminant1/2``), flat float64 arrays.
     """
 
     mosaic: np.ndarray
@@ -73,6 +94,8 @@ class RawImage:
     model: str
     path: str
     exif_fields: tuple[str, ...] = ()
+    is_dng: bool = False
+    dng_color: dict = dataclasses.field(default_factory=dict)
 
     def normalized(self) -> np.ndarray:
         """Float32 mosaic ``(x - black[c]) / (white - black[c])`` per CFA site (not clipped:
@@ -109,12 +132,17 @@ def _tiff_metadata(p: Path) -> dict:
                 for key, code in (("make", 271), ("model", 272)):
                     if key not in out and code in tags:
                         out[key] = str(tags[code].value).strip("\x00 ")
-                if "color_matrix1" not in out and 50721 in tags:
-                    tag = tags[50721]
-                    vals = np.asarray(tag.value, np.float64).ravel()
-                    if vals.size == 2 * tag.count:  # (S)RATIONAL: numerator, denominator pairs
-                        vals = vals[0::2] / np.where(vals[1::2] == 0, 1.0, vals[1::2])
-                    out["color_matrix1"] = vals
+                if 50706 in tags:
+                    out["is_dng"] = True
+                for code, key in _DNG_COLOR_TAGS.items():
+                    if key not in out.setdefault("dng_color", {}) and code in tags:
+                        tag = tags[code]
+                        vals = np.asarray(tag.value, np.float64).ravel()
+                        if vals.size == 2 * tag.count:  # (S)RATIONAL: numerator, denominator
+                            vals = vals[0::2] / np.where(vals[1::2] == 0, 1.0, vals[1::2])
+                        out["dng_color"][key] = vals
+                if "color_matrix1" in out["dng_color"]:
+                    out["color_matrix1"] = out["dng_color"]["color_matrix1"]
                 for key, (code, _names) in _EXIF_TAGS.items():
                     if key not in out and code in tags:
                         out[key] = _as_float(tags[code].value, rational=key != "iso")
@@ -211,6 +239,8 @@ def read_raw(path) -> RawImage:
         model=meta.get("model", ""),
         path=str(p),
         exif_fields=found,
+        is_dng=bool(meta.get("is_dng", False)),
+        dng_color=dict(meta.get("dng_color", {})),
     )
 
 

@@ -36,6 +36,8 @@ COLOUR_NAMES = {
     "rec2020": "ITU-R BT.2020",
     "adobe_rgb": "Adobe RGB (1998)",
     "prophoto": "ProPhoto RGB",
+    "aces2065-1": "ACES2065-1",
+    "acescg": "ACEScg",
 }
 
 

@@ -89,7 +89,10 @@ def test_raw_dng_stack(tmp_path):
         dn = 256 + x * (4095 - 256) + rng.normal(0, 1.5, x.shape)
         mosaic = np.clip(np.round(dn), 0, 4095).astype(np.uint16)
         p = str(tmp_path / f"img{i}.dng")
-        io.write_dng(p, mosaic, black_level=256, white_level=4095, exposure_time=nominal[i])
+        io.write_dng(
+            p, mosaic, black_level=256, white_level=4095, exposure_time=nominal[i],
+            camera_whitebalance=(1.0, 1.0, 1.0),
+        )  # fmt: skip
         files.append(p)
     rep = run_calibrate(CalibrateConfig(), files, str(tmp_path / "out"), progress=False)
     ratios = rep["raw_calibration"]["exposure_ratios"]
@@ -113,3 +116,26 @@ def test_bad_inputs(tmp_path):
         run_calibrate(CalibrateConfig(), [str(tmp_path / "empty")], str(tmp_path), progress=False)
     with pytest.raises(ValueError, match="synthetic.exposure_times"):
         load_config(CalibrateConfig, {"synthetic": {"exposure_times": [1.0]}})
+
+
+@pytest.mark.parametrize(
+    "build, needle",
+    [
+        (lambda: CalibrateConfig(demosaic="fancy"), "demosaic: expected one of"),
+        (lambda: CalibrateConfig(tonemap=("drago", "nope")), "tonemap[1]: expected one of"),
+        (lambda: hdr_cfg().MergeConfig(weighting="box"), "merge.weighting: expected one of"),
+        (lambda: hdr_cfg().ResponseConfig(method="magic"), "response.method: expected one of"),
+        (lambda: hdr_cfg().AlignConfig(method="sift"), "align.method: expected one of"),
+    ],
+)
+def test_config_built_in_python_is_checked(build, needle):
+    # issue 21: the dataclasses validate on construction, not only through load_config
+    with pytest.raises(ValueError) as e:
+        build()
+    assert needle in str(e.value)
+
+
+def hdr_cfg():
+    import jaxgfx.pipelines.calibrate as c
+
+    return c

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import argparse
 import ast
+import importlib
 import inspect
+import pkgutil
 
 import numpy as np
 
@@ -51,7 +53,11 @@ def test_experiment_offers_exactly_the_cli_options():
 
 
 def test_pipelines_hold_no_parser_or_sort_of_their_own():
-    for mod in (calibrate_mod, render_mod):
+    calibrate_modules = [
+        importlib.import_module(f"{calibrate_mod.__name__}.{m.name}")
+        for m in pkgutil.iter_modules(calibrate_mod.__path__)
+    ]
+    for mod in (calibrate_mod, *calibrate_modules, render_mod):
         src = inspect.getsource(mod)
         assert "argparse" not in src and "Namespace" not in src
         assert "argsort" not in src and "Fraction" not in src and "eval_fraction" not in src

@@ -21,6 +21,8 @@ from jaxgfx import hdr, image, io
 from jaxgfx.config import load_config
 from jaxgfx.pipelines import calibrate as calibrate_mod
 from jaxgfx.pipelines.calibrate import CalibrateConfig
+from jaxgfx.pipelines.calibrate import ldr as calibrate_ldr
+from jaxgfx.pipelines.calibrate import plots as calibrate_plots
 
 from ._util import assert_one_line_error, no_partial_files, read_only_sys, run_cli, snapshot
 
@@ -110,13 +112,13 @@ def test_d03_equalize_flat_image_like_skimage(value):
 @pytest.mark.parametrize(
     "data, needle",
     [
-        ({"demosaic": "fancy"}, "demosaic: expected one of malvar, bilinear"),
+        ({"demosaic": "fancy"}, "demosaic: expected one of ('bilinear', 'malvar')"),
         ({"preview_key": -1.0}, "preview_key: expected a finite value > 0"),
         ({"preview_key": 0.0}, "preview_key"),
         ({"response": {"options": {"n_samples": 0}}}, "n_samples: expected an integer >= 32"),
         ({"response": {"options": {"n_samples": 31}}}, "n_samples"),
         ({"response": {"options": {"smoothness": 50.0}}}, "has no option 'smoothness'"),
-        ({"align": {"method": "sift"}}, "align.method: expected one of phase, mtb"),
+        ({"align": {"method": "sift"}}, "align.method: expected one of ('phase', 'mtb')"),
         ({"merge": {"weighting": "box"}}, "merge.weighting"),
         ({"response": {"method": "magic"}}, "response.method"),
         ({"response": {"compare": ["debevec", "nope"]}}, "response.compare[1]"),
@@ -274,8 +276,8 @@ def small_config(tmp_path, monkeypatch):
             **result_kw,
         )  # fmt: skip
 
-    monkeypatch.setattr(calibrate_mod, "_load_ldr", load)
-    monkeypatch.setattr(calibrate_mod, "_fit_ldr", fit)
+    monkeypatch.setattr(calibrate_ldr, "_load_ldr", load)
+    monkeypatch.setattr(calibrate_ldr, "_fit_ldr", fit)
     return p
 
 
@@ -285,7 +287,7 @@ def _fail_late(monkeypatch):
     def boom(*a, **k):
         raise OSError(28, "No space left on device", "response.png")
 
-    monkeypatch.setattr(calibrate_mod, "_plot_response", boom)
+    monkeypatch.setattr(calibrate_plots, "_plot_response", boom)
 
 
 def test_d08_failed_calibrate_creates_no_out(tmp_path, small_config, monkeypatch):

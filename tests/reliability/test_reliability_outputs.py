@@ -24,6 +24,8 @@ import pytest
 from jaxgfx import hdr, io
 from jaxgfx.pipelines import _output
 from jaxgfx.pipelines import calibrate as calibrate_mod
+from jaxgfx.pipelines.calibrate import ldr as calibrate_ldr
+from jaxgfx.pipelines.calibrate import plots as calibrate_plots
 
 from ._util import run_cli
 
@@ -66,7 +68,7 @@ def _run_and_signal(names, files, tmp_path):
                    ["render", files["scene"], tmp_path / "r" / "out.exr"]),
         "fit": (signal.SIGHUP, "jaxgfx.pipelines.fit.job:_fit_and_write",
                 ["fit", FIT_CONFIG, "--out", tmp_path / "f" / "out", "--quiet"]),
-        "calibrate": (signal.SIGKILL, "jaxgfx.pipelines.calibrate:_load_ldr",
+        "calibrate": (signal.SIGKILL, "jaxgfx.pipelines.calibrate.ldr:_load_ldr",
                       ["calibrate", "--out", tmp_path / "c" / "out", "--quiet"]),
     }  # fmt: skip
     procs = {}
@@ -139,7 +141,7 @@ def test_a_signal_mid_job_removes_the_staging(command, sig, files, tmp_path, mon
         time.sleep(5)  # interrupted by the handler's exception
         raise AssertionError("the signal did not stop the job")
 
-    target = {"render": (jaxgfx.render, "render"), "calibrate": (calibrate_mod, "_load_ldr"),
+    target = {"render": (jaxgfx.render, "render"), "calibrate": (calibrate_ldr, "_load_ldr"),
               "fit": (fit_mod, "_fit_and_write")}[command]  # fmt: skip
     monkeypatch.setattr(*target, kill_self)
     argv = {
@@ -243,8 +245,8 @@ def fake_jobs(monkeypatch, tmp_path):
         return {"params": {"a": 1.0}, "camera": None, "loss": [1.0, 0.5], "n_steps": 2,
                 "seconds": 0.1, "compile_seconds": 0.2}  # fmt: skip
 
-    monkeypatch.setattr(calibrate_mod, "_load_ldr", load)
-    monkeypatch.setattr(calibrate_mod, "_fit_ldr", fit_ldr)
+    monkeypatch.setattr(calibrate_ldr, "_load_ldr", load)
+    monkeypatch.setattr(calibrate_ldr, "_fit_ldr", fit_ldr)
     monkeypatch.setattr(fit_mod, "_fit_and_write", fit_and_write)
     cfg = tmp_path / "small.yaml"
     cfg.write_text("synthetic: {height: 16, width: 16}\nresponse: {method: debevec, compare: []}\n")
@@ -350,7 +352,7 @@ def test_response_plot_axis_spans_the_defined_levels_only():
     import matplotlib.pyplot as plt
 
     resp = hdr.CameraResponse.gamma(2.2, channels=3)
-    fig = calibrate_mod._response_figure({"gamma": resp}, truth=resp)
+    fig = calibrate_plots._response_figure({"gamma": resp}, truth=resp)
     try:
         ax = fig.axes[0]
         lo, hi = ax.get_ylim()
@@ -367,7 +369,7 @@ def test_response_plot_axis_spans_the_defined_levels_only():
 
 def test_calibrate_writes_the_plot_through_the_figure(tmp_path):
     resp = hdr.CameraResponse.gamma(2.2, channels=3)
-    calibrate_mod._plot_response(tmp_path / "r.png", {"gamma": resp})
+    calibrate_plots._plot_response(tmp_path / "r.png", {"gamma": resp})
     h, w = io.read_image(str(tmp_path / "r.png")).shape[:2]
     assert (w, h) == (660, 462)  # 6 x 4.2 in at 110 dpi
     assert os.listdir(tmp_path) == ["r.png"]

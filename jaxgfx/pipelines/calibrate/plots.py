@@ -1,0 +1,111 @@
+"""The job's figures: fitted response curves (``response.png``), the leave-one-out
+self-check (``loo.png``) and the exposure-normalised preview (``preview.png``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__: list[str] = []  # the job's helpers (tests patch _plot_response here)
+
+
+def _plot_response(path, responses: dict, truth=None, title="camera response"):
+    """Plot g(Z) = ln to_linear(Z) per channel for each fitted response (and the truth,
+    shifted by the best constant ln offset, since the anchor is arbitrary) to ``path``."""
+    import matplotlib.pyplot as plt
+
+    fig = _response_figure(responses, truth, title)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _response_figure(responses: dict, truth=None, title="camera response"):
+    """The figure of :func:`_plot_response`. Only levels 1..255 where a curve is defined
+    (``to_linear > 0``) are drawn: at level 0 the exposure is 0 and ln 0 = -inf (clamping it
+    stretched the axis to -27 and flattened every curve), and the fits carry no data there."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    z = np.linspace(0.0, 1.0, 256)
+
+    def curve(resp):
+        zz = np.ascontiguousarray(np.broadcast_to(z[:, None], (256, resp.channels)), np.float32)
+        lin = np.asarray(resp.to_linear_normalized(zz), np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = np.where(np.isfinite(lin) & (lin > 0), np.log(lin), np.nan)
+        g[0] = np.nan  # level 0: no exposure is known there
+        return g
+
+    colors = ("tab:red", "tab:green", "tab:blue")
+    styles = ["-", "--", "-.", ":"]
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    ref = None
+    for k, (name, resp) in enumerate(responses.items()):
+        g = curve(resp)
+        if ref is None:
+            ref = g[:, min(1, g.shape[1] - 1)]
+        for c in range(g.shape[1]):
+            ax.plot(
+                z * 255,
+                g[:, c],
+                styles[k % len(styles)],
+                color=colors[c % 3],
+                lw=1.2,
+                label=name if c == 0 else None,
+            )
+    if truth is not None:
+        g = curve(truth)[:, min(1, truth.channels - 1)]
+        sl = slice(10, 246)
+        g = g + np.nanmean(ref[sl] - g[sl]) if ref is not None else g
+        ax.plot(z * 255, g, color="k", lw=2.5, alpha=0.35, label="ground truth (G)")
+    ax.set_xlim(0, 255)
+    ax.set_xlabel("pixel level Z (of 255)")
+    ax.set_ylabel("g(Z) = ln relative exposure")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def _plot_loo(path, loo):
+    """Leave-one-out self-check: mean |error| and bias per level band, and per held frame."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    d = loo.to_dict()
+    edges = d["band_edges"]
+    labels = [f"{edges[i]:g}-{edges[i + 1]:g}" for i in range(len(edges) - 1)]
+    nan = float("nan")
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.6))
+    x = np.arange(len(labels))
+    band = [nan if v is None else v for v in d["per_band"]]
+    bias = [nan if v is None else v for v in d["per_band_bias"]]
+    a1.bar(x - 0.2, band, 0.4, label="mean |error|")
+    a1.bar(x + 0.2, bias, 0.4, label="mean error (bias)")
+    a1.axhline(0, color="k", lw=0.8)
+    a1.set_xticks(x, labels, fontsize=8)
+    a1.set_xlabel("level of the held-out frame (of 255)")
+    a1.set_ylabel("predicted - actual (levels)")
+    a1.legend(fontsize=8)
+    a1.set_title(f"leave-one-out: {d['mean_abs_error']:.2f} levels overall")
+    pf = [nan if v is None else v for v in d["per_frame"]]
+    a2.bar(np.arange(len(pf)), pf)
+    a2.set_xticks(np.arange(len(pf)), [f"{t:.3g} s" for t in d["exposure_times"]], fontsize=8)
+    a2.set_xlabel("held-out frame (exposure time)")
+    a2.set_ylabel("mean |error| (levels)")
+    for a in (a1, a2):
+        a.grid(alpha=0.3, axis="y")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _preview(radiance: np.ndarray, key: float) -> np.ndarray:
+    """Global Reinhard (2002) with key ``key``, L_white = the maximum (jaxgfx.tonemap)."""
+    from jaxgfx.pipelines.tonemap import tonemap_image
+
+    return tonemap_image(radiance, "reinhard", key=key)

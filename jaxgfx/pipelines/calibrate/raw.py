@@ -1,0 +1,77 @@
+"""The RAW path: read the bracket, calibrate the sensor (:func:`jaxgfx.hdr.calibrate_raw_stack`),
+merge the normalised mosaics with the measured exposure ratios and noise model (one call,
+:func:`merge_mosaics`), demosaic, then white-balance and convert camera RGB to
+``config.colorspace`` (:func:`jaxgfx.hdr.raw.color_transform`: the DNG colour tags, or
+LibRaw's matrix)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .config import CalibrateConfig
+from .report import CalibrateResult
+
+__all__: list[str] = []  # the job's stages (tests patch _fit_raw here)
+
+
+def merge_mosaics(raws, times, cal):
+    """The merge stage of a RAW bracket: the normalised mosaics merged as one channel with the
+    measured exposure ratios (nominal times when a ratio could not be measured) and the CFA
+    channels' noise model pooled. Returns ``(radiance, variance)`` mosaics ``(H, W, 1)``."""
+    from jaxgfx import hdr
+
+    norm = np.stack([r.normalized() for r in raws])[..., None]
+    ratios = np.asarray(cal.ratios.ratios, np.float64)
+    ref = int(np.asarray(cal.ratios.reference))
+    good = ratios.shape == times.shape and np.all(np.isfinite(ratios)) and np.all(ratios > 0)
+    eff_times = times[ref] * ratios if good else times
+    resp = hdr.CameraResponse.gamma(1.0, channels=1, anchor="unit")
+    weighting = "noise" if cal.noise is not None else "hat"
+    noise = None  # the mosaic is merged as one channel: the CFA channels' model, pooled
+    if cal.noise is not None:
+        noise = hdr.NoiseModel(
+            np.mean(np.asarray(cal.noise.gain), keepdims=True),
+            np.mean(np.asarray(cal.noise.read_variance), keepdims=True),
+        )
+    return hdr.merge_radiance(
+        np.clip(norm, 0.0, 1.0),
+        eff_times,
+        resp,
+        weighting=weighting,
+        noise=noise,
+        return_variance=True,
+    )
+
+
+def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
+    """Read, calibrate the sensor, merge, demosaic."""
+    from jaxgfx import hdr, image, io
+
+    steps.start("read raw")
+    raws, times = io.read_raw_stack(files, exposure_times=cfg.exposure_times)
+    pattern = raws[0].cfa_pattern
+    mosaics = np.stack([r.mosaic for r in raws]).astype(np.float32)
+    black = np.asarray(raws[0].black_level, np.float32)
+    white = float(raws[0].white_level)
+    steps.start("raw calibration")
+    cal = hdr.calibrate_raw_stack(mosaics, times, cfa_pattern=pattern, black=black, white=white)
+    steps.start("merge")
+    rad, var = merge_mosaics(raws, times, cal)
+    steps.start("demosaic")
+    rgb = np.asarray(image.demosaic(np.asarray(rad)[..., 0], pattern, method=cfg.demosaic))
+    var_rgb = np.asarray(
+        image.demosaic(np.asarray(var)[..., 0], pattern, method="bilinear"), np.float32
+    )
+    steps.start("colour")
+    ct = hdr.raw.color_transform(
+        raws[0], rgb, colorspace=cfg.colorspace, white_balance=cfg.white_balance
+    )
+    rgb, var_rgb = hdr.raw.apply_color_transform(rgb, ct, var_rgb)
+    return CalibrateResult(
+        radiance=np.asarray(rgb, np.float32),
+        variance=np.asarray(var_rgb, np.float32),
+        color=ct,
+        times=times,
+        image_shape=mosaics.shape,
+        raw_calibration=cal,
+    )
