@@ -34,6 +34,7 @@ __all__ = [
     "free_init",
     "fit_level_table",
     "response_of",
+    "with_channels",
 ]
 
 RESPONSE_MODELS = ("gamma", "table", *ANALYTIC_RESPONSES)
@@ -138,6 +139,16 @@ def fit_level_table(cam_p, cam_args, bits: int):
     u = freeze(cam_p["curve"], cam_args["free"]["curve"])
     g_free = level_table(free_response(u), bits)
     return w[0] * g_gamma + w[1] * fixed + w[2] * g_free
+
+
+def with_channels(resp: CameraResponse, channels: int) -> CameraResponse:
+    """``resp`` with its one curve repeated for ``channels`` channels (a curve per channel
+    already: unchanged)."""
+    if resp.channels == channels or resp.channels != 1:
+        return resp
+    params = jnp.broadcast_to(resp.params, resp.params.shape[:-1] + (channels,))
+    return CameraResponse(params, resp.kind, resp.method, resp.code_max, resp.anchor,
+                          resp.exposure_ratios, resp.diagnostics)
 
 
 def response_of(kind: str, cam_p, fixed_response: CameraResponse | None):

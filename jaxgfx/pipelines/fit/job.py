@@ -317,7 +317,7 @@ def _result(cfg: FitConfig, prep: Prepared, res, target_seconds, scene_params) -
         cp = res.params["camera"]
         kind = cam.response.curve_kind
         camera_out = {
-            "model": cam.response.model,
+            "model": "file" if cam.response.source and kind == "fixed" else cam.response.model,
             "from": cam.response.source,
             "curve": kind,
             "exposure": plain(cp["exposure"]),
@@ -372,12 +372,12 @@ def fitted_camera(cfg: FitConfig, prep: Prepared, cam_p, photo: int = 0, bits: i
 
     from jaxgfx.hdr import Camera
 
-    from .camera import response_of
+    from .camera import response_of, with_channels
 
     cam = cfg.camera
-    resp = response_of(cam.response.curve_kind, cam_p, prep.fixed_response)
-    e = float(np.asarray(cam_p["exposure"])) * float(np.asarray(cam_p["photo_exposure"])[photo])
     nch = 1 if prep.targets and prep.targets[0].grey else 3
+    resp = with_channels(response_of(cam.response.curve_kind, cam_p, prep.fixed_response), nch)
+    e = float(np.asarray(cam_p["exposure"])) * float(np.asarray(cam_p["photo_exposure"])[photo])
     wb = jnp.asarray(cam_p["white_balance"], jnp.float32)[:nch] if nch == 3 else None
     return Camera(resp, jnp.asarray(e, jnp.float32), white_balance=wb, bits=bits, clip=True)
 

@@ -116,14 +116,13 @@ def photo_gains(cam_p, cam_args, nch: int):
 def texture_prior(x, kind: str):
     """Smoothness of a texel grid ``x`` ``(H, W, C)``: ``"tv"`` the mean Charbonnier total
     variation ``√(∂x² + ∂y² + ε²) − ε`` (ε = 1e-3), ``"laplacian"`` the mean squared
-    5-point Laplacian (edge-replicated borders)."""
+    5-point Laplacian over the interior texels (``H, W >= 3``; a linear ramp costs 0)."""
     if kind == "tv":
         dx = jnp.diff(x, axis=1)[:-1]
         dy = jnp.diff(x, axis=0)[:, :-1]
         eps = 1e-3
         return jnp.mean(jnp.sqrt(dx * dx + dy * dy + eps * eps) - eps)
-    p = jnp.pad(x, ((1, 1), (1, 1), (0, 0)), mode="edge")
-    lap = p[:-2, 1:-1] + p[2:, 1:-1] + p[1:-1, :-2] + p[1:-1, 2:] - 4.0 * x
+    lap = x[:-2, 1:-1] + x[2:, 1:-1] + x[1:-1, :-2] + x[1:-1, 2:] - 4.0 * x[1:-1, 1:-1]
     return jnp.mean(lap * lap)
 
 

@@ -402,6 +402,11 @@ def prepare_fit(cfg: FitConfig, *, base_dir: str | None = None) -> Prepared:
                     f"texture or environment map, shape (H, W, C)); {path} has shape "
                     f"{tuple(np.shape(current))}"
                 )
+            if "laplacian" in spec.prior and min(np.shape(current)[:2]) < 3:
+                raise ValueError(
+                    f"params.{path}.prior.laplacian: needs a grid of at least 3x3 texels, got "
+                    f"{tuple(np.shape(current))}; use tv"
+                )
             textures.append(path)
         x0 = np.asarray(current, np.float64) if spec.init is None else spec.init
         x0 = np.broadcast_to(_check_value(path, current, x0, "init"), current.shape)
