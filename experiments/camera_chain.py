@@ -71,8 +71,9 @@ def calibrate(cal: dict, out: str, overwrite: bool) -> str:
 def camera_for(variant: str, fit: dict, report: str) -> dict:
     tc = fit["camera"]
     if variant == "true_camera":
-        return {"response": {"model": tc["response"]},
-                "exposure": {"init": float(tc["exposure"])}}
+        # camera.exposure is the first photo's (the others are at their given ratios)
+        e0 = float(tc["exposure"]) * float(tc.get("exposures", [1.0])[0])
+        return {"response": {"model": tc["response"]}, "exposure": {"init": e0}}
     if variant == "calibrated":
         return {"response": {"from": report}, "exposure": {"init": 1.0, "fit": True}}
     if variant == "joint":

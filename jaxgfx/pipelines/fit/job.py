@@ -225,9 +225,11 @@ def _initial(cfg: FitConfig, prep: Prepared):
             "gamma": jnp.asarray(gamma0, jnp.float32),
             "curve": jnp.asarray(curve0),
         }
+        # lower bounds only (softplus: exp-like near the bound): a sigmoid over (1e-3, 1e3)
+        # moves every init below 1e-3 of its width (1.0) to the margin, 1.001
         bounds["camera"] = {
-            "exposure": (cam.exposure.min, cam.exposure.max),
-            "photo_exposure": (ratios / 32.0, ratios * 32.0),
+            "exposure": (cam.exposure.min, None),
+            "photo_exposure": (ratios / 32.0, None),
             "white_balance": (cam.white_balance.min, cam.white_balance.max),
             "gamma": gb,
             "curve": None,
