@@ -164,7 +164,9 @@ def test_fit_step_of_a_photo_target_traces_in_a_fresh_interpreter(tmp_path):
         env={**os.environ, "JAX_PLATFORMS": "cpu"},
     )
     assert r.returncode == 0, r.stderr[-2000:]
-    assert "traced () ['exposure', 'gamma']" in r.stdout
+    assert "traced () ['curve', 'exposure', 'gamma', 'photo_exposure', 'white_balance']" in (
+        r.stdout
+    )
 
 
 # cost: ~20 s quiet, 120 s at load 8 on 2 cores (one compiled fit step shared by both files)
@@ -193,7 +195,8 @@ def test_masked_pixels_do_not_change_the_loss():
     change it, a visible code does; with an all-ones mask it equals the unmasked loss."""
     import jax.numpy as jnp
 
-    from jaxgfx.pipelines.fit import RESPONSE_MODELS
+    from jaxgfx.hdr import CameraResponse
+    from jaxgfx.pipelines.fit import level_table
     from jaxgfx.pipelines.fit.loss import censored_linear_loss
 
     rng = np.random.default_rng(1)
@@ -201,10 +204,10 @@ def test_masked_pixels_do_not_change_the_loss():
     codes = np.asarray(rng.integers(0, 256, (N, N, 3)), np.float32)
     mask = np.ones((N, N, 1), np.float32)
     mask[:2] = 0.0
-    w = jnp.asarray([float(m == "gamma") for m in RESPONSE_MODELS])
+    table = level_table(CameraResponse.gamma(2.2, anchor="unit"), 8)
 
     def value(c, m):
-        return float(censored_linear_loss(img, jnp.asarray(c), 1.3, 2.2, w, 255.0, m))
+        return float(censored_linear_loss(img, jnp.asarray(c), table, 1.3, 255.0, m))
 
     v0 = value(codes, mask)
     hidden, visible = codes.copy(), codes.copy()

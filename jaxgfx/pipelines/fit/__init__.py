@@ -58,6 +58,8 @@ from .camera import RESPONSE_MODELS as RESPONSE_MODELS
 from .camera import apply_camera as apply_camera
 from .camera import camera_to_linear as camera_to_linear
 from .camera import fit_camera as fit_camera
+from .camera import free_response as free_response
+from .camera import level_table as level_table
 from .config import CameraConfig as CameraConfig
 from .config import ExposureSpec as ExposureSpec
 from .config import FitConfig as FitConfig
@@ -66,7 +68,9 @@ from .config import LossConfig as LossConfig
 from .config import OptimizerConfig as OptimizerConfig
 from .config import RenderConfig as RenderConfig
 from .config import ResponseSpec as ResponseSpec
+from .config import WhiteBalanceSpec as WhiteBalanceSpec
 from .job import FitJob as FitJob
+from .job import fitted_camera as fitted_camera
 from .job import run_fit as run_fit
 from .loss import make_loss as make_loss
 from .report import OUTPUT_NAMES as OUTPUT_NAMES
@@ -82,6 +86,7 @@ __all__ = [
     "CameraConfig",
     "ResponseSpec",
     "ExposureSpec",
+    "WhiteBalanceSpec",
     "OptimizerConfig",
     "RenderConfig",
     "LossConfig",
@@ -92,6 +97,9 @@ __all__ = [
     "apply_camera",
     "camera_to_linear",
     "fit_camera",
+    "fitted_camera",
+    "free_response",
+    "level_table",
     "build_scene",
     "make_loss",
     "prepare_fit",

@@ -10,6 +10,8 @@ import dataclasses
 from typing import Any
 
 from jaxgfx._checks import check_choice
+from jaxgfx.config import load_config
+from jaxgfx.hdr import ANALYTIC_RESPONSES
 from jaxgfx.optim import LOSS_SPACES, LOSSES, OPTIMIZERS
 from jaxgfx.render.integrators import INTEGRATORS
 
@@ -19,6 +21,8 @@ __all__ = [
     "FitParam",
     "ResponseSpec",
     "ExposureSpec",
+    "WhiteBalanceSpec",
+    "PRIOR_KINDS",
     "CameraConfig",
     "OptimizerConfig",
     "RenderConfig",
@@ -40,41 +44,107 @@ def _positive_int(v, where):
         raise ValueError(f"{where}: expected a positive integer, got {v!r}")
 
 
+PRIOR_KINDS = ("tv", "laplacian")
+"""Smoothness priors of texel-grid parameters (``params.X.prior: {tv: weight}``): total
+variation ``mean |∇x|`` (Charbonnier, ε = 1e-3) or the squared Laplacian ``mean (Δx)²``."""
+
+
 @dataclasses.dataclass(frozen=True)
 class FitParam:
-    """One fitted parameter: ``init`` (None: the scene's value), bounds ``min``/``max``."""
+    """One fitted parameter: ``init`` (None: the scene's value), bounds ``min``/``max``,
+    its own learning rate ``lr`` (None: ``optimizer.lr``; with a schedule, scaled alike) and a
+    smoothness ``prior`` ``{tv | laplacian: weight}`` (texel grids only)."""
 
     init: float | tuple[float, ...] | None = None
     min: float | None = None
     max: float | None = None
+    lr: float | None = None
+    prior: dict | None = None
+
+    def __post_init__(self):
+        if self.lr is not None and not self.lr > 0:
+            raise ValueError(f"lr: expected a positive number, got {self.lr}")
+        if self.prior is not None:
+            if not self.prior:
+                raise ValueError("prior: expected {tv: weight} or {laplacian: weight}")
+            for k, v in self.prior.items():
+                check_choice(k, "prior", PRIOR_KINDS)
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0:
+                    raise ValueError(f"prior.{k}: expected a weight >= 0, got {v!r}")
 
 
 @dataclasses.dataclass(frozen=True)
 class ResponseSpec:
+    """The fit camera's response: ``model`` (:data:`RESPONSE_MODELS`), or ``source`` (YAML
+    key ``from``: a response file of :func:`jaxgfx.hdr.save_response` or a calibrate
+    ``report.json``). ``fit``: fit it (``gamma``: the exponent; ``table``: a free-form
+    monotone curve of ``knots`` knots and ``channels`` 1 or 3 curves, started from ``init`` —
+    a gamma exponent, an analytic curve's name, or the ``from`` curve — with a
+    ``smoothness`` prior on its second differences). A loaded curve with ``fit: true`` starts
+    a free-form fit."""
+
     model: str = "srgb"
+    source: str | None = None
     fit: bool = False
-    init: float = 2.2  # gamma exponent (model "gamma")
+    init: float | str = 2.2
     min: float = 0.2
     max: float = 6.0
+    knots: int = 33
+    channels: int = 1
+    smoothness: float = 1e-3
 
     def __post_init__(self):
         check_choice(self.model, "camera.response.model", RESPONSE_MODELS)
-        if self.fit and self.model != "gamma":
+        if self.source is not None:
+            if not isinstance(self.source, str) or not self.source:
+                raise ValueError(f"camera.response.from: expected a file path, got "
+                                 f"{self.source!r}")
+            if self.fit:  # a loaded curve that is refined: the free-form table starts from it
+                object.__setattr__(self, "model", "table")
+        if self.fit and self.model not in ("gamma", "table"):
             raise ValueError(
-                f"camera.response.fit: only the 'gamma' model has parameters, got {self.model!r}"
+                "camera.response.fit: only 'gamma' (an exponent) and 'table' (a free-form "
+                f"curve) have parameters, got {self.model!r}"
             )
-        if not self.min < self.init < self.max:
+        if self.model == "gamma" and not self.min < float(self.init) < self.max:
             raise ValueError(
                 f"camera.response: init {self.init} outside the bounds ({self.min}, {self.max})"
             )
+        if self.model == "table":
+            init = self.init
+            if isinstance(init, str):
+                check_choice(init, "camera.response.init", tuple(ANALYTIC_RESPONSES))
+            elif not init > 0:
+                raise ValueError(f"camera.response.init: expected a gamma > 0, got {init}")
+        _positive_int(self.knots, "camera.response.knots")
+        if self.knots < 4:
+            raise ValueError(f"camera.response.knots: expected >= 4, got {self.knots}")
+        if self.channels not in (1, 3):
+            raise ValueError(f"camera.response.channels: expected 1 or 3, got {self.channels}")
+        if not self.smoothness >= 0:
+            raise ValueError(f"camera.response.smoothness: expected >= 0, got {self.smoothness}")
+
+    @property
+    def curve_kind(self) -> str:
+        """The slot of the fit's level table (:data:`CURVE_KINDS`)."""
+        if self.model == "gamma":
+            return "gamma"
+        if self.model == "table":
+            return "free"
+        return "fixed"
 
 
 @dataclasses.dataclass(frozen=True)
 class ExposureSpec:
+    """The exposure of the first photo (``init``, ``fit``, bounds); the others are at their
+    given exposure ratios (EXIF or ``target[i].exposure``), each fitted too with
+    ``per_photo``."""
+
     init: float = 1.0
     fit: bool = False
     min: float = 1e-3
     max: float = 1e3
+    per_photo: bool = False
 
     def __post_init__(self):
         if not 0 < self.min < self.init < self.max:
@@ -85,15 +155,48 @@ class ExposureSpec:
 
 
 @dataclasses.dataclass(frozen=True)
-class CameraConfig:
-    """The unknown camera between the rendered radiance and an LDR target."""
+class WhiteBalanceSpec:
+    """Per-channel gains before the response (``fit``: red and blue; green is the
+    reference that the exposure scales)."""
 
-    response: ResponseSpec = ResponseSpec()
+    init: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    fit: bool = False
+    min: float = 0.1
+    max: float = 10.0
+
+    def __post_init__(self):
+        if not all(self.min < float(v) < self.max for v in self.init):
+            raise ValueError(
+                f"camera.white_balance: init {list(self.init)} outside the bounds "
+                f"({self.min}, {self.max})"
+            )
+
+
+@dataclasses.dataclass(frozen=True)
+class CameraConfig:
+    """The camera between the rendered radiance and LDR targets (``response`` a mapping with
+    the keys of :class:`ResponseSpec`, ``from`` for ``source``, or a model name)."""
+
+    response: Any = ResponseSpec()
     exposure: ExposureSpec = ExposureSpec()
+    white_balance: WhiteBalanceSpec = WhiteBalanceSpec()
     bits: int = 8
     space: str = "linear"  # where the loss compares: linear (unbiased) | code (see module doc)
 
     def __post_init__(self):
+        r = self.response
+        if isinstance(r, str):
+            r = {"model": r}
+        if isinstance(r, dict):
+            r = dict(r)
+            if "from" in r:
+                if "source" in r:
+                    raise ValueError("camera.response: give 'from' or 'source', not both")
+                r["source"] = r.pop("from")
+            r = load_config(ResponseSpec, r, where="camera.response")
+        if not isinstance(r, ResponseSpec):
+            raise ValueError(f"camera.response: expected a mapping, got {self.response!r}")
+        object.__setattr__(self, "response", r)
         if self.bits not in (8, 16):
             raise ValueError(f"camera.bits: expected 8 or 16, got {self.bits}")
         check_choice(self.space, "camera.space", LOSS_COMPARE_SPACES)
@@ -168,7 +271,7 @@ class LossConfig:
 @dataclasses.dataclass(frozen=True)
 class FitConfig:
     scene: str
-    target: Any  # path, or {synthetic: {path: value}, spp, seed, camera}
+    target: Any  # path, {file, exposure}, a list of those, or {synthetic: ..., camera: ...}
     params: dict
     camera: CameraConfig | None = None
     optimizer: OptimizerConfig = OptimizerConfig()
@@ -182,7 +285,12 @@ class FitConfig:
             raise ValueError(f"scene: expected a scene file path, got {self.scene!r}")
         if not isinstance(self.params, dict) or not self.params:
             raise ValueError("params: expected a mapping {parameter path: {init, min, max}}")
-        if not isinstance(self.target, (str, dict)):
-            raise ValueError("target: expected a file path or {synthetic: {...}}")
+        if not isinstance(self.target, (str, dict, list, tuple)) or (
+            isinstance(self.target, (list, tuple)) and not self.target
+        ):
+            raise ValueError(
+                "target: expected a file path, {file: PATH, exposure: ...}, a list of those, "
+                "or {synthetic: {...}}"
+            )
         if isinstance(self.seed, bool) or not isinstance(self.seed, int):
             raise ValueError(f"seed: expected an integer, got {self.seed!r}")

@@ -11,7 +11,6 @@ import numpy as np
 
 from jaxgfx.config import config_to_dict, load_config
 
-from .camera import RESPONSE_MODELS, photo_camera
 from .config import FitConfig
 from .loss import cached_loss
 from .report import OUTPUT_NAMES, plain, srgb8, write_outputs
@@ -88,12 +87,52 @@ def _render(cfg: FitConfig, scene, key, spp):
     return np.asarray(render(scene, key, spp=spp, integrator=r.integrator, max_depth=r.max_depth))
 
 
-def _target(cfg: FitConfig, prep: Prepared) -> tuple[Target, np.ndarray | None]:
-    """The target the loss compares with, and its linear radiance when synthetic."""
+def _target_camera(tc: dict, exposure: float, channels: int):
+    """The :class:`~jaxgfx.hdr.Camera` that takes a synthetic target's photo."""
+    import jax.numpy as jnp
+
+    from jaxgfx.hdr import Camera, CameraResponse, NoiseModel
+
+    model = tc.get("response", "gamma")
+    if model == "gamma":
+        resp = CameraResponse.gamma(float(tc.get("gamma", 2.2)), anchor="unit")
+    else:
+        resp = CameraResponse.analytic(model, anchor="unit")
+    noise = None
+    if tc.get("noise"):
+        n = tc["noise"]
+        noise = NoiseModel(
+            jnp.full((channels,), float(n.get("gain", 0.0))),
+            jnp.full((channels,), float(n.get("read_sigma", 0.0)) ** 2),
+        )
+    wb = tc.get("white_balance")
+    return Camera(
+        resp,
+        jnp.asarray(exposure, jnp.float32),
+        white_balance=None if wb is None else jnp.asarray(wb, jnp.float32)[:channels],
+        noise=noise,
+        bits=int(tc.get("bits", 8)),
+        clip=True,
+    )
+
+
+def _target(cfg: FitConfig, prep: Prepared, key=None) -> tuple[Target, np.ndarray | None]:
+    """The target the loss compares with (photos stacked ``(N, H, W, C)``), and its linear
+    radiance when synthetic."""
     import jax
 
-    if prep.target is not None:
-        return prep.target, None
+    if prep.targets is not None:
+        ts = prep.targets
+        if not prep.ldr:
+            return ts[0], None
+        pixels = np.stack([t.pixels for t in ts])
+        mask = None
+        if any(t.mask is not None for t in ts):
+            mask = np.stack([
+                np.ones(t.pixels.shape[:2] + (1,), np.float32) if t.mask is None else t.mask
+                for t in ts
+            ])
+        return Target(pixels, grey=ts[0].grey, mask=mask, bits=ts[0].bits), None
     t = prep.target_spec
     tscene = build_scene(prep.scene, list(prep.truth), prep.truth)
     linear = _render(cfg, tscene, jax.random.key(int(t.get("seed", 1))), int(t.get("spp", 256)))
@@ -101,46 +140,158 @@ def _target(cfg: FitConfig, prep: Prepared) -> tuple[Target, np.ndarray | None]:
         return Target(linear), linear
     tc = t["camera"]
     bits = int(tc.get("bits", 8))
-    cam = photo_camera(
-        float(tc.get("exposure", 1.0)),
-        float(tc.get("gamma", 2.2)),
-        model=tc.get("response", "gamma"),
-        bits=bits,
-    )
-    codes = np.asarray(cam.capture(linear)).astype(np.float32)
-    return Target(codes, bits=bits), linear
+    e0 = float(tc.get("exposure", 1.0))
+    noise_key = jax.random.fold_in(jax.random.key(int(t.get("seed", 1))), 1)
+    photos = []
+    for j, r in enumerate(tc.get("exposures", [1.0])):
+        cam = _target_camera(tc, e0 * float(r), linear.shape[-1])
+        photos.append(np.asarray(cam.capture(linear, jax.random.fold_in(noise_key, j))))
+    photos = np.stack(photos)
+    if tc.get("jpeg") is not None:
+        from jaxgfx.hdr import jpeg_roundtrip
+
+        photos = jpeg_roundtrip(photos, quality=int(tc["jpeg"]))
+    return Target(photos.astype(np.float32), bits=bits), linear
+
+
+def _prior_specs(cfg: FitConfig, prep: Prepared):
+    """``((path, kind), ...)`` and ``{path: {kind: weight}}`` of the texel-grid priors, and
+    ``{path: k}`` the learning-rate factors (``params.X.lr / optimizer.lr``)."""
+    from .targets import _param_spec
+
+    priors, weights, scales = [], {}, {}
+    for path in prep.paths:
+        spec = _param_spec(path, cfg.params[path])
+        if spec.prior:
+            weights[path] = {}
+            for kind, w in spec.prior.items():
+                priors.append((path, kind))
+                weights[path][kind] = np.float32(w)
+        if spec.lr is not None and spec.lr != cfg.optimizer.lr:
+            scales[path] = float(spec.lr / cfg.optimizer.lr)
+    return tuple(priors), weights, scales
 
 
 def _initial(cfg: FitConfig, prep: Prepared):
     """Initial parameters, bounds and camera arguments of :func:`jaxgfx.optim.fit`."""
     import jax.numpy as jnp
 
+    from jaxgfx.hdr import CameraResponse
+    from jaxgfx.optim import Interval
+
+    from .camera import CURVE_KINDS, free_init, level_table
+
     cam = cfg.camera
-    params = {"scene": {p: jnp.asarray(prep.init[p]) for p in prep.paths}, "camera": {}}
-    bounds = {"scene": {p: prep.bounds[p] for p in prep.paths}, "camera": {}}
+    _, weights, scales = _prior_specs(cfg, prep)
+    params = {"scene": {}, "camera": {}}
+    bounds = {"scene": {}, "camera": {}}
+    for p in prep.paths:
+        x0 = jnp.asarray(prep.init[p])
+        if p in scales:  # its own learning rate: fitted as v, x = bounds.forward(k v)
+            iv = Interval(*[None if b is None else np.asarray(b, np.float64).tolist()
+                            for b in prep.bounds[p]])
+            params["scene"][p] = jnp.asarray(iv.inverse(x0) / scales[p], jnp.float32)
+            bounds["scene"][p] = None
+        else:
+            params["scene"][p] = x0
+            bounds["scene"][p] = prep.bounds[p]
     cam_args = None
+    if weights:
+        cam_args = {"priors": {p: {k: jnp.asarray(w) for k, w in d.items()}
+                               for p, d in weights.items()}}
     if cam is not None:
+        spec = cam.response
+        kind = spec.curve_kind
+        n = prep.n_targets
+        ratios = np.asarray(prep.exposures, np.float32)
+        nch = 1 if prep.targets and prep.targets[0].grey else 3
+        if kind == "free":
+            if prep.fixed_response is not None:
+                start = prep.fixed_response
+            elif isinstance(spec.init, str):
+                start = CameraResponse.analytic(spec.init, anchor="unit")
+            else:
+                start = CameraResponse.gamma(float(spec.init), anchor="unit")
+            curve0 = free_init(start, spec.knots, spec.channels)
+        else:  # unused: a small placeholder of the default shape
+            curve0 = free_init(CameraResponse.gamma(2.2, anchor="unit"), spec.knots,
+                               spec.channels)
+        gamma0 = float(spec.init) if kind == "gamma" else 2.2
+        gb = (spec.min, spec.max) if kind == "gamma" else (0.2, 6.0)
         params["camera"] = {
             "exposure": jnp.asarray(cam.exposure.init, jnp.float32),
-            "gamma": jnp.asarray(cam.response.init, jnp.float32),
+            "photo_exposure": jnp.asarray(ratios),
+            "white_balance": jnp.asarray(cam.white_balance.init, jnp.float32),
+            "gamma": jnp.asarray(gamma0, jnp.float32),
+            "curve": jnp.asarray(curve0),
         }
+        # lower bounds only (softplus: exp-like near the bound): a sigmoid over (1e-3, 1e3)
+        # moves every init below 1e-3 of its width (1.0) to the margin, 1.001
         bounds["camera"] = {
-            "exposure": (cam.exposure.min, cam.exposure.max),
-            "gamma": (cam.response.min, cam.response.max),
+            "exposure": (cam.exposure.min, None),
+            "photo_exposure": (ratios / 32.0, None),
+            "white_balance": (cam.white_balance.min, cam.white_balance.max),
+            "gamma": gb,
+            "curve": None,
         }
+        bits = cam.bits
+        if kind == "fixed":
+            fixed = level_table(prep.fixed_response, bits)
+        else:
+            fixed = jnp.zeros((2**bits, 1), jnp.float32)
+        fixed = jnp.broadcast_to(fixed, (2**bits, nch)) if fixed.shape[1] == 1 else fixed
+        per_photo = np.zeros(n, np.float32)
+        if cam.exposure.per_photo:
+            per_photo[1:] = 1.0
         cam_args = {
-            "weights": jnp.asarray(
-                [float(m == cam.response.model) for m in RESPONSE_MODELS], jnp.float32
-            ),
-            "free": jnp.asarray([float(cam.exposure.fit), float(cam.response.fit)], jnp.float32),
+            **(cam_args or {}),
+            "weights": jnp.asarray([float(k == kind) for k in CURVE_KINDS], jnp.float32),
+            "fixed": fixed,
+            "free": {
+                "exposure": jnp.asarray(float(cam.exposure.fit), jnp.float32),
+                "photo_exposure": jnp.asarray(per_photo),
+                "white_balance": jnp.asarray(
+                    [1.0, 0.0, 1.0] if cam.white_balance.fit else [0.0, 0.0, 0.0], jnp.float32
+                ),
+                "gamma": jnp.asarray(float(kind == "gamma" and spec.fit), jnp.float32),
+                "curve": jnp.asarray(float(kind == "free"), jnp.float32),
+            },
+            "smoothness": jnp.asarray(spec.smoothness if kind == "free" else 0.0, jnp.float32),
         }
     return params, bounds, cam_args
+
+
+def _scaled_intervals(cfg: FitConfig, prep: Prepared):
+    """``((path, (k, Interval)), ...)`` of the parameters with their own learning rate."""
+    from jaxgfx.optim import Interval
+
+    _, _, scales = _prior_specs(cfg, prep)
+    out = []
+    for p in prep.paths:
+        if p in scales:
+            lo, hi = prep.bounds[p]
+            iv = Interval(None if lo is None else np.asarray(lo, np.float64).tolist(),
+                          None if hi is None else np.asarray(hi, np.float64).tolist())
+            out.append((p, (scales[p], iv)))
+    return tuple(out)
+
+
+def _unscale(tree: dict, scaled) -> dict:
+    """Scene values from the fitted leaves (``x = Interval.forward(k · v)``)."""
+    out = dict(tree)
+    for p, (k, iv) in scaled:
+        out[p] = np.asarray(iv.forward(k * np.asarray(tree[p])))
+    return out
 
 
 def _fitted_camera_names(cam) -> list:
     if cam is None:
         return []
-    return [n for n, f in (("exposure", cam.exposure.fit), ("gamma", cam.response.fit)) if f]
+    names = [("exposure", cam.exposure.fit), ("gamma", cam.response.fit and
+                                              cam.response.curve_kind == "gamma"),
+             ("photo_exposure", cam.exposure.per_photo), ("white_balance",
+                                                          cam.white_balance.fit)]
+    return [n for n, f in names if f]
 
 
 def _check_fitted(prep: Prepared, fitted_scene, cfg: FitConfig):
@@ -160,18 +311,22 @@ def _check_fitted(prep: Prepared, fitted_scene, cfg: FitConfig):
             ) from None
 
 
-def _result(cfg: FitConfig, prep: Prepared, res, target_seconds) -> dict:
+def _result(cfg: FitConfig, prep: Prepared, res, target_seconds, scene_params) -> dict:
     cam = cfg.camera
-    fitted = {p: plain(res.params["scene"][p]) for p in prep.paths}
+    fitted = {p: plain(scene_params[p]) for p in prep.paths}
     camera_out = None
     if cam is not None:
+        cp = res.params["camera"]
+        kind = cam.response.curve_kind
         camera_out = {
-            "model": cam.response.model,
-            "exposure": plain(res.params["camera"]["exposure"]),
-            "gamma": plain(res.params["camera"]["gamma"])
-            if cam.response.model == "gamma"
-            else None,
-            "fitted": _fitted_camera_names(cam),
+            "model": "file" if cam.response.source and kind == "fixed" else cam.response.model,
+            "from": cam.response.source,
+            "curve": kind,
+            "exposure": plain(cp["exposure"]),
+            "photo_exposure": plain(cp["photo_exposure"]),
+            "white_balance": plain(cp["white_balance"]),
+            "gamma": plain(cp["gamma"]) if kind == "gamma" else None,
+            "fitted": _fitted_camera_names(cam) + (["curve"] if kind == "free" else []),
         }
     out = {
         "params": fitted,
@@ -189,6 +344,7 @@ def _result(cfg: FitConfig, prep: Prepared, res, target_seconds) -> dict:
             for p in prep.paths
             if np.size(prep.init[p]) <= 16
         },
+        "n_targets": prep.n_targets,
         "seconds_history": [float(v) for v in res.seconds],
         "config": config_to_dict(cfg),
     }
@@ -205,35 +361,51 @@ def _result(cfg: FitConfig, prep: Prepared, res, target_seconds) -> dict:
                 "model": tc.get("response", "gamma"),
                 "exposure": float(tc.get("exposure", 1.0)),
                 "gamma": float(tc.get("gamma", 2.2)),
+                "exposures": [float(v) for v in tc.get("exposures", [1.0])],
             }
     return out
 
 
-def _previews(cfg: FitConfig, prep: Prepared, target: Target, params, res, key):
+def fitted_camera(cfg: FitConfig, prep: Prepared, cam_p, photo: int = 0, bits: int = 8):
+    """The :class:`~jaxgfx.hdr.Camera` of photo ``photo`` with camera parameters ``cam_p``
+    (the response the fit ended with, its exposure and white balance), clipped and quantised
+    to ``bits`` as a photo is taken."""
+    import jax.numpy as jnp
+
+    from jaxgfx.hdr import Camera
+
+    from .camera import response_of, with_channels
+
+    cam = cfg.camera
+    nch = 1 if prep.targets and prep.targets[0].grey else 3
+    resp = with_channels(response_of(cam.response.curve_kind, cam_p, prep.fixed_response), nch)
+    e = float(np.asarray(cam_p["exposure"])) * float(np.asarray(cam_p["photo_exposure"])[photo])
+    wb = jnp.asarray(cam_p["white_balance"], jnp.float32)[:nch] if nch == 3 else None
+    return Camera(resp, jnp.asarray(e, jnp.float32), white_balance=wb, bits=bits, clip=True)
+
+
+def _previews(cfg: FitConfig, prep: Prepared, target: Target, params, res, key, scene_after):
     """(before, after, target) preview images: linear fits as sRGB scaled to the target's
-    99.5th percentile, LDR fits through the initial / fitted camera at 8 bits."""
+    99.5th percentile, LDR fits through the initial / fitted camera at 8 bits (the middle
+    photo of a bracket)."""
     cam = cfg.camera
     show_spp = max(cfg.render.spp, 64)
+    j = prep.n_targets // 2
 
     def show(scene_params, cam_params):
         img = _render(cfg, build_scene(prep.scene, prep.paths, scene_params), key, show_spp)
         if cam is None:
             return img
-        pc = photo_camera(
-            float(cam_params["exposure"]),
-            float(cam_params["gamma"]),
-            model=cam.response.model,
-            bits=8,
-        )
+        pc = fitted_camera(cfg, prep, cam_params, photo=j)
         return np.asarray(pc.capture(img)) / 255.0
 
-    before = show(params["scene"], params["camera"])
-    after = show(res.params["scene"], res.params["camera"])
+    before = show(prep.init, params["camera"])
+    after = show(scene_after, res.params["camera"])
     pixels = target.pixels
     if cam is None:
         scale = 1.0 / max(float(np.percentile(pixels, 99.5)), 1e-6)
         return srgb8(before, scale), srgb8(after, scale), srgb8(pixels, scale)
-    return before, after, pixels / (2**target.bits - 1)
+    return before, after, pixels[j] / (2**target.bits - 1)
 
 
 def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
@@ -250,8 +422,10 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
     target_seconds = time.perf_counter() - t0
 
     params, bounds, cam_args = _initial(cfg, prep)
+    priors, _, _ = _prior_specs(cfg, prep)
+    scaled = _scaled_intervals(cfg, prep)
     masked = target.mask is not None
-    loss = cached_loss(cfg, prep.paths, prep.ldr, target.grey, masked)
+    loss = cached_loss(cfg, prep.paths, prep.ldr, target.grey, masked, priors, scaled)
     pixels = jnp.asarray(target.pixels)
     target_arg = (pixels, jnp.asarray(target.mask)) if masked else pixels
     o = cfg.optimizer
@@ -267,13 +441,17 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
         progress=cfg.progress,
         tol=o.tol,
     )
-    _check_fitted(prep, res.params["scene"], cfg)
-    out = _result(cfg, prep, res, target_seconds)
+    if scaled and res.history is not None:  # fitted leaves of own-lr parameters -> values
+        res.history["scene"] = _unscale(res.history["scene"], scaled)
+    scene_after = _unscale(res.params["scene"], scaled)
+    _check_fitted(prep, scene_after, cfg)
+    out = _result(cfg, prep, res, target_seconds, scene_after)
 
     if out_dir is not None:
-        before, after, tgt = _previews(cfg, prep, target, params, res, k_show)
+        before, after, tgt = _previews(cfg, prep, target, params, res, k_show, scene_after)
         names = [("scene", p) for p in prep.paths]
-        names += [("camera", c) for c in _fitted_camera_names(cfg.camera)]
+        names += [("camera", c) for c in _fitted_camera_names(cfg.camera)
+                  if np.size(res.params["camera"][c]) <= 16]
         truth_named = dict(prep.truth or {})
         if prep.ldr and prep.truth is not None:
             truth_named.update({k: out["truth_camera"][k] for k in ("exposure", "gamma")})
@@ -281,4 +459,14 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
             out_dir, out, res, before=before, after=after, target=tgt, names=names,
             truth=truth_named,
         )
+        if cfg.camera is not None:
+            from jaxgfx.hdr import save_response
+
+            from .camera import response_of
+
+            save_response(
+                os.path.join(out_dir, "response.json"),
+                response_of(cfg.camera.response.curve_kind, res.params["camera"],
+                            prep.fixed_response),
+            )
     return out

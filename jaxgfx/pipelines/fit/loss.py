@@ -1,5 +1,6 @@
-"""The fit's loss: render → (camera) → loss, one jitted program per render / loss
-configuration and parameter set (camera choices are arrays, not part of the program)."""
+"""The fit's loss: render → camera → loss over every target (+ priors), one jitted program per
+render / loss configuration and parameter set (camera choices are arrays, not part of the
+program)."""
 
 from __future__ import annotations
 
@@ -8,11 +9,20 @@ import jax.numpy as jnp
 
 from jaxgfx.color import LUMINANCE_WEIGHTS
 
-from .camera import apply_camera, camera_blend, camera_to_linear, freeze
+from .camera import fit_level_table, freeze
 from .config import FitConfig
 from .targets import build_scene
 
-__all__ = ["make_loss", "cached_loss", "censored_linear_loss", "to_target_channels"]
+__all__ = [
+    "make_loss",
+    "cached_loss",
+    "censored_linear_loss",
+    "code_space_loss",
+    "to_target_channels",
+    "photo_gains",
+    "texture_prior",
+    "curve_smoothness",
+]
 
 
 def to_target_channels(img, grey: bool):
@@ -24,84 +34,178 @@ def to_target_channels(img, grey: bool):
     return (img @ w)[..., None]
 
 
-def _masked_mean(v, mask):
+def _masked_mean(v, mask, axes):
     if mask is None:
-        return jnp.mean(v)
+        return jnp.mean(v, axis=axes)
     m = jnp.broadcast_to(mask, v.shape)
-    return jnp.sum(v * m) / jnp.sum(m)
+    return jnp.sum(v * m, axis=axes) / jnp.sum(m, axis=axes)
 
 
-def censored_linear_loss(img, codes, exposure, gamma, weights, code_max, mask=None):
-    """Censored L2 in linear radiance: each code ``q`` is linearised through the current camera
-    (``T = f⁻¹(q / c) / exposure``, a blend over the response models by ``weights``) and
-    compared with the *linear* render, so the loss is quadratic in the Monte Carlo image and its
-    expectation is unbiased (in code space, ``E f(Î) ≠ f(E Î)`` for a curved response: a
-    noisy render through a concave response is darker on average, and the camera parameters
-    absorb that). Clipped codes bound the radiance from one side (``q = c``: ``Î ≥
-    f⁻¹((c - ½)/c)/e``; ``q = 0``: ``Î ≤ f⁻¹(½/c)/e``). Normalised by the mean linearised
-    target so that its scale does not drift with the exposure. ``mask``: per-pixel weights
-    (None: all pixels)."""
+def censored_linear_loss(img, codes, table, gain, code_max, mask=None):
+    """Censored L2 in linear radiance, summed over photos.
 
-    def inv(z):
-        return camera_blend(lambda m: camera_to_linear(z, exposure, gamma, model=m), weights)
+    ``img`` ``(H, W, C)`` the linear render; ``codes`` ``(N, H, W, C)`` integer codes of
+    ``N`` photos (or ``(H, W, C)``: one); ``table`` the camera's level table ``(2^bits, C)``
+    (:func:`~jaxgfx.pipelines.fit.camera.level_table`: ``ln f⁻¹`` at the codes and at the
+    half-codes ½ and ``c − ½`` in slots 0 and ``c``); ``gain`` ``(N, C)`` (or broadcastable)
+    the exposure × white-balance gain of each photo. Each code ``q`` is linearised through the
+    current camera, ``T = f⁻¹(q / c) / gain``, and compared with the *linear* render, so the
+    loss is quadratic in the Monte Carlo image and its expectation is unbiased (in code space
+    ``E f(Î) ≠ f(E Î)`` for a curved response). Clipped codes only bound the radiance
+    (``q = c``: ``Î ≥ f⁻¹((c − ½)/c) / gain``; ``q = 0``: ``Î ≤ f⁻¹(½/c) / gain``): one
+    gather gives both, the bounds being the table's end slots. Each photo's term is
+    normalised by its mean linearised target (so its scale does not drift with the exposure);
+    ``mask`` ``(N, H, W, 1)`` (or ``(H, W, 1)``) per-pixel weights, None: all pixels."""
+    single = codes.ndim == 3
+    if single:
+        codes = codes[None]
+        mask = None if mask is None else mask[None]
+    c = int(round(code_max))
+    nch = codes.shape[-1]
+    q = jnp.clip(codes, 0, c).astype(jnp.int32)
+    table = jnp.broadcast_to(table, (table.shape[0], nch))
+    gain = jnp.broadcast_to(jnp.asarray(gain, img.dtype), (codes.shape[0], nch))
+    t = jnp.exp(table[q, jnp.arange(nch)]) / gain[:, None, None, :]
+    e = jnp.where(q >= c, jnp.maximum(t - img, 0.0),
+                  jnp.where(q <= 0, jnp.maximum(img - t, 0.0), img - t))
+    axes = (1, 2, 3)
+    scale = jax.lax.stop_gradient(_masked_mean(t, mask, axes)) + 1e-6
+    return jnp.sum(_masked_mean(e * e, mask, axes) / (scale * scale))
 
-    c = code_max
-    t_mid = inv(codes / c)
-    t_lo = inv((c - 0.5) / c)
-    t_hi = inv(0.5 / c)
-    e = jnp.where(
-        codes >= c,
-        jnp.maximum(t_lo - img, 0.0),
-        jnp.where(codes <= 0, jnp.maximum(img - t_hi, 0.0), img - t_mid),
-    )
-    scale = jax.lax.stop_gradient(_masked_mean(t_mid, mask)) + 1e-6
-    return _masked_mean(e * e, mask) / (scale * scale)
+
+def code_space_loss(img, codes, table, gain, code_max, mask=None):
+    """:func:`jaxgfx.optim.censored_l2_loss` on display values, summed over photos: the
+    render through each photo's camera, ``v = f(gain · img)`` (the level table inverted by
+    interpolation in ``ln x``), against the codes. Biased for low-spp renders (module doc of
+    :mod:`jaxgfx.pipelines.fit`); ``camera.space: code``."""
+    from jaxgfx.optim import censored_l2_loss
+
+    from .camera import code_levels
+
+    if codes.ndim == 3:
+        codes = codes[None]
+        mask = None if mask is None else mask[None]
+    bits = {256: 8, 65536: 16}[table.shape[0]]
+    zl = jnp.asarray(code_levels(bits), img.dtype) / code_max
+    nch = codes.shape[-1]
+    table = jnp.broadcast_to(table, (table.shape[0], nch))
+    gain = jnp.broadcast_to(jnp.asarray(gain, img.dtype), (codes.shape[0], nch))
+    total = 0.0
+    for j in range(codes.shape[0]):
+        lx = jnp.log(jnp.maximum(gain[j] * img, 1e-30))
+        v = jnp.stack(
+            [jnp.interp(lx[..., k], table[:, k], zl) for k in range(nch)], axis=-1
+        )
+        total = total + censored_l2_loss(
+            v, codes[j], code_max=code_max, mask=None if mask is None else mask[j]
+        )
+    return total
 
 
-def make_loss(cfg: FitConfig, paths, ldr: bool, grey: bool = False, masked: bool = False):
+def photo_gains(cam_p, cam_args, nch: int):
+    """``(N, C)`` gain of each photo: exposure × its relative exposure × white balance (the
+    frozen entries without gradient)."""
+    free = cam_args["free"]
+    e = freeze(cam_p["exposure"], free["exposure"])
+    r = freeze(cam_p["photo_exposure"], free["photo_exposure"])
+    wb = freeze(cam_p["white_balance"], free["white_balance"])
+    wb = wb[:nch] if nch == 3 else jnp.ones((1,), wb.dtype)
+    return e * r[:, None] * wb[None, :]
+
+
+def texture_prior(x, kind: str):
+    """Smoothness of a texel grid ``x`` ``(H, W, C)``: ``"tv"`` the mean Charbonnier total
+    variation ``√(∂x² + ∂y² + ε²) − ε`` (ε = 1e-3), ``"laplacian"`` the mean squared
+    5-point Laplacian over the interior texels (``H, W >= 3``; a linear ramp costs 0)."""
+    if kind == "tv":
+        dx = jnp.diff(x, axis=1)[:-1]
+        dy = jnp.diff(x, axis=0)[:, :-1]
+        eps = 1e-3
+        return jnp.mean(jnp.sqrt(dx * dx + dy * dy + eps * eps) - eps)
+    lap = x[:-2, 1:-1] + x[2:, 1:-1] + x[1:-1, :-2] + x[1:-1, 2:] - 4.0 * x[1:-1, 1:-1]
+    return jnp.mean(lap * lap)
+
+
+def curve_smoothness(cam_p):
+    """Mean squared second difference of the free-form curve's ``ln x`` knots (its
+    smoothness prior; the curve is monotone by construction)."""
+    from .camera import free_response
+
+    g = free_response(cam_p["curve"]).params
+    d2 = g[2:] - 2.0 * g[1:-1] + g[:-2]
+    return jnp.mean(d2 * d2)
+
+
+def make_loss(
+    cfg: FitConfig, paths, ldr: bool, grey: bool = False, masked: bool = False, priors=(),
+    scaled=(),
+):
     """The fit's loss ``loss(params, key, (scene, target, camera_args))`` for
     :func:`jaxgfx.optim.fit`.
 
-    ``params = {"scene": {path: value}, "camera": {"exposure": e, "gamma": g}}``; for LDR
-    targets ``camera_args = {"weights": one-hot over RESPONSE_MODELS, "free": [exposure free,
-    gamma free]}`` (arrays, so that every camera variant of a scene shares one compiled
-    program; a frozen camera parameter has a zero gradient and Adam leaves it unchanged).
-    ``target`` is ``(pixels, mask)`` when ``masked``, else the pixels; ``grey`` compares the
-    render's luminance."""
-    from jaxgfx.optim import censored_l2_loss, decorrelated_loss, image_loss
+    ``params = {"scene": {path: value}, "camera": {...}}``; for LDR targets ``params
+    ["camera"]`` holds ``exposure`` (scalar), ``photo_exposure`` ``(N,)`` (relative
+    exposures), ``white_balance`` ``(3,)``, ``gamma`` and ``curve`` (the free-form curve's
+    parameters), and ``camera_args`` ``{"weights": one-hot over CURVE_KINDS, "fixed": the fixed
+    curve's level table, "free": {name: mask}, "smoothness": weight}`` — arrays, so every
+    camera variant of a scene shares one compiled program (a frozen parameter has a zero
+    gradient and Adam leaves it unchanged). ``target`` is ``(pixels, mask)`` when ``masked``,
+    else the pixels (``(N, H, W, C)`` codes of ``N`` photos of one view for LDR targets: one
+    render serves them all). ``priors``: ``((path, kind), ...)`` texel-grid priors whose
+    weights are ``camera_args["priors"][path][kind]`` (arrays); ``scaled``: ``((path, (k,
+    Interval)), ...)`` parameters with their own learning rate (``k`` times the optimiser's),
+    fitted as ``v`` with ``x = Interval.forward(k · v)``. ``grey`` compares the render's
+    luminance."""
+    from jaxgfx.optim import decorrelated_loss, image_loss
     from jaxgfx.render import render
 
     r = cfg.render
-    code_max = float(2 ** (cfg.camera.bits if cfg.camera else 8) - 1)
+    bits = cfg.camera.bits if cfg.camera else 8
+    code_max = float(2**bits - 1)
     paths = tuple(paths)
     kind, space = cfg.loss.kind, cfg.loss.space
     code_space = cfg.camera is not None and cfg.camera.space == "code"
+    scaled = dict(scaled)
+
+    def scene_values(p):
+        """The scene parameters: a parameter with its own learning rate is fitted as ``v``
+        with ``x = bounds.forward(k · v)`` (Adam's steps in ``v`` are ``k``× larger in the
+        bijection's space: a per-parameter learning rate ``k · lr``)."""
+        vals = dict(p["scene"])
+        for path, (k, interval) in scaled.items():
+            vals[path] = interval.forward(k * vals[path])
+        return vals
 
     def image(scene, p, key, spp):
-        s = build_scene(scene, paths, p["scene"])
+        s = build_scene(scene, paths, scene_values(p))
         img = render(s, key, spp=spp, integrator=r.integrator, max_depth=r.max_depth)
         return to_target_channels(img, grey)
 
-    def per_image_loss(img, target, p, cam_args):
+    def per_image_loss(img, target, p, cam_args, table):
         pixels, mask = target if masked else (target, None)
         if not ldr:
             return image_loss(img, pixels, kind=kind, space=space, mask=mask)
-        e = freeze(p["camera"]["exposure"], cam_args["free"][0])
-        g = freeze(p["camera"]["gamma"], cam_args["free"][1])
-        if code_space:
-            v = camera_blend(lambda m: apply_camera(img, e, g, model=m), cam_args["weights"])
-            return censored_l2_loss(v, pixels, code_max=code_max, mask=mask)
-        return censored_linear_loss(img, pixels, e, g, cam_args["weights"], code_max, mask)
+        gain = photo_gains(p["camera"], cam_args, img.shape[-1])
+        fn = code_space_loss if code_space else censored_linear_loss
+        return fn(img, pixels, table, gain, code_max, mask)
 
     def loss(p, key, args):
         scene, target, cam_args = args
+        table = fit_level_table(p["camera"], cam_args, bits) if ldr else None
         if r.estimator == "correlated":
-            return per_image_loss(image(scene, p, key, r.spp), target, p, cam_args)
-        return decorrelated_loss(
-            lambda k: image(scene, p, k, r.spp // 2),
-            lambda im: per_image_loss(im, target, p, cam_args),
-            key,
-        )
+            value = per_image_loss(image(scene, p, key, r.spp), target, p, cam_args, table)
+        else:
+            value = decorrelated_loss(
+                lambda k: image(scene, p, k, r.spp // 2),
+                lambda im: per_image_loss(im, target, p, cam_args, table),
+                key,
+            )
+        vals = scene_values(p) if priors else None
+        for path, prior in priors:
+            value = value + cam_args["priors"][path][prior] * texture_prior(vals[path], prior)
+        if ldr:
+            value = value + cam_args["smoothness"] * curve_smoothness(p["camera"])
+        return value
 
     return loss
 
@@ -109,11 +213,16 @@ def make_loss(cfg: FitConfig, paths, ldr: bool, grey: bool = False, masked: bool
 _LOSS_CACHE: dict = {}
 
 
-def cached_loss(cfg: FitConfig, paths, ldr: bool, grey: bool = False, masked: bool = False):
+def cached_loss(
+    cfg: FitConfig, paths, ldr: bool, grey: bool = False, masked: bool = False, priors=(),
+    scaled=(),
+):
     """One loss object (hence one compiled fit step) per render / loss configuration and
-    parameter set; camera choices are arguments, not part of the program."""
+    parameter set; camera choices and prior weights are arguments, not part of the
+    program."""
     cam = (cfg.camera.bits, cfg.camera.space) if cfg.camera else None
-    key = (cfg.render, cfg.loss, cam, tuple(paths), ldr, grey, masked)
+    key = (cfg.render, cfg.loss, cam, tuple(paths), ldr, grey, masked, tuple(priors),
+           tuple(scaled))
     if key not in _LOSS_CACHE:
-        _LOSS_CACHE[key] = make_loss(cfg, paths, ldr, grey, masked)
+        _LOSS_CACHE[key] = make_loss(cfg, paths, ldr, grey, masked, priors, scaled)
     return _LOSS_CACHE[key]

@@ -16,14 +16,28 @@ from typing import Any
 import numpy as np
 
 from jaxgfx.config import load_config, read_yaml
+from jaxgfx.hdr import ANALYTIC_RESPONSES
 
 from .camera import RESPONSE_MODELS
 from .config import FitConfig, FitParam
 
-__all__ = ["Prepared", "Target", "prepare_fit", "resolve_path", "load_fit_scene", "build_scene"]
+__all__ = [
+    "Prepared",
+    "Target",
+    "prepare_fit",
+    "resolve_path",
+    "load_fit_scene",
+    "build_scene",
+    "is_texel_grid",
+    "check_synthetic_camera",
+    "fixed_response_of",
+]
 
-TARGET_CAMERA_KEYS = ("response", "gamma", "exposure", "bits")
+TARGET_CAMERA_KEYS = (
+    "response", "gamma", "exposure", "exposures", "bits", "white_balance", "noise", "jpeg",
+)
 SYNTHETIC_TARGET_KEYS = ("synthetic", "spp", "seed", "camera")
+PHOTO_KEYS = ("file", "exposure")
 
 
 @dataclasses.dataclass
@@ -38,6 +52,7 @@ class Target:
     mask: np.ndarray | None = None
     bits: int | None = None
     path: str | None = None
+    exposure: float | None = None  # relative exposure (seconds or a ratio) of a photo
 
 
 @dataclasses.dataclass
@@ -49,7 +64,15 @@ class Prepared:
     truth: dict | None
     target_spec: Any
     ldr: bool
-    target: Target | None = None  # file targets, read and checked; synthetic ones are rendered
+    target: Target | None = None  # the first file target (all of them: ``targets``)
+    targets: list | None = None  # file targets, read and checked; synthetic ones are rendered
+    exposures: np.ndarray | None = None  # (N,) exposure of each photo relative to the first
+    fixed_response: Any = None  # the camera's fixed CameraResponse (analytic or loaded)
+    texture_paths: tuple = ()  # fitted parameters that are texel grids
+
+    @property
+    def n_targets(self) -> int:
+        return len(self.exposures) if self.exposures is not None else 1
 
 
 def resolve_path(path: str, base: str | None, what: str) -> str:
@@ -107,7 +130,18 @@ def _param_spec(path, raw) -> FitParam:
         raw = {}
     if not isinstance(raw, dict):
         raise ValueError(f"params.{path}: expected a mapping with init/min/max, got {raw!r}")
-    return load_config(FitParam, raw, where=f"params.{path}")
+    try:
+        return load_config(FitParam, raw, where=f"params.{path}")
+    except ValueError as e:
+        msg = str(e)
+        raise ValueError(msg if msg.startswith("params.") else f"params.{path}.{msg}") from None
+
+
+def is_texel_grid(value) -> bool:
+    """A parameter that a smoothness prior can act on: an ``(H, W, C)`` texel grid (bitmap
+    texture or environment map) with ``H, W >= 2``."""
+    shape = np.shape(value)
+    return len(shape) == 3 and shape[0] >= 2 and shape[1] >= 2
 
 
 def _check_value(path, scene_value, value, what):
@@ -218,24 +252,132 @@ def _synthetic_spec(t: dict, scene):
         ).astype(np.float32)
     ldr = t.get("camera") is not None
     if ldr:
-        cam = t["camera"]
-        if not isinstance(cam, dict):
-            raise ValueError(f"target.camera: expected a mapping, got {cam!r}")
-        bad = set(cam) - set(TARGET_CAMERA_KEYS)
-        if bad:
-            raise ValueError(
-                f"target.camera: unknown keys {sorted(bad)}; expected some of {TARGET_CAMERA_KEYS}"
-            )
-        from jaxgfx._checks import check_choice
-
-        check_choice(cam.get("response", "gamma"), "target.camera.response", RESPONSE_MODELS)
-        if cam.get("bits", 8) not in (8, 16):
-            raise ValueError(f"target.camera.bits: expected 8 or 16, got {cam.get('bits')!r}")
-        for key in ("gamma", "exposure"):
-            v = cam.get(key, 1.0)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
-                raise ValueError(f"target.camera.{key}: expected a positive number, got {v!r}")
+        check_synthetic_camera(t["camera"])
     return truth, ldr
+
+
+def _number(v, where, *, positive=True):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or (
+        positive and not v > 0
+    ):
+        raise ValueError(f"{where}: expected a positive number, got {v!r}")
+    return float(v)
+
+
+def check_synthetic_camera(cam) -> None:
+    """Check ``target.camera`` of a synthetic target: the camera that takes the photos
+    (``response`` a gamma / analytic name, ``gamma``, ``exposure``, ``exposures`` — a bracket
+    of several photos, relative to ``exposure`` —, ``bits``, ``white_balance``, ``noise``
+    ``{gain, read_sigma}`` in normalised units, ``jpeg`` quality)."""
+    if not isinstance(cam, dict):
+        raise ValueError(f"target.camera: expected a mapping, got {cam!r}")
+    bad = set(cam) - set(TARGET_CAMERA_KEYS)
+    if bad:
+        raise ValueError(
+            f"target.camera: unknown keys {sorted(bad)}; expected some of {TARGET_CAMERA_KEYS}"
+        )
+    from jaxgfx._checks import check_choice
+
+    check_choice(cam.get("response", "gamma"), "target.camera.response",
+                 tuple(m for m in RESPONSE_MODELS if m != "table"))
+    if cam.get("bits", 8) not in (8, 16):
+        raise ValueError(f"target.camera.bits: expected 8 or 16, got {cam.get('bits')!r}")
+    for key in ("gamma", "exposure"):
+        _number(cam.get(key, 1.0), f"target.camera.{key}")
+    ex = cam.get("exposures")
+    if ex is not None:
+        if not isinstance(ex, (list, tuple)) or not ex:
+            raise ValueError(f"target.camera.exposures: expected a list of numbers, got {ex!r}")
+        for i, v in enumerate(ex):
+            _number(v, f"target.camera.exposures[{i}]")
+    wb = cam.get("white_balance")
+    if wb is not None:
+        if not isinstance(wb, (list, tuple)) or len(wb) != 3:
+            raise ValueError(f"target.camera.white_balance: expected 3 gains, got {wb!r}")
+        for i, v in enumerate(wb):
+            _number(v, f"target.camera.white_balance[{i}]")
+    noise = cam.get("noise")
+    if noise is not None:
+        if not isinstance(noise, dict) or set(noise) - {"gain", "read_sigma"}:
+            raise ValueError(
+                f"target.camera.noise: expected {{gain, read_sigma}}, got {noise!r}"
+            )
+        for k, v in noise.items():
+            _number(v, f"target.camera.noise.{k}", positive=False)
+            if v < 0:
+                raise ValueError(f"target.camera.noise.{k}: expected >= 0, got {v!r}")
+    q = cam.get("jpeg")
+    if q is not None:
+        if isinstance(q, bool) or not isinstance(q, int) or not 1 <= q <= 100:
+            raise ValueError(f"target.camera.jpeg: expected a quality 1..100, got {q!r}")
+        if cam.get("bits", 8) != 8:
+            raise ValueError("target.camera.jpeg: JPEG photos are 8-bit (set bits: 8)")
+
+
+def _photo_entries(target) -> list:
+    """``[(where, path, exposure or None)]`` of a file target (a path, ``{file, exposure}``
+    or a list of those)."""
+    items = list(target) if isinstance(target, (list, tuple)) else [target]
+    out = []
+    for i, item in enumerate(items):
+        where = f"target[{i}]" if isinstance(target, (list, tuple)) else "target"
+        if isinstance(item, str):
+            out.append((where, item, None))
+        elif isinstance(item, dict) and "file" in item and "synthetic" not in item:
+            bad = set(item) - set(PHOTO_KEYS)
+            if bad:
+                raise ValueError(f"{where}: unknown keys {sorted(bad)}; expected {PHOTO_KEYS}")
+            ex = item.get("exposure")
+            if ex is not None and ex != "exif":
+                ex = _number(ex, f"{where}.exposure")
+            out.append((where, item["file"], ex))
+        else:
+            raise ValueError(
+                f"{where}: expected a photo path or {{file: PATH, exposure: SECONDS | exif}}"
+                + (" (a synthetic target cannot be one of a list)"
+                   if isinstance(item, dict) and "synthetic" in item else "")
+            )
+        if not isinstance(out[-1][1], str) or not out[-1][1]:
+            raise ValueError(f"{where}.file: expected a file path, got {out[-1][1]!r}")
+    return out
+
+
+def _photo_exposure(where, path, given, n_photos):
+    """The exposure of one photo of a bracket: the given number, else (``exif`` or not
+    given) EXIF ExposureTime; a bracket of several photos needs one for each."""
+    if given is not None and given != "exif":
+        return given
+    from jaxgfx import io
+
+    t = io.exif_exposure_time(path)
+    if t is None and (given == "exif" or n_photos > 1):
+        raise ValueError(
+            f"{where}: {path}: no exposure information (no EXIF ExposureTime); a bracket of "
+            f"several photos needs each photo's exposure: give {where}.exposure (seconds or a "
+            "ratio)"
+        )
+    return t
+
+
+def fixed_response_of(cfg: FitConfig, base: str | None, channels: int):
+    """The camera's fixed :class:`~jaxgfx.hdr.CameraResponse` (an analytic curve, or the
+    ``from`` file checked against ``camera.bits``), or None; also the start of a free-form
+    fit from a file."""
+    from jaxgfx import hdr
+
+    spec = cfg.camera.response
+    if spec.source is not None:
+        path = resolve_path(spec.source, base, "camera.response.from")
+        resp = hdr.load_response(path, bits=cfg.camera.bits)
+        if resp.channels not in (1, channels):
+            raise ValueError(
+                f"camera.response.from: {path}: a {resp.channels}-channel response cannot "
+                f"linearise {channels}-channel targets"
+            )
+        return resp
+    if spec.model in ANALYTIC_RESPONSES:
+        return hdr.CameraResponse.analytic(spec.model, anchor="unit")
+    return None
 
 
 def prepare_fit(cfg: FitConfig, *, base_dir: str | None = None) -> Prepared:
@@ -252,13 +394,26 @@ def prepare_fit(cfg: FitConfig, *, base_dir: str | None = None) -> Prepared:
     if not isinstance(cfg, FitConfig):
         raise TypeError(f"cfg: expected a FitConfig, got {type(cfg).__name__}")
     scene = load_fit_scene(cfg, base_dir)
-    paths, init, bounds = [], {}, {}
+    paths, init, bounds, textures = [], {}, {}, []
     for path, raw in cfg.params.items():
         spec = _param_spec(path, raw)
         try:
             current = scene.get(path)
         except (ValueError, IndexError, AttributeError) as e:
             raise ValueError(f"params.{path}: unknown parameter path ({e})") from None
+        if spec.prior is not None:
+            if not is_texel_grid(current):
+                raise ValueError(
+                    f"params.{path}.prior: a smoothness prior needs a texel grid (a bitmap "
+                    f"texture or environment map, shape (H, W, C)); {path} has shape "
+                    f"{tuple(np.shape(current))}"
+                )
+            if "laplacian" in spec.prior and min(np.shape(current)[:2]) < 3:
+                raise ValueError(
+                    f"params.{path}.prior.laplacian: needs a grid of at least 3x3 texels, got "
+                    f"{tuple(np.shape(current))}; use tv"
+                )
+            textures.append(path)
         x0 = np.asarray(current, np.float64) if spec.init is None else spec.init
         x0 = np.broadcast_to(_check_value(path, current, x0, "init"), current.shape)
         lo = None if spec.min is None else _check_value(path, current, spec.min, "min")
@@ -277,28 +432,60 @@ def prepare_fit(cfg: FitConfig, *, base_dir: str | None = None) -> Prepared:
         bounds[path] = (lo_b, hi_b)
 
     h, w = scene.height, scene.width
-    truth, target = None, None
-    if isinstance(cfg.target, dict):
+    truth, targets, exposures = None, None, None
+    if isinstance(cfg.target, dict) and "file" not in cfg.target:
         truth, ldr = _synthetic_spec(dict(cfg.target), scene)
         target_spec = dict(cfg.target)
+        if ldr:
+            tc = target_spec["camera"]
+            exposures = np.asarray(tc.get("exposures", [1.0]), np.float64)
+            exposures = exposures / exposures[0]
     else:
-        path = resolve_path(cfg.target, base_dir, "target")
-        target = _read_target_file(path)
-        th, tw = target.pixels.shape[:2]
-        if (th, tw) != (h, w):
+        entries = _photo_entries(cfg.target)
+        targets, seconds = [], []
+        for where, given_path, given_exposure in entries:
+            path = resolve_path(given_path, base_dir, where)
+            t = _read_target_file(path)
+            th, tw = t.pixels.shape[:2]
+            if (th, tw) != (h, w):
+                raise ValueError(
+                    f"{where}: {path}: size {tw}x{th} (W x H) differs from the scene camera's "
+                    f"{w}x{h}; set render.width/height or resize the target"
+                )
+            if targets and (t.bits, t.grey) != (targets[0].bits, targets[0].grey):
+                raise ValueError(
+                    f"{where}: {path}: a {t.bits or 'float'}-bit {'grey' if t.grey else 'RGB'}"
+                    f" target among {targets[0].bits or 'float'}-bit "
+                    f"{'grey' if targets[0].grey else 'RGB'} ones; all targets of a fit must "
+                    "be of one kind"
+                )
+            if t.bits is not None:
+                t.exposure = _photo_exposure(where, path, given_exposure, len(entries))
+                seconds.append(t.exposure)
+            targets.append(t)
+        ldr = targets[0].bits is not None
+        if not ldr and len(targets) > 1:
+            raise ValueError("target: several targets must be photos (8/16-bit) of a bracket")
+        target_spec = [t.path for t in targets] if len(targets) > 1 else targets[0].path
+        if ldr:
+            s0 = seconds[0]
+            exposures = np.asarray([1.0 if s0 is None else v / s0 for v in seconds])
+        if ldr and cfg.camera is not None and cfg.camera.bits != targets[0].bits:
             raise ValueError(
-                f"target: size {tw}x{th} (W x H) differs from the scene camera's {w}x{h}; "
-                "set render.width/height or resize the target"
-            )
-        ldr = target.bits is not None
-        target_spec = path
-        if ldr and cfg.camera is not None and cfg.camera.bits != target.bits:
-            raise ValueError(
-                f"camera.bits: the target {path} is a {target.bits}-bit photo; expected "
-                f"camera.bits: {target.bits}, got {cfg.camera.bits}"
+                f"camera.bits: the target {targets[0].path} is a {targets[0].bits}-bit photo; "
+                f"expected camera.bits: {targets[0].bits}, got {cfg.camera.bits}"
             )
     if ldr and cfg.camera is None:
         raise ValueError("camera: an LDR (8-bit) target needs a camera section (response model)")
     if not ldr and cfg.camera is not None:
         raise ValueError("camera: only LDR targets (PNG/JPEG or a synthetic camera) use a camera")
-    return Prepared(scene, paths, init, bounds, truth, target_spec, ldr, target)
+    fixed = None
+    if ldr:
+        channels = 1 if (targets and targets[0].grey) else 3
+        fixed = fixed_response_of(cfg, base_dir, channels)
+        if cfg.camera.white_balance.fit and channels == 1:
+            raise ValueError("camera.white_balance.fit: a grey target has no colour balance")
+    return Prepared(
+        scene, paths, init, bounds, truth, target_spec, ldr,
+        targets[0] if targets else None, targets, exposures, fixed, tuple(textures),
+    )
