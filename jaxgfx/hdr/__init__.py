@@ -15,10 +15,10 @@ from .response import MIN_USABLE_PIXELS as MIN_USABLE_PIXELS
 from .response import RESPONSE_METHODS as RESPONSE_METHODS
 from .response import check_response_options as check_response_options
 from .response import recover_response as recover_response
-from .synthetic import CANON_EOS_5D_MARK_II as CANON_EOS_5D_MARK_II
 from .response_io import RESPONSE_FILE_FORMAT as RESPONSE_FILE_FORMAT
 from .response_io import load_response as load_response
 from .response_io import save_response as save_response
+from .synthetic import CANON_EOS_5D_MARK_II as CANON_EOS_5D_MARK_II
 from .synthetic import SYNTHETIC_RESPONSES as SYNTHETIC_RESPONSES
 from .synthetic import BracketedStack as BracketedStack
 from .synthetic import jpeg_roundtrip as jpeg_roundtrip
