@@ -22,7 +22,7 @@ def test_aliases_are_their_owners_objects():
     assert _global._ACES is color.ACES_NARKOWICZ2015
     assert textured._LUMA is color.LUMINANCE_WEIGHTS["rec709"]
     assert set(hdr.SYNTHETIC_RESPONSES) - {"gamma2.2"} == set(hdr.ANALYTIC_RESPONSES) - {"linear"}
-    assert fit.RESPONSE_MODELS == ("gamma", *hdr.ANALYTIC_RESPONSES)
+    assert fit.RESPONSE_MODELS == ("gamma", "table", *hdr.ANALYTIC_RESPONSES)
     assert set(hdr.RESPONSE_KINDS) == {"table", "gamma", "polynomial", *hdr.ANALYTIC_RESPONSES}
     assert io.kind_of("a.NRW") == "raw" and io.kind_of("x.exr") == "hdr"
     assert io.kind_of("y.jpeg") == "ldr" and io.kind_of("z.npy") == "npy"

@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_choice, check_nonnegative, check_positive
+from ..color import LUMINANCE_WEIGHTS
 from ._curves import ANALYTIC_KINDS
 from ._model import CameraResponse
 from .camera import Camera
@@ -404,7 +405,7 @@ def _patch_scene(rng, height, width, patch, dynamic_range):
     rgb = rng.uniform(0.0, 1.0, (gh, gw, 3)) ** 2
     grey = rng.uniform(0.0, 1.0, (gh, gw, 1))
     rgb = grey * rgb.mean(-1, keepdims=True) + (1 - grey) * rgb + 0.01
-    y = rgb @ np.array([0.2126, 0.7152, 0.0722])
+    y = rgb @ np.array(LUMINANCE_WEIGHTS["rec709"])
     lum = np.exp(rng.uniform(np.log(1.0 / dynamic_range), 0.0, (gh, gw)))
     rgb = rgb * (lum / y)[..., None]
     img = np.kron(rgb, np.ones((patch, patch, 1)))[:height, :width]
