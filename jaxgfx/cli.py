@@ -116,6 +116,12 @@ def _calibrate_arguments(p):
         default=None,
         help="RAW white balance: as_shot (default) | grey_world | white_patch",
     )
+    p.add_argument(
+        "--flat-field",
+        default=None,
+        help="RAW flat-field frame (same camera and size): fits the lens vignetting and "
+        "divides it out before the colour step (vignetting.png, camera.json)",
+    )
 
 
 def calibrate_job(args):
@@ -139,7 +145,7 @@ def calibrate_job(args):
             overrides["response"] = {**section, "method": args.method}
     if getattr(args, "tonemap", None):
         overrides["tonemap"] = [t.strip() for t in args.tonemap.split(",") if t.strip()]
-    for key in ("colorspace", "white_balance"):
+    for key in ("colorspace", "white_balance", "flat_field"):
         if getattr(args, key, None) is not None:
             overrides[key] = getattr(args, key)
     cfg = load_config(CalibrateConfig, args.config, **overrides)

@@ -117,6 +117,14 @@ __all__ += [
 
 __all__ += ["LOO_BANDS", "LeaveOneOut", "leave_one_out"]
 
+# --- camera profiles: the fitted camera as one file (docs/raw_calibration.md)
+from .camera_profile import CAMERA_PROFILE_FORMAT as CAMERA_PROFILE_FORMAT  # noqa: E402
+from .camera_profile import CameraProfile as CameraProfile  # noqa: E402
+from .camera_profile import load_camera_profile as load_camera_profile  # noqa: E402
+from .camera_profile import save_camera_profile as save_camera_profile  # noqa: E402
+
+__all__ += ["CAMERA_PROFILE_FORMAT", "CameraProfile", "load_camera_profile", "save_camera_profile"]
+
 # --- exposure fusion (docs/tonemap.md; owner: tonemap)
 from .fusion import exposure_fusion as exposure_fusion  # noqa: E402
 

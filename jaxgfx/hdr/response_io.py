@@ -20,7 +20,13 @@ import numpy as np
 
 from ._model import RESPONSE_KINDS, CameraResponse
 
-__all__ = ["save_response", "load_response", "RESPONSE_FILE_FORMAT"]
+__all__ = [
+    "save_response",
+    "load_response",
+    "response_to_dict",
+    "response_from_dict",
+    "RESPONSE_FILE_FORMAT",
+]
 
 RESPONSE_FILE_FORMAT = "jaxgfx-response"
 """The ``format`` field of a response file written by :func:`save_response`."""
@@ -46,16 +52,9 @@ def _array_from(entry, path, name):
         raise ValueError(f"response file {path}: {name}: not an array ({e})") from None
 
 
-def save_response(path, response: CameraResponse) -> str:
-    """Write ``response`` to the JSON file ``path`` (format in the module doc); returns the
-    path. :func:`load_response` reads it back with identical fields and arrays.
-
-    >>> import tempfile, os
-    >>> r = CameraResponse.gamma(2.2, channels=3, code_max=255.0)
-    >>> p = save_response(os.path.join(tempfile.mkdtemp(), "camera.json"), r)
-    >>> bool(np.all(np.asarray(load_response(p, bits=8).params) == np.asarray(r.params)))
-    True
-    """
+def response_to_dict(response: CameraResponse) -> dict:
+    """The JSON-ready dict :func:`save_response` writes (also embedded in a camera profile,
+    :func:`jaxgfx.hdr.save_camera_profile`); :func:`response_from_dict` inverts it."""
     if not isinstance(response, CameraResponse):
         raise TypeError(f"response: expected a CameraResponse, got {type(response).__name__}")
     diag = {
@@ -63,7 +62,7 @@ def save_response(path, response: CameraResponse) -> str:
         for k, v in response.diagnostics.items()
         if hasattr(v, "shape") or isinstance(v, (int, float))
     }
-    doc = {
+    return {
         "format": RESPONSE_FILE_FORMAT,
         "version": 1,
         "kind": response.kind,
@@ -76,6 +75,19 @@ def save_response(path, response: CameraResponse) -> str:
         else _array_entry(response.exposure_ratios),
         "diagnostics": diag,
     }
+
+
+def save_response(path, response: CameraResponse) -> str:
+    """Write ``response`` to the JSON file ``path`` (format in the module doc); returns the
+    path. :func:`load_response` reads it back with identical fields and arrays.
+
+    >>> import tempfile, os
+    >>> r = CameraResponse.gamma(2.2, channels=3, code_max=255.0)
+    >>> p = save_response(os.path.join(tempfile.mkdtemp(), "camera.json"), r)
+    >>> bool(np.all(np.asarray(load_response(p, bits=8).params) == np.asarray(r.params)))
+    True
+    """
+    doc = response_to_dict(response)
     path = os.fspath(path)
     with open(path, "w", encoding="utf-8") as f:
         json.dump(doc, f, indent=1)
@@ -87,8 +99,9 @@ def _bits_of(code_max: float):
 
 
 def load_response(path, *, bits: int | None = None) -> CameraResponse:
-    """Read a :class:`CameraResponse` from ``path``: a file of :func:`save_response`, or the
-    ``report.json`` of ``jaxgfx calibrate`` (its ``response.summary``).
+    """Read a :class:`CameraResponse` from ``path``: a file of :func:`save_response`, the
+    ``report.json`` of ``jaxgfx calibrate`` (its ``response.summary``), or a camera profile
+    (``camera.json``, :func:`jaxgfx.hdr.save_camera_profile`, its ``response``).
 
     ``bits`` (8 or 16): the bit depth of the photos it will linearise; a response fitted on
     levels of another bit depth raises ``ValueError`` (a response fitted on float levels,
@@ -107,8 +120,11 @@ def load_response(path, *, bits: int | None = None) -> CameraResponse:
     if not isinstance(doc, dict):
         raise ValueError(f"response file {path}: expected a JSON object")
     if doc.get("format") != RESPONSE_FILE_FORMAT:
-        summary = doc.get("response", {}).get("summary") if isinstance(doc.get("response"),
-                                                                       dict) else None
+        section = doc.get("response")
+        section = section if isinstance(section, dict) else {}
+        # a camera profile (jaxgfx.hdr.save_camera_profile) embeds a response file's dict
+        summary = section if section.get("format") == RESPONSE_FILE_FORMAT else None
+        summary = summary or section.get("summary")
         if not isinstance(summary, dict):
             raise ValueError(
                 f"response file {path}: neither a response file (format "
@@ -116,6 +132,14 @@ def load_response(path, *, bits: int | None = None) -> CameraResponse:
                 "(a RAW calibration has no response curve)"
             )
         doc = summary
+    return response_from_dict(doc, path, bits=bits)
+
+
+def response_from_dict(doc: dict, path, *, bits: int | None = None) -> CameraResponse:
+    """The :class:`CameraResponse` of a dict of :func:`response_to_dict` (``path``: the file
+    it came from, for the messages; ``bits`` as in :func:`load_response`)."""
+    if not isinstance(doc, dict):
+        raise ValueError(f"response file {path}: expected a JSON object for the response")
     missing = [k for k in _FIELDS if k not in doc]
     if missing:
         raise ValueError(f"response file {path}: missing field(s) {', '.join(missing)}")

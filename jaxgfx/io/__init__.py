@@ -21,6 +21,7 @@ from .hdr_rgbe import read_hdr_header as read_hdr_header
 from .hdr_rgbe import write_hdr as write_hdr
 from .ldr import exif_exposure_time as exif_exposure_time
 from .ldr import exposure_order as exposure_order
+from .ldr import exposure_values as exposure_values
 from .ldr import parse_exposure_time as parse_exposure_time
 from .ldr import read_image as read_image
 from .ldr import read_ldr_stack as read_ldr_stack
@@ -55,6 +56,7 @@ __all__ = [
     "exif_exposure_time",
     "parse_exposure_time",
     "exposure_order",
+    "exposure_values",
     "read_any",
     "write_any",
 ]

@@ -217,6 +217,33 @@ def exposure_order(times) -> np.ndarray:
     return np.argsort(np.asarray(times, np.float64), kind="stable")
 
 
+def exposure_values(times, f_numbers=None, isos=None, *, names=None) -> np.ndarray:
+    """Relative exposures of a bracket: ``time x (N_ref / N)^2 x (ISO / ISO_ref)``.
+
+    ``times``: ``(N,)`` seconds; ``f_numbers`` / ``isos``: one per frame (``None`` entries:
+    unknown). A factor is applied only when every frame has its value and they differ (a bracket
+    in time alone is returned unchanged); the reference is the first frame's, so the result is
+    seconds at the first frame's aperture and ISO. ``names`` (one per frame) name the frame
+    in errors: a non-finite or non-positive f-number or ISO raises ``ValueError``.
+
+    >>> exposure_values([1.0, 1.0, 1.0], [4.0, 2.0, 4.0], [100, 100, 400]).tolist()
+    [1.0, 4.0, 4.0]
+    """
+    t = np.asarray(times, np.float64).ravel()
+    names = names if names is not None else [f"frame {i}" for i in range(t.size)]
+    for label, vals, power in (("f-number", f_numbers, -2.0), ("ISO", isos, 1.0)):
+        if vals is None or len(vals) != t.size or any(v is None for v in vals):
+            continue
+        v = np.asarray(vals, np.float64)
+        for name, x in zip(names, v, strict=True):
+            if not (np.isfinite(x) and x > 0):
+                raise ValueError(f"{name}: {label} must be finite and > 0, got {x:g}")
+        if np.allclose(v, v[0], rtol=1e-6):
+            continue
+        t = t * (v / v[0]) ** power
+    return t
+
+
 def exif_exposure_time(path) -> float | None:
     """EXIF ExposureTime (tag 0x829A, seconds) of an image file, or ``None`` if absent.
 
@@ -241,6 +268,26 @@ def exif_exposure_time(path) -> float | None:
     except (UnidentifiedImageError, OSError, SyntaxError, tifffile.TiffFileError) as e:
         raise ValueError(f"'{p}': cannot read EXIF ({e})") from None
     return None if v is None else float(v)
+
+
+def _exif_aperture_iso(path) -> tuple[float | None, float | None]:
+    """EXIF FNumber (0x829D) and ISO (0x8827) of a Pillow-readable image (``None``: absent or
+    unreadable; TIFFs: not read here)."""
+    p = existing_file(path)
+    if p.suffix.lower() in _TIFF_EXT:
+        return None, None
+    try:
+        with Image.open(p) as im:
+            exif = im.getexif()
+            sub = exif.get_ifd(_EXIF_IFD)
+            fn, iso = sub.get(33437, exif.get(33437)), sub.get(34855, exif.get(34855))
+    except (UnidentifiedImageError, OSError, SyntaxError):
+        return None, None
+    iso = iso[0] if isinstance(iso, (tuple, list)) and iso else iso
+    try:
+        return (None if fn is None else float(fn)), (None if iso is None else float(iso))
+    except (TypeError, ValueError, ZeroDivisionError):
+        return None, None
 
 
 def _read_sidecar(sidecar, names: list[str]) -> list[float]:
@@ -278,7 +325,8 @@ def read_ldr_stack(paths, *, exposure_times=None, sidecar=None, return_order: bo
     given), ``sidecar`` (a ``.txt`` with
     N numbers or fractions like ``1/250``, or a ``.yaml`` / ``.json`` holding a list, a
     ``{"exposure_times": [...]}`` mapping, or ``{file name: time}``), else each file's EXIF
-    ExposureTime (:func:`exif_exposure_time`).
+    ExposureTime (:func:`exif_exposure_time`), times the aperture and ISO ratios when the EXIF
+    FNumber / ISO differ between frames (:func:`exposure_values`).
 
     Returns ``(images, times)``, or ``(images, times, order)`` with ``return_order=True``:
     ``images`` ``(N, H, W, 3)`` uint8 or uint16 (grey is replicated to 3 channels, alpha
@@ -314,6 +362,12 @@ def read_ldr_stack(paths, *, exposure_times=None, sidecar=None, return_order: bo
                     "pass exposure_times= or a sidecar file"
                 )
             times[i] = v
+        # frames that differ in aperture or ISO too: exposure = time x aperture^2 x ISO ratio
+        ap_iso = [_exif_aperture_iso(f) for f in files]
+        times = exposure_values(
+            times, [a for a, _ in ap_iso], [i for _, i in ap_iso],
+            names=[f"'{f}': EXIF" for f in files],
+        )  # fmt: skip
     images = []
     for f in files:
         img = read_image(f)

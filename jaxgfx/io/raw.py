@@ -278,12 +278,14 @@ def read_raw_stack(paths, *, exposure_times=None) -> tuple[list[RawImage], np.nd
     """Read a bracket of RAW files, sorted by exposure time (shortest first).
 
     ``exposure_times``: ``N`` positive seconds in ``paths`` order (``None`` or empty: each
-    file's EXIF ExposureTime). Returns ``(raws, times)``: the :class:`RawImage` frames and
+    file's EXIF ExposureTime, times the aperture and ISO ratios when the frames differ in them
+    too, :func:`jaxgfx.io.exposure_values`; explicit times are taken as the exposures).
+    Returns ``(raws, times)``: the :class:`RawImage` frames and
     ``(N,)`` float64 seconds, ascending (:func:`jaxgfx.io.exposure_order`). Raises
     ``ValueError`` naming the file with no (or a zero) exposure time, or when the CFA
     patterns or mosaic sizes differ.
     """
-    from .ldr import exposure_order, parse_exposure_time
+    from .ldr import exposure_order, exposure_values, parse_exposure_time
 
     if isinstance(paths, (str, bytes)) or not hasattr(paths, "__len__") or len(paths) == 0:
         raise ValueError(f"paths: expected a non-empty list of RAW files, got {paths!r}")
@@ -303,6 +305,11 @@ def read_raw_stack(paths, *, exposure_times=None) -> tuple[list[RawImage], np.nd
             if r.exposure_time is None:
                 raise ValueError(f"'{r.path}': no EXIF ExposureTime; pass exposure times (--times)")
             times.append(parse_exposure_time(r.exposure_time, f"'{r.path}': EXIF ExposureTime"))
+        # frames that differ in aperture or ISO too: exposure = time x aperture^2 x ISO ratio
+        times = exposure_values(
+            times, [r.f_number for r in raws], [r.iso for r in raws],
+            names=[f"'{r.path}': EXIF" for r in raws],
+        )  # fmt: skip
     patterns = {r.cfa_pattern for r in raws}
     if len(patterns) != 1:
         raise ValueError(f"paths: RAW files have different CFA patterns {sorted(patterns)}")

@@ -52,6 +52,9 @@ from .linearity import linearity_check as linearity_check
 from .ratios import ExposureRatios as ExposureRatios
 from .ratios import estimate_exposure_ratios as estimate_exposure_ratios
 from .ratios import pairwise_exposure_ratio as pairwise_exposure_ratio
+from .vignetting import Vignetting as Vignetting
+from .vignetting import devignette as devignette
+from .vignetting import fit_vignetting as fit_vignetting
 
 __all__ = [
     "CFA_PATTERNS",
@@ -88,4 +91,7 @@ __all__ = [
     "color_transform",
     "apply_color_transform",
     "exr_chromaticities",
+    "Vignetting",
+    "fit_vignetting",
+    "devignette",
 ]

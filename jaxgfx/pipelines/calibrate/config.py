@@ -116,8 +116,11 @@ class CalibrateConfig:
     tonemap: tuple[str, ...] = ()
     colorspace: str = "rec709"
     white_balance: str = "as_shot"
+    flat_field: str | None = None
 
     def __post_init__(self):
+        if self.flat_field is not None and not isinstance(self.flat_field, str):
+            raise ValueError(f"flat_field: expected a RAW file path, got {self.flat_field!r}")
         check_choice(self.demosaic, "demosaic", DEMOSAIC_METHODS)
         check_choice(self.colorspace, "colorspace", COLORSPACES)
         check_choice(self.white_balance, "white_balance", RAW_WHITE_BALANCES)

@@ -109,6 +109,12 @@ def run_calibrate(
     job = _as_job(job, inputs, out_dir, progress, overwrite)
     files = collect_inputs(job.inputs)
     kind = stack_kind(files)
+    ff = job.config.flat_field
+    if ff is not None:
+        if kind != "raw":
+            raise ValueError(f"flat_field: a RAW flat-field frame needs RAW inputs, not {kind}")
+        if not os.path.isfile(ff):
+            raise FileNotFoundError(f"flat_field: file not found: {ff}")
     t_all = time.perf_counter()
     with StagedDir(job.out, report.OUTPUT_NAMES, overwrite=job.overwrite) as stage:
         steps = _Steps(total=5 if files else 6, enabled=job.progress)

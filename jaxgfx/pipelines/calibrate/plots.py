@@ -109,3 +109,31 @@ def _preview(radiance: np.ndarray, key: float) -> np.ndarray:
     from jaxgfx.pipelines.tonemap import tonemap_image
 
     return tonemap_image(radiance, "reinhard", key=key)
+
+
+def _plot_vignetting(path, vig):
+    """``vignetting.png``: the fitted falloff V(r) against radius, and its map."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    v = np.asarray(vig.falloff(), np.float64)
+    r_corner = float(np.max(np.asarray(vig.radius(
+        np.array([0.0, 0.0, vig.shape[0] - 1.0, vig.shape[0] - 1.0]),
+        np.array([0.0, vig.shape[1] - 1.0, 0.0, vig.shape[1] - 1.0])))))  # fmt: skip
+    r = np.linspace(0.0, r_corner, 200)
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.6))
+    a1.plot(r, np.asarray(vig.of_radius(r)), lw=2)
+    a1.set_xlabel("r (1 = half the image diagonal)")
+    a1.set_ylabel("V(r), relative illumination")
+    a1.set_title(f"corner falloff {float(vig.corner_falloff()):.3f}")
+    a1.grid(alpha=0.3)
+    im = a2.imshow(v, cmap="viridis")
+    a2.plot([float(vig.center[1])], [float(vig.center[0])], "r+", ms=12)
+    a2.set_title("V over the frame (+ optical centre)")
+    fig.colorbar(im, ax=a2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+

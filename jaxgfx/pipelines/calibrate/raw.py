@@ -2,7 +2,10 @@
 merge the normalised mosaics with the measured exposure ratios and noise model (one call,
 :func:`merge_mosaics`), demosaic, then white-balance and convert camera RGB to
 ``config.colorspace`` (:func:`jaxgfx.hdr.raw.color_transform`: the DNG colour tags, or
-LibRaw's matrix)."""
+LibRaw's matrix). With ``config.flat_field`` the lens vignetting is fitted from that frame
+(:func:`jaxgfx.hdr.raw.fit_vignetting`) and divided out of the merged mosaic: for a linear
+sensor that equals dividing every frame by it, while the saturation test of the merge still
+sees the recorded levels."""
 
 from __future__ import annotations
 
@@ -53,10 +56,23 @@ def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
     mosaics = np.stack([r.mosaic for r in raws]).astype(np.float32)
     black = np.asarray(raws[0].black_level, np.float32)
     white = float(raws[0].white_level)
+    vig = None
+    if cfg.flat_field is not None:
+        flat = io.read_raw(cfg.flat_field)
+        if flat.mosaic.shape != mosaics.shape[1:]:
+            raise ValueError(
+                f"flat_field '{cfg.flat_field}': mosaic {flat.mosaic.shape} differs from the "
+                f"bracket's {mosaics.shape[1:]}; use a flat field of the same camera and size"
+            )
+        steps.start("vignetting")
+        vig = hdr.raw.fit_vignetting(flat.normalized())
     steps.start("raw calibration")
     cal = hdr.calibrate_raw_stack(mosaics, times, cfa_pattern=pattern, black=black, white=white)
     steps.start("merge")
     rad, var = merge_mosaics(raws, times, cal)
+    if vig is not None:  # linear sensor: dividing the merge = dividing each frame by V
+        rad, var = hdr.raw.devignette(np.asarray(rad)[..., 0], vig, np.asarray(var)[..., 0])
+        rad, var = np.asarray(rad)[..., None], np.asarray(var)[..., None]
     steps.start("demosaic")
     rgb = np.asarray(image.demosaic(np.asarray(rad)[..., 0], pattern, method=cfg.demosaic))
     var_rgb = np.asarray(
@@ -74,4 +90,5 @@ def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
         times=times,
         image_shape=mosaics.shape,
         raw_calibration=cal,
+        vignetting=vig,
     )

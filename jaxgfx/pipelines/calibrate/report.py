@@ -31,6 +31,8 @@ OUTPUT_NAMES = (
     "preview.png",
     "response.png",
     "loo.png",
+    "vignetting.png",
+    "camera.json",
     "report.json",
 ) + tuple(f"tonemap_{op}.png" for op in TONEMAP_METHODS)
 """Every file a calibration run may write into ``out`` (a RAW run writes no response.png)."""
@@ -78,6 +80,7 @@ class CalibrateResult:
     alignment_shifts: Any = None
     synthetic: dict | None = None
     color: Any = None  # hdr.raw.ColorTransform (RAW): camera RGB -> the output colour space
+    vignetting: Any = None  # hdr.raw.Vignetting (RAW with a flat field)
 
 
 def write_outputs(folder, result: CalibrateResult, cfg) -> list[str]:
@@ -103,6 +106,11 @@ def write_outputs(folder, result: CalibrateResult, cfg) -> list[str]:
         for op in dict.fromkeys(cfg.tonemap):
             io.write_png(os.path.join(folder, f"tonemap_{op}.png"), tonemap_image(radiance, op))
             names.append(f"tonemap_{op}.png")
+    _write_camera_profile(os.path.join(folder, "camera.json"), result)
+    names.append("camera.json")
+    if result.vignetting is not None:
+        plots._plot_vignetting(os.path.join(folder, "vignetting.png"), result.vignetting)
+        names.append("vignetting.png")
     if result.loo is not None:
         plots._plot_loo(os.path.join(folder, "loo.png"), result.loo)
         names.append("loo.png")
@@ -116,6 +124,25 @@ def write_outputs(folder, result: CalibrateResult, cfg) -> list[str]:
     return names
 
 
+def _write_camera_profile(path, result: CalibrateResult) -> None:
+    """``camera.json`` (:func:`jaxgfx.hdr.save_camera_profile`): what this run fitted."""
+    from jaxgfx import hdr
+
+    kw: dict = {"response": result.response, "vignetting": result.vignetting}
+    if result.color is not None:
+        ct = result.color
+        neutral = np.asarray(ct.neutral, np.float64)
+        kw.update(
+            white_balance_gains=neutral.max() / neutral,
+            matrix=np.asarray(ct.matrix, np.float64),
+            colorspace=ct.colorspace,
+            source={"matrix": ct.matrix_source, "white_balance": ct.white_balance_source},
+        )
+    if result.raw_calibration is not None:
+        kw["noise"] = result.raw_calibration.noise
+    hdr.save_camera_profile(path, **kw)
+
+
 _OUTPUT_KEYS = {
     "radiance.exr": "radiance",
     "variance.exr": "variance",
@@ -123,6 +150,8 @@ _OUTPUT_KEYS = {
     "preview.png": "preview",
     "response.png": "response_plot",
     "loo.png": "loo_plot",
+    "vignetting.png": "vignetting_plot",
+    "camera.json": "camera_profile",
     "report.json": "report",
     **{n: n[: -len(".png")] for n in OUTPUT_NAMES if n.startswith("tonemap_")},
 }
@@ -145,6 +174,8 @@ def build_report(job, files, result: CalibrateResult, timings: dict, outputs):
         report["raw_calibration"] = _jsonable(result.raw_calibration.to_dict())
     if result.color is not None:
         report["color"] = result.color.to_dict()
+    if result.vignetting is not None:
+        report["vignetting"] = {"flat_field": cfg.flat_field, **result.vignetting.to_dict()}
     if result.response is not None:
         report["response"] = {
             "method": cfg.response.method,
