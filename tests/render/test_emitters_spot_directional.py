@@ -154,7 +154,7 @@ def test_spot_sample_gradients_vs_fd(x64):
     assert float(g[0]) > 0 and float(g[1]) > 0  # a wider cone / beam: more light
 
 
-@pytest.mark.slow  # measured 25 s (compile of value_and_grad through path_radiance, x2)
+@pytest.mark.slow  # measured 33 s (compile of value_and_grad through path_radiance, x2)
 def test_render_gradients_vs_fd(x64):
     # end to end through the path integrator and Scene.replace; the transition region holds
     # XZ[2] (theta 15.5 deg), so d/dcutoff and d/dbeam are nonzero
