@@ -8,7 +8,7 @@ from collections.abc import Mapping
 import jax
 import jax.numpy as jnp
 
-from jaxgfx.render.bsdf import make_bsdf
+from jaxgfx.render.bsdf import BSDF_TYPES, make_bsdf
 from jaxgfx.render.bsdf.textured import (
     Textured,
     is_texture_desc,
@@ -55,7 +55,10 @@ def material_from_desc(desc, *, where="material", base_dir=None):
     colour textures non-negative.
     """
     desc = dict(desc)
-    tex_keys = [k for k, v in desc.items() if k != "type" and is_texture_desc(v)]
+    # nested BSDF descriptions (blendbsdf's bsdf0 / bsdf1) are not textures
+    tex_keys = [
+        k for k, v in desc.items() if k != "type" and is_texture_desc(v) and not _is_bsdf_desc(v)
+    ]
     pre = f"{where}." if where else ""
     if not tex_keys:
         return make_bsdf(desc)
@@ -79,6 +82,10 @@ def material_from_desc(desc, *, where="material", base_dir=None):
             raise ValueError(f"{pre}{k}: texture values must be {need}, got min {lo}")
         textures[k] = tex
     return Textured(bsdf, textures)
+
+
+def _is_bsdf_desc(v):
+    return isinstance(v, Mapping) and v.get("type") in BSDF_TYPES
 
 
 def _concat(shapes):
