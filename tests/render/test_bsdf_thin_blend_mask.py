@@ -80,10 +80,13 @@ def test_thindielectric_choice_gradient_vs_fd(x64):
     assert np.isfinite(grad(jnp.float64(1.0)))  # eta -> 1 finite
 
 
-BLEND = BlendBSDF(
-    {"type": "diffuse", "reflectance": [0.2, 0.5, 0.8]},
-    {"type": "roughconductor", "alpha": 0.2},
-    weight=0.35,
+BLEND = make_bsdf(
+    {
+        "type": "blendbsdf",
+        "bsdf0": {"type": "diffuse", "reflectance": [0.2, 0.5, 0.8]},
+        "bsdf1": {"type": "roughconductor", "alpha": 0.2},
+        "weight": 0.35,
+    }
 )
 _pdf = jax.jit(lambda b, wo, w: b.pdf(wo, w))
 _eval = jax.jit(lambda b, wo, wi: b.eval(wo, wi))
@@ -127,18 +130,20 @@ def test_blendbsdf_weight_zero_and_one_is_the_component(w):
 
 def test_blendbsdf_delta_component_and_weight_gradient_vs_fd(x64):
     # glass (delta) blended with diffuse: delta samples carry w_k, the choice's derivative
-    b0 = {"type": "diffuse", "reflectance": 0.5}
+    b0 = make_bsdf({"type": "diffuse", "reflectance": 0.5})
+    rc = make_bsdf({"type": "roughconductor", "alpha": 0.3})
+    glass_b = make_bsdf({"type": "dielectric", "eta": 1.5})
     wo, wi = _dir(0.8), _dir(0.4, 2.0)
 
     def f(w):
-        return jnp.sum(BlendBSDF(b0, {"type": "roughconductor", "alpha": 0.3}, w).eval(wo, wi))
+        return jnp.sum(BlendBSDF(b0, rc, w).eval(wo, wi))
 
     fj, gj = jax.jit(f), jax.jit(jax.grad(f))
     for w in (0.3, 0.0, 1.0 - 1e-3):
         g = gj(jnp.float64(w))
         fd = (fj(w + 1e-6) - fj(w - 1e-6)) / 2e-6
         np.testing.assert_allclose(g, fd, rtol=1e-6)
-    glass = BlendBSDF(b0, {"type": "dielectric", "eta": 1.5}, 0.4)
+    glass = BlendBSDF(b0, glass_b, 0.4)
     assert glass.has_delta and glass.is_transmissive
     s = _sample(glass, wo, jnp.array([0.1, 0.9]), jnp.full((2, 2), 0.5))
     assert bool(s.is_delta[0]) and not bool(s.is_delta[1])
@@ -147,9 +152,7 @@ def test_blendbsdf_delta_component_and_weight_gradient_vs_fd(x64):
     assert float(s_below.wi[0, 2]) < 0 and float(s_below.pdf[0]) > 0
 
     def delta_w(w):
-        s = BlendBSDF(b0, {"type": "dielectric", "eta": 1.5}, w).sample(
-            wo, jnp.asarray(0.001), jnp.full((2,), 0.5)
-        )
+        s = BlendBSDF(b0, glass_b, w).sample(wo, jnp.asarray(0.001), jnp.full((2,), 0.5))
         return s.weight[0]
 
     np.testing.assert_allclose(jax.jit(jax.grad(delta_w))(jnp.float64(0.4)), 1 / 0.4, rtol=1e-9)

@@ -79,4 +79,11 @@ def make_bsdf(desc: dict) -> BSDF:
             raise ValueError(
                 f"desc[{k!r}]: unknown parameter for {kind!r}; expected one of {allowed}"
             )
+    if kind == "blendbsdf":  # nested descriptions
+        for k in ("bsdf0", "bsdf1"):
+            if isinstance(params.get(k), dict):
+                try:
+                    params[k] = make_bsdf(params[k])
+                except (ValueError, TypeError) as e:
+                    raise type(e)(f"{k}.{e}") from None
     return cls(**params)

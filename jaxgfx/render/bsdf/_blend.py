@@ -22,23 +22,17 @@ _FLIP = (1.0, 1.0, -1.0)
 
 
 def _as_bsdf(x, name):
+    # description dicts are built by make_bsdf (bsdf/__init__.py), which owns the registry
     if isinstance(x, BSDF):
         return x
-    if isinstance(x, dict):
-        from jaxgfx.render.bsdf import make_bsdf
-
-        try:
-            return make_bsdf(x)
-        except (ValueError, TypeError) as e:
-            raise type(e)(f"{name}.{e}") from None
-    raise TypeError(f"{name}: expected a BSDF or a description dict, got {type(x).__name__}")
+    raise TypeError(f"{name}: expected a BSDF, got {type(x).__name__}")
 
 
 class BlendBSDF(BSDF):
     """Weighted blend of two BSDFs (Mitsuba 3 ``blendbsdf``): ``f = (1 - w) f_0 + w f_1`` with
     ``w = clip(weight, 0, 1)`` (a number, or a texture through the material's ``weight`` key).
 
-    ``bsdf0`` / ``bsdf1``: BSDFs or description dicts (``{"type": "diffuse", ...}``). ``pdf`` is
+    ``bsdf0`` / ``bsdf1``: BSDFs (``make_bsdf`` also takes description dicts for them). ``pdf`` is
     the mixture ``(1 - w) p_0 + w p_1``; ``sample`` picks component 1 with probability ``w``
     (reusing ``u1``) and, for a non-delta sample, returns the mixture pdf and
     ``weight = f / pdf`` (so MIS sees the true density; Mitsuba returns the chosen component's
