@@ -6,6 +6,12 @@ Conventions follow Mitsuba 3:
   distance r falls off as ``intensity / r^2``.
 - ``AreaLight``: a shape of the scene emits constant ``radiance`` from its front side (the side
   its geometric normal points to); it is also ordinary geometry (it occludes and is hit).
+- ``DirectionalLight``: a distant light, ``irradiance`` (W/m^2 on a surface facing it) arriving
+  along ``direction`` (the direction the light travels, Mitsuba's ``direction``); a delta light.
+- ``SpotLight``: a point light at ``position`` with axis ``direction``, ``intensity`` (W/sr) on
+  the axis, full intensity inside ``beam_width`` and Mitsuba's linear-in-angle falloff
+  ``(cutoff - theta) / (cutoff - beam_width)`` to zero at ``cutoff_angle`` (degrees, as in
+  Mitsuba's XML); a delta light, differentiable in both angles.
 - ``ConstantEnvironment``: radiance arriving from every direction.
 - ``EnvironmentMap``: latitude-longitude image, y-up, with Mitsuba's mapping
   ``u = atan2(d_x, -d_z) / (2 pi)`` (wrapped to [0, 1)), ``v = acos(d_y) / pi``; importance
@@ -21,8 +27,17 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 
-from jaxgfx._checks import as_float_array, check_finite, check_nonnegative
-from jaxgfx._math import safe_arccos, safe_atan2, safe_div, safe_sqrt, sincos, sum_last, take_rows
+from jaxgfx._checks import as_float_array, check_finite, check_nonnegative, is_concrete
+from jaxgfx._math import (
+    safe_arccos,
+    safe_atan2,
+    safe_div,
+    safe_normalize,
+    safe_sqrt,
+    sincos,
+    sum_last,
+    take_rows,
+)
 from jaxgfx.color import LUMINANCE_WEIGHTS
 from jaxgfx.render.bsdf import rgb_param
 from jaxgfx.render.sampling import Distribution2D
@@ -30,6 +45,8 @@ from jaxgfx.render.sampling import Distribution2D
 __all__ = [
     "PointLights",
     "AreaLight",
+    "DirectionalLight",
+    "SpotLight",
     "ConstantEnvironment",
     "EnvironmentMap",
     "direction_to_latlong",
@@ -72,6 +89,109 @@ class PointLights(eqx.Module):
         dist = safe_sqrt(d2)
         wi = safe_div(v, dist[..., None])
         li = safe_div(take_rows(self.intensities, index), d2[..., None])
+        return wi, dist, li
+
+
+def _unit_direction(d, name):
+    d = as_float_array(d, name)
+    check_finite(d, name)
+    if d.shape != (3,):
+        raise ValueError(f"{name}: expected 3 numbers, got shape {d.shape}")
+    n = float(jnp.linalg.norm(d))
+    if not n > 0:
+        raise ValueError(f"{name}: expected a nonzero vector")
+    return d / n
+
+
+class DirectionalLight(eqx.Module):
+    """Distant light (Mitsuba ``directional``): ``irradiance (3,)`` arriving along the unit
+    ``direction (3,)`` (the direction of travel). Light sampling only (a delta light): from any
+    point the light is ``wi = -direction`` at infinite distance with ``Li = irradiance``."""
+
+    irradiance: jnp.ndarray
+    direction: jnp.ndarray
+
+    def __check_init__(self):
+        check_nonnegative(self.irradiance, "irradiance")
+        check_finite(self.direction, "direction")
+
+    @classmethod
+    def create(cls, irradiance, direction):
+        return cls(rgb_param(irradiance, "irradiance"), _unit_direction(direction, "direction"))
+
+    def sample(self, p):
+        """``(wi, dist, Li)`` at points ``p (..., 3)`` (pdf 1: a delta light)."""
+        shape = p.shape[:-1]
+        wi = jnp.broadcast_to(-safe_normalize(self.direction.astype(p.dtype)), p.shape)
+        dist = jnp.full(shape, jnp.inf, p.dtype)
+        li = jnp.broadcast_to(self.irradiance.astype(p.dtype), p.shape)
+        return wi, dist, li
+
+
+class SpotLight(eqx.Module):
+    """Spot light (Mitsuba ``spot``): ``position (3,)``, unit axis ``direction (3,)``,
+    ``intensity (3,)`` (W/sr on the axis), ``cutoff_angle`` and ``beam_width`` (degrees).
+
+    Falloff with the angle ``theta`` from the axis (Mitsuba 3 ``SpotLight::falloff_curve``):
+    1 for ``theta <= beam_width``, ``(cutoff - theta) / (cutoff - beam_width)`` between, 0 for
+    ``theta >= cutoff``. Continuous in ``theta``, so images are differentiable in both angles
+    without a boundary term. Light sampling only (a delta light).
+    """
+
+    position: jnp.ndarray
+    direction: jnp.ndarray
+    intensity: jnp.ndarray
+    cutoff_angle: jnp.ndarray
+    beam_width: jnp.ndarray
+
+    def __check_init__(self):
+        check_finite(self.position, "position")
+        check_finite(self.direction, "direction")
+        check_nonnegative(self.intensity, "intensity")
+        check_finite(self.cutoff_angle, "cutoff_angle")
+        check_finite(self.beam_width, "beam_width")
+        if is_concrete(self.cutoff_angle) and is_concrete(self.beam_width):
+            c, b = float(self.cutoff_angle), float(self.beam_width)
+            if not 0 < c <= 180:
+                raise ValueError(f"cutoff_angle: expected degrees in (0, 180], got {c}")
+            if not 0 <= b <= c:
+                raise ValueError(f"beam_width: expected degrees in [0, cutoff_angle], got {b}")
+
+    @classmethod
+    def create(cls, position, direction, intensity, cutoff_angle=20.0, beam_width=None):
+        """Mitsuba's defaults: ``cutoff_angle`` 20 degrees, ``beam_width`` 3/4 of it."""
+        p = as_float_array(position, "position")
+        check_finite(p, "position")
+        if p.shape != (3,):
+            raise ValueError(f"position: expected 3 numbers, got shape {p.shape}")
+        c = as_float_array(cutoff_angle, "cutoff_angle")
+        if c.shape != ():
+            raise ValueError(f"cutoff_angle: expected a number, got shape {c.shape}")
+        b = 0.75 * c if beam_width is None else as_float_array(beam_width, "beam_width")
+        if b.shape != ():
+            raise ValueError(f"beam_width: expected a number, got shape {b.shape}")
+        d = _unit_direction(direction, "direction")
+        return cls(p, d, rgb_param(intensity, "intensity"), c, b)
+
+    def falloff(self, cos_theta):
+        """Mitsuba's falloff curve at ``cos_theta`` (cosine to the axis), in [0, 1]."""
+        dt = cos_theta.dtype
+        cutoff = jnp.deg2rad(self.cutoff_angle.astype(dt))
+        beam = jnp.deg2rad(self.beam_width.astype(dt))
+        theta = safe_arccos(cos_theta)
+        # the ratio only where it is selected, so an equal beam and cutoff gives no 0 / 0
+        ramp = safe_div(cutoff - theta, cutoff - beam)
+        f = jnp.where(theta <= beam, 1.0, jnp.clip(ramp, 0.0, 1.0))
+        return jnp.where(theta < cutoff, f, 0.0)
+
+    def sample(self, p):
+        """``(wi, dist, Li)`` at points ``p (..., 3)`` (pdf 1: a delta light)."""
+        v = self.position.astype(p.dtype) - p
+        d2 = sum_last(v * v)
+        dist = safe_sqrt(d2)
+        wi = safe_div(v, dist[..., None])
+        cos_theta = -sum_last(wi * safe_normalize(self.direction.astype(p.dtype)))
+        li = self.intensity.astype(p.dtype) * safe_div(self.falloff(cos_theta), d2)[..., None]
         return wi, dist, li
 
 

@@ -13,6 +13,7 @@ import inspect
 from jaxgfx.render.bsdf._base import BSDF as BSDF
 from jaxgfx.render.bsdf._base import BSDFSample as BSDFSample
 from jaxgfx.render.bsdf._base import rgb_param as rgb_param
+from jaxgfx.render.bsdf._blend import BlendBSDF as BlendBSDF
 from jaxgfx.render.bsdf._conductor import Mirror as Mirror
 from jaxgfx.render.bsdf._dielectric import SmoothDielectric as SmoothDielectric
 from jaxgfx.render.bsdf._diffuse import Diffuse as Diffuse
@@ -21,6 +22,7 @@ from jaxgfx.render.bsdf._plastic import SmoothPlastic as SmoothPlastic
 from jaxgfx.render.bsdf._roughconductor import RoughConductor as RoughConductor
 from jaxgfx.render.bsdf._roughdielectric import RoughDielectric as RoughDielectric
 from jaxgfx.render.bsdf._roughplastic import RoughPlastic as RoughPlastic
+from jaxgfx.render.bsdf._thindielectric import ThinDielectric as ThinDielectric
 
 __all__ = [
     "BSDF",
@@ -33,6 +35,8 @@ __all__ = [
     "SmoothDielectric",
     "SmoothPlastic",
     "RoughPlastic",
+    "ThinDielectric",
+    "BlendBSDF",
     "BSDF_TYPES",
     "make_bsdf",
     "rgb_param",
@@ -48,6 +52,8 @@ BSDF_TYPES = {
     "plastic": SmoothPlastic,
     "roughplastic": RoughPlastic,
     "phong": Phong,
+    "thindielectric": ThinDielectric,
+    "blendbsdf": BlendBSDF,
 }
 
 
@@ -73,4 +79,11 @@ def make_bsdf(desc: dict) -> BSDF:
             raise ValueError(
                 f"desc[{k!r}]: unknown parameter for {kind!r}; expected one of {allowed}"
             )
+    if kind == "blendbsdf":  # nested descriptions
+        for k in ("bsdf0", "bsdf1"):
+            if isinstance(params.get(k), dict):
+                try:
+                    params[k] = make_bsdf(params[k])
+                except (ValueError, TypeError) as e:
+                    raise type(e)(f"{k}.{e}") from None
     return cls(**params)

@@ -229,7 +229,7 @@ def sample_light(scene, p, u_sel, u2, *, detached=False):
     Returns ``(wi, dist, Li, pdf, is_delta)``: world direction towards the light, distance
     (inf for the environment), unoccluded incident radiance, solid-angle density including the
     selection probability (1 x selection for point lights), and whether it is a delta light.
-    Light order: area lights, point lights, environment.
+    Light order: area lights, point lights, environment, directional and spot lights.
     """
     dtype = p.dtype
     n = scene.n_lights
@@ -261,6 +261,14 @@ def sample_light(scene, p, u_sel, u2, *, detached=False):
     # map light index -> candidate index
     n_point = scene.point_lights.count if scene.point_lights is not None else 0
     cand_idx = jnp.where(idx < na, idx, jnp.where(idx < na + n_point, na, na + (n_point > 0)))
+    if scene.delta_lights:  # directional / spot lights, after the environment (delta lights)
+        n_before = na + n_point + (scene.environment is not None)
+        c_before = len(cands)
+        for light in scene.delta_lights:
+            wi, dist, li = light.sample(p)
+            ones = jnp.ones(p.shape[:-1], dtype)
+            cands.append((wi, dist, li, ones, jnp.ones(p.shape[:-1], bool)))
+        cand_idx = jnp.where(idx < n_before, cand_idx, c_before + idx - n_before)
     out = cands[0]
     for k in range(1, len(cands)):
         sel = cand_idx == k

@@ -44,6 +44,9 @@ def _direct(scene, hit, frame, ng, wo, mat, alive, u, detached):
         for j in range(scene.point_lights.count):
             wi, dist, li = scene.point_lights.sample(jnp.full(hit.t.shape, j), hit.p)
             L = L + one(wi, dist, li, jnp.ones(hit.t.shape, hit.p.dtype))
+    for light in scene.delta_lights:  # directional / spot: one shadow ray each
+        wi, dist, li = light.sample(hit.p)
+        L = L + one(wi, dist, li, jnp.ones(hit.t.shape, hit.p.dtype))
     if scene.area_lights or scene.environment is not None:
         # sample the non-delta lights with a uniform choice among them
         sub = _nondelta_scene(scene)
@@ -55,7 +58,8 @@ def _direct(scene, hit, frame, ng, wo, mat, alive, u, detached):
 def _nondelta_scene(scene):
     import equinox as eqx
 
-    return eqx.tree_at(lambda s: s.point_lights, scene, None, is_leaf=lambda x: x is None)
+    scene = eqx.tree_at(lambda s: s.point_lights, scene, None, is_leaf=lambda x: x is None)
+    return eqx.tree_at(lambda s: s.delta_lights, scene, ()) if scene.delta_lights else scene
 
 
 def whitted_radiance(scene, o, d, u, *, max_depth: int, sampling: str = "detached"):

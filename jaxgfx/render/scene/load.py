@@ -8,7 +8,7 @@ from collections.abc import Mapping
 import jax
 import jax.numpy as jnp
 
-from jaxgfx.render.bsdf import make_bsdf
+from jaxgfx.render.bsdf import BSDF_TYPES, make_bsdf
 from jaxgfx.render.bsdf.textured import (
     Textured,
     is_texture_desc,
@@ -16,7 +16,14 @@ from jaxgfx.render.bsdf.textured import (
     texture_from_dict,
     texture_min,
 )
-from jaxgfx.render.emitters import AreaLight, ConstantEnvironment, EnvironmentMap, PointLights
+from jaxgfx.render.emitters import (
+    AreaLight,
+    ConstantEnvironment,
+    DirectionalLight,
+    EnvironmentMap,
+    PointLights,
+    SpotLight,
+)
 from jaxgfx.render.film import make_filter
 from jaxgfx.render.geometry import Rectangles, SDFShape, Spheres, area
 from jaxgfx.render.parameters import get_path
@@ -27,6 +34,7 @@ from jaxgfx.render.scene.schema import (
     build_camera,
     envmap_image,
     expect_keys,
+    num,
     rgb,
     shape_from_desc,
     vec,
@@ -47,7 +55,10 @@ def material_from_desc(desc, *, where="material", base_dir=None):
     colour textures non-negative.
     """
     desc = dict(desc)
-    tex_keys = [k for k, v in desc.items() if k != "type" and is_texture_desc(v)]
+    # nested BSDF descriptions (blendbsdf's bsdf0 / bsdf1) are not textures
+    tex_keys = [
+        k for k, v in desc.items() if k != "type" and is_texture_desc(v) and not _is_bsdf_desc(v)
+    ]
     pre = f"{where}." if where else ""
     if not tex_keys:
         return make_bsdf(desc)
@@ -71,6 +82,10 @@ def material_from_desc(desc, *, where="material", base_dir=None):
             raise ValueError(f"{pre}{k}: texture values must be {need}, got min {lo}")
         textures[k] = tex
     return Textured(bsdf, textures)
+
+
+def _is_bsdf_desc(v):
+    return isinstance(v, Mapping) and v.get("type") in BSDF_TYPES
 
 
 def _concat(shapes):
@@ -186,7 +201,7 @@ def load_scene(
             shapes.append(m)
         shape_mats.append(jnp.full((m.faces.shape[0],), mi, jnp.int32))
 
-    points_pos, points_int, area_lights, emitter_shapes = [], [], [], []
+    points_pos, points_int, area_lights, emitter_shapes, delta_lights = [], [], [], [], []
     environment = None
     em_desc = desc.get("emitters", []) or []
     if not isinstance(em_desc, (list, tuple)):
@@ -200,6 +215,36 @@ def load_scene(
             expect_keys(ed, where, ("type", "position", "intensity"))
             points_pos.append(vec(ed["position"], f"{where}.position"))
             points_int.append(rgb(ed["intensity"], f"{where}.intensity"))
+        elif kind == "directional":
+            expect_keys(ed, where, ("type", "direction", "irradiance"))
+            delta_lights.append(
+                _prefixed(
+                    where,
+                    DirectionalLight.create,
+                    rgb(ed["irradiance"], f"{where}.irradiance"),
+                    vec(ed["direction"], f"{where}.direction"),
+                )
+            )
+        elif kind == "spot":
+            expect_keys(
+                ed,
+                where,
+                ("type", "position", "direction", "intensity"),
+                ("cutoff_angle", "beam_width"),
+            )
+            delta_lights.append(
+                _prefixed(
+                    where,
+                    SpotLight.create,
+                    vec(ed["position"], f"{where}.position"),
+                    vec(ed["direction"], f"{where}.direction"),
+                    rgb(ed["intensity"], f"{where}.intensity"),
+                    num(ed.get("cutoff_angle", 20.0), f"{where}.cutoff_angle"),
+                    None
+                    if "beam_width" not in ed
+                    else num(ed["beam_width"], f"{where}.beam_width"),
+                )
+            )
         elif kind == "area":
             expect_keys(ed, where, ("type", "shape", "radiance"), ("material",))
             sk, shape = shape_from_desc(ed["shape"], f"{where}.shape", base_dir)
@@ -247,8 +292,18 @@ def load_scene(
         environment=environment,
         material_names=tuple(names),
         rfilter=rfilter,
+        delta_lights=tuple(delta_lights),
     )
     return cast_floats(scene, dtype)
+
+
+def _prefixed(where, build, *args):
+    """``build(*args)`` with its ``ValueError`` prefixed by ``where`` (``emitters[1].beam_width:
+    ...``)."""
+    try:
+        return build(*args)
+    except ValueError as e:
+        raise ValueError(f"{where}.{e}") from None
 
 
 def _float_dtype(dtype):

@@ -71,6 +71,10 @@ PARAMETER_BOUNDS = {
     "radiance": (0.0, float("inf")),
     "intensities": (0.0, float("inf")),
     "scale": (0.0, float("inf")),
+    "irradiance": (0.0, float("inf")),
+    "intensity": (0.0, float("inf")),
+    "cutoff_angle": (0.0, 180.0),
+    "beam_width": (0.0, 180.0),
 }
 """``(lower, upper)`` of a parameter by its last field name (what the constructors accept;
 reflectances at most 1 for energy conservation); others are unbounded."""
@@ -136,6 +140,10 @@ def parameter_names(obj, *, aliases: bool = True) -> list[str]:
     return list(dict.fromkeys(out))
 
 
+def _delta_kind(light) -> str:
+    return "spot" if type(light).__name__ == "SpotLight" else "directional"
+
+
 class Scene(eqx.Module):
     """A renderable scene (pytree). Build with :func:`load_scene`.
 
@@ -145,7 +153,8 @@ class Scene(eqx.Module):
     ``materials`` (tuple of BSDFs) named by the static ``material_names``; ``point_lights``
     (PointLights or None); ``area_lights`` (tuple of AreaLight); ``environment``
     (ConstantEnvironment / EnvironmentMap / None); ``emitter_shapes`` (tuple: the raw shape of each
-    area light, for sampling); ``rfilter`` (reconstruction filter, static).
+    area light, for sampling); ``rfilter`` (reconstruction filter, static); ``delta_lights``
+    (tuple of DirectionalLight / SpotLight).
     """
 
     camera: PerspectiveCamera | MatrixCamera
@@ -158,6 +167,9 @@ class Scene(eqx.Module):
     environment: ConstantEnvironment | EnvironmentMap | None
     material_names: tuple = eqx.field(static=True)
     rfilter: object = eqx.field(static=True)
+    delta_lights: tuple = ()
+    """Directional and spot lights (``DirectionalLight`` / ``SpotLight``), in description order;
+    empty for scenes without them (their programs are unchanged)."""
 
     @property
     def width(self) -> int:
@@ -196,7 +208,7 @@ class Scene(eqx.Module):
 
     @property
     def n_lights(self) -> int:
-        n = len(self.area_lights) + (self.environment is not None)
+        n = len(self.area_lights) + (self.environment is not None) + len(self.delta_lights)
         return n + (self.point_lights.count if self.point_lights is not None else 0)
 
     # -- parameter access by name ------------------------------------------------------------
@@ -229,6 +241,11 @@ class Scene(eqx.Module):
                 raise ValueError(f"{path}: the scene has no environment emitter")
             getter = lambda s: s.environment  # noqa: E731
             rest = parts[2:]
+        elif head == "emitters" and len(parts) >= 3 and parts[1] in ("directional", "spot"):
+            kinds = [i for i, e in enumerate(self.delta_lights) if _delta_kind(e) == parts[1]]
+            i = kinds[_index(path, parts[2], len(kinds), f"a {parts[1]} light")]
+            getter = lambda s: s.delta_lights[i]  # noqa: E731
+            rest = parts[3:]
         elif head == "shapes" and len(parts) >= 2:
             i = _index(path, parts[1], len(self.shapes), "a shape")
             getter = lambda s: s.shapes[i]  # noqa: E731
@@ -236,7 +253,8 @@ class Scene(eqx.Module):
         else:
             raise ValueError(
                 f"{path}: expected materials.NAME.FIELD, camera.FIELD, emitters.point.FIELD, "
-                "emitters.area.I.FIELD, emitters.environment.FIELD or shapes.I.FIELD"
+                "emitters.area.I.FIELD, emitters.environment.FIELD, emitters.directional.I.FIELD, "
+                "emitters.spot.I.FIELD or shapes.I.FIELD"
             )
         if not rest:
             raise ValueError(f"{path}: expected a field name after the object")
@@ -301,6 +319,11 @@ class Scene(eqx.Module):
         objs += [(f"emitters.area.{i}", a) for i, a in enumerate(self.area_lights)]
         if self.environment is not None:
             objs.append(("emitters.environment", self.environment))
+        counts = {"directional": 0, "spot": 0}
+        for e in self.delta_lights:
+            k = _delta_kind(e)
+            objs.append((f"emitters.{k}.{counts[k]}", e))
+            counts[k] += 1
         objs += [(f"shapes.{i}", s) for i, s in enumerate(self.shapes)]
         out = []
         for prefix, obj in objs:
