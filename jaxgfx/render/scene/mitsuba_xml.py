@@ -29,8 +29,8 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
   (piecewise-linear spectrum, zero outside the listed range, against the CIE 1931 2 degree
   observer from colour-science, 1000 samples over 360-830 nm; reflectances weighted by D65 and
   normalised by its luminance, emission normalised by the CMFs' y integral).
-* Mitsuba's one-sided BSDFs (``diffuse``, ``conductor``, ``roughconductor``, ``roughplastic``)
-  are shaded on both sides in jaxgfx: the image agrees where back faces are not seen
+* Mitsuba's one-sided BSDFs (``diffuse``, ``conductor``, ``roughconductor``, ``plastic``,
+  ``roughplastic``) are shaded on both sides in jaxgfx: the image agrees where back faces are not seen
   (``twosided`` is therefore a pass-through wrapper).
 * ``envmap``: same direction -> (u, v) map as jaxgfx (y up); Mitsuba places rows at
   ``v = j / (H - 1)``, jaxgfx at ``(j + 1/2) / H'``: the map is resampled to ``H' = 4 H`` rows
@@ -721,8 +721,15 @@ def _bsdf(obj: _Obj, doc, desc, *, textured_ok=True, name=None) -> str:
              "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
              "specular_transmittance": p.color("specular_transmittance", [1.0] * 3,
                                                texture=True)}  # fmt: skip
-    elif t == "roughplastic":
-        m = {"type": "roughplastic", **_distribution(p),
+    elif t == "roughdielectric":
+        eta = p.ior("int_ior", DEFAULTS["dielectric.int_ior"]) / p.ior(
+            "ext_ior", DEFAULTS["dielectric.ext_ior"])
+        m = {"type": "roughdielectric", **_distribution(p), "eta": eta,
+             "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
+             "specular_transmittance": p.color("specular_transmittance", [1.0] * 3,
+                                               texture=True)}  # fmt: skip
+    elif t in ("plastic", "roughplastic"):
+        m = {"type": t, **(_distribution(p) if t == "roughplastic" else {}),
              "eta": p.ior("int_ior", DEFAULTS["roughplastic.int_ior"])
              / p.ior("ext_ior", DEFAULTS["roughplastic.ext_ior"]),
              "diffuse_reflectance": p.color("diffuse_reflectance",
@@ -731,8 +738,7 @@ def _bsdf(obj: _Obj, doc, desc, *, textured_ok=True, name=None) -> str:
              "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
              "nonlinear": p.bool("nonlinear", False)}  # fmt: skip
     else:
-        hint = " (jaxgfx has roughplastic only)" if t == "plastic" else ""
-        raise ValueError(f"{obj.where}: BSDF plugin {t!r} is not supported{hint}")
+        raise ValueError(f"{obj.where}: BSDF plugin {t!r} is not supported")
     p.done()
     name = obj.id or name or f"bsdf_{len(desc['materials'])}"
     while name in desc["materials"]:
