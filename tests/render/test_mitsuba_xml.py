@@ -425,10 +425,10 @@ def test_disk_is_a_fan_of_256_triangles(tmp_path):
             "<shape type='cylinder'>: shape plugin 'cylinder' is not supported",
         ),  # fmt: skip
         (
-            '<bsdf type="plastic" id="p"/>',
+            '<bsdf type="mask" id="p"/>',
             10,
-            "<bsdf type='plastic' id='p'>: bsdf plugin "
-            "'plastic' is not supported (jaxgfx has roughplastic only)",
+            "<bsdf type='mask' id='p'>: bsdf plugin "
+            "'mask' is not supported (no opacity masks in jaxgfx)",
         ),  # fmt: skip
         (
             '<emitter type="directional"/>',

@@ -309,6 +309,11 @@ def test_yaml_scene_saved_as_xml_renders_in_mitsuba_like_jaxgfx(mi, tmp_path, na
     scene = mi.load_file(out)
     b = np.stack([np.array(mi.render(scene, spp=SPP, seed=s))[..., :3] for s in range(K)])
     a = _jaxgfx_replicates(desc, SCENES, 3)
+    _assert_agree(a, b)
+
+
+def _assert_agree(a, b):
+    """Replicate stacks ``a`` (jaxgfx) and ``b`` (Mitsuba), K x H x W x 3, agree."""
     # channel means: Welch-type z from the replicate spread (P(|z| > 5) ~ 1e-3 with 6 dof)
     ma, mb = a.mean((0, 1, 2)), b.mean((0, 1, 2))
     se = np.sqrt(a.mean((1, 2)).var(0, ddof=1) / K + b.mean((1, 2)).var(0, ddof=1) / K)
@@ -395,3 +400,29 @@ def test_anisotropic_roughdielectric_is_refused_with_its_place(tmp_path):
     with pytest.raises(ValueError, match=r"a\.xml:2: <bsdf type='roughdielectric' id='r'>.*"
                                          r"anisotropic roughness is not supported"):  # fmt: skip
         read_xml(str(p))
+
+
+@pytest.mark.mitsuba
+def test_mitsuba_loads_plastic_and_roughdielectric_to_the_same_parameters(mi, tmp_path):
+    desc = read_xml(_new_bsdfs_xml(tmp_path)).desc
+    p = mi.traverse(mi.load_file(save_scene(desc, str(tmp_path / "w.xml"))))
+    m = desc["materials"]
+    np.testing.assert_allclose(p["shiny.brdf_0.eta"], m["shiny"]["eta"], rtol=1e-6)
+    np.testing.assert_allclose(p["shiny.brdf_0.diffuse_reflectance.value"],
+                               m["shiny"]["diffuse_reflectance"], rtol=1e-6)  # fmt: skip
+    for n in ("frosted", "ggx_glass"):
+        np.testing.assert_allclose(p[f"{n}.eta"], m[n]["eta"], rtol=1e-6)
+        np.testing.assert_allclose(p[f"{n}.alpha.value"], m[n]["alpha"], rtol=1e-6)
+        np.testing.assert_allclose(p[f"{n}.specular_transmittance.value"],
+                                   m[n]["specular_transmittance"], rtol=1e-6)  # fmt: skip
+
+
+@pytest.mark.mitsuba
+@pytest.mark.slow  # 45 s measured here (16², 4 x 64 spp each side, max_depth 6; compile dominates)
+def test_plastic_and_roughdielectric_scene_renders_in_mitsuba_like_jaxgfx(mi, tmp_path):
+    desc = read_xml(_new_bsdfs_xml(tmp_path)).desc
+    out = save_scene(desc, str(tmp_path / "w.xml"), spp=SPP, max_depth=6)
+    scene = mi.load_file(out)
+    b = np.stack([np.array(mi.render(scene, spp=SPP, seed=s))[..., :3] for s in range(K)])
+    a = _jaxgfx_replicates(desc, None, 6)
+    _assert_agree(a, b)

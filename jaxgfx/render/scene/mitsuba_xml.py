@@ -30,8 +30,8 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
   observer from colour-science, 1000 samples over 360-830 nm; reflectances weighted by D65 and
   normalised by its luminance, emission normalised by the CMFs' y integral).
 * Mitsuba's one-sided BSDFs (``diffuse``, ``conductor``, ``roughconductor``, ``plastic``,
-  ``roughplastic``) are shaded on both sides in jaxgfx: the image agrees where back faces are not seen
-  (``twosided`` is therefore a pass-through wrapper).
+  ``roughplastic``) are shaded on both sides in jaxgfx: the image agrees where back faces are
+  not seen (``twosided`` is therefore a pass-through wrapper).
 * ``envmap``: same direction -> (u, v) map as jaxgfx (y up); Mitsuba places rows at
   ``v = j / (H - 1)``, jaxgfx at ``(j + 1/2) / H'``: the map is resampled to ``H' = 4 H`` rows
   with Mitsuba's linear interpolation along v (exact between Mitsuba's rows up to the
