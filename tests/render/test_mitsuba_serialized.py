@@ -108,3 +108,27 @@ def test_mitsuba_reads_the_same_meshes(tmp_path):
         if ours.uvs is not None:  # not flipped, unlike OBJ
             np.testing.assert_allclose(np.reshape(p["vertex_texcoords"], (-1, 2)), ours.uvs,
                                        rtol=1e-7)  # fmt: skip
+
+
+def test_xml_serialized_shape_loads_with_its_index_and_transform(tmp_path):
+    from jaxgfx.render.scene.mitsuba_xml import read_xml
+
+    _file(tmp_path, [(*TRI, {}), (*QUAD, {"n": [[0, 0, 1]] * 4})])
+    (tmp_path / "s.xml").write_text(
+        '<scene version="3.0.0"><sensor type="perspective"/>'
+        '<shape type="serialized"><string name="filename" value="m4.serialized"/>'
+        '<integer name="shape_index" value="1"/>'
+        '<transform name="to_world"><translate x="5"/></transform></shape></scene>'
+    )
+    (shape,) = read_xml(str(tmp_path / "s.xml")).desc["shapes"]
+    assert shape["type"] == "mesh" and shape["vertices"] == QUAD[0] and shape["faces"] == QUAD[1]
+    assert shape["normals"] == [[0, 0, 1]] * 4
+    np.testing.assert_allclose(np.asarray(shape["to_world"])[:3, 3], [5, 0, 0])
+    (tmp_path / "bad.xml").write_text(
+        '<scene version="3.0.0"><sensor type="perspective"/>\n'
+        '<shape type="serialized" id="s"><string name="filename" value="m4.serialized"/>'
+        '<integer name="shape_index" value="2"/></shape></scene>'
+    )
+    with pytest.raises(ValueError, match=r"bad\.xml:2: <shape type='serialized' id='s'>.*"
+                                         r"shape_index 2 out of range"):  # fmt: skip
+        read_xml(str(tmp_path / "bad.xml"))

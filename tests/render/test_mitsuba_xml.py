@@ -543,5 +543,6 @@ def test_every_refused_plugin_is_refused_with_its_reason(tmp_path, tag, plugin, 
 def test_unknown_plugin_names_the_supported_ones(tmp_path):
     p = write(tmp_path, scene_xml('<shape type="teapot"/>'))
     with pytest.raises(ValueError, match=rx("shape plugin 'teapot' is not supported (unknown "
-                                            "plugin; supported: obj, ply, sphere, rectangle")):
+                                            "plugin; supported: obj, ply, serialized, sphere, "
+                                            "rectangle")):
         read_xml(p)

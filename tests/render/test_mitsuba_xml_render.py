@@ -88,7 +88,7 @@ def test_infinite_mirrors_matches_mitsubas_reference(data_dir):
     assert c["z_rms"] < 1.5 and c["frac_3_5"] >= 0.97, c
 
 
-@pytest.mark.slow  # 58 s measured here (4 OBJ spheres + envmap + area and point light; 48²)
+@pytest.mark.slow  # 58 s (earlier, light load) to 123 s (load 11) here; 4 OBJ spheres, 48²
 def test_roughplastic_spheres_match_mitsubas_reference(data_dir):
     """roughplastic α 0.01 ... 1 with the rough coat's tabulated transmittance (bsdf/_coating.py);
     before it jaxgfx's green mean was 0.249 against the reference's 0.199."""
@@ -107,7 +107,7 @@ def test_roughplastic_spheres_match_mitsubas_reference(data_dir):
     assert c["rel_rmse"] < c["noise_rel_rmse"] and c["frac_3_5"] >= 0.97, c
 
 
-@pytest.mark.slow  # 59 s measured here (1 OBJ sphere, envmap; 48², 16 spp; BVH + compile)
+@pytest.mark.slow  # 33-59 s measured here (1 OBJ sphere, envmap; 48², 16 spp; BVH + compile)
 def test_roughdielectric_sphere_matches_mitsubas_reference(data_dir):
     """Beckmann roughdielectric α = 0.02, bk7 / air, under the museum envmap."""
     scene = data_dir / "tests" / "scenes" / "bsdf_spheres"

@@ -50,7 +50,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     # shapes
     ("shape", "obj"): S,
     ("shape", "ply"): S,
-    ("shape", "serialized"): "refused: Mitsuba's zlib mesh format is not read yet",
+    ("shape", "serialized"): S + " (shape_index; vertex colours ignored)",
     ("shape", "sphere"): S,
     ("shape", "rectangle"): S,
     ("shape", "cube"): S + " (untextured)",

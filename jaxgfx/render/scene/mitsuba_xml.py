@@ -853,17 +853,23 @@ def _shape(obj: _Obj, doc, desc, ctx):
               "edge_u": (2 * lin[:, 0]).tolist(), "edge_v": (2 * lin[:, 1]).tolist()}  # fmt: skip
         corners = np.array([[x, y, 0, 1] for x in (-1, 1) for y in (-1, 1)]) @ m.T
         bbox = np.stack([corners[:, :3].min(0), corners[:, :3].max(0)])
-    elif t in ("obj", "ply", "cube", "disk"):
+    elif t in ("obj", "ply", "serialized", "cube", "disk"):
         from jaxgfx.render.geometry import mesh_io
 
         uvs = normals = None
-        if t in ("obj", "ply"):
+        if t in ("obj", "ply", "serialized"):
             fname = p.string("filename")
             if fname is None:
                 raise ValueError(f"{obj.where}: missing parameter 'filename'")
             path = doc.resolve(fname, obj.props["filename"].node, obj.label)
             try:
-                mesh = (mesh_io.load_obj if t == "obj" else mesh_io.load_ply)(path)
+                if t == "serialized":
+                    from jaxgfx.render.geometry.serialized import read_serialized
+
+                    # vertex colours are ignored, as Mitsuba does unless a texture reads them
+                    mesh = read_serialized(path, p.int("shape_index", 0))
+                else:
+                    mesh = (mesh_io.load_obj if t == "obj" else mesh_io.load_ply)(path)
             except ValueError as e:
                 raise p.err("filename", str(e)) from None
             v = np.asarray(mesh.vertices, np.float64)
@@ -900,7 +906,7 @@ def _shape(obj: _Obj, doc, desc, ctx):
         bbox = np.stack([vw.min(0), vw.max(0)])
     else:
         raise ValueError(f"{obj.where}: shape plugin {t!r} is not supported "
-                         "(obj, ply, sphere, rectangle, cube, disk)")  # fmt: skip
+                         "(obj, ply, serialized, sphere, rectangle, cube, disk)")  # fmt: skip
     p.done(children_ok=len(obj.children))
     ctx["bboxes"].append((bbox, obj))
     if emitters:
