@@ -425,10 +425,10 @@ def test_disk_is_a_fan_of_256_triangles(tmp_path):
             "<shape type='cylinder'>: shape plugin 'cylinder' is not supported",
         ),  # fmt: skip
         (
-            '<bsdf type="plastic" id="p"/>',
+            '<bsdf type="mask" id="p"/>',
             10,
-            "<bsdf type='plastic' id='p'>: bsdf plugin "
-            "'plastic' is not supported (jaxgfx has roughplastic only)",
+            "<bsdf type='mask' id='p'>: bsdf plugin "
+            "'mask' is not supported (no opacity masks in jaxgfx)",
         ),  # fmt: skip
         (
             '<emitter type="directional"/>',
@@ -543,5 +543,6 @@ def test_every_refused_plugin_is_refused_with_its_reason(tmp_path, tag, plugin, 
 def test_unknown_plugin_names_the_supported_ones(tmp_path):
     p = write(tmp_path, scene_xml('<shape type="teapot"/>'))
     with pytest.raises(ValueError, match=rx("shape plugin 'teapot' is not supported (unknown "
-                                            "plugin; supported: obj, ply, sphere, rectangle")):
+                                            "plugin; supported: obj, ply, serialized, sphere, "
+                                            "rectangle")):
         read_xml(p)

@@ -309,6 +309,11 @@ def test_yaml_scene_saved_as_xml_renders_in_mitsuba_like_jaxgfx(mi, tmp_path, na
     scene = mi.load_file(out)
     b = np.stack([np.array(mi.render(scene, spp=SPP, seed=s))[..., :3] for s in range(K)])
     a = _jaxgfx_replicates(desc, SCENES, 3)
+    _assert_agree(a, b)
+
+
+def _assert_agree(a, b):
+    """Replicate stacks ``a`` (jaxgfx) and ``b`` (Mitsuba), K x H x W x 3, agree."""
     # channel means: Welch-type z from the replicate spread (P(|z| > 5) ~ 1e-3 with 6 dof)
     ma, mb = a.mean((0, 1, 2)), b.mean((0, 1, 2))
     se = np.sqrt(a.mean((1, 2)).var(0, ddof=1) / K + b.mean((1, 2)).var(0, ddof=1) / K)
@@ -317,3 +322,110 @@ def test_yaml_scene_saved_as_xml_renders_in_mitsuba_like_jaxgfx(mi, tmp_path, na
     var = a.var(0, ddof=1) / K + b.var(0, ddof=1) / K + (1e-4 * (a.mean(0) + b.mean(0))) ** 2
     z = np.abs(a.mean(0) - b.mean(0)) / np.sqrt(var + 1e-12)
     assert np.mean(z < 4) >= 0.95, np.mean(z < 4)
+
+
+# -------------------------------------------------------------------------------------------
+# plastic and roughdielectric
+
+NEW_BSDFS = """<scene version="3.0.0">
+  <sensor type="perspective"><float name="fov" value="35"/>
+    <transform name="to_world"><lookat origin="0, 0.6, -5" target="0, 0.2, 0" up="0, 1, 0"/>
+    </transform>
+    <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/>
+    </film></sensor>
+  <bsdf type="plastic" id="shiny"><rgb name="diffuse_reflectance" value="0.1, 0.3, 0.6"/>
+    <float name="int_ior" value="1.6"/><boolean name="nonlinear" value="true"/></bsdf>
+  <bsdf type="roughdielectric" id="frosted"><float name="alpha" value="0.25"/>
+    <string name="int_ior" value="water"/><rgb name="specular_transmittance" value="1, 0.9, 0.8"/>
+  </bsdf>
+  <bsdf type="roughdielectric" id="ggx_glass"><string name="distribution" value="ggx"/>
+    <float name="alpha_u" value="0.15"/><float name="alpha_v" value="0.15"/>
+    <float name="ext_ior" value="1.2"/><boolean name="sample_visible" value="false"/></bsdf>
+  <shape type="sphere"><point name="center" value="-0.6, 0.3, 0"/>
+    <float name="radius" value="0.5"/><ref id="shiny"/></shape>
+  <shape type="sphere"><point name="center" value="0.6, 0.3, 0"/>
+    <float name="radius" value="0.5"/><ref id="frosted"/></shape>
+  <shape type="rectangle"><transform name="to_world"><rotate x="1" angle="-90"/>
+    <scale value="3"/><translate y="-0.2"/></transform><ref id="ggx_glass"/></shape>
+  <shape type="rectangle"><transform name="to_world"><rotate x="1" angle="90"/>
+    <translate y="3"/></transform>
+    <emitter type="area"><rgb name="radiance" value="6, 6, 6"/></emitter></shape>
+  <emitter type="constant"><rgb name="radiance" value="0.3, 0.35, 0.4"/></emitter>
+</scene>
+"""
+
+
+def _new_bsdfs_xml(tmp_path):
+    p = tmp_path / "new_bsdfs.xml"
+    p.write_text(NEW_BSDFS)
+    return str(p)
+
+
+def test_plastic_and_roughdielectric_load_and_round_trip(tmp_path):
+    from jaxgfx.render import bsdf as B
+    from jaxgfx.render.scene.mitsuba_conventions import IOR_TABLE
+
+    first = read_xml(_new_bsdfs_xml(tmp_path))
+    m = first.desc["materials"]
+    assert m["shiny"] == {"type": "plastic", "eta": pytest.approx(1.6 / IOR_TABLE["air"]),
+                          "diffuse_reflectance": [0.1, 0.3, 0.6],
+                          "specular_reflectance": [1.0] * 3, "nonlinear": True}  # fmt: skip
+    # Mitsuba's default distribution (beckmann) is stated: jaxgfx's own default is ggx
+    fr = m["frosted"]
+    assert (fr["type"], fr["distribution"], fr["alpha"]) == ("roughdielectric", "beckmann", 0.25)
+    assert fr["eta"] == pytest.approx(IOR_TABLE["water"] / IOR_TABLE["air"])
+    g = m["ggx_glass"]
+    assert (g["distribution"], g["alpha"], g["sample_visible"]) == ("ggx", 0.15, False)
+    assert g["eta"] == pytest.approx(IOR_TABLE["bk7"] / 1.2)
+    scene = load_scene(first.desc)
+    kinds = dict(zip(scene.material_names, map(type, scene.materials), strict=False))
+    assert kinds["shiny"] is B.SmoothPlastic and kinds["frosted"] is B.RoughDielectric
+    out = save_scene(first.desc, str(tmp_path / "out" / "again.xml"))
+    text = Path(out).read_text()
+    assert '<bsdf type="twosided" id="shiny">' in text  # one-sided in Mitsuba, as roughplastic
+    assert '<bsdf type="roughdielectric" id="frosted">' in text
+    assert_same(first.desc, read_xml(out).desc)
+    # a built scene saves the same materials (scene_to_desc reads the BSDF objects)
+    back = read_xml(save_scene(scene, str(tmp_path / "built.xml"))).desc["materials"]
+    for n in ("shiny", "frosted", "ggx_glass"):
+        assert_same(back[n], m[n], n)
+
+
+def test_anisotropic_roughdielectric_is_refused_with_its_place(tmp_path):
+    p = tmp_path / "a.xml"
+    p.write_text('<scene version="3.0.0"><sensor type="perspective"/>\n<shape type="sphere">'
+                 '<bsdf type="roughdielectric" '
+                 'id="r"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.3"/>'
+                 "</bsdf></shape></scene>")  # fmt: skip
+    with pytest.raises(ValueError, match=r"a\.xml:2: <bsdf type='roughdielectric' id='r'>.*"
+                                         r"anisotropic roughness is not supported"):  # fmt: skip
+        read_xml(str(p))
+
+
+@pytest.mark.mitsuba
+def test_mitsuba_loads_plastic_and_roughdielectric_to_the_same_parameters(mi, tmp_path):
+    desc = read_xml(_new_bsdfs_xml(tmp_path)).desc
+    p = mi.traverse(mi.load_file(save_scene(desc, str(tmp_path / "w.xml"))))
+    m = desc["materials"]
+    np.testing.assert_allclose(p["shiny.brdf_0.eta"], m["shiny"]["eta"], rtol=1e-6)
+    np.testing.assert_allclose(p["shiny.brdf_0.diffuse_reflectance.value"],
+                               m["shiny"]["diffuse_reflectance"], rtol=1e-6)  # fmt: skip
+    for n in ("frosted", "ggx_glass"):
+        np.testing.assert_allclose(p[f"{n}.eta"], m[n]["eta"], rtol=1e-6)
+        np.testing.assert_allclose(p[f"{n}.alpha.value"], m[n]["alpha"], rtol=1e-6)
+        np.testing.assert_allclose(p[f"{n}.specular_transmittance.value"],
+                                   m[n]["specular_transmittance"], rtol=1e-6)  # fmt: skip
+
+
+@pytest.mark.mitsuba
+@pytest.mark.slow  # 50 s measured here (16², 4 x 64 spp each side, max_depth 6; compile dominates)
+@pytest.mark.xfail(strict=True, reason="open: the smooth plastic sphere (nonlinear, kd (0.1, 0.3, "
+                   "0.6), area light + sky) renders 17 / 12 / 8 % darker (R, G, B; z -4.7) in "
+                   "jaxgfx; the rough-glass sphere and floor agree (|z| < 1.2)")  # fmt: skip
+def test_plastic_and_roughdielectric_scene_renders_in_mitsuba_like_jaxgfx(mi, tmp_path):
+    desc = read_xml(_new_bsdfs_xml(tmp_path)).desc
+    out = save_scene(desc, str(tmp_path / "w.xml"), spp=SPP, max_depth=6)
+    scene = mi.load_file(out)
+    b = np.stack([np.array(mi.render(scene, spp=SPP, seed=s))[..., :3] for s in range(K)])
+    a = _jaxgfx_replicates(desc, None, 6)
+    _assert_agree(a, b)

@@ -18,8 +18,9 @@ Mapping of conventions (jaxgfx -> Mitsuba 3), each checked by ``tests/render/tes
   local xy plane, normal +z) with ``to_world`` columns ``(s w/2, t h/2, n, center)`` where
   ``(s, t, n)`` is the same Duff et al. 2017 frame jaxgfx builds, so uv and normal agree.
 * reflection-only materials are shaded on both sides in jaxgfx; Mitsuba's ``diffuse``,
-  ``conductor``, ``roughconductor`` and ``roughplastic`` are one-sided (black from behind), so they
-  are wrapped in ``twosided``. ``dielectric`` is not wrapped. Emitter shapes without a material
+  ``conductor``, ``roughconductor``, ``plastic`` and ``roughplastic`` are one-sided (black from
+  behind), so they are wrapped in ``twosided``. ``dielectric`` and ``roughdielectric`` are not
+  wrapped. Emitter shapes without a material
   get a black ``diffuse`` (jaxgfx's default) instead of Mitsuba's grey default.
 * anisotropic roughness (``alpha_v``) is exported on rectangles only: jaxgfx's tangent is the
   Duff et al. frame around the normal everywhere, Mitsuba's is ``dp/du`` (longitude on spheres,
@@ -188,6 +189,24 @@ def _material(md, where) -> dict:
             "ext_ior": 1.0,
             "specular_reflectance": _rgb(m.specular_reflectance),
             "specular_transmittance": _rgb(m.specular_transmittance),
+        }
+    elif kind == "roughdielectric":
+        out = {
+            "type": kind,
+            **_distribution(m, where),
+            "int_ior": _float(m.eta),
+            "ext_ior": 1.0,
+            "specular_reflectance": _rgb(m.specular_reflectance),
+            "specular_transmittance": _rgb(m.specular_transmittance),
+        }
+    elif kind == "plastic":
+        out = {
+            "type": kind,
+            "int_ior": _float(m.eta),
+            "ext_ior": 1.0,
+            "diffuse_reflectance": _rgb(m.diffuse_reflectance),
+            "specular_reflectance": _rgb(m.specular_reflectance),
+            "nonlinear": bool(m.nonlinear),
         }
     elif kind == "roughplastic":
         dist = _distribution(m, where)
@@ -486,6 +505,18 @@ def _bsdf_desc(m, where) -> dict:
         if isinstance(m, B.RoughConductor):
             return {"type": "roughconductor", **micro, "alpha_v": _list(dist.alpha_v), **conductor}
         return {"type": "roughplastic", **micro, "eta": _list(m.eta),
+                "diffuse_reflectance": _list(m.diffuse_reflectance),
+                "specular_reflectance": _list(m.specular_reflectance),
+                "nonlinear": bool(m.nonlinear)}  # fmt: skip
+    if isinstance(m, B.RoughDielectric):
+        dist = m.distribution
+        return {"type": "roughdielectric", "distribution": dist.type,
+                "alpha": _list(dist.alpha_u), "alpha_v": _list(dist.alpha_v),
+                "sample_visible": bool(dist.sample_visible), "eta": _list(m.eta),
+                "specular_reflectance": _list(m.specular_reflectance),
+                "specular_transmittance": _list(m.specular_transmittance)}  # fmt: skip
+    if isinstance(m, B.SmoothPlastic):
+        return {"type": "plastic", "eta": _list(m.eta),
                 "diffuse_reflectance": _list(m.diffuse_reflectance),
                 "specular_reflectance": _list(m.specular_reflectance),
                 "nonlinear": bool(m.nonlinear)}  # fmt: skip

@@ -50,7 +50,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     # shapes
     ("shape", "obj"): S,
     ("shape", "ply"): S,
-    ("shape", "serialized"): "refused: Mitsuba's zlib mesh format is not read yet",
+    ("shape", "serialized"): S + " (shape_index; vertex colours ignored)",
     ("shape", "sphere"): S,
     ("shape", "rectangle"): S,
     ("shape", "cube"): S + " (untextured)",
@@ -68,9 +68,9 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("bsdf", "conductor"): S,
     ("bsdf", "roughconductor"): S + " (isotropic)",
     ("bsdf", "dielectric"): S,
-    ("bsdf", "roughplastic"): S + " (jaxgfx's model differs at large alpha)",
-    ("bsdf", "plastic"): "refused: jaxgfx has roughplastic only",
-    ("bsdf", "roughdielectric"): "refused: no rough dielectric in jaxgfx",
+    ("bsdf", "roughplastic"): S,
+    ("bsdf", "plastic"): S,
+    ("bsdf", "roughdielectric"): S + " (isotropic)",
     ("bsdf", "thindielectric"): "refused: no thin dielectric in jaxgfx",
     ("bsdf", "principled"): "refused: no principled BSDF in jaxgfx",
     ("bsdf", "principledthin"): "refused: no principled BSDF in jaxgfx",
@@ -154,11 +154,13 @@ BSDF_TO_MITSUBA = {
     "Mirror": "conductor",
     "RoughConductor": "roughconductor",
     "SmoothDielectric": "dielectric",
+    "RoughDielectric": "roughdielectric",
+    "SmoothPlastic": "plastic",
     "RoughPlastic": "roughplastic",
 }
 """jaxgfx BSDF class -> Mitsuba plugin (``Phong`` has none)."""
 
-ONE_SIDED_BSDFS = ("diffuse", "conductor", "roughconductor", "roughplastic")
+ONE_SIDED_BSDFS = ("diffuse", "conductor", "roughconductor", "plastic", "roughplastic")
 """Mitsuba BSDFs that are black from behind; jaxgfx shades them on both sides, so the writer
 wraps them in ``twosided`` and the loader treats ``twosided`` as a pass-through."""
 

@@ -29,9 +29,9 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
   (piecewise-linear spectrum, zero outside the listed range, against the CIE 1931 2 degree
   observer from colour-science, 1000 samples over 360-830 nm; reflectances weighted by D65 and
   normalised by its luminance, emission normalised by the CMFs' y integral).
-* Mitsuba's one-sided BSDFs (``diffuse``, ``conductor``, ``roughconductor``, ``roughplastic``)
-  are shaded on both sides in jaxgfx: the image agrees where back faces are not seen
-  (``twosided`` is therefore a pass-through wrapper).
+* Mitsuba's one-sided BSDFs (``diffuse``, ``conductor``, ``roughconductor``, ``plastic``,
+  ``roughplastic``) are shaded on both sides in jaxgfx: the image agrees where back faces are
+  not seen (``twosided`` is therefore a pass-through wrapper).
 * ``envmap``: same direction -> (u, v) map as jaxgfx (y up); Mitsuba places rows at
   ``v = j / (H - 1)``, jaxgfx at ``(j + 1/2) / H'``: the map is resampled to ``H' = 4 H`` rows
   with Mitsuba's linear interpolation along v (exact between Mitsuba's rows up to the
@@ -721,8 +721,15 @@ def _bsdf(obj: _Obj, doc, desc, *, textured_ok=True, name=None) -> str:
              "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
              "specular_transmittance": p.color("specular_transmittance", [1.0] * 3,
                                                texture=True)}  # fmt: skip
-    elif t == "roughplastic":
-        m = {"type": "roughplastic", **_distribution(p),
+    elif t == "roughdielectric":
+        eta = p.ior("int_ior", DEFAULTS["dielectric.int_ior"]) / p.ior(
+            "ext_ior", DEFAULTS["dielectric.ext_ior"])
+        m = {"type": "roughdielectric", **_distribution(p), "eta": eta,
+             "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
+             "specular_transmittance": p.color("specular_transmittance", [1.0] * 3,
+                                               texture=True)}  # fmt: skip
+    elif t in ("plastic", "roughplastic"):
+        m = {"type": t, **(_distribution(p) if t == "roughplastic" else {}),
              "eta": p.ior("int_ior", DEFAULTS["roughplastic.int_ior"])
              / p.ior("ext_ior", DEFAULTS["roughplastic.ext_ior"]),
              "diffuse_reflectance": p.color("diffuse_reflectance",
@@ -731,8 +738,7 @@ def _bsdf(obj: _Obj, doc, desc, *, textured_ok=True, name=None) -> str:
              "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
              "nonlinear": p.bool("nonlinear", False)}  # fmt: skip
     else:
-        hint = " (jaxgfx has roughplastic only)" if t == "plastic" else ""
-        raise ValueError(f"{obj.where}: BSDF plugin {t!r} is not supported{hint}")
+        raise ValueError(f"{obj.where}: BSDF plugin {t!r} is not supported")
     p.done()
     name = obj.id or name or f"bsdf_{len(desc['materials'])}"
     while name in desc["materials"]:
@@ -847,17 +853,23 @@ def _shape(obj: _Obj, doc, desc, ctx):
               "edge_u": (2 * lin[:, 0]).tolist(), "edge_v": (2 * lin[:, 1]).tolist()}  # fmt: skip
         corners = np.array([[x, y, 0, 1] for x in (-1, 1) for y in (-1, 1)]) @ m.T
         bbox = np.stack([corners[:, :3].min(0), corners[:, :3].max(0)])
-    elif t in ("obj", "ply", "cube", "disk"):
+    elif t in ("obj", "ply", "serialized", "cube", "disk"):
         from jaxgfx.render.geometry import mesh_io
 
         uvs = normals = None
-        if t in ("obj", "ply"):
+        if t in ("obj", "ply", "serialized"):
             fname = p.string("filename")
             if fname is None:
                 raise ValueError(f"{obj.where}: missing parameter 'filename'")
             path = doc.resolve(fname, obj.props["filename"].node, obj.label)
             try:
-                mesh = (mesh_io.load_obj if t == "obj" else mesh_io.load_ply)(path)
+                if t == "serialized":
+                    from jaxgfx.render.geometry.serialized import read_serialized
+
+                    # vertex colours are ignored, as Mitsuba does unless a texture reads them
+                    mesh = read_serialized(path, p.int("shape_index", 0))
+                else:
+                    mesh = (mesh_io.load_obj if t == "obj" else mesh_io.load_ply)(path)
             except ValueError as e:
                 raise p.err("filename", str(e)) from None
             v = np.asarray(mesh.vertices, np.float64)
@@ -894,7 +906,7 @@ def _shape(obj: _Obj, doc, desc, ctx):
         bbox = np.stack([vw.min(0), vw.max(0)])
     else:
         raise ValueError(f"{obj.where}: shape plugin {t!r} is not supported "
-                         "(obj, ply, sphere, rectangle, cube, disk)")  # fmt: skip
+                         "(obj, ply, serialized, sphere, rectangle, cube, disk)")  # fmt: skip
     p.done(children_ok=len(obj.children))
     ctx["bboxes"].append((bbox, obj))
     if emitters:
