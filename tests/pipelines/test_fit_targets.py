@@ -149,6 +149,9 @@ print("traced", out[0].shape, sorted(out[1]["camera"]))
 """
 
 
+# cost: 20-70 s (a fresh interpreter importing and tracing the fit step); the default run keeps
+# tests/test_imports.py::test_every_module_imports_inside_a_trace, the general guard
+@pytest.mark.slow
 def test_fit_step_of_a_photo_target_traces_in_a_fresh_interpreter(tmp_path):
     """The crash of the documented `target: photo.png` path: tracing the fit step raised
     ConcretizationTypeError because `jaxgfx.hdr` was first imported *inside* the trace (an

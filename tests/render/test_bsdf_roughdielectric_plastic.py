@@ -42,9 +42,16 @@ def _np_fresnel(mu, eta):
 
 CHI2_CASES = [
     ("ggx a=0.3 outside", RoughDielectric(0.3, eta=1.5), 0.7),
-    ("ggx a=0.3 inside", RoughDielectric(0.3, eta=1.5), -0.6),
-    ("ggx a=0.8 grazing", RoughDielectric(0.8, eta=1.33), 0.15),  # ires 40: peaked at horizon
-    ("beckmann a=0.3", RoughDielectric(0.3, eta=1.5, distribution="beckmann"), 0.5),
+    # the other cases run in make test-slow: ~20 s each at load 8 (the default suite's budget);
+    # "ggx a=0.3 outside" stays in the default run
+    pytest.param("ggx a=0.3 inside", RoughDielectric(0.3, eta=1.5), -0.6, marks=pytest.mark.slow),
+    pytest.param(  # ires 40: peaked at the horizon
+        "ggx a=0.8 grazing", RoughDielectric(0.8, eta=1.33), 0.15, marks=pytest.mark.slow
+    ),
+    pytest.param(
+        "beckmann a=0.3", RoughDielectric(0.3, eta=1.5, distribution="beckmann"), 0.5,
+        marks=pytest.mark.slow,
+    ),
     pytest.param(
         "ggx a=0.05", RoughDielectric(0.05, eta=1.5), 0.6, marks=pytest.mark.slow
     ),  # measured 9 s (ires 40)
@@ -153,7 +160,9 @@ _WI = [[-0.4, 0.0, 0.8], [-0.3, 0.1, -0.9], [-0.2, -0.4, 0.85]]
 
 @pytest.mark.parametrize(
     "dist",
-    ["ggx", pytest.param("beckmann", marks=pytest.mark.slow)],  # slow: measured 25 s
+    # slow: measured 31 s (ggx) and 25 s (beckmann) at load 8; the default run keeps the
+    # closed-form energy and reciprocity checks of this BSDF
+    [pytest.param("ggx", marks=pytest.mark.slow), pytest.param("beckmann", marks=pytest.mark.slow)],
 )
 def test_roughdielectric_grads_vs_fd(dist, x64):  # ggx: measured 23 s on the loaded box
     """d eval / d(alpha, eta) and d pdf / d(alpha, eta) (float64, jitted)."""
