@@ -12,7 +12,9 @@
    jaxgfx and Mitsuba interleaved in one process, warm, wall clock, all cores, a new seed per
    call, synchronised, medians of 3, process CPU and other processes' CPU recorded, Mitsuba's
    figure checked against its known throughput; the run refuses to start above
-   ``--max-load``.
+   ``--max-load``. ``passes`` (not a default section): interleaved A/B of the estimator's
+   layout on the same scenes, one sample pass per scan step (before issue 22) against several
+   (now), with Mitsuba in the same round-robin, medians of 5.
 
 1. Speed. Scenes: ``configs/scenes/example.yaml`` at 128^2 and 256^2 with ``direct`` and
    ``path`` (max_depth 3), and a 99 224-triangle mesh scene (a UV sphere written as a PLY to a
@@ -113,6 +115,59 @@ def ratios(mi, *, repeats=3, quick=False):
                     extra = {"triangles": n_tri}
                 row = {"scene": name, "width": w, "height": h, **extra}
                 row.update(H.compare(desc, mi=mi, spp=16, max_depth=4, repeats=repeats))
+                rows.append(row)
+                _log(json.dumps(row))
+    return rows
+
+
+class _OnePassPerStep(H.JaxgfxRender):
+    """The estimator's layout before issue 22 (one sample pass per scan step), same scene,
+    same numbers per sample: the A of the ``passes`` section's A/B."""
+
+    def __init__(self, desc, *, spp, integrator="path", max_depth=4):
+        import equinox as eqx
+
+        from jaxgfx.render.estimator import render_partial, resolve_integrator
+
+        super().__init__(desc, spp=spp, integrator=integrator, max_depth=max_depth)
+        integ = resolve_integrator(integrator, max_depth=max_depth)
+        self._fn = eqx.filter_jit(
+            lambda sc, k: render_partial(sc, k, integ, spp=spp, rays_per_step=None) / spp
+        )
+
+    def call(self, seed):
+        return jax.block_until_ready(self._fn(self.scene, jax.random.key(seed)))
+
+
+def passes_ab(mi, *, repeats=3, quick=False):
+    """Interleaved A/B of the estimator's layout on the ratios scenes: one sample pass per scan
+    step (before) against ``passes_per_step`` passes per step (now), with Mitsuba 3 in the same
+    round-robin; also the largest |difference| of the two images for one key."""
+    rows = []
+    sizes = {"two_spheres": ((96, 72),) if quick else ((96, 72), (384, 288)),
+             "mesh_5k": ((80, 64),) if quick else ((80, 64), (320, 256))}  # fmt: skip
+    with tempfile.TemporaryDirectory(prefix="jaxgfx_bench_passes_") as tmp:
+        for name, res in sizes.items():
+            for w, h in res:
+                if name == "two_spheres":
+                    desc = H.two_spheres_desc(w, h)
+                else:
+                    desc, _ = H.blob_mesh_desc(tmp, w, h)
+                renders = {
+                    "one_pass_per_step": _OnePassPerStep(desc, spp=16, max_depth=4),
+                    "grouped": H.JaxgfxRender(desc, spp=16, max_depth=4),
+                }
+                if mi is not None:
+                    renders["mitsuba"] = H.MitsubaRender(mi, desc, spp=16, max_depth=4)
+                row = {"scene": name, "width": w, "height": h, "spp": 16, "max_depth": 4}
+                row.update(H.interleave(renders, repeats=repeats))
+                a = np.asarray(renders["one_pass_per_step"].call(7))
+                b = np.asarray(renders["grouped"].call(7))
+                row["max_abs_diff"] = float(np.abs(a - b).max())
+                row["bit_identical"] = bool(np.array_equal(a, b))
+                row["speedup"] = round(
+                    row["grouped"]["samples_per_s"] / row["one_pass_per_step"]["samples_per_s"], 2
+                )
                 rows.append(row)
                 _log(json.dumps(row))
     return rows
@@ -287,7 +342,7 @@ def main(argv=None):
     ap.add_argument(
         "--sections",
         default="ratios,speed,mesh,features,equal_time",
-        help="comma-separated subset of ratios,speed,mesh,features,equal_time",
+        help="comma-separated subset of ratios,speed,mesh,features,equal_time,passes",
     )
     ap.add_argument("--max-load", type=float, default=1.0,
                     help="refuse to measure when the 1-min load average is above this")  # fmt: skip
@@ -312,6 +367,8 @@ def main(argv=None):
     }
     if "ratios" in sections:
         doc["ratios"] = ratios(mi, repeats=repeat, quick=quick)
+    if "passes" in sections:  # not in the default sections
+        doc["passes_ab"] = passes_ab(mi, repeats=5, quick=quick)
     base = read_yaml(EXAMPLE)
     cases = []
     for res in ((128,) if quick else (128, 256)) if "speed" in sections else ():

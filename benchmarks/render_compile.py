@@ -1,0 +1,154 @@
+"""Compile time as a metric: what the ``configs/inverse_material.yaml`` fit step compiles.
+
+    python -m benchmarks.render_compile [--config configs/inverse_material.yaml]
+                                        [--variants default,one_pass_per_step] [--out FILE]
+
+Each variant runs in a **fresh Python process** with JAX's persistent compilation cache off
+(a cold start, as ``jaxgfx fit`` on a new problem): the fit step of
+``jaxgfx.optim._loop._step`` for the config (render -> loss -> ``value_and_grad`` -> Adam), as
+``jaxgfx.optim.fit`` builds it, timed in stages (``jax.stages``): ``trace_s`` (``.trace``),
+``lower_s`` (``.lower``), ``compile_s`` (``.compile()``, XLA), their process CPU seconds, the
+size of the StableHLO module (characters, ops) and of the optimised HLO (characters), and a
+warm step's median seconds (3 calls). Variants (``estimator.RAYS_PER_STEP`` etc. patched in the
+child before tracing):
+
+* ``default``: the code as it is.
+* ``one_pass_per_step``: ``render_partial`` with one sample pass per scan step (the layout
+  before issue 22).
+* ``one_render_for_both_keys``: the decorrelated loss's two images (``optim._estimators``)
+  rendered by one program vmapped over the two keys instead of two render calls (a
+  measurement only: same keys and values, the backward then runs over both images).
+
+Prints one JSON document (``machine`` block first; the load average is the other jobs').
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+VARIANTS = ("default", "one_pass_per_step", "one_render_for_both_keys")
+
+
+def _child(config: str, variant: str) -> dict:
+    os.environ["JAXGFX_CACHE_DIR"] = "off"
+    import jax
+    import numpy as np
+
+    import jaxgfx.render.estimator as E
+
+    if variant == "one_pass_per_step":
+        E.RAYS_PER_STEP = None
+        defaults = list(E.render_partial.__kwdefaults__.items())
+        E.render_partial.__kwdefaults__ = {
+            k: (None if k == "rays_per_step" else v) for k, v in defaults
+        }
+    elif variant == "one_render_for_both_keys":
+        import jaxgfx.optim._estimators as OE
+
+        def two_images(image_fn, key):  # the same two keys, one (vmapped) render program
+            imgs = jax.vmap(image_fn)(jax.random.split(key))
+            return jax.lax.stop_gradient(imgs[0]), imgs[1]
+
+        OE._two_images = two_images
+    elif variant != "default":
+        raise SystemExit(f"variant: expected one of {VARIANTS}, got {variant!r}")
+
+    import functools
+
+    from jaxgfx.config import load_config
+    from jaxgfx.optim import _loop as L
+    from jaxgfx.pipelines.fit import FitConfig
+    from jaxgfx.pipelines.fit.job import _initial, _target
+    from jaxgfx.pipelines.fit.loss import cached_loss
+    from jaxgfx.pipelines.fit.targets import prepare_fit
+
+    cfg = load_config(FitConfig, config)
+    prep = prepare_fit(cfg, base_dir=os.path.dirname(os.path.abspath(config)))
+    target, _ = _target(cfg, prep)
+    params, bounds, cam_args = _initial(cfg, prep)
+    loss = cached_loss(cfg, prep.paths, prep.ldr, target.grey, target.mask is not None)
+    import jax.numpy as jnp
+
+    args = (prep.scene, jnp.asarray(target.pixels), cam_args)
+    tx = L._named_optimizer("adam", ())
+    spec = L._bound_spec(params, bounds)
+    u0 = L.to_unconstrained(params, bounds)
+    state = tx.init(u0)
+    key = jax.random.key(0)
+    static = dict(loss=loss, tx=tx, spec=spec, use_key=True)
+    step = functools.partial(L._step, **static)
+    out = {"variant": variant}
+
+    def clocks():
+        return time.perf_counter(), time.process_time()
+
+    w0, c0 = clocks()
+    traced = L._step.trace(u0, state, key, np.int32(0), args, **static)
+    w1, c1 = clocks()
+    lowered = traced.lower()
+    w2, c2 = clocks()
+    compiled = lowered.compile()
+    w3, c3 = clocks()
+    out.update(
+        trace_s=w1 - w0, trace_cpu_s=c1 - c0, lower_s=w2 - w1, lower_cpu_s=c2 - c1,
+        compile_s=w3 - w2, compile_cpu_s=c3 - c2,
+    )  # fmt: skip
+    text = lowered.as_text()
+    out["stablehlo_chars"] = len(text)
+    out["stablehlo_ops"] = sum(1 for ln in text.splitlines() if " = " in ln)
+    try:
+        out["optimized_hlo_chars"] = len(compiled.as_text())
+    except Exception:  # pragma: no cover - depends on the jax version
+        out["optimized_hlo_chars"] = None
+    res = compiled(u0, state, key, np.int32(0), args)
+    jax.block_until_ready(res)
+    ts = []
+    for i in range(3):
+        t = time.perf_counter()
+        jax.block_until_ready(step(u0, state, key, np.int32(i + 1), args))
+        ts.append(time.perf_counter() - t)
+    out["step_s"] = float(np.median(ts))
+    out["loss"] = float(res[2])
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--config", default=os.path.join(ROOT, "configs", "inverse_material.yaml"))
+    ap.add_argument("--variants", default=",".join(VARIANTS))
+    ap.add_argument("--out", default=None)
+    ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    if a.child:
+        print(json.dumps(_child(a.config, a.child)), flush=True)
+        return
+    from benchmarks._report import emit, machine
+
+    doc = {"benchmark": "render_compile", "machine": machine(), "config": a.config, "rows": []}
+    env = dict(os.environ, JAXGFX_CACHE_DIR="off")
+    env["PYTHONPATH"] = os.pathsep.join([ROOT, env.get("PYTHONPATH", "")])
+    for v in a.variants.split(","):
+        t = time.perf_counter()
+        p = subprocess.run(
+            [sys.executable, "-m", "benchmarks.render_compile", "--config", a.config,
+             "--child", v],
+            env=env, capture_output=True, text=True, cwd=ROOT,
+        )  # fmt: skip
+        if p.returncode != 0:
+            raise SystemExit(p.stderr[-3000:])
+        row = json.loads(p.stdout.strip().splitlines()[-1])
+        row["process_wall_s"] = time.perf_counter() - t
+        row["load_avg_after"] = [round(x, 2) for x in os.getloadavg()]
+        doc["rows"].append(row)
+        print(json.dumps(row), file=sys.stderr, flush=True)
+    emit(doc, a.out)
+
+
+if __name__ == "__main__":
+    main()
