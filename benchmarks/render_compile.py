@@ -13,6 +13,8 @@ warm step's median seconds (3 calls). Variants (``estimator.RAYS_PER_STEP`` etc.
 child before tracing):
 
 * ``default``: the code as it is.
+* ``checkpointed``: a pass scan of one step and a bounce loop of one bounce checkpointed
+  anyway (``estimator.CHECKPOINT_ONE_STEP``, ``path.CHECKPOINT_ONE_BOUNCE``; before issue 22).
 * ``one_pass_per_step``: ``render_partial`` with one sample pass per scan step (the layout
   before issue 22).
 * ``one_render_for_both_keys``: the decorrelated loss's two images (``optim._estimators``)
@@ -32,7 +34,7 @@ import sys
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-VARIANTS = ("default", "one_pass_per_step", "one_render_for_both_keys")
+VARIANTS = ("default", "checkpointed", "one_pass_per_step", "one_render_for_both_keys")
 
 
 def _child(config: str, variant: str) -> dict:
@@ -48,6 +50,11 @@ def _child(config: str, variant: str) -> dict:
         E.render_partial.__kwdefaults__ = {
             k: (None if k == "rays_per_step" else v) for k, v in defaults
         }
+    elif variant == "checkpointed":
+        import jaxgfx.render.integrators.path as PI
+
+        E.CHECKPOINT_ONE_STEP = True
+        PI.CHECKPOINT_ONE_BOUNCE = True
     elif variant == "one_render_for_both_keys":
         import jaxgfx.optim._estimators as OE
 

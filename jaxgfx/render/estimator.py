@@ -31,6 +31,11 @@ traces several sample passes per ``lax.scan`` step (:func:`passes_per_step`), so
 about as many rays as a large image's and the per-step overhead is shared (issue 22)."""
 
 
+CHECKPOINT_ONE_STEP = False
+"""Whether :func:`pass_scan` checkpoints a scan of a single step of several passes (``False``:
+it runs the step as plain code, see there)."""
+
+
 def passes_per_step(rays_per_pass: int, n_passes: int, target: int | None = RAYS_PER_STEP) -> int:
     """How many sample passes of ``rays_per_pass`` rays one scan step traces: about
     ``target / rays_per_pass`` (at least 1, at most ``n_passes``), evened out so that the
@@ -78,7 +83,14 @@ def pass_scan(one_pass, passes, acc0, weights=None, *, per_step: int = 1):
     if pad:
         passes = jnp.concatenate([passes, jnp.broadcast_to(passes[-1:], (pad,))])
         weights = jnp.concatenate([weights, jnp.zeros((pad,), weights.dtype)])
-    group = jax.checkpoint(one_pass, prevent_cse=False)
+    steps = (n + pad) // k
+    # one step: no scan and no checkpoint. The checkpoint's recomputation would hold the same
+    # intermediates as plain reverse mode (one step's), so it only adds a copy of the forward
+    # program to compile and to run (issue 22: the 32x32 fit step); CHECKPOINT_ONE_STEP = True
+    # restores it (benchmarks/render_compile.py)
+    group = one_pass if steps == 1 and not CHECKPOINT_ONE_STEP else jax.checkpoint(
+        one_pass, prevent_cse=False
+    )
 
     def body_k(acc, sw):
         ss, wts = sw
@@ -87,9 +99,10 @@ def pass_scan(one_pass, passes, acc0, weights=None, *, per_step: int = 1):
             acc = acc + wts[j].astype(acc.dtype) * out[j]
         return acc, None
 
-    acc, _ = jax.lax.scan(
-        body_k, acc0, (passes.reshape(-1, k), weights.reshape(-1, k).astype(acc0.dtype))
-    )
+    xs = (passes.reshape(-1, k), weights.reshape(-1, k).astype(acc0.dtype))
+    if steps == 1 and not CHECKPOINT_ONE_STEP:
+        return body_k(acc0, (xs[0][0], xs[1][0]))[0]
+    acc, _ = jax.lax.scan(body_k, acc0, xs)
     return acc
 
 
