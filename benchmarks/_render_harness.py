@@ -148,7 +148,9 @@ class JaxgfxRender:
         self.load_s = time.perf_counter() - t
         self.samples = int(self.scene.width) * int(self.scene.height) * int(spp)
         self._render = render
-        self._kw = dict(spp=spp, integrator=integrator, max_depth=max_depth, **options)
+        self._kw = dict(spp=spp, integrator=integrator, **options)
+        if max_depth is not None:  # None: an integrator object carries its own
+            self._kw["max_depth"] = max_depth
         self.info = {"accel": self.scene.accel}
 
     def call(self, seed):

@@ -14,7 +14,9 @@
    figure checked against its known throughput; the run refuses to start above
    ``--max-load``. ``passes`` (not a default section): interleaved A/B of the estimator's
    layout on the same scenes, one sample pass per scan step (before issue 22) against several
-   (now), with Mitsuba in the same round-robin, medians of 5.
+   (now), and several without wavefront shading (``PathIntegrator(chunk=None)``), with
+   Mitsuba in the same round-robin, medians of 5. ``mesh_profile`` (not a default section):
+   the Embree callbacks' share of a mesh render (5 k-triangle blob, 320x256, 16 spp, depth 4).
 
 1. Speed. Scenes: ``configs/scenes/example.yaml`` at 128^2 and 256^2 with ``direct`` and
    ``path`` (max_depth 3), and a 99 224-triangle mesh scene (a UV sphere written as a PLY to a
@@ -52,6 +54,7 @@ from benchmarks._report import emit, machine
 from benchmarks._timing import median_time
 from jaxgfx.config import read_yaml
 from jaxgfx.render.geometry.mesh_io import make_uv_sphere, save_ply
+from jaxgfx.render.integrators import PathIntegrator
 from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
 
@@ -156,6 +159,11 @@ def passes_ab(mi, *, repeats=3, quick=False):
                 renders = {
                     "one_pass_per_step": _OnePassPerStep(desc, spp=16, max_depth=4),
                     "grouped": H.JaxgfxRender(desc, spp=16, max_depth=4),
+                    # the same without wavefront shading, which a batch of >= 2 chunks turns on
+                    "grouped_no_wavefront": H.JaxgfxRender(
+                        desc, spp=16, max_depth=None,
+                        integrator=PathIntegrator(max_depth=4, chunk=None),
+                    ),  # fmt: skip
                 }
                 if mi is not None:
                     renders["mitsuba"] = H.MitsubaRender(mi, desc, spp=16, max_depth=4)
@@ -171,6 +179,52 @@ def passes_ab(mi, *, repeats=3, quick=False):
                 rows.append(row)
                 _log(json.dumps(row))
     return rows
+
+
+def mesh_profile(*, width=320, height=256, repeats=3):
+    """Where a mesh render's time goes: the 5 120-triangle blob (path, depth 4, 16 spp,
+    Embree) with the host side of every Embree ``pure_callback`` timed (closest-hit and
+    shadow-ray queries counted and timed separately), against the render's wall time."""
+    import collections
+
+    from jaxgfx.render.geometry.accel import embree as E
+
+    stats = collections.defaultdict(lambda: [0, 0.0, 0])
+    orig = E._EmbreeScene.query
+
+    def timed_query(self, o, d, tmin, tmax, any_hit):
+        t = time.perf_counter()
+        r = orig(self, o, d, tmin, tmax, any_hit)
+        st = stats["shadow" if any_hit else "closest"]
+        st[0] += 1
+        st[1] += time.perf_counter() - t
+        st[2] += int(np.prod(np.shape(o)[:-1]))
+        return r
+
+    E._EmbreeScene.query = timed_query
+    try:
+        with tempfile.TemporaryDirectory(prefix="jaxgfx_bench_meshprof_") as tmp:
+            desc, n_tri = H.blob_mesh_desc(tmp, width, height)
+            r = H.JaxgfxRender(desc, spp=16, max_depth=4)
+            r.call(0)
+            stats.clear()
+            t, c = time.perf_counter(), time.process_time()
+            for i in range(repeats):
+                r.call(i + 1)
+            wall = (time.perf_counter() - t) / repeats
+            cpu = (time.process_time() - c) / repeats
+    finally:
+        E._EmbreeScene.query = orig
+    out = {"triangles": n_tri, "width": width, "height": height, "accel": r.scene.accel,
+           "render_wall_s": round(wall, 4), "render_cpu_s": round(cpu, 4)}  # fmt: skip
+    for kind, (calls, sec, rays) in stats.items():
+        out[kind] = {
+            "callbacks_per_render": calls / repeats,
+            "seconds_per_render": round(sec / repeats, 4),
+            "fraction_of_wall": round(sec / repeats / wall, 3),
+            "mrays_per_s_in_callback": round(rays / sec / 1e6, 2),
+        }
+    return out
 
 
 # -------------------------------------------------------------------------------------------
@@ -342,7 +396,7 @@ def main(argv=None):
     ap.add_argument(
         "--sections",
         default="ratios,speed,mesh,features,equal_time",
-        help="comma-separated subset of ratios,speed,mesh,features,equal_time,passes",
+        help="subset of ratios,speed,mesh,features,equal_time; also passes, mesh_profile",
     )
     ap.add_argument("--max-load", type=float, default=1.0,
                     help="refuse to measure when the 1-min load average is above this")  # fmt: skip
@@ -369,6 +423,8 @@ def main(argv=None):
         doc["ratios"] = ratios(mi, repeats=repeat, quick=quick)
     if "passes" in sections:  # not in the default sections
         doc["passes_ab"] = passes_ab(mi, repeats=5, quick=quick)
+    if "mesh_profile" in sections:  # not in the default sections
+        doc["mesh_profile"] = mesh_profile()
     base = read_yaml(EXAMPLE)
     cases = []
     for res in ((128,) if quick else (128, 256)) if "speed" in sections else ():

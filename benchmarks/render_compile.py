@@ -8,8 +8,9 @@ Each variant runs in a **fresh Python process** with JAX's persistent compilatio
 ``jaxgfx.optim._loop._step`` for the config (render -> loss -> ``value_and_grad`` -> Adam), as
 ``jaxgfx.optim.fit`` builds it, timed in stages (``jax.stages``): ``trace_s`` (``.trace``),
 ``lower_s`` (``.lower``), ``compile_s`` (``.compile()``, XLA), their process CPU seconds, the
-size of the StableHLO module (characters, ops) and of the optimised HLO (characters), and a
-warm step's median seconds (3 calls). Variants (``estimator.RAYS_PER_STEP`` etc. patched in the
+size of the StableHLO module (characters, ops) and of the optimised HLO (characters), a census
+of the loss's jaxpr (equations per ``jaxgfx`` function and per primitive), and a warm step's
+median seconds (3 calls). Variants (``estimator.RAYS_PER_STEP`` etc. patched in the
 child before tracing):
 
 * ``default``: the code as it is.
@@ -35,6 +36,49 @@ import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 VARIANTS = ("default", "checkpointed", "one_pass_per_step", "one_render_for_both_keys")
+
+
+def _jaxpr_census(fn, *args, top=10) -> dict:
+    """Equations of ``jax.make_jaxpr(fn)(*args)`` (the fit's loss, forward only), every nested
+    jaxpr flattened (a jitted function called twice counts twice), grouped by the innermost
+    ``jaxgfx`` function they were traced from and by primitive."""
+    import collections
+
+    import jax
+    from jax._src import source_info_util as siu
+    from jax.extend import core as jcore
+
+    by_fn, by_prim = collections.Counter(), collections.Counter()
+
+    def subs(eqn):
+        for v in eqn.params.values():
+            for x in v if isinstance(v, (list, tuple)) else (v,):
+                if isinstance(x, jcore.ClosedJaxpr):
+                    yield x.jaxpr
+                elif isinstance(x, jcore.Jaxpr):
+                    yield x
+
+    def walk(j):
+        for e in j.eqns:
+            inner = list(subs(e))
+            for sj in inner:
+                walk(sj)
+            if inner:
+                continue
+            name = "?"
+            for fr in siu.user_frames(e.source_info.traceback):
+                if "/jaxgfx/" in fr.file_name:
+                    name = fr.file_name.split("/jaxgfx/")[-1] + ":" + fr.function_name
+                    break
+            by_fn[name] += 1
+            by_prim[e.primitive.name] += 1
+
+    walk(jax.make_jaxpr(fn)(*args).jaxpr)
+    return {
+        "loss_jaxpr_eqns": sum(by_fn.values()),
+        "loss_jaxpr_top_functions": by_fn.most_common(top),
+        "loss_jaxpr_top_primitives": by_prim.most_common(top),
+    }
 
 
 def _child(config: str, variant: str) -> dict:
@@ -113,6 +157,7 @@ def _child(config: str, variant: str) -> dict:
         out["optimized_hlo_chars"] = len(compiled.as_text())
     except Exception:  # pragma: no cover - depends on the jax version
         out["optimized_hlo_chars"] = None
+    out.update(_jaxpr_census(functools.partial(L._value, **static), u0, key, args))
     res = compiled(u0, state, key, np.int32(0), args)
     jax.block_until_ready(res)
     ts = []

@@ -63,9 +63,10 @@ def pass_scan(one_pass, passes, acc0, weights=None, *, per_step: int = 1):
     ``per_step == 1``: ``one_pass(s)`` takes one pass index. ``per_step = k > 1``:
     ``one_pass(ss)`` takes ``k`` pass indices ``(k,)`` and returns the ``k`` passes stacked
     ``(k, *acc0.shape)`` (traced together, e.g. as one batch of rays); ``passes`` is padded to a
-    multiple of ``k`` with weight-0 repeats of its last index. The sum is taken in the same
-    order, pass by pass, as with ``per_step = 1``, so the result is the same up to the rounding
-    of the differently compiled passes."""
+    multiple of ``k`` with weight-0 repeats of its last index; when that makes a single step it
+    runs without scan and checkpoint (the recomputation would hold the same intermediates).
+    The sum is taken in the same order, pass by pass, as with ``per_step = 1``, so the result
+    is the same up to the rounding of the differently compiled passes."""
     if weights is None:
         weights = jnp.ones(passes.shape, acc0.dtype)
     k = int(per_step)
