@@ -19,10 +19,13 @@ the backend's search plus the differentiable hit record (t, p, normals, uv) reco
 (``--backends-jax-rays``). Also reports build seconds and the fraction of rays whose hit and
 triangle id agree with Embree.
 
-``scaling``: path-traced samples/s (depth 3, 64^2, 4 spp) of the example scene with its sphere
+``scaling``: path-traced samples/s (depth 4, 128^2, 16 spp) of the example scene with its sphere
 replaced by a UV-sphere mesh of 1k ... 1M triangles (``--quick``: up to 16k) for each backend and
-Mitsuba 3 (same scene through ``to_mitsuba_dict``), with load/build and compile seconds;
-``--plot DIR`` writes ``samples_vs_triangles.png``.
+Mitsuba 3 (same scene through ``to_mitsuba_dict``), with load/build and compile seconds, timed
+by ``benchmarks/_render_harness.py`` (interleaved, warm, new seed per call, synchronised,
+medians of 3, process CPU; Mitsuba's figure checked against its known throughput);
+``--plot DIR`` writes ``samples_vs_triangles.png``. The run refuses to start above
+``--max-load`` (default 1.0) unless ``--allow-load``.
 
 ``wavefront`` (issue 13, not run by default): closest-hit M rays/s of the JAX BVH traversal, a
 2x2 ablation: per-ray ``while_loop`` under ``vmap`` (the traversal before issue 13) or the
@@ -46,6 +49,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from benchmarks import _render_harness as H
 from benchmarks._report import emit, machine
 from jaxgfx.render import geometry as S
 from jaxgfx.render.geometry import accel as A
@@ -189,9 +193,7 @@ def _e2e(acc, o, d):
 
 
 def _mitsuba_setup():
-    from benchmarks.render import _mitsuba
-
-    return _mitsuba(["llvm_ad_rgb", "scalar_rgb"])
+    return H.import_mitsuba(("llvm_ad_rgb", "scalar_rgb"))
 
 
 def _mitsuba_trace(mi, scene, o, d, threads):
@@ -407,21 +409,27 @@ def run_wavefront(n_rings=(36, 144), n_rays=(16384, 65536), variants=tuple(_BVH_
 # samples/s against the triangle count, per backend and Mitsuba 3
 
 
-def run_scaling(n_rings, *, res=64, spp=4, jax_max_tris=300_000, repeat=4):
+def run_scaling(n_rings, *, res=128, spp=16, max_depth=4, jax_max_tris=70_000, repeats=3):
+    """Path-traced samples/s against the triangle count: the example scene with its metal
+    sphere replaced by a UV-sphere mesh (PLY), per traversal backend and Mitsuba 3, all timed by
+    ``benchmarks/_render_harness.interleave`` in one round-robin per mesh (warm, new seed per
+    call, synchronised, medians of ``repeats``, process CPU, other processes' CPU).
+
+    Issue 22: this table used to be taken at 64^2 x 4 spp (16 k samples: Mitsuba's per-call
+    overhead dominated), with one fixed seed, ``np.array`` as the only synchronisation and
+    Mitsuba timed after all jaxgfx backends, at load 20: Mitsuba came out 16-25x too slow.
+    Defaults now: 128^2, 16 spp, depth 4 (262 k samples per call)."""
     import copy
     import tempfile
 
-    from benchmarks.render import EXAMPLE, bench_mitsuba
+    from benchmarks.render import EXAMPLE
     from jaxgfx.config import read_yaml
     from jaxgfx.render.geometry import accel as T
     from jaxgfx.render.geometry.mesh_io import make_uv_sphere, save_ply
-    from jaxgfx.render.render import render
-    from jaxgfx.render.scene import load_scene
 
     mi, variant = _mitsuba_setup()
     base = read_yaml(EXAMPLE)
     base["camera"]["width"] = base["camera"]["height"] = res
-    key = jax.random.key(0)
     rows = []
     with tempfile.TemporaryDirectory(prefix="jaxgfx_bench_accel_") as tmp:
         for nr in n_rings:
@@ -431,41 +439,17 @@ def run_scaling(n_rings, *, res=64, spp=4, jax_max_tris=300_000, repeat=4):
             desc = copy.deepcopy(base)
             desc["shapes"][0] = {"type": "mesh", "file": path, "material": "metal"}
             n_tris = int(m.faces.shape[0])
-            row = dict(n_tris=n_tris, res=res, spp=spp, integrator="path", max_depth=3)
-            first_backend = T.resolve_backend("auto")
-            t0 = time.perf_counter()
-            scene = load_scene(desc, accel=first_backend)
-            row[f"load_s_with_{first_backend}"] = time.perf_counter() - t0
+            row = dict(n_tris=n_tris, res=res, spp=spp, integrator="path", max_depth=max_depth)
+            renders = {}
             for name in T.available_backends():
                 if name == "jax" and n_tris > jax_max_tris:
                     continue
-                mesh = next(s.mesh for s in scene.shapes if T.accel_of(s) is not None)
-                t0 = time.perf_counter()
-                jax.block_until_ready(T.build_traversal(mesh, name))
-                build = time.perf_counter() - t0  # host build of the backend's structure
-                sc = scene.with_accel(name)
-
-                def run(sc=sc):
-                    return jax.block_until_ready(
-                        render(sc, key, spp=spp, integrator="path", max_depth=3)
-                    )
-
-                t0, c0 = time.perf_counter(), time.process_time()
-                img = run()
-                first, first_cpu = time.perf_counter() - t0, time.process_time() - c0
-                c0 = time.process_time()
-                sec, _ = _best_time(run, repeat)
-                run_cpu = (time.process_time() - c0) / repeat
-                # compile_cpu_s: CPU seconds of the first call minus a warm call's; robust to
-                # the load of a shared machine (XLA compiles on one thread)
-                row[name] = dict(build_s=build, compile_s=max(first - sec, 0.0),
-                                 compile_cpu_s=max(first_cpu - run_cpu, 0.0), time_s=sec,
-                                 samples_per_s=res * res * spp / sec,
-                                 mean=float(np.asarray(img).mean()))  # fmt: skip
+                renders[name] = H.JaxgfxRender(desc, spp=spp, max_depth=max_depth, accel=name)
             if mi is not None:
-                row["mitsuba"] = bench_mitsuba(
-                    mi, desc, spp=spp, integrator="path", max_depth=3, repeat=repeat
-                )
+                renders["mitsuba"] = H.MitsubaRender(mi, desc, spp=spp, max_depth=max_depth)
+            row.update(H.interleave(renders, repeats=repeats))
+            if mi is not None:
+                row["mitsuba_suspect"] = H.mitsuba_suspect(row["mitsuba"])
                 for name in T.ACCEL_BACKENDS:
                     if name in row:
                         row[f"mitsuba_over_{name}"] = round(
@@ -491,7 +475,7 @@ def plot_scaling(res, out_dir):
             label = f"Mitsuba 3 ({res['mitsuba_variant']})" if name == "mitsuba" else name
             ax.loglog(x, y, style, label=label)
     ax.set_xlabel("triangles")
-    ax.set_ylabel("path samples / s (depth 3, 64², 4 spp)")
+    ax.set_ylabel("path samples / s (depth 4, 128², 16 spp)")
     ax.set_title("Path tracing a mesh: samples/s per traversal backend")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
@@ -522,7 +506,12 @@ def main(argv=None):
         help=f"subset of {','.join(_BVH_VARIANTS)} (the first is the reference)",
     )
     ap.add_argument("--plot", default=None, help="write samples_vs_triangles.png here")
+    ap.add_argument("--max-load", type=float, default=1.0,
+                    help="refuse to measure when the 1-min load average is above this")  # fmt: skip
+    ap.add_argument("--allow-load", action="store_true",
+                    help="measure above --max-load anyway (flagged loaded: true)")  # fmt: skip
     a = ap.parse_args(argv)
+    gate = H.load_gate(a.max_load, refuse=not a.allow_load)
     mach = machine()
     sections = set(a.sections.split(","))
     max_exp = 3 if a.quick else (6 if a.full else a.max_exp)
@@ -547,7 +536,8 @@ def main(argv=None):
         extra["scaling"] = run_scaling(rings)
         if a.plot:
             extra["scaling"]["plot"] = plot_scaling(extra["scaling"], a.plot)
-    doc = dict(benchmark="accel", machine=mach, n_rays=n_rays, results=res, **extra)
+    doc = dict(benchmark="accel", machine=mach, load_gate=gate, n_rays=n_rays, results=res,
+               **extra)
     emit(doc, a.out)
 
 

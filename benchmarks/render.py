@@ -2,16 +2,30 @@
 
     python -m benchmarks.render [--quick] [--out FILE] [--plot DIR] [--ref-cache DIR]
                                 [--no-mitsuba | --mitsuba-variant scalar_rgb]
+                                [--sections ratios,speed,mesh,features,equal_time]
+                                [--max-load 1.0 | --allow-load]
+
+0. Ratios (issue 22's table; ``--sections ratios`` prints only it): path tracing, max_depth 4,
+   16 spp, the two spheres of ``configs/scenes/inverse.yaml`` at 96x72 and 384x288 and a
+   5 120-triangle blob mesh (OBJ, Beckmann conductor, point + area light, ``accel="auto"``) at
+   80x64 and 320x256. Every timing in this script goes through ``benchmarks/_render_harness.py``:
+   jaxgfx and Mitsuba interleaved in one process, warm, wall clock, all cores, a new seed per
+   call, synchronised, medians of 3, process CPU and other processes' CPU recorded, Mitsuba's
+   figure checked against its known throughput; the run refuses to start above
+   ``--max-load``. ``passes`` (not a default section): interleaved A/B of the estimator's
+   layout on the same scenes, one sample pass per scan step (before issue 22) against several
+   (now), and several without wavefront shading (``PathIntegrator(chunk=None)``), with
+   Mitsuba in the same round-robin, medians of 5. ``mesh_profile`` (not a default section):
+   the Embree callbacks' share of a mesh render (5 k-triangle blob, 320x256, 16 spp, depth 4).
 
 1. Speed. Scenes: ``configs/scenes/example.yaml`` at 128^2 and 256^2 with ``direct`` and
    ``path`` (max_depth 3), and a 99 224-triangle mesh scene (a UV sphere written as a PLY to a
    temporary folder, so both renderers load the same file) at 128^2, path depth 3, 4 spp (the
-   others 16; ``--quick``: 4 spp, 128^2 only, a 6 240-triangle sphere, 1 repeat). jaxgfx: one
-   warm-up call, then the median of ``repeat`` calls; ``compile_s`` = first call minus the
-   median; samples/s = W H spp / median. Mitsuba 3 renders the same scenes through
-   :func:`jaxgfx.render.scene.mitsuba.to_mitsuba_dict` in ``llvm_ad_rgb`` when it works (sets
-   ``DRJIT_LIBLLVM_PATH`` to Debian's ``libLLVM.so.19.1`` if present and unset), otherwise
-   ``scalar_rgb``: a warm-up render (LLVM JIT compilation), then the median of ``repeat``.
+   others 16; ``--quick``: 4 spp, 128^2 only, a 6 240-triangle sphere). ``compile_s`` = first
+   call minus the warm median; samples/s = W H spp / median. Mitsuba 3 renders the same scenes
+   through :func:`jaxgfx.render.scene.mitsuba.to_mitsuba_dict` in ``llvm_ad_rgb`` when it
+   works (sets ``DRJIT_LIBLLVM_PATH`` to Debian's ``libLLVM.so.19.1`` if present and unset),
+   otherwise ``scalar_rgb``.
 2. Equal-time error at 64^2 (example scene without its point light: a delta light cannot be
    reached by BSDF sampling, which would make that strategy biased): RMSE against a 4096-spp
    jaxgfx MIS reference (cached as .npy in ``--ref-cache``, default the system temp folder) vs
@@ -35,16 +49,18 @@ import time
 import jax
 import numpy as np
 
+from benchmarks import _render_harness as H
 from benchmarks._report import emit, machine
 from benchmarks._timing import median_time
 from jaxgfx.config import read_yaml
 from jaxgfx.render.geometry.mesh_io import make_uv_sphere, save_ply
+from jaxgfx.render.integrators import PathIntegrator
 from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXAMPLE = os.path.join(ROOT, "configs", "scenes", "example.yaml")
-LLVM19 = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"
+LLVM19 = H.LLVM19
 
 
 def _log(*a):
@@ -73,82 +89,142 @@ def mesh_scene(tmp_dir, n_rings=158, res=128):
 
 
 def bench_jaxgfx(desc, *, spp, integrator, max_depth, repeat):
-    t = time.perf_counter()
-    scene = load_scene(desc)
-    jax.block_until_ready(scene)
-    build = time.perf_counter() - t
-    key = jax.random.key(0)
-
-    def run():
-        return render(scene, key, spp=spp, integrator=integrator, max_depth=max_depth)
-
-    t = time.perf_counter()
-    img = run().block_until_ready()
-    first = time.perf_counter() - t
-    med = median_time(run, repeat)
-    w, h = scene.width, scene.height
-    return {
-        "accel": scene.accel,  # mesh traversal backend (load_scene's "auto"), None without meshes
-        "load_s": round(build, 3),
-        "first_call_s": round(first, 3),
-        "compile_s": round(max(first - med, 0.0), 3),
-        "time_s": round(med, 4),
-        "samples_per_s": round(w * h * spp / med),
-        "mean": float(np.asarray(img).mean()),
-    }
+    """jaxgfx alone through the harness (warm median of ``max(repeat, 3)`` calls, new key per
+    call, process CPU); the row of :func:`benchmarks._render_harness.interleave`."""
+    r = H.JaxgfxRender(desc, spp=spp, integrator=integrator, max_depth=max_depth)
+    return H.interleave({"jaxgfx": r}, repeats=max(repeat, 3))["jaxgfx"]
 
 
 def _mitsuba(variant_pref):
     """Import mitsuba with the first working variant of ``variant_pref``; (mi, variant)."""
-    if "llvm_ad_rgb" in variant_pref and "DRJIT_LIBLLVM_PATH" not in os.environ:
-        if os.path.exists(LLVM19):
-            os.environ["DRJIT_LIBLLVM_PATH"] = LLVM19
+    return H.import_mitsuba(tuple(variant_pref))
+
+
+def ratios(mi, *, repeats=3, quick=False):
+    """Issue 22's table: samples/s of jaxgfx and Mitsuba 3 on the same descriptions, path
+    tracing, ``max_depth`` 4, 16 spp, interleaved in this process: the two spheres of
+    ``configs/scenes/inverse.yaml`` at 96x72 and 384x288, a 5 120-triangle blob (OBJ, Beckmann
+    conductor, floor, point + area light; ``accel="auto"``) at 80x64 and 320x256."""
+    rows = []
+    sizes = {"two_spheres": ((96, 72),) if quick else ((96, 72), (384, 288)),
+             "mesh_5k": ((80, 64),) if quick else ((80, 64), (320, 256))}  # fmt: skip
+    with tempfile.TemporaryDirectory(prefix="jaxgfx_bench_ratios_") as tmp:
+        for name, res in sizes.items():
+            for w, h in res:
+                if name == "two_spheres":
+                    desc, extra = H.two_spheres_desc(w, h), {}
+                else:
+                    desc, n_tri = H.blob_mesh_desc(tmp, w, h)
+                    extra = {"triangles": n_tri}
+                row = {"scene": name, "width": w, "height": h, **extra}
+                row.update(H.compare(desc, mi=mi, spp=16, max_depth=4, repeats=repeats))
+                rows.append(row)
+                _log(json.dumps(row))
+    return rows
+
+
+class _OnePassPerStep(H.JaxgfxRender):
+    """The estimator's layout before issue 22 (one sample pass per scan step), same scene,
+    same numbers per sample: the A of the ``passes`` section's A/B."""
+
+    def __init__(self, desc, *, spp, integrator="path", max_depth=4):
+        import equinox as eqx
+
+        from jaxgfx.render.estimator import render_partial, resolve_integrator
+
+        super().__init__(desc, spp=spp, integrator=integrator, max_depth=max_depth)
+        integ = resolve_integrator(integrator, max_depth=max_depth)
+        self._fn = eqx.filter_jit(
+            lambda sc, k: render_partial(sc, k, integ, spp=spp, rays_per_step=None) / spp
+        )
+
+    def call(self, seed):
+        return jax.block_until_ready(self._fn(self.scene, jax.random.key(seed)))
+
+
+def passes_ab(mi, *, repeats=3, quick=False):
+    """Interleaved A/B of the estimator's layout on the ratios scenes: one sample pass per scan
+    step (before) against ``passes_per_step`` passes per step (now), with Mitsuba 3 in the same
+    round-robin; also the largest |difference| of the two images for one key."""
+    rows = []
+    sizes = {"two_spheres": ((96, 72),) if quick else ((96, 72), (384, 288)),
+             "mesh_5k": ((80, 64),) if quick else ((80, 64), (320, 256))}  # fmt: skip
+    with tempfile.TemporaryDirectory(prefix="jaxgfx_bench_passes_") as tmp:
+        for name, res in sizes.items():
+            for w, h in res:
+                if name == "two_spheres":
+                    desc = H.two_spheres_desc(w, h)
+                else:
+                    desc, _ = H.blob_mesh_desc(tmp, w, h)
+                renders = {
+                    "one_pass_per_step": _OnePassPerStep(desc, spp=16, max_depth=4),
+                    "grouped": H.JaxgfxRender(desc, spp=16, max_depth=4),
+                    # the same without wavefront shading, which a batch of >= 2 chunks turns on
+                    "grouped_no_wavefront": H.JaxgfxRender(
+                        desc, spp=16, max_depth=None,
+                        integrator=PathIntegrator(max_depth=4, chunk=None),
+                    ),  # fmt: skip
+                }
+                if mi is not None:
+                    renders["mitsuba"] = H.MitsubaRender(mi, desc, spp=16, max_depth=4)
+                row = {"scene": name, "width": w, "height": h, "spp": 16, "max_depth": 4}
+                row.update(H.interleave(renders, repeats=repeats))
+                a = np.asarray(renders["one_pass_per_step"].call(7))
+                b = np.asarray(renders["grouped"].call(7))
+                row["max_abs_diff"] = float(np.abs(a - b).max())
+                row["bit_identical"] = bool(np.array_equal(a, b))
+                row["speedup"] = round(
+                    row["grouped"]["samples_per_s"] / row["one_pass_per_step"]["samples_per_s"], 2
+                )
+                rows.append(row)
+                _log(json.dumps(row))
+    return rows
+
+
+def mesh_profile(*, width=320, height=256, repeats=3):
+    """Where a mesh render's time goes: the 5 120-triangle blob (path, depth 4, 16 spp,
+    Embree) with the host side of every Embree ``pure_callback`` timed (closest-hit and
+    shadow-ray queries counted and timed separately), against the render's wall time."""
+    import collections
+
+    from jaxgfx.render.geometry.accel import embree as E
+
+    stats = collections.defaultdict(lambda: [0, 0.0, 0])
+    orig = E._EmbreeScene.query
+
+    def timed_query(self, o, d, tmin, tmax, any_hit):
+        t = time.perf_counter()
+        r = orig(self, o, d, tmin, tmax, any_hit)
+        st = stats["shadow" if any_hit else "closest"]
+        st[0] += 1
+        st[1] += time.perf_counter() - t
+        st[2] += int(np.prod(np.shape(o)[:-1]))
+        return r
+
+    E._EmbreeScene.query = timed_query
     try:
-        import mitsuba as mi
-    except ImportError:
-        return None, None
-    for v in variant_pref:
-        if v not in mi.variants():
-            continue
-        try:
-            mi.set_variant(v)
-            if v.startswith("llvm"):  # Dr.Jit only fails when the backend is first used
-                mi.load_dict({"type": "scene"})
-                _ = mi.Float(1.0) + 1.0
-                mi.Float(_).numpy()
-            return mi, v
-        except Exception as e:  # pragma: no cover - depends on the installation
-            _log(f"mitsuba variant {v} unavailable: {e}")
-    return None, None
-
-
-def bench_mitsuba(mi, desc, *, spp, integrator, max_depth, repeat):
-    from jaxgfx.render.scene.mitsuba import mitsuba_integrator, to_mitsuba_dict
-
-    t = time.perf_counter()
-    d = to_mitsuba_dict(desc, mi=mi)
-    d["integrator"] = mitsuba_integrator(integrator, max_depth=max_depth)
-    d["sensor"]["sampler"]["sample_count"] = spp
-    scene = mi.load_dict(d)
-    build = time.perf_counter() - t
-
-    def run(seed=0):
-        img = mi.render(scene, spp=spp, seed=seed)
-        return np.array(img)  # forces evaluation in JIT variants
-
-    t = time.perf_counter()
-    img = run()
-    first = time.perf_counter() - t
-    med = median_time(lambda: run(1), repeat)
-    w, h = desc["camera"]["width"], desc["camera"]["height"]
-    return {
-        "load_s": round(build, 3),
-        "first_call_s": round(first, 3),
-        "compile_s": round(max(first - med, 0.0), 3),
-        "time_s": round(med, 4),
-        "samples_per_s": round(w * h * spp / med),
-        "mean": float(img[..., :3].mean()),
-    }
+        with tempfile.TemporaryDirectory(prefix="jaxgfx_bench_meshprof_") as tmp:
+            desc, n_tri = H.blob_mesh_desc(tmp, width, height)
+            r = H.JaxgfxRender(desc, spp=16, max_depth=4)
+            r.call(0)
+            stats.clear()
+            t, c = time.perf_counter(), time.process_time()
+            for i in range(repeats):
+                r.call(i + 1)
+            wall = (time.perf_counter() - t) / repeats
+            cpu = (time.process_time() - c) / repeats
+    finally:
+        E._EmbreeScene.query = orig
+    out = {"triangles": n_tri, "width": width, "height": height, "accel": r.scene.accel,
+           "render_wall_s": round(wall, 4), "render_cpu_s": round(cpu, 4)}  # fmt: skip
+    for kind, (calls, sec, rays) in stats.items():
+        out[kind] = {
+            "callbacks_per_render": calls / repeats,
+            "seconds_per_render": round(sec / repeats, 4),
+            "fraction_of_wall": round(sec / repeats / wall, 3),
+            "mrays_per_s_in_callback": round(rays / sec / 1e6, 2),
+        }
+    return out
 
 
 # -------------------------------------------------------------------------------------------
@@ -319,15 +395,20 @@ def main(argv=None):
     )
     ap.add_argument(
         "--sections",
-        default="speed,mesh,features,equal_time",
-        help="comma-separated subset of speed,mesh,features,equal_time",
+        default="ratios,speed,mesh,features,equal_time",
+        help="subset of ratios,speed,mesh,features,equal_time; also passes, mesh_profile",
     )
+    ap.add_argument("--max-load", type=float, default=1.0,
+                    help="refuse to measure when the 1-min load average is above this")  # fmt: skip
+    ap.add_argument("--allow-load", action="store_true",
+                    help="measure above --max-load anyway (flagged loaded: true)")  # fmt: skip
     args = ap.parse_args(argv)
     sections = set(args.sections.split(","))
+    gate = H.load_gate(args.max_load, refuse=not args.allow_load)
 
     quick = args.quick
     spp = 4 if quick else 16
-    repeat = 1 if quick else 3
+    repeat = 3  # medians of at least 3 warm calls, also with --quick
     prefs = [args.mitsuba_variant] if args.mitsuba_variant else ["llvm_ad_rgb", "scalar_rgb"]
     mi, variant = (None, None) if args.no_mitsuba else _mitsuba(prefs)
     doc = {
@@ -335,8 +416,15 @@ def main(argv=None):
         "machine": machine(mitsuba=None if mi is None else mi.__version__, mitsuba_variant=variant),
         "spp": spp,
         "repeat": repeat,
+        "load_gate": gate,
         "speed": [],
     }
+    if "ratios" in sections:
+        doc["ratios"] = ratios(mi, repeats=repeat, quick=quick)
+    if "passes" in sections:  # not in the default sections
+        doc["passes_ab"] = passes_ab(mi, repeats=5, quick=quick)
+    if "mesh_profile" in sections:  # not in the default sections
+        doc["mesh_profile"] = mesh_profile()
     base = read_yaml(EXAMPLE)
     cases = []
     for res in ((128,) if quick else (128, 256)) if "speed" in sections else ():
@@ -356,16 +444,10 @@ def main(argv=None):
                 "max_depth": 3 if integ == "path" else 2,
                 "spp": spp,
             }
-            row["jaxgfx"] = bench_jaxgfx(
-                desc, spp=spp, integrator=integ, max_depth=3, repeat=repeat
+            # both systems through the harness, interleaved, new seed per call, synchronised
+            row.update(
+                H.compare(desc, mi=mi, spp=spp, integrator=integ, max_depth=3, repeats=repeat)
             )
-            if mi is not None:
-                row["mitsuba"] = bench_mitsuba(
-                    mi, desc, spp=spp, integrator=integ, max_depth=3, repeat=repeat
-                )
-                row["mitsuba_over_jaxgfx"] = round(
-                    row["mitsuba"]["samples_per_s"] / row["jaxgfx"]["samples_per_s"], 2
-                )
             doc["speed"].append(row)
             _log(json.dumps(row))
     if "features" in sections:

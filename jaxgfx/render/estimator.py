@@ -22,24 +22,88 @@ from jaxgfx.render.integrators._common import SAMPLING
 from jaxgfx.render.integrators.path import STRATEGIES
 from jaxgfx.render.sampler import uniform
 
-__all__ = ["render_partial", "resolve_integrator", "pass_scan"]
+__all__ = ["render_partial", "resolve_integrator", "pass_scan", "passes_per_step"]
 
 
-def pass_scan(one_pass, passes, acc0, weights=None):
+RAYS_PER_STEP = 1 << 16
+"""Target number of camera rays traced together in one step of the pass scan: a small image
+traces several sample passes per ``lax.scan`` step (:func:`passes_per_step`), so its kernels see
+about as many rays as a large image's and the per-step overhead is shared (issue 22)."""
+
+
+CHECKPOINT_ONE_STEP = False
+"""Whether :func:`pass_scan` checkpoints a scan of a single step of several passes (``False``:
+it runs the step as plain code, see there)."""
+
+
+def passes_per_step(rays_per_pass: int, n_passes: int, target: int | None = RAYS_PER_STEP) -> int:
+    """How many sample passes of ``rays_per_pass`` rays one scan step traces: about
+    ``target / rays_per_pass`` (at least 1, at most ``n_passes``), evened out so that the
+    ``ceil(n_passes / k)`` steps of ``k`` passes pad as few passes as possible.
+    ``target`` ``None`` or ``0``: 1 (one pass per step).
+
+    >>> passes_per_step(96 * 72, 16), passes_per_step(384 * 288, 16), passes_per_step(1024, 8)
+    (8, 1, 8)
+    """
+    if not target or n_passes <= 1:
+        return 1
+    k = max(1, min(n_passes, target // max(int(rays_per_pass), 1)))
+    steps = -(-n_passes // k)
+    return -(-n_passes // steps)
+
+
+def pass_scan(one_pass, passes, acc0, weights=None, *, per_step: int = 1):
     """``acc0 + Σ_s weights[s] · one_pass(s)`` over the pass indices ``passes`` ``(P,)``, one
-    ``lax.scan`` step per pass, each pass checkpointed: the reverse sweep recomputes a pass from
-    its index, so the memory of ``jax.grad`` does not grow with the number of passes (a plain
-    loop stores every intermediate of every pass; docs/render_gradients.md). ``weights``:
-    ``None`` (1 each; ``x * 1`` is exact, so the sum is that of the unweighted passes)."""
-    one_pass = jax.checkpoint(one_pass, prevent_cse=False)
+    ``lax.scan`` step per ``per_step`` passes, each step checkpointed: the reverse sweep
+    recomputes a step from its pass indices, so the memory of ``jax.grad`` does not grow with
+    the number of passes (a plain loop stores every intermediate of every pass;
+    docs/render_gradients.md). ``weights``: ``None`` (1 each; ``x * 1`` is exact, so the sum is
+    that of the unweighted passes).
+
+    ``per_step == 1``: ``one_pass(s)`` takes one pass index. ``per_step = k > 1``:
+    ``one_pass(ss)`` takes ``k`` pass indices ``(k,)`` and returns the ``k`` passes stacked
+    ``(k, *acc0.shape)`` (traced together, e.g. as one batch of rays); ``passes`` is padded to a
+    multiple of ``k`` with weight-0 repeats of its last index; when that makes a single step it
+    runs without scan and checkpoint (the recomputation would hold the same intermediates).
+    The sum is taken in the same order, pass by pass, as with ``per_step = 1``, so the result
+    is the same up to the rounding of the differently compiled passes."""
     if weights is None:
         weights = jnp.ones(passes.shape, acc0.dtype)
+    k = int(per_step)
+    if k == 1:
+        one = jax.checkpoint(one_pass, prevent_cse=False)
 
-    def body(acc, sw):
-        s, wt = sw
-        return acc + wt.astype(acc.dtype) * one_pass(s), None
+        def body(acc, sw):
+            s, wt = sw
+            return acc + wt.astype(acc.dtype) * one(s), None
 
-    acc, _ = jax.lax.scan(body, acc0, (passes, weights))
+        acc, _ = jax.lax.scan(body, acc0, (passes, weights))
+        return acc
+    n = passes.shape[0]
+    pad = -n % k
+    if pad:
+        passes = jnp.concatenate([passes, jnp.broadcast_to(passes[-1:], (pad,))])
+        weights = jnp.concatenate([weights, jnp.zeros((pad,), weights.dtype)])
+    steps = (n + pad) // k
+    # one step: no scan and no checkpoint. The checkpoint's recomputation would hold the same
+    # intermediates as plain reverse mode (one step's), so it only adds a copy of the forward
+    # program to compile and to run (issue 22: the 32x32 fit step); CHECKPOINT_ONE_STEP = True
+    # restores it (benchmarks/render_compile.py)
+    group = one_pass if steps == 1 and not CHECKPOINT_ONE_STEP else jax.checkpoint(
+        one_pass, prevent_cse=False
+    )
+
+    def body_k(acc, sw):
+        ss, wts = sw
+        out = group(ss)
+        for j in range(k):  # the order of the one-pass scan: ((acc + p0) + p1) + ...
+            acc = acc + wts[j].astype(acc.dtype) * out[j]
+        return acc, None
+
+    xs = (passes.reshape(-1, k), weights.reshape(-1, k).astype(acc0.dtype))
+    if steps == 1 and not CHECKPOINT_ONE_STEP:
+        return body_k(acc0, (xs[0][0], xs[1][0]))[0]
+    acc, _ = jax.lax.scan(body_k, acc0, xs)
     return acc
 
 
@@ -91,7 +155,15 @@ def resolve_integrator(
 
 
 def render_partial(
-    scene, key, integrator: Integrator, *, spp: int, rows=None, passes=None, weights=None
+    scene,
+    key,
+    integrator: Integrator,
+    *,
+    spp: int,
+    rows=None,
+    passes=None,
+    weights=None,
+    rays_per_step: int | None = RAYS_PER_STEP,
 ):
     """UNNORMALISED sum ``(R, W, C)`` over sample passes of the radiance of some image rows.
 
@@ -100,7 +172,11 @@ def render_partial(
     ``key`` splits into a camera key (``film.pixel_samples``: stratified when ``spp`` is a
     square, ``(H, W, spp, 2)``) and a key into which pass ``s`` is folded for the integrator's
     uniform numbers of shape ``(H, W, *integrator.random_shape)``; pass ``s`` traces one ray per
-    pixel through camera sample ``s``; the passes run through :func:`pass_scan`.
+    pixel through camera sample ``s``; the passes run through :func:`pass_scan`,
+    :func:`passes_per_step` ``(R W, P, rays_per_step)`` of them per scan step, stacked along the
+    rows (``(k R, W)`` rays): a small image does not pay one step's overhead per pass, and
+    every sample keeps its random numbers (``rays_per_step=None``: one pass per step; same
+    image up to the rounding of the differently compiled program, tests/render/test_layout.py).
 
     ``rows``: ``None`` (all ``H`` rows) or global row indices ``(R,)`` (int32, may be traced;
     rows ``>= H`` are padding: rendered beyond the image with their own numbers). A row's
@@ -117,19 +193,32 @@ def render_partial(
     dtype = scene.dtype
     px = pixel_samples(kp, w, h, spp, scene.rfilter, rows=rows, dtype=dtype)  # (R, W, spp, 2)
     shape_u = integrator.random_shape
+    r = px.shape[0]
+
+    def rays(pxs):
+        o, d = scene.camera.generate_ray(pxs)
+        o, d = o.astype(dtype), d.astype(dtype)
+        return fusion_barrier((o, d))  # measured 635 -> 518 ns/sample (direct, one core)
+
+    def numbers(s):
+        return uniform(jax.random.fold_in(ku, s), (h, w, *shape_u), dtype, rows=rows)
 
     def one_pass(s):
-        o, d = scene.camera.generate_ray(px[:, :, s, :])
-        o, d = o.astype(dtype), d.astype(dtype)
-        o, d = fusion_barrier((o, d))  # measured 635 -> 518 ns/sample (direct, one core)
+        o, d = rays(px[:, :, s, :])
+        u = None if shape_u is None else numbers(s)
+        return integrator(scene, o, d, u)
+
+    def k_passes(ss):  # (k,) pass indices -> (k, R, W, C): the k passes as one (k R, W) batch
+        k = ss.shape[0]
+        pxs = jnp.moveaxis(px[:, :, ss, :], 2, 0).reshape(k * r, w, 2)
+        o, d = rays(pxs)
         u = None
         if shape_u is not None:
-            u = uniform(jax.random.fold_in(ku, s), (h, w, *shape_u), dtype, rows=rows)
-        return integrator(scene, o, d, u)
+            u = jax.vmap(numbers)(ss).reshape(k * r, w, *shape_u)
+        return integrator(scene, o, d, u).reshape(k, r, w, -1)
 
     if passes is None:
         passes = jnp.arange(spp)
-    acc0 = jnp.zeros((px.shape[0], w, integrator.n_channels), dtype)
-    return pass_scan(one_pass, passes, acc0, weights)
-
-
+    k = passes_per_step(r * w, passes.shape[0], rays_per_step)
+    acc0 = jnp.zeros((r, w, integrator.n_channels), dtype)
+    return pass_scan(k_passes if k > 1 else one_pass, passes, acc0, weights, per_step=k)

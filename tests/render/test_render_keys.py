@@ -103,3 +103,85 @@ def test_fusion_barriers_survive_vmap_over_keys(lit_plane):
     assert one["cond"] >= 4  # render's pass barrier and intersect's two, at least
     assert many["cond"] == one["cond"]
     # (through reverse mode: tests/test_math.py::test_fusion_barrier_stays_a_cond_under_vmap)
+
+
+# --- several sample passes per scan step (issue 22) -------------------------------------------
+# estimator.render_partial traces passes_per_step(R W, spp, rays_per_step) passes per lax.scan
+# step as one (k R, W) batch. Every sample keeps its camera sample and uniform numbers and the
+# passes are summed in the same order, so the image may differ from one pass per step only by
+# the rounding of differently compiled code. Reference: the one-pass-per-step render (the
+# layout before issue 22). Tolerance per pixel 8 spp u |b| + u max|b| (u = 2^-24), that of
+# test_distributed; a sample drawn from another stream would move a pixel by its Monte Carlo
+# noise (the sphere-and-floor scene at 5 spp: tens of percent), ~10^5 times more.
+
+
+def _grouped_renders(scene, integ, spp, steps):
+    from jaxgfx.render.estimator import render_partial
+
+    def make(rps):
+        return jax.jit(lambda sc, k: render_partial(sc, k, integ, spp=spp, rays_per_step=rps))
+
+    return {rps: make(rps) for rps in steps}
+
+
+def test_passes_per_step_layout():
+    from jaxgfx.render.estimator import passes_per_step
+
+    # fewest padded passes for the step count: 16 passes of 6 912 rays -> 2 steps of 8
+    assert passes_per_step(96 * 72, 16) == 8
+    assert passes_per_step(384 * 288, 16) == 1  # a large image: one pass per step
+    assert passes_per_step(100, 5, 250) == 2  # 3 steps of 2: one weight-0 padding pass
+    assert passes_per_step(100, 7, 350) == 3  # 3 steps of 3, 2 padding passes
+    assert passes_per_step(100, 7, 400) == 4  # 2 steps of 4 (not 4 + 3)
+    assert passes_per_step(10, 1) == passes_per_step(10, 16, None) == 1
+
+
+# ~11 CPU s, 47 s wall at load 11 (two compiles of a 10 x 6 path render, depth 2); the default
+# run keeps it: it is the only check that the grouped layout keeps every sample's numbers
+def test_several_passes_per_step_keep_every_sample():
+    from jaxgfx.render.integrators import PathIntegrator
+
+    # diffuse plane under an area light (light and BSDF sampling, MIS, a shadow ray, a bounce)
+    light = area_light([1.5, 1.5, 0.0], [-0.7071, -0.7071, 0.0], [1.0, 1.0], 5.0)
+    scene = load_scene(plane_scene([light], cam={"width": 10, "height": 6, "fov": 60}))
+    spp = 3
+    integ = PathIntegrator(max_depth=2)
+    # None: 1 pass per step (the reference); 120 rays: 2 passes per step, 2 steps, 1 weight-0
+    # padding pass
+    fns = _grouped_renders(scene, integ, spp, (None, 120))
+    key = jax.random.key(11)
+    ref = np.asarray(fns[None](scene, key), np.float64)
+    assert ref.std() > 0.05 * ref.mean() > 0  # not a blank frame
+    tol = 8 * spp * 2.0**-24 * np.abs(ref) + 2.0**-24 * np.abs(ref).max()
+    img = np.asarray(fns[120](scene, key), np.float64)
+    err = np.abs(img - ref)
+    assert np.all(err <= tol), (err.max(), (err / tol).max())
+    # another key moves the pixels by their noise: the check can fail
+    other = np.asarray(fns[120](scene, jax.random.key(12)), np.float64)
+    assert np.mean(np.abs(other - ref) > tol) > 0.5
+
+
+# ~45 CPU s (two reverse-mode compiles of a path render, depth 3), 166 s wall at load 8; out of
+# make test
+@pytest.mark.slow
+def test_several_passes_per_step_same_gradient():
+    from jaxgfx.render.estimator import render_partial
+    from jaxgfx.render.integrators import PathIntegrator
+
+    from ._scenes import sphere_floor_scene
+
+    scene = load_scene(sphere_floor_scene())
+    integ = PathIntegrator(max_depth=3)
+    key = jax.random.key(5)
+
+    def grad(rps):
+        def f(a):
+            sc = scene.replace("materials.metal.alpha", a)
+            return render_partial(sc, key, integ, spp=4, rays_per_step=rps).mean()
+
+        return np.asarray(jax.jit(jax.value_and_grad(f))(jnp.float32(0.3)), np.float64)
+
+    g1, g4 = grad(None), grad(1 << 16)
+    assert abs(g1[1]) > 1e-3  # a real derivative
+    # the H W 3 spp cotangent terms reduced in another order: ~ulps, rtol 1e-5 (~170 ulps)
+    np.testing.assert_allclose(g4, g1, rtol=1e-5)

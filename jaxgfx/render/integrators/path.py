@@ -21,6 +21,8 @@ __all__ = ["PathIntegrator", "DirectIntegrator", "path_radiance", "N_RANDOM", "S
 
 STRATEGIES = ("mis", "light", "bsdf")
 
+CHECKPOINT_ONE_BOUNCE = False  # True: checkpoint a bounce loop of one bounce too (A/B switch)
+
 
 def _identity(x):
     return x
@@ -200,7 +202,10 @@ def path_radiance(
         # bytes per ray) and recomputes the bounce in the backward sweep, instead of every
         # intermediate of it (~1.4 MB per bounce at 32² x 4 spp before; measured in
         # docs/render_gradients.md: same gradient, same time per gradient, faster compile)
-        carry, _ = jax.lax.scan(jax.checkpoint(bounce), carry, (us, jnp.arange(max_depth - 1)))
+        # (one bounce, e.g. direct light: the checkpoint would keep the same intermediates and
+        # only add a recomputation to compile; issue 22)
+        body = bounce if max_depth == 2 and not CHECKPOINT_ONE_BOUNCE else jax.checkpoint(bounce)
+        carry, _ = jax.lax.scan(body, carry, (us, jnp.arange(max_depth - 1)))
     # last vertex: emission only
     o, d, beta, L, alive, prev_pdf, prev_delta, p_prev = carry
     hit = C.intersect(scene, o, d)
