@@ -17,8 +17,7 @@ import jax.numpy as jnp
 from jaxgfx._checks import check_choice, check_positive_int
 from jaxgfx._math import fusion_barrier
 from jaxgfx.render.film import pixel_samples
-from jaxgfx.render.integrators import INTEGRATORS, Integrator, make_integrator
-from jaxgfx.render.integrators._common import SAMPLING
+from jaxgfx.render.integrators import INTEGRATORS, SAMPLING, Integrator, make_integrator
 from jaxgfx.render.integrators.path import STRATEGIES
 from jaxgfx.render.sampler import uniform
 

@@ -13,8 +13,7 @@ import equinox as eqx
 
 from jaxgfx._checks import check_positive_int
 from jaxgfx.render.estimator import render_partial, resolve_integrator
-from jaxgfx.render.integrators import Integrator
-from jaxgfx.render.integrators._common import replace_grad
+from jaxgfx.render.integrators import Integrator, replace_grad
 from jaxgfx.render.visibility import EdgeSampling, edge_sampling
 
 __all__ = ["render"]

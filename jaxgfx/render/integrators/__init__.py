@@ -7,6 +7,8 @@ an instance (``integrator=PathIntegrator(max_depth=3)``) or a registered name.
 """
 
 from jaxgfx._checks import check_choice
+from jaxgfx.render.integrators._common import SAMPLING as SAMPLING
+from jaxgfx.render.integrators._common import replace_grad as replace_grad
 from jaxgfx.render.integrators.aov import AOV_CHANNELS as AOV_CHANNELS
 from jaxgfx.render.integrators.aov import AOVIntegrator as AOVIntegrator
 from jaxgfx.render.integrators.aov import aov as aov
@@ -56,6 +58,8 @@ def make_integrator(name: str, **options) -> Integrator:
 
 __all__ = [
     "INTEGRATORS",
+    "SAMPLING",
+    "replace_grad",
     "AOV_CHANNELS",
     "Integrator",
     "PathIntegrator",
