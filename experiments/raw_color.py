@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgfx import color, hdr, io
-from jaxgfx.pipelines.calibrate import CalibrateConfig, run_calibrate
+from jaxgfx.pipelines.calibrate import CalibrateConfig, CalibrateJob, run_calibrate
 
 
 def block_de(est, truth, b=4, interior=False):
@@ -47,7 +47,8 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as d:
         paths, truth = hdr.write_dng_bracket(f"{d}/dng", seed=args.seed, patch=args.patch)
         for cs in ("camera", "rec709"):
-            rep = run_calibrate(CalibrateConfig(colorspace=cs), paths, f"{d}/{cs}", progress=False)
+            job = CalibrateJob(CalibrateConfig(colorspace=cs), paths, f"{d}/{cs}", progress=False)
+            rep = run_calibrate(job)
             rad = io.read_exr(rep["outputs"]["radiance"])
             out[cs] = {
                 "median_de2000_all_blocks": round(float(np.median(block_de(rad, truth))), 3),

@@ -133,13 +133,14 @@ def _block_de(est, truth, b=4, interior=False):
 
 @pytest.mark.slow  # issue 26: ~25 s of a loaded 2-core run (two calibrate runs, compiles)
 def test_colour_managed_raw_merge_vs_true_colours(tmp_path):
-    from jaxgfx.pipelines.calibrate import CalibrateConfig, run_calibrate
+    from jaxgfx.pipelines.calibrate import CalibrateConfig, CalibrateJob, run_calibrate
 
     paths, truth = hdr.write_dng_bracket(tmp_path / "dng", seed=1, patch=16)
     out = {}
     for cs in ("camera", "rec709"):
-        rep = run_calibrate(CalibrateConfig(colorspace=cs), paths, str(tmp_path / cs),
-                            progress=False)  # fmt: skip
+        job = CalibrateJob(CalibrateConfig(colorspace=cs), paths, str(tmp_path / cs),
+                           progress=False)  # fmt: skip
+        rep = run_calibrate(job)
         out[cs] = (rep, io.read_exr(rep["outputs"]["radiance"]))
     rep, rad = out["rec709"]
     interior = _block_de(rad, truth, interior=True)

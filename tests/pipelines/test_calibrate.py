@@ -15,7 +15,7 @@ import pytest
 from jaxgfx import hdr, io
 from jaxgfx.cli import main
 from jaxgfx.config import load_config
-from jaxgfx.pipelines.calibrate import CalibrateConfig, run_calibrate
+from jaxgfx.pipelines.calibrate import CalibrateConfig, CalibrateJob, run_calibrate
 
 SMALL = {
     "synthetic": {"height": 48, "width": 64},
@@ -26,7 +26,7 @@ SMALL = {
 @pytest.mark.slow  # issue 9: ~15 s of a loaded 2-core run; out of make test
 def test_synthetic_default_job(tmp_path):
     cfg = load_config(CalibrateConfig, SMALL)
-    rep = run_calibrate(cfg, None, str(tmp_path), progress=False)
+    rep = run_calibrate(CalibrateJob(cfg, (), str(tmp_path), progress=False))
     err = rep["errors_vs_ground_truth"]["debevec"]
     assert err["curve_rmse_ln"] < 0.1
     assert err["radiance_median_abs_ln"] < 0.1
@@ -94,7 +94,8 @@ def test_raw_dng_stack(tmp_path):
             camera_whitebalance=(1.0, 1.0, 1.0),
         )  # fmt: skip
         files.append(p)
-    rep = run_calibrate(CalibrateConfig(), files, str(tmp_path / "out"), progress=False)
+    job = CalibrateJob(CalibrateConfig(), files, str(tmp_path / "out"), progress=False)
+    rep = run_calibrate(job)
     ratios = rep["raw_calibration"]["exposure_ratios"]
     measured = np.asarray(ratios["ratios"], float)
     ref = int(ratios["reference"])
@@ -110,10 +111,13 @@ def test_raw_dng_stack(tmp_path):
 
 def test_bad_inputs(tmp_path):
     with pytest.raises(FileNotFoundError):
-        run_calibrate(CalibrateConfig(), [str(tmp_path / "nope")], str(tmp_path), progress=False)
+        run_calibrate(
+            CalibrateJob(CalibrateConfig(), [str(tmp_path / "nope")], str(tmp_path), progress=False)
+        )
     (tmp_path / "empty").mkdir()
     with pytest.raises(ValueError, match="no image files"):
-        run_calibrate(CalibrateConfig(), [str(tmp_path / "empty")], str(tmp_path), progress=False)
+        empty = [str(tmp_path / "empty")]
+        run_calibrate(CalibrateJob(CalibrateConfig(), empty, str(tmp_path), progress=False))
     with pytest.raises(ValueError, match="synthetic.exposure_times"):
         load_config(CalibrateConfig, {"synthetic": {"exposure_times": [1.0]}})
 
@@ -173,20 +177,20 @@ def test_flat_field_of_another_size_is_one_clear_error(tmp_path):
     files, flat = _vignetted_dng_bracket(tmp_path, flat_shape=(48, 48))
     cfg = CalibrateConfig(flat_field=flat)
     with pytest.raises(ValueError, match=r"flat_field '.*flat.dng': mosaic \(48, 48\) differs"):
-        run_calibrate(cfg, files, str(tmp_path / "out"), progress=False)
+        run_calibrate(CalibrateJob(cfg, files, str(tmp_path / "out"), progress=False))
     assert not (tmp_path / "out").exists()
     ldr = [str(tmp_path / f"l{i}.png") for i in range(2)]
     for p in ldr:
         io.write_png(p, np.full((8, 8, 3), 0.5, np.float32))
     with pytest.raises(ValueError, match="flat_field: a RAW flat-field frame needs RAW inputs"):
-        run_calibrate(cfg, ldr, str(tmp_path / "out2"), progress=False)
+        run_calibrate(CalibrateJob(cfg, ldr, str(tmp_path / "out2"), progress=False))
 
 
 @pytest.mark.slow  # ~7 s on a loaded 2-core machine (RAW calibration + the vignetting fit)
 def test_raw_flat_field_and_camera_profile(tmp_path):
     files, flat = _vignetted_dng_bracket(tmp_path)
     cfg = CalibrateConfig(flat_field=flat)
-    rep = run_calibrate(cfg, files, str(tmp_path / "out"), progress=False)
+    rep = run_calibrate(CalibrateJob(cfg, files, str(tmp_path / "out"), progress=False))
     # truth: V(corner) = 1 - 0.3 + 0.05 = 0.75; issue 26 target: within 2 %
     assert abs(rep["vignetting"]["corner_falloff"] / 0.75 - 1) < 0.02
     rad = io.read_exr(rep["outputs"]["radiance"])[..., 1]

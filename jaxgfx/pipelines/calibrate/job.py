@@ -60,26 +60,6 @@ class _Steps:
         self.bar.close()
 
 
-def _as_job(job, inputs, out_dir, progress, overwrite) -> CalibrateJob:
-    if job is None or isinstance(job, CalibrateConfig):
-        job = CalibrateJob(config=job or CalibrateConfig())
-    if not isinstance(job, CalibrateJob):
-        raise TypeError(f"job: expected a CalibrateJob or CalibrateConfig, got {type(job)}")
-    changes: dict = {}
-    if inputs is not None:
-        changes["inputs"] = (inputs,) if isinstance(inputs, (str, os.PathLike)) else inputs
-    if out_dir is not None:
-        changes["out"] = out_dir
-    if progress is not None:
-        changes["progress"] = progress
-    if overwrite is not None:
-        changes["overwrite"] = overwrite
-    job = dataclasses.replace(job, **changes)
-    return dataclasses.replace(
-        job, inputs=tuple(os.fspath(i) for i in job.inputs or ()), out=os.fspath(job.out)
-    )
-
-
 def _compute(job: CalibrateJob, files, kind: str, steps) -> report.CalibrateResult:
     """The LDR or RAW path (module attributes, so tests can replace a stage)."""
     cfg = job.config
@@ -90,23 +70,18 @@ def _compute(job: CalibrateJob, files, kind: str, steps) -> report.CalibrateResu
     return ldr._fit_ldr(cfg, images, times, truth, steps, result_kw)
 
 
-def run_calibrate(
-    job: CalibrateJob | CalibrateConfig | None = None,
-    inputs=None,
-    out_dir=None,
-    *,
-    progress: bool | None = None,
-    overwrite: bool | None = None,
-) -> dict:
-    """Run the calibration job; returns the report dict (also written to ``report.json``).
-
-    ``job``: a :class:`CalibrateJob` (or a :class:`CalibrateConfig`, with ``inputs``,
-    ``out_dir``, ``progress``, ``overwrite`` given here; explicit arguments override the
-    job's fields). Inputs and the output folder are checked before any computation; results
-    appear in ``out`` only when the whole run succeeded (see :mod:`jaxgfx.pipelines._output`).
-    The returned dict also has ``"replaced"``: the previous results that were replaced.
+def run_calibrate(job: CalibrateJob) -> dict:
+    """Run the calibration ``job`` (a :class:`CalibrateJob`: config, inputs, out, overwrite,
+    progress); returns the report dict (also written to ``report.json``). Inputs and the output
+    folder are checked before any computation; results appear in ``out`` only when the whole
+    run succeeded (see :mod:`jaxgfx.pipelines._output`). The returned dict also has
+    ``"replaced"``: the previous results that were replaced.
     """
-    job = _as_job(job, inputs, out_dir, progress, overwrite)
+    if not isinstance(job, CalibrateJob):
+        raise TypeError(f"job: expected a CalibrateJob, got {type(job).__name__}")
+    job = dataclasses.replace(
+        job, inputs=tuple(os.fspath(i) for i in job.inputs or ()), out=os.fspath(job.out)
+    )
     files = collect_inputs(job.inputs)
     kind = stack_kind(files)
     ff = job.config.flat_field
