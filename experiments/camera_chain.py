@@ -69,6 +69,11 @@ def calibrate(cal: dict, out: str, overwrite: bool) -> str:
 
 
 def camera_for(variant: str, fit: dict, report: str) -> dict:
+    clip = {"clip_code": int(fit["clip_code"])} if fit.get("clip_code") is not None else {}
+    return dict(_camera_for(variant, fit, report), **clip)
+
+
+def _camera_for(variant: str, fit: dict, report: str) -> dict:
     tc = fit["camera"]
     if variant == "true_camera":
         # camera.exposure is the first photo's (the others are at their given ratios)
@@ -141,6 +146,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", default="out/camera_chain")
     p.add_argument("--steps", type=int, default=None)
     p.add_argument("--variants", default=None)
+    p.add_argument("--clip-code", type=int, default=None,
+                   help="override fit.clip_code (codes >= it are censored; 255: none)")
     p.add_argument("--overwrite", action="store_true")
     p.add_argument("--quiet", action="store_true")
     a = p.parse_args(argv)
@@ -152,6 +159,8 @@ def main(argv=None) -> int:
     base = read_yaml(a.config)
     base_dir = os.path.dirname(os.path.abspath(a.config))
     fit = base["fit"]
+    if a.clip_code is not None:
+        fit["clip_code"] = a.clip_code
     os.makedirs(a.out, exist_ok=True)
     report = calibrate(base["calibration"], a.out, a.overwrite)
     true_resp = hdr.synthetic_response(base["calibration"]["curve"], channels=1)
@@ -160,6 +169,7 @@ def main(argv=None) -> int:
         "calibration": {"report": report, "response": response_errors(calibrated, true_resp)},
         "truth": fit["truth"],
         "truth_camera": fit["camera"],
+        "clip_code": fit.get("clip_code"),
         "variants": {},
     }
     print("calibrated response", json.dumps(summary["calibration"]), flush=True)

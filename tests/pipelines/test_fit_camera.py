@@ -173,6 +173,43 @@ def test_censored_linear_loss_is_zero_at_the_truth_for_any_response():
         assert v0 < 2e-4 and v1 > 20 * v0
 
 
+def test_clip_code_censors_a_jpeg_rung_highlight():
+    """A highlight 4x above the clip level, photographed and JPEG-compressed (quality 90,
+    4:2:0): its clipped codes ring down to ~235-254. Read as exact values (the default, only
+    255 censored) they say the true radiance is far too dark; with ``clip_code`` every code >= k
+    only bounds it from below at ``f^-1((k - 1/2)/255)``, and the true radiance costs no more
+    than the JPEG error of the rest of the photo."""
+    resp = hdr.CameraResponse.analytic("camera", anchor="unit")
+    rad = np.full((16, 16, 3), 0.2, np.float32)
+    rad[4:12, 4:12] = 4.0
+    rad[:, :, 2] = np.linspace(0.05, 0.6, 16)[None, :]
+    codes = np.asarray(hdr.Camera(resp, jnp.asarray(1.0), bits=8).capture(rad))
+    jpeg = hdr.jpeg_roundtrip(codes[None], quality=90).astype(np.float32)
+    hi = rad[None] >= 1.0
+    assert ((jpeg < 255) & (jpeg >= 235) & hi).any()  # rung: clipped but not 255
+    table = level_table(resp, 8)
+    img = jnp.asarray(rad)
+
+    def loss(k, im=img):
+        return float(censored_linear_loss(im, jnp.asarray(jpeg), table, 1.0, 255.0, None, k))
+
+    floor = float(censored_linear_loss(img, jnp.asarray(jpeg) * ~hi, table, 1.0, 255.0))
+    assert loss(None) > 10 * loss(230) and loss(255) == loss(None)
+    assert loss(230) < 1.5 * floor
+    # the bound is f^-1 at k - 1/2: a render just below it costs, just above it does not
+    cam = hdr.Camera(resp, jnp.asarray(1.0), bits=8, clip=False)
+    b = float(cam.linearize(jnp.full((3,), 239.5))[0])
+    one = jnp.asarray(jpeg[:, 8:9, 8:9, :1])
+    assert float(one[0, 0, 0, 0]) >= 240
+    t1 = table[:, :1]
+    f = lambda v: float(censored_linear_loss(jnp.full((1, 1, 1), v), one, t1, 1.0, 255.0,
+                                             None, 240))
+    assert f(1.001 * b) == 0.0 and f(0.99 * b) > 0.0
+    g = jax.grad(lambda im: censored_linear_loss(im, jnp.asarray(jpeg), table, 1.0, 255.0,
+                                                 None, jnp.asarray(240)))(img)
+    assert np.all(np.isfinite(np.asarray(g)))
+
+
 def test_photo_gains_and_texture_priors_closed_forms():
     cam_p = {"exposure": jnp.asarray(2.0), "photo_exposure": jnp.asarray([1.0, 4.0]),
              "white_balance": jnp.asarray([1.5, 1.0, 0.5])}
@@ -337,6 +374,9 @@ def test_camera_config_errors():
         prepare_fit(_cfg(target={"synthetic": {}, "camera": {"exposures": [1.0, -2.0]}}))
     with pytest.raises(ValueError, match=r"target.camera.jpeg"):
         prepare_fit(_cfg(target={"synthetic": {}, "camera": {"jpeg": 101}}))
+    for bad in (256, 1, 2.5, True):
+        with pytest.raises(ValueError, match=r"camera.clip_code: expected an integer"):
+            _cfg(camera={"response": "srgb", "clip_code": bad})
 
 
 # cost: 45 s at load 10 on 2 cores (traces the render's gradient four times, no compile)

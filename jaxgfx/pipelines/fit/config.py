@@ -182,6 +182,10 @@ class CameraConfig:
     white_balance: WhiteBalanceSpec = WhiteBalanceSpec()
     bits: int = 8
     space: str = "linear"  # where the loss compares: linear (unbiased) | code (see module doc)
+    # codes >= clip_code only bound the radiance from below, like the clip level (None: only
+    # 2^bits - 1): JPEG rings a clipped highlight down to ~235-254, and a calibrated curve is
+    # trusted only up to some level (docs/inverse.md section 2b)
+    clip_code: int | None = None
 
     def __post_init__(self):
         r = self.response
@@ -199,6 +203,13 @@ class CameraConfig:
         object.__setattr__(self, "response", r)
         if self.bits not in (8, 16):
             raise ValueError(f"camera.bits: expected 8 or 16, got {self.bits}")
+        c = 2**self.bits - 1
+        k = self.clip_code
+        if k is not None and (isinstance(k, bool) or not isinstance(k, int) or not 1 < k <= c):
+            raise ValueError(
+                f"camera.clip_code: expected an integer code in 2..{c} (camera.bits "
+                f"{self.bits}), got {k!r}"
+            )
         check_choice(self.space, "camera.space", LOSS_COMPARE_SPACES)
 
 

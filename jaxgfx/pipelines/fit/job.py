@@ -257,6 +257,9 @@ def _initial(cfg: FitConfig, prep: Prepared):
                 "curve": jnp.asarray(float(kind == "free"), jnp.float32),
             },
             "smoothness": jnp.asarray(spec.smoothness if kind == "free" else 0.0, jnp.float32),
+            "clip_code": jnp.asarray(
+                2**bits - 1 if cam.clip_code is None else cam.clip_code, jnp.int32
+            ),
         }
     return params, bounds, cam_args
 
