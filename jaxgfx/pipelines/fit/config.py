@@ -145,6 +145,10 @@ class ExposureSpec:
     min: float = 1e-3
     max: float = 1e3
     per_photo: bool = False
+    # auto: start from the exposure that best maps the initial render onto the linearised
+    # photos (median ratio over measured pixels, :func:`jaxgfx.pipelines.fit.job.auto_exposure`)
+    # instead of init: a calibrated curve's scale is arbitrary (x = 1 at its extrapolated top)
+    auto: bool = False
 
     def __post_init__(self):
         if not 0 < self.min < self.init < self.max:
@@ -186,6 +190,10 @@ class CameraConfig:
     # 2^bits - 1): JPEG rings a clipped highlight down to ~235-254, and a calibrated curve is
     # trusted only up to some level (docs/inverse.md section 2b)
     clip_code: int | None = None
+    # bound: every clipped (or black) code bounds the radiance; unmeasured: only where no
+    # other photo of the bracket measures the pixel (the hinge of a bound is biased by the
+    # render's Monte Carlo noise; a measured pixel does not need it)
+    clipped: str = "bound"
 
     def __post_init__(self):
         r = self.response
@@ -211,6 +219,7 @@ class CameraConfig:
                 f"{self.bits}), got {k!r}"
             )
         check_choice(self.space, "camera.space", LOSS_COMPARE_SPACES)
+        check_choice(self.clipped, "camera.clipped", ("bound", "unmeasured"))
 
 
 # first-order optimisers only: a fit renders with a fresh key per step, which least-squares

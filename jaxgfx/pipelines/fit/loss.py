@@ -41,7 +41,9 @@ def _masked_mean(v, mask, axes):
     return jnp.sum(v * m, axis=axes) / jnp.sum(m, axis=axes)
 
 
-def censored_linear_loss(img, codes, table, gain, code_max, mask=None, clip_code=None):
+def censored_linear_loss(
+    img, codes, table, gain, code_max, mask=None, clip_code=None, unmeasured_only=None
+):
     """Censored L2 in linear radiance, summed over photos.
 
     ``img`` ``(H, W, C)`` the linear render; ``codes`` ``(N, H, W, C)`` integer codes of
@@ -60,7 +62,11 @@ def censored_linear_loss(img, codes, table, gain, code_max, mask=None, clip_code
     ``q ≥ k`` is censored like a clipped one, ``Î ≥ f⁻¹((k − ½)/c) / gain`` (``ln f⁻¹`` at
     ``k − ½`` interpolated halfway between the table's codes ``k − 1`` and ``k``) — for JPEG
     photos, whose clipped highlights ring down to codes ~235–254, and for a calibrated curve
-    trusted only below some level."""
+    trusted only below some level. ``unmeasured_only`` (a 0/1 scalar, traced allowed): a
+    censored code of one photo counts only where no other photo measures that pixel (an
+    uncensored code there): the hinge of a bound is biased by the render's Monte Carlo noise
+    (``E max(t − Î, 0) > max(t − E Î, 0)``: a noisy render is pushed above the bound), and a
+    pixel that a darker (brighter) photo of the bracket measures needs no bound."""
     single = codes.ndim == 3
     if single:
         codes = codes[None]
@@ -78,6 +84,11 @@ def censored_linear_loss(img, codes, table, gain, code_max, mask=None, clip_code
     t = jnp.exp(table[q, jnp.arange(nch)]) / gain[:, None, None, :]
     e = jnp.where(q >= c, jnp.maximum(t - img, 0.0),
                   jnp.where(q <= 0, jnp.maximum(img - t, 0.0), img - t))
+    if unmeasured_only is not None:
+        censored = (q >= c) | (q <= 0)
+        measured = jnp.sum(~censored, axis=0, keepdims=True) > 0
+        drop = censored & measured & (jnp.asarray(unmeasured_only) > 0)
+        e = jnp.where(drop, 0.0, e)
     axes = (1, 2, 3)
     scale = jax.lax.stop_gradient(_masked_mean(t, mask, axes)) + 1e-6
     return jnp.sum(_masked_mean(e * e, mask, axes) / (scale * scale))
@@ -199,7 +210,7 @@ def make_loss(
         if code_space:
             return code_space_loss(img, pixels, table, gain, code_max, mask)
         return censored_linear_loss(img, pixels, table, gain, code_max, mask,
-                                    cam_args.get("clip_code"))
+                                    cam_args.get("clip_code"), cam_args.get("unmeasured"))
 
     def loss(p, key, args):
         scene, target, cam_args = args
