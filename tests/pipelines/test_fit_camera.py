@@ -210,6 +210,36 @@ def test_clip_code_censors_a_jpeg_rung_highlight():
     assert np.all(np.isfinite(np.asarray(g)))
 
 
+def test_clipped_unmeasured_drops_only_bounds_another_photo_measures():
+    """Two photos (gains 1 and 8) of radiance 0.05 / 0.5: pixel 1 clips in the bright photo
+    only, pixel 0 in none. A render too dark at pixel 1 pays its bound in the bright photo by
+    default; with ``unmeasured_only`` that term is dropped (the dark photo measures the pixel)
+    and the loss equals the dark photo's term alone. A pixel clipped in both keeps its bound."""
+    resp = hdr.CameraResponse.gamma(2.2, anchor="unit")
+    table = level_table(resp, 8)
+    rad = np.asarray([[[0.05], [0.5], [4.0]]], np.float32)  # (1, 3, 1)
+    gains = np.asarray([[1.0], [8.0]], np.float32)
+    codes = np.stack([np.asarray(hdr.Camera(resp, jnp.asarray(g[0]), bits=8).capture(rad))
+                      for g in gains]).astype(np.float32)
+    assert codes[:, 0, :, 0].tolist() == [[int(codes[0, 0, 0, 0]), int(codes[0, 0, 1, 0]), 255],
+                                          [int(codes[1, 0, 0, 0]), 255, 255]]
+    img = jnp.asarray(rad * np.asarray([1.0, 0.02, 1.0], np.float32)[None, :, None])
+
+    def loss(um, im=img):
+        return float(censored_linear_loss(im, jnp.asarray(codes), table[:, :1], gains, 255.0,
+                                          None, None, um))
+
+    dark = float(censored_linear_loss(img, jnp.asarray(codes[0]), table[:, :1], gains[0],
+                                      255.0))
+    bright = float(censored_linear_loss(img, jnp.asarray(codes[1]), table[:, :1], gains[1],
+                                        255.0))
+    assert bright > 0.1 and loss(0.0) == pytest.approx(dark + bright, rel=1e-5)
+    assert loss(1.0) == pytest.approx(dark, rel=1e-5)
+    # pixel 2 is clipped in both photos: a render below its bound still pays with unmeasured
+    low = img.at[0, 2, 0].set(0.01)
+    assert loss(1.0, low) > loss(1.0) + 0.01
+
+
 def test_auto_exposure_recovers_the_exposure_of_a_clipped_bracket():
     """Photos of a render through the calibrated-like camera at exposure 0.126 x (1, 4, 16)
     (clipped, quantised): ``auto_exposure`` finds 0.126 within 2 %, where a fixed start of 1
