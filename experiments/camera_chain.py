@@ -69,18 +69,27 @@ def calibrate(cal: dict, out: str, overwrite: bool) -> str:
 
 
 def camera_for(variant: str, fit: dict, report: str) -> dict:
+    clip = {"clip_code": int(fit["clip_code"])} if fit.get("clip_code") is not None else {}
+    if fit.get("clipped") is not None:
+        clip["clipped"] = fit["clipped"]
+    return dict(_camera_for(variant, fit, report), **clip)
+
+
+def _camera_for(variant: str, fit: dict, report: str) -> dict:
     tc = fit["camera"]
     if variant == "true_camera":
         # camera.exposure is the first photo's (the others are at their given ratios)
         e0 = float(tc["exposure"]) * float(tc.get("exposures", [1.0])[0])
         return {"response": {"model": tc["response"]}, "exposure": {"init": e0}}
     if variant == "calibrated":
-        return {"response": {"from": report}, "exposure": {"init": 1.0, "fit": True}}
+        return {"response": {"from": report},
+                "exposure": {"init": 1.0, "fit": True, "auto": bool(fit.get("auto_exposure"))}}
     if variant == "joint":
         fc = fit["free_curve"]
         return {"response": {"model": "table", "fit": True, **fc},
-                "exposure": {"init": 1.0, "fit": True}}
-    return {"response": {"model": "srgb"}, "exposure": {"init": 1.0, "fit": True}}
+                "exposure": {"init": 1.0, "fit": True, "auto": bool(fit.get("auto_exposure"))}}
+    return {"response": {"model": "srgb"},
+            "exposure": {"init": 1.0, "fit": True, "auto": bool(fit.get("auto_exposure"))}}
 
 
 def response_errors(resp, truth) -> dict:
@@ -141,6 +150,12 @@ def main(argv=None) -> int:
     p.add_argument("--out", default="out/camera_chain")
     p.add_argument("--steps", type=int, default=None)
     p.add_argument("--variants", default=None)
+    p.add_argument("--clip-code", type=int, default=None,
+                   help="override fit.clip_code (codes >= it are censored; 255: none)")
+    p.add_argument("--auto-exposure", default=None, choices=("on", "off"),
+                   help="override fit.auto_exposure (camera.exposure.auto of the fitted ones)")
+    p.add_argument("--clipped", default=None, choices=("bound", "unmeasured"),
+                   help="override fit.clipped (camera.clipped of every fit)")
     p.add_argument("--overwrite", action="store_true")
     p.add_argument("--quiet", action="store_true")
     a = p.parse_args(argv)
@@ -152,6 +167,12 @@ def main(argv=None) -> int:
     base = read_yaml(a.config)
     base_dir = os.path.dirname(os.path.abspath(a.config))
     fit = base["fit"]
+    if a.clip_code is not None:
+        fit["clip_code"] = a.clip_code
+    if a.clipped is not None:
+        fit["clipped"] = a.clipped
+    if a.auto_exposure is not None:
+        fit["auto_exposure"] = a.auto_exposure == "on"
     os.makedirs(a.out, exist_ok=True)
     report = calibrate(base["calibration"], a.out, a.overwrite)
     true_resp = hdr.synthetic_response(base["calibration"]["curve"], channels=1)
@@ -160,6 +181,9 @@ def main(argv=None) -> int:
         "calibration": {"report": report, "response": response_errors(calibrated, true_resp)},
         "truth": fit["truth"],
         "truth_camera": fit["camera"],
+        "clip_code": fit.get("clip_code"),
+        "clipped": fit.get("clipped", "bound"),
+        "auto_exposure": bool(fit.get("auto_exposure")),
         "variants": {},
     }
     print("calibrated response", json.dumps(summary["calibration"]), flush=True)

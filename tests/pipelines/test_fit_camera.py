@@ -173,6 +173,93 @@ def test_censored_linear_loss_is_zero_at_the_truth_for_any_response():
         assert v0 < 2e-4 and v1 > 20 * v0
 
 
+def test_clip_code_censors_a_jpeg_rung_highlight():
+    """A highlight 4x above the clip level, photographed and JPEG-compressed (quality 90,
+    4:2:0): its clipped codes ring down to ~235-254. Read as exact values (the default, only
+    255 censored) they say the true radiance is far too dark; with ``clip_code`` every code >= k
+    only bounds it from below at ``f^-1((k - 1/2)/255)``, and the true radiance costs no more
+    than the JPEG error of the rest of the photo."""
+    resp = hdr.CameraResponse.analytic("camera", anchor="unit")
+    rad = np.full((16, 16, 3), 0.2, np.float32)
+    rad[4:12, 4:12] = 4.0
+    rad[:, :, 2] = np.linspace(0.05, 0.6, 16)[None, :]
+    codes = np.asarray(hdr.Camera(resp, jnp.asarray(1.0), bits=8).capture(rad))
+    jpeg = hdr.jpeg_roundtrip(codes[None], quality=90).astype(np.float32)
+    hi = rad[None] >= 1.0
+    assert ((jpeg < 255) & (jpeg >= 235) & hi).any()  # rung: clipped but not 255
+    table = level_table(resp, 8)
+    img = jnp.asarray(rad)
+
+    def loss(k, im=img):
+        return float(censored_linear_loss(im, jnp.asarray(jpeg), table, 1.0, 255.0, None, k))
+
+    floor = float(censored_linear_loss(img, jnp.asarray(jpeg) * ~hi, table, 1.0, 255.0))
+    assert loss(None) > 10 * loss(230) and loss(255) == loss(None)
+    assert loss(230) < 1.5 * floor
+    # the bound is f^-1 at k - 1/2: a render just below it costs, just above it does not
+    cam = hdr.Camera(resp, jnp.asarray(1.0), bits=8, clip=False)
+    b = float(cam.linearize(jnp.full((3,), 239.5))[0])
+    one = jnp.asarray(jpeg[:, 8:9, 8:9, :1])
+    assert float(one[0, 0, 0, 0]) >= 240
+    t1 = table[:, :1]
+    f = lambda v: float(censored_linear_loss(jnp.full((1, 1, 1), v), one, t1, 1.0, 255.0,
+                                             None, 240))
+    assert f(1.001 * b) == 0.0 and f(0.99 * b) > 0.0
+    g = jax.grad(lambda im: censored_linear_loss(im, jnp.asarray(jpeg), table, 1.0, 255.0,
+                                                 None, jnp.asarray(240)))(img)
+    assert np.all(np.isfinite(np.asarray(g)))
+
+
+def test_clipped_unmeasured_drops_only_bounds_another_photo_measures():
+    """Two photos (gains 1 and 8) of radiance 0.05 / 0.5: pixel 1 clips in the bright photo
+    only, pixel 0 in none. A render too dark at pixel 1 pays its bound in the bright photo by
+    default; with ``unmeasured_only`` that term is dropped (the dark photo measures the pixel)
+    and the loss equals the dark photo's term alone. A pixel clipped in both keeps its bound."""
+    resp = hdr.CameraResponse.gamma(2.2, anchor="unit")
+    table = level_table(resp, 8)
+    rad = np.asarray([[[0.05], [0.5], [4.0]]], np.float32)  # (1, 3, 1)
+    gains = np.asarray([[1.0], [8.0]], np.float32)
+    codes = np.stack([np.asarray(hdr.Camera(resp, jnp.asarray(g[0]), bits=8).capture(rad))
+                      for g in gains]).astype(np.float32)
+    assert codes[:, 0, :, 0].tolist() == [[int(codes[0, 0, 0, 0]), int(codes[0, 0, 1, 0]), 255],
+                                          [int(codes[1, 0, 0, 0]), 255, 255]]
+    img = jnp.asarray(rad * np.asarray([1.0, 0.02, 1.0], np.float32)[None, :, None])
+
+    def loss(um, im=img):
+        return float(censored_linear_loss(im, jnp.asarray(codes), table[:, :1], gains, 255.0,
+                                          None, None, um))
+
+    dark = float(censored_linear_loss(img, jnp.asarray(codes[0]), table[:, :1], gains[0],
+                                      255.0))
+    bright = float(censored_linear_loss(img, jnp.asarray(codes[1]), table[:, :1], gains[1],
+                                        255.0))
+    assert bright > 0.1 and loss(0.0) == pytest.approx(dark + bright, rel=1e-5)
+    assert loss(1.0) == pytest.approx(dark, rel=1e-5)
+    # pixel 2 is clipped in both photos: a render below its bound still pays with unmeasured
+    low = img.at[0, 2, 0].set(0.01)
+    assert loss(1.0, low) > loss(1.0) + 0.01
+
+
+def test_auto_exposure_recovers_the_exposure_of_a_clipped_bracket():
+    """Photos of a render through the calibrated-like camera at exposure 0.126 x (1, 4, 16)
+    (clipped, quantised): ``auto_exposure`` finds 0.126 within 2 %, where a fixed start of 1
+    is 8x off (the camera_chain calibrated fit then falls into a rough, dark basin)."""
+    from jaxgfx.pipelines.fit.job import auto_exposure
+
+    rng = np.random.default_rng(1)
+    img = rng.uniform(0.02, 5.0, (12, 12, 3)).astype(np.float32)
+    img[0, 0] = 0.0
+    resp = hdr.CameraResponse.analytic("camera", anchor="unit")
+    e, r = 0.126, np.asarray([1.0, 4.0, 16.0])
+    codes = np.stack([np.asarray(hdr.Camera(resp, jnp.asarray(e * ri), bits=8).capture(img))
+                      for ri in r]).astype(np.float32)
+    assert (codes == 255).mean() > 0.3
+    got = auto_exposure(img, codes, level_table(resp, 8), r, 255.0)
+    assert abs(got / e - 1) < 0.02
+    with pytest.raises(ValueError, match="camera.exposure.auto"):
+        auto_exposure(img, np.full_like(codes, 255.0), level_table(resp, 8), r, 255.0)
+
+
 def test_photo_gains_and_texture_priors_closed_forms():
     cam_p = {"exposure": jnp.asarray(2.0), "photo_exposure": jnp.asarray([1.0, 4.0]),
              "white_balance": jnp.asarray([1.5, 1.0, 0.5])}
@@ -340,6 +427,9 @@ def test_camera_config_errors():
         prepare_fit(_cfg(target={"synthetic": {}, "camera": {"exposures": [1.0, -2.0]}}))
     with pytest.raises(ValueError, match=r"target.camera.jpeg"):
         prepare_fit(_cfg(target={"synthetic": {}, "camera": {"jpeg": 101}}))
+    for bad in (256, 1, 2.5, True):
+        with pytest.raises(ValueError, match=r"camera.clip_code: expected an integer"):
+            _cfg(camera={"response": "srgb", "clip_code": bad})
 
 
 # cost: 45 s at load 10 on 2 cores (traces the render's gradient four times, no compile)

@@ -145,6 +145,10 @@ class ExposureSpec:
     min: float = 1e-3
     max: float = 1e3
     per_photo: bool = False
+    # auto: start from the exposure that best maps the initial render onto the linearised
+    # photos (median ratio over measured pixels, :func:`jaxgfx.pipelines.fit.job.auto_exposure`)
+    # instead of init: a calibrated curve's scale is arbitrary (x = 1 at its extrapolated top)
+    auto: bool = False
 
     def __post_init__(self):
         if not 0 < self.min < self.init < self.max:
@@ -182,6 +186,14 @@ class CameraConfig:
     white_balance: WhiteBalanceSpec = WhiteBalanceSpec()
     bits: int = 8
     space: str = "linear"  # where the loss compares: linear (unbiased) | code (see module doc)
+    # codes >= clip_code only bound the radiance from below, like the clip level (None: only
+    # 2^bits - 1): JPEG rings a clipped highlight down to ~235-254, and a calibrated curve is
+    # trusted only up to some level (docs/inverse.md section 2b)
+    clip_code: int | None = None
+    # bound: every clipped (or black) code bounds the radiance; unmeasured: only where no
+    # other photo of the bracket measures the pixel (the hinge of a bound is biased by the
+    # render's Monte Carlo noise; a measured pixel does not need it)
+    clipped: str = "bound"
 
     def __post_init__(self):
         r = self.response
@@ -199,7 +211,15 @@ class CameraConfig:
         object.__setattr__(self, "response", r)
         if self.bits not in (8, 16):
             raise ValueError(f"camera.bits: expected 8 or 16, got {self.bits}")
+        c = 2**self.bits - 1
+        k = self.clip_code
+        if k is not None and (isinstance(k, bool) or not isinstance(k, int) or not 1 < k <= c):
+            raise ValueError(
+                f"camera.clip_code: expected an integer code in 2..{c} (camera.bits "
+                f"{self.bits}), got {k!r}"
+            )
         check_choice(self.space, "camera.space", LOSS_COMPARE_SPACES)
+        check_choice(self.clipped, "camera.clipped", ("bound", "unmeasured"))
 
 
 # first-order optimisers only: a fit renders with a fresh key per step, which least-squares

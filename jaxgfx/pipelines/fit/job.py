@@ -16,7 +16,7 @@ from .loss import cached_loss
 from .report import OUTPUT_NAMES, plain, srgb8, write_outputs
 from .targets import Prepared, Target, build_scene, prepare_fit
 
-__all__ = ["FitJob", "run_fit"]
+__all__ = ["FitJob", "run_fit", "auto_exposure"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -154,6 +154,27 @@ def _target(cfg: FitConfig, prep: Prepared, key=None) -> tuple[Target, np.ndarra
     return Target(photos.astype(np.float32), bits=bits), linear
 
 
+def auto_exposure(img, codes, table, ratios, code_max: float) -> float:
+    """The first photo's exposure ``e`` that maps a render ``img`` ``(H, W, C)`` onto photos
+    ``codes`` ``(N, H, W, C)`` of relative exposures ``ratios`` ``(N,)`` through a camera of
+    level table ``table`` (``ln f⁻¹``, :func:`~jaxgfx.pipelines.fit.camera.level_table`):
+    the median of ``f⁻¹(q) / (r_j · img)`` over the uncensored codes (``0 < q < c``) of
+    pixels with ``img > 0``. Robust to clipping and to a material that is still wrong over
+    part of the image; a start for ``camera.exposure.auto``."""
+    img = np.asarray(img, np.float64)
+    codes = np.asarray(codes)
+    c = int(round(code_max))
+    q = np.clip(codes, 0, c).astype(np.int64)
+    g = np.broadcast_to(np.asarray(table, np.float64), (c + 1, codes.shape[-1]))
+    x = np.exp(np.take_along_axis(g, q.reshape(-1, codes.shape[-1]), 0)).reshape(codes.shape)
+    r = np.asarray(ratios, np.float64).reshape(-1, 1, 1, 1)
+    ok = (q > 0) & (q < c) & (img[None] > 1e-8)
+    if not ok.any():
+        raise ValueError("camera.exposure.auto: no pixel is both measured and lit in the render")
+    ri = np.broadcast_to(r * img[None], codes.shape)
+    return float(np.median(x[ok] / ri[ok]))
+
+
 def _prior_specs(cfg: FitConfig, prep: Prepared):
     """``((path, kind), ...)`` and ``{path: {kind: weight}}`` of the texel-grid priors, and
     ``{path: k}`` the learning-rate factors (``params.X.lr / optimizer.lr``)."""
@@ -257,6 +278,10 @@ def _initial(cfg: FitConfig, prep: Prepared):
                 "curve": jnp.asarray(float(kind == "free"), jnp.float32),
             },
             "smoothness": jnp.asarray(spec.smoothness if kind == "free" else 0.0, jnp.float32),
+            "clip_code": jnp.asarray(
+                2**bits - 1 if cam.clip_code is None else cam.clip_code, jnp.int32
+            ),
+            "unmeasured": jnp.asarray(float(cam.clipped == "unmeasured"), jnp.float32),
         }
     return params, bounds, cam_args
 
@@ -422,6 +447,20 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
     target_seconds = time.perf_counter() - t0
 
     params, bounds, cam_args = _initial(cfg, prep)
+    if prep.ldr and cfg.camera.exposure.auto:
+        from .camera import fit_level_table
+
+        bits = cfg.camera.bits
+        img = _render(cfg, build_scene(prep.scene, prep.paths, prep.init), k_show,
+                      max(cfg.render.spp, 16))
+        if target.grey:
+            from .loss import to_target_channels
+
+            img = np.asarray(to_target_channels(jnp.asarray(img), True))
+        table = fit_level_table(params["camera"], cam_args, bits)
+        e0 = auto_exposure(img, target.pixels, table, prep.exposures, float(2**bits - 1))
+        lo = cfg.camera.exposure.min
+        params["camera"]["exposure"] = jnp.asarray(max(e0, 1.01 * lo), jnp.float32)
     priors, _, _ = _prior_specs(cfg, prep)
     scaled = _scaled_intervals(cfg, prep)
     masked = target.mask is not None

@@ -41,7 +41,9 @@ def _masked_mean(v, mask, axes):
     return jnp.sum(v * m, axis=axes) / jnp.sum(m, axis=axes)
 
 
-def censored_linear_loss(img, codes, table, gain, code_max, mask=None):
+def censored_linear_loss(
+    img, codes, table, gain, code_max, mask=None, clip_code=None, unmeasured_only=None
+):
     """Censored L2 in linear radiance, summed over photos.
 
     ``img`` ``(H, W, C)`` the linear render; ``codes`` ``(N, H, W, C)`` integer codes of
@@ -55,7 +57,16 @@ def censored_linear_loss(img, codes, table, gain, code_max, mask=None):
     (``q = c``: ``Î ≥ f⁻¹((c − ½)/c) / gain``; ``q = 0``: ``Î ≤ f⁻¹(½/c) / gain``): one
     gather gives both, the bounds being the table's end slots. Each photo's term is
     normalised by its mean linearised target (so its scale does not drift with the exposure);
-    ``mask`` ``(N, H, W, 1)`` (or ``(H, W, 1)``) per-pixel weights, None: all pixels."""
+    ``mask`` ``(N, H, W, 1)`` (or ``(H, W, 1)``) per-pixel weights, None: all pixels.
+    ``clip_code`` (an integer code ``k``, a traced scalar allowed; None: ``c``): every code
+    ``q ≥ k`` is censored like a clipped one, ``Î ≥ f⁻¹((k − ½)/c) / gain`` (``ln f⁻¹`` at
+    ``k − ½`` interpolated halfway between the table's codes ``k − 1`` and ``k``) — for JPEG
+    photos, whose clipped highlights ring down to codes ~235–254, and for a calibrated curve
+    trusted only below some level. ``unmeasured_only`` (a 0/1 scalar, traced allowed): a
+    censored code of one photo counts only where no other photo measures that pixel (an
+    uncensored code there): the hinge of a bound is biased by the render's Monte Carlo noise
+    (``E max(t − Î, 0) > max(t − E Î, 0)``: a noisy render is pushed above the bound), and a
+    pixel that a darker (brighter) photo of the bracket measures needs no bound."""
     single = codes.ndim == 3
     if single:
         codes = codes[None]
@@ -65,9 +76,19 @@ def censored_linear_loss(img, codes, table, gain, code_max, mask=None):
     q = jnp.clip(codes, 0, c).astype(jnp.int32)
     table = jnp.broadcast_to(table, (table.shape[0], nch))
     gain = jnp.broadcast_to(jnp.asarray(gain, img.dtype), (codes.shape[0], nch))
+    if clip_code is not None:
+        k = jnp.clip(jnp.asarray(clip_code, jnp.int32), 2, c)
+        g_k = jnp.where(k >= c, table[c], 0.5 * (table[k - 1] + table[jnp.minimum(k, c - 1)]))
+        table = table.at[c].set(g_k)
+        q = jnp.where(q >= k, c, q)
     t = jnp.exp(table[q, jnp.arange(nch)]) / gain[:, None, None, :]
     e = jnp.where(q >= c, jnp.maximum(t - img, 0.0),
                   jnp.where(q <= 0, jnp.maximum(img - t, 0.0), img - t))
+    if unmeasured_only is not None:
+        censored = (q >= c) | (q <= 0)
+        measured = jnp.sum(~censored, axis=0, keepdims=True) > 0
+        drop = censored & measured & (jnp.asarray(unmeasured_only) > 0)
+        e = jnp.where(drop, 0.0, e)
     axes = (1, 2, 3)
     scale = jax.lax.stop_gradient(_masked_mean(t, mask, axes)) + 1e-6
     return jnp.sum(_masked_mean(e * e, mask, axes) / (scale * scale))
@@ -186,8 +207,10 @@ def make_loss(
         if not ldr:
             return image_loss(img, pixels, kind=kind, space=space, mask=mask)
         gain = photo_gains(p["camera"], cam_args, img.shape[-1])
-        fn = code_space_loss if code_space else censored_linear_loss
-        return fn(img, pixels, table, gain, code_max, mask)
+        if code_space:
+            return code_space_loss(img, pixels, table, gain, code_max, mask)
+        return censored_linear_loss(img, pixels, table, gain, code_max, mask,
+                                    cam_args.get("clip_code"), cam_args.get("unmeasured"))
 
     def loss(p, key, args):
         scene, target, cam_args = args
