@@ -43,7 +43,7 @@ import numpy as np
 
 from benchmarks._report import emit, machine
 from jaxgfx.config import read_yaml
-from jaxgfx.pipelines.fit import enable_compilation_cache, run_fit
+from jaxgfx.pipelines.fit import FitJob, enable_compilation_cache, run_fit
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "configs", "inverse_material.yaml")
@@ -78,7 +78,7 @@ def time_to_first(alpha_hist, seconds_cum, truth, rel=0.02):
 
 def run_jaxgfx(cfg: dict) -> dict:
     t0 = time.perf_counter()
-    out = run_fit(cfg, None, base_dir=ROOT)
+    out = run_fit(FitJob.load(cfg, None, base_dir=ROOT))
     wall = time.perf_counter() - t0
     truth_a = out["truth"][ALPHA]
     alpha = np.asarray(out["history"][ALPHA], np.float64)  # (steps + 1,)

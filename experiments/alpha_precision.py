@@ -75,7 +75,7 @@ def loss_curve(with_params, target, grid=(0.13, 0.14, 0.145, 0.15, 0.155, 0.16, 
 
 def run_adam(seeds):
     from jaxgfx.config import read_yaml
-    from jaxgfx.pipelines.fit import run_fit
+    from jaxgfx.pipelines.fit import FitJob, run_fit
 
     base = read_yaml(CONFIG)
     base["progress"] = False
@@ -83,7 +83,7 @@ def run_adam(seeds):
     for seed in seeds:
         cfg = copy.deepcopy(base)
         cfg["seed"] = seed
-        res = run_fit(cfg, None, base_dir=ROOT)
+        res = run_fit(FitJob.load(cfg, None, base_dir=ROOT))
         hist = np.asarray(res["history"]["materials.metal.alpha"], np.float64)
         a = float(hist[-1])
         rec = {

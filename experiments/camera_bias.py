@@ -26,7 +26,7 @@ import sys
 import numpy as np
 
 from jaxgfx.config import read_yaml
-from jaxgfx.pipelines.fit import enable_compilation_cache, run_fit
+from jaxgfx.pipelines.fit import FitJob, enable_compilation_cache, run_fit
 
 VARIANTS = ("srgb_fixed", "srgb_exposure", "joint", "oracle")
 
@@ -88,7 +88,7 @@ def main(argv=None) -> int:
         cfg["progress"] = not a.quiet
         if a.steps is not None:
             cfg["optimizer"] = {**cfg.get("optimizer", {}), "steps": a.steps}
-        out = run_fit(cfg, os.path.join(a.out, v), base_dir=os.getcwd())
+        out = run_fit(FitJob.load(cfg, os.path.join(a.out, v), base_dir=os.getcwd()))
         summary["variants"][v] = {
             "params": out["params"],
             "camera": out["camera"],

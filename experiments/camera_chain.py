@@ -161,7 +161,7 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
 
     from jaxgfx import hdr
-    from jaxgfx.pipelines.fit import enable_compilation_cache, run_fit
+    from jaxgfx.pipelines.fit import FitJob, enable_compilation_cache, run_fit
 
     enable_compilation_cache()
     base = read_yaml(a.config)
@@ -200,8 +200,8 @@ def main(argv=None) -> int:
             "render": fit["render"],
             "progress": not a.quiet,
         }
-        out = run_fit(cfg, os.path.join(a.out, f"fit_{v}"), base_dir=base_dir,
-                      overwrite=a.overwrite)
+        out = run_fit(FitJob.load(cfg, os.path.join(a.out, f"fit_{v}"), base_dir=base_dir,
+                                  overwrite=a.overwrite))
         results[v] = out
         entry = {
             "params": out["params"],

@@ -23,7 +23,7 @@ REPORT = os.path.abspath(os.environ.get("CHAIN_REPORT", "out/camera_chain/calibr
 
 
 def run(name, tcam, fcam, steps=300, size=32, spp=8, est="independent", seed=0, clip=None, um=0):
-    from jaxgfx.pipelines.fit import run_fit
+    from jaxgfx.pipelines.fit import FitJob, run_fit
 
     fcam = dict(fcam)
     if um:
@@ -43,7 +43,7 @@ def run(name, tcam, fcam, steps=300, size=32, spp=8, est="independent", seed=0, 
         "seed": seed,
     }
     t = time.time()
-    out = run_fit(cfg, None, base_dir=CONFIGS)
+    out = run_fit(FitJob.load(cfg, None, base_dir=CONFIGS))
     a = out["params"]["materials.metal.alpha"]
     rho = np.round(out["params"]["materials.clay.reflectance"], 3).tolist()
     err = out["errors"]["materials.clay.reflectance"]

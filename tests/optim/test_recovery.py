@@ -169,7 +169,7 @@ def test_recover_beckmann_alpha():
 
 
 def _run(cfg_over, size=16):
-    from jaxgfx.pipelines.fit import run_fit
+    from jaxgfx.pipelines.fit import FitJob, run_fit
 
     cfg = {
         "scene": SCENE,
@@ -181,7 +181,7 @@ def _run(cfg_over, size=16):
     }
     for k, v in cfg_over.items():
         cfg[k] = {**cfg[k], **v} if isinstance(v, dict) and isinstance(cfg.get(k), dict) else v
-    return run_fit(cfg)
+    return run_fit(FitJob.load(cfg, None))
 
 
 @pytest.mark.slow

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from jaxgfx.config import load_config
-from jaxgfx.pipelines.fit import FitConfig, apply_camera, prepare_fit, run_fit
+from jaxgfx.pipelines.fit import FitConfig, FitJob, apply_camera, prepare_fit, run_fit
 
 SCENE = os.path.join(os.path.dirname(__file__), "..", "..", "configs", "scenes", "inverse.yaml")
 
@@ -91,7 +91,7 @@ def test_apply_camera_matches_closed_forms():
 
 @pytest.mark.slow
 def test_run_fit_end_to_end(tmp_path):
-    out = run_fit(_cfg(optimizer={"steps": 4}), str(tmp_path))
+    out = run_fit(FitJob(_cfg(optimizer={"steps": 4}), str(tmp_path)))
     for name in ("result.json", "curves.png", "before.png", "after.png", "target.png"):
         assert (tmp_path / name).exists(), name
     with open(tmp_path / "result.json") as f:

@@ -9,7 +9,7 @@ from PIL import Image
 
 from jaxgfx.config import load_config
 from jaxgfx.io import write_exr, write_png
-from jaxgfx.pipelines.fit import FitConfig, prepare_fit, run_fit
+from jaxgfx.pipelines.fit import FitConfig, FitJob, prepare_fit, run_fit
 
 SCENE = os.path.join(os.path.dirname(__file__), "..", "..", "configs", "scenes", "inverse.yaml")
 N = 8
@@ -177,7 +177,7 @@ def test_fit_step_of_a_photo_target_traces_in_a_fresh_interpreter(tmp_path):
 def test_fit_of_an_8bit_png_and_a_jpeg_photo_runs_end_to_end(tmp_path):
     for kind in ("png8", "jpeg"):
         path, *_ = _photo(tmp_path, kind)
-        out = run_fit(_cfg(path), str(tmp_path / f"out_{kind}"))
+        out = run_fit(FitJob(_cfg(path), str(tmp_path / f"out_{kind}")))
         assert out["n_steps"] == 2 and np.all(np.isfinite(out["loss"]))
         assert set(out["camera"]["fitted"]) == {"exposure", "gamma"}
         assert (tmp_path / f"out_{kind}" / "after.png").exists()
@@ -189,7 +189,7 @@ def test_fit_of_an_8bit_png_and_a_jpeg_photo_runs_end_to_end(tmp_path):
 def test_fit_of_16bit_grey_and_rgba_photos_runs_end_to_end(tmp_path, kind):
     path, _, bits, _, _ = _photo(tmp_path, kind)
     over = {"camera": {"bits": bits, "response": {"model": "gamma", "fit": True}}}
-    out = run_fit(_cfg(path, **over), None)
+    out = run_fit(FitJob(_cfg(path, **over), None))
     assert out["n_steps"] == 2 and np.all(np.isfinite(out["loss"]))
 
 

@@ -5,10 +5,10 @@ The package is the job's stages: ``config`` (the frozen, self-validating datacla
 :class:`jaxgfx.hdr.Camera` between render and photo), ``loss``, ``report`` (result.json,
 plots, previews) and ``job`` (``run_fit``: check → target → fit → check → report).
 
-``run_fit(cfg, out_dir)`` loads the initial scene, the target (a linear EXR/HDR, an 8-bit
-PNG/JPEG "photo", or a synthetic target rendered here at known parameter values), checks every
-parameter path, size and bound *before* rendering, fits with :func:`jaxgfx.optim.fit` and
-writes::
+``run_fit(FitJob.load(cfg, out_dir))`` loads the initial scene, the target (a linear
+EXR/HDR, an 8-bit PNG/JPEG "photo", or a synthetic target rendered here at known parameter
+values), checks every parameter path, size and bound *before* rendering, fits with
+:func:`jaxgfx.optim.fit` and writes::
 
     result.json   fitted params {path: value}, camera, loss per step, seconds, truth and errors,
                   the parameter history per step (parameters of <= 16 values)

@@ -33,37 +33,35 @@ class FitJob:
         if not isinstance(self.config, FitConfig):
             raise TypeError(f"config: expected a FitConfig, got {type(self.config).__name__}")
 
+    @classmethod
+    def load(cls, config, out: str | None = None, *, base_dir: str | None = None,
+             overwrite: bool = False) -> FitJob:  # fmt: skip
+        """A job from ``config``: a YAML path (its folder becomes ``base_dir`` unless given), a
+        mapping, or a :class:`FitConfig`."""
+        if isinstance(config, (str, os.PathLike)):
+            base_dir = base_dir or os.path.dirname(os.path.abspath(config))
+            config = load_config(FitConfig, config)
+        elif not isinstance(config, FitConfig):
+            config = load_config(FitConfig, config)
+        return cls(config, out, overwrite, base_dir)
 
-def _as_job(cfg, out_dir, base_dir, overwrite) -> FitJob:
-    if isinstance(cfg, FitJob):
-        return cfg
-    if isinstance(cfg, (str, os.PathLike)):
-        base_dir = base_dir or os.path.dirname(os.path.abspath(cfg))
-        cfg = load_config(FitConfig, cfg)
-    elif not isinstance(cfg, FitConfig):
-        cfg = load_config(FitConfig, cfg)
-    return FitJob(cfg, out_dir, overwrite, base_dir)
 
-
-def run_fit(
-    cfg: FitJob | FitConfig | dict | str,
-    out_dir: str | None = None,
-    *,
-    base_dir: str | None = None,
-    overwrite: bool = False,
-) -> dict:
-    """Run the fit described by ``cfg`` (a :class:`FitJob`, or a :class:`FitConfig`, a mapping
-    or a YAML path with ``out_dir``, ``base_dir``, ``overwrite``) and write the outputs
-    (:data:`OUTPUT_NAMES`) to ``out_dir`` (None: nothing written). Everything is checked before
-    rendering (:func:`prepare_fit`); an ``out_dir`` that holds a previous run's results is
-    refused unless ``overwrite`` (outputs are staged and moved into place only when the job
-    succeeded, :mod:`jaxgfx.pipelines._output`). Relative paths in the config (scene, target)
-    are looked up in ``base_dir`` (a YAML path's folder), then in the working directory.
-    Returns the ``result.json`` dictionary (plus ``"outputs"``: ``{name: path}`` when written).
+def run_fit(job: FitJob) -> dict:
+    """Run the fit ``job`` (a :class:`FitJob`; :meth:`FitJob.load` builds one from a YAML path,
+    a mapping or a :class:`FitConfig`) and write the outputs (:data:`OUTPUT_NAMES`) to
+    ``job.out`` (None: nothing written). Everything is checked before rendering
+    (:func:`prepare_fit`); an ``out`` that holds a previous run's results is refused unless
+    ``job.overwrite`` (outputs are staged and moved into place only when the job succeeded,
+    :mod:`jaxgfx.pipelines._output`). Relative paths in the config (scene, target) are looked up
+    in ``job.base_dir`` (a YAML path's folder), then in the working directory. Returns the
+    ``result.json`` dictionary (plus ``"outputs"``: ``{name: path}`` when written).
     """
+    if not isinstance(job, FitJob):
+        raise TypeError(
+            f"job: expected a FitJob (FitJob.load(config, out=...)), got {type(job).__name__}"
+        )
     from jaxgfx.pipelines._output import StagedDir
 
-    job = _as_job(cfg, out_dir, base_dir, overwrite)
     stage = (
         StagedDir(job.out, OUTPUT_NAMES, overwrite=job.overwrite)
         if job.out is not None
