@@ -13,6 +13,8 @@ function in :mod:`jaxgfx.pipelines`)
     Inverse rendering: fit scene (and camera) parameters to a target (docs/inverse.md).
 ``jaxgfx tonemap IN.exr OUT.png --op drago --bias 0.85``
     Tone map an HDR image for display (see ``jaxgfx tonemap --list``).
+``jaxgfx fuse bracket/ OUT.png``
+    Exposure fusion of an LDR bracket (files or a directory) into one display image.
 
 Every subcommand takes ``--overwrite`` (replace existing results; without it an output that
 already exists is refused before any work) and ``--debug`` (show the traceback of an error).
@@ -271,6 +273,40 @@ def _tonemap_run(args) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- fuse
+
+# jaxgfx.pipelines.fuse.FUSE_PARAMETERS (kept here so --help needs no jax import;
+# tests/tonemap/test_pipeline_fuse.py checks the two agree)
+FUSE_CLI_PARAMS = ("contrast_weight", "saturation_weight", "exposedness_weight", "sigma")
+
+
+def _fuse_arguments(p):
+    p.add_argument(
+        "paths",
+        nargs="+",
+        metavar="PATH",
+        help="LDR frames of a bracket (PNG/JPEG/TIFF files or a directory), then OUTPUT "
+        "(.png/.jpg 8-bit, .tif 16-bit)",
+    )
+    for name in FUSE_CLI_PARAMS:
+        p.add_argument(f"--{name.replace('_', '-')}", type=float, default=None, dest=name)
+
+
+def _fuse_run(args) -> int:
+    from jaxgfx.pipelines.fuse import FuseJob, run_fuse
+
+    if len(args.paths) < 2:
+        raise _UsageError("expected input frames (or a directory) followed by OUTPUT")
+    params = {k: getattr(args, k) for k in FUSE_CLI_PARAMS if getattr(args, k) is not None}
+    job = FuseJob(tuple(args.paths[:-1]), args.paths[-1], params, overwrite=args.overwrite)
+    res = run_fuse(job)
+    print(
+        f"wrote {res['outputs']['output']} (exposure fusion of {len(res['inputs'])} frames, "
+        f"{res['seconds']:.2f} s incl. compile)"
+    )
+    return 0
+
+
 # ----------------------------------------------------------------------------- fit
 def _fit_arguments(p):
     p.add_argument("config", help="YAML config (configs/inverse_material.yaml, docs/inverse.md)")
@@ -344,6 +380,13 @@ COMMANDS: dict[str, Command] = {
         "(docs/tonemap.md); every continuous parameter is an option.",
         _tonemap_arguments,
         _tonemap_run,
+    ),
+    "fuse": Command(
+        "fuse an LDR exposure bracket into one display image (Mertens et al. 2007)",
+        "Exposure fusion of an LDR bracket with jaxgfx.hdr.exposure_fusion "
+        "(docs/tonemap.md): no exposure times, response curve or tone mapping needed.",
+        _fuse_arguments,
+        _fuse_run,
     ),
     "fit": Command(
         "fit scene (and camera) parameters to a target image (inverse rendering)",

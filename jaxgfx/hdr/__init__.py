@@ -66,6 +66,7 @@ __all__ = [
 # --- pixel encodings (docs/io.md); noise, RAW calibration, alignment (docs/raw_calibration.md)
 from .align import ALIGN_METHODS as ALIGN_METHODS
 from .align import SHIFT_MODES as SHIFT_MODES
+from .align import align_raw_stack as align_raw_stack
 from .align import align_stack as align_stack
 from .align import mtb_align as mtb_align
 from .align import phase_correlation as phase_correlation
@@ -94,6 +95,7 @@ __all__ += [
     "ALIGN_METHODS",
     "SHIFT_MODES",
     "align_stack",
+    "align_raw_stack",
     "mtb_align",
     "phase_correlation",
     "shift_image",
@@ -129,3 +131,9 @@ __all__ += ["CAMERA_PROFILE_FORMAT", "CameraProfile", "load_camera_profile", "sa
 from .fusion import exposure_fusion as exposure_fusion  # noqa: E402
 
 __all__ += ["exposure_fusion"]
+
+# --- ghost-free merge of brackets of moving scenes (docs/hdr.md)
+from .deghost import DeghostResult as DeghostResult  # noqa: E402
+from .deghost import merge_deghosted as merge_deghosted  # noqa: E402
+
+__all__ += ["DeghostResult", "merge_deghosted"]

@@ -27,6 +27,7 @@ __all__ = [
     "mtb_align",
     "shift_image",
     "align_stack",
+    "align_raw_stack",
     "ALIGN_METHODS",
     "SHIFT_MODES",
 ]
@@ -348,6 +349,13 @@ def align_stack(
     ref = n // 2 if reference is None else reference
     if isinstance(ref, bool) or not isinstance(ref, (int, np.integer)) or not 0 <= ref < n:
         raise ValueError(f"reference: expected an int in [0, {n}), got {reference!r}")
+    shifts = _estimate_shifts(x, method, ref, upsample, levels)
+    aligned = jax.vmap(lambda im, s: _shift_core(im, -s, mode=mode))(x, shifts)
+    return aligned, shifts
+
+
+def _estimate_shifts(x, method, ref, upsample, levels):
+    """``(N, 2)`` shifts of every frame of ``x`` relative to frame ``ref`` (0 for it)."""
     if method == "phase":
 
         def est(i):
@@ -357,6 +365,79 @@ def align_stack(
         def est(i):
             return mtb_align(x[ref], x[i], levels=levels).astype(x.dtype)
 
-    shifts = jnp.stack([jnp.zeros(2, x.dtype) if i == ref else est(i) for i in range(n)])
-    aligned = jax.vmap(lambda im, s: _shift_core(im, -s, mode=mode))(x, shifts)
+    n = x.shape[0]
+    return jnp.stack([jnp.zeros(2, x.dtype) if i == ref else est(i) for i in range(n)])
+
+
+def align_raw_stack(
+    frames,
+    *,
+    cfa_pattern: str | None = None,
+    method: str = "phase",
+    reference: int | None = None,
+    upsample: int = 10,
+    levels: int = 5,
+):
+    """Align the frames of a *linear* RAW bracket by a global translation.
+
+    The shift is estimated on ``sqrt(max(x, 0))`` of each frame (a variance-stabilising
+    compression of the linear data, close to a display gamma, so that the bright end does not
+    dominate the correlation; both estimators are insensitive to the exposure ratio) and
+    undone on the linear values by bilinear interpolation (:func:`shift_image`, edge values
+    outside), so the aligned frames stay linear and can be merged
+    (:func:`jaxgfx.hdr.merge_radiance` with a linear response, or
+    :func:`jaxgfx.hdr.merge_deghosted` with ``response=None``).
+
+    With ``cfa_pattern`` (e.g. ``"RGGB"``) the frames are Bayer mosaics ``(N, H, W)``, H and W
+    even: the estimate uses the half-resolution mean of each 2 x 2 tile and each of the four
+    CFA planes is moved by the same shift in its own half-resolution grid, so the mosaic
+    pattern is kept (a shift of the mosaic itself would mix colours for odd or fractional
+    shifts). Without, ``(N, H, W)`` or ``(N, H, W, C)`` linear frames (demosaiced or one
+    channel) are moved directly.
+
+    Args:
+      frames: linear RAW frames, black-subtracted (``RawFrame.normalized()``), N >= 2.
+      cfa_pattern: ``None`` or one of :data:`jaxgfx.image.BAYER_PATTERNS`.
+      method, reference, upsample, levels: as for :func:`align_stack`.
+
+    Returns:
+      ``(aligned, shifts)``: ``aligned`` like ``frames`` (float); ``shifts (N, 2)`` the
+      ``(dy, dx)`` of each frame relative to the reference in full-resolution pixels.
+
+    Example: ``align_raw_stack(mosaics, cfa_pattern="RGGB")`` -> ``(aligned, shifts)``.
+    """
+    from .raw_calibration import CFA_PATTERNS
+
+    check_choice(method, "method", tuple(ALIGN_METHODS))
+    if cfa_pattern is not None:
+        check_choice(cfa_pattern, "cfa_pattern", CFA_PATTERNS)
+    x = as_float_array(frames, "frames")
+    if cfa_pattern is not None:
+        if x.ndim != 3 or x.shape[1] % 2 or x.shape[2] % 2:
+            raise ValueError(
+                f"frames: expected Bayer mosaics (N, H, W) with even H, W, got shape {x.shape}"
+            )
+    elif x.ndim not in (3, 4):
+        raise ValueError(f"frames: expected (N, H, W) or (N, H, W, C), got shape {x.shape}")
+    n = x.shape[0]
+    if n < 2:
+        raise ValueError(f"frames: expected at least 2 frames, got {n}")
+    check_finite(x, "frames")
+    ref = n // 2 if reference is None else reference
+    if isinstance(ref, bool) or not isinstance(ref, (int, np.integer)) or not 0 <= ref < n:
+        raise ValueError(f"reference: expected an int in [0, {n}), got {reference!r}")
+    if cfa_pattern is not None:
+        nn, h, w = x.shape
+        planes = x.reshape(nn, h // 2, 2, w // 2, 2).transpose(0, 1, 3, 2, 4)
+        planes = planes.reshape(nn, h // 2, w // 2, 4)
+        if min(h, w) // 2 < 4:
+            raise ValueError(f"frames: mosaics of {h} x {w} are too small to align")
+        grey = jnp.sqrt(jnp.maximum(jnp.mean(planes, axis=-1), 0.0))
+        s_half = _estimate_shifts(grey, method, ref, upsample, levels)
+        moved = jax.vmap(lambda im, s: _shift_core(im, -s, mode="bilinear"))(planes, s_half)
+        aligned = moved.reshape(nn, h // 2, w // 2, 2, 2).transpose(0, 1, 3, 2, 4)
+        return aligned.reshape(nn, h, w), 2.0 * s_half
+    grey = jnp.sqrt(jnp.maximum(x if x.ndim == 3 else jnp.mean(x, axis=-1), 0.0))
+    shifts = _estimate_shifts(grey, method, ref, upsample, levels)
+    aligned = jax.vmap(lambda im, s: _shift_core(im, -s, mode="bilinear"))(x, shifts)
     return aligned, shifts

@@ -34,6 +34,8 @@ __all__ = [
     "hard_hdr_scenes",
     "CANON_EOS_5D_MARK_II",
     "write_dng_bracket",
+    "MovingStack",
+    "make_moving_object_stack",
 ]
 
 SYNTHETIC_RESPONSES = ("gamma2.2", *(k for k in ANALYTIC_KINDS if k != "linear"))
@@ -510,3 +512,83 @@ def write_dng_bracket(
         )
         paths.append(path)
     return paths, rgb * k
+
+
+# ----------------------------------------------------------------------------------------
+# brackets of scenes that move (ghost-free merging: jaxgfx.hdr.deghost)
+
+
+class MovingStack(NamedTuple):
+    """Output of :func:`make_moving_object_stack`: ``stack`` the bracket (its ``radiance`` is
+    the static background), ``frames_radiance`` ``(N, H, W, C)`` the radiance each frame saw
+    (ground truth of a merge referenced to that frame), ``object_masks`` ``(N, H, W)`` where
+    the object was in each frame."""
+
+    stack: BracketedStack
+    frames_radiance: jax.Array
+    object_masks: jax.Array
+
+
+def make_moving_object_stack(
+    key,
+    radiance,
+    exposure_times,
+    response,
+    *,
+    centers,
+    radius: float,
+    level: float,
+    bits: int | None = 8,
+    gain: float = 1e-4,
+    read_sigma: float = 1e-3,
+) -> MovingStack:
+    """A bracket of ``radiance`` ``(H, W, C)`` with a textured disc (``radius`` px, mean
+    radiance ``level`` x a cool tint, +-30 % texture that moves with it) at ``centers[j] =
+    (row, col)`` in frame ``j``: an object that moves between the exposures. Each frame is
+    simulated as :func:`make_bracketed_stack` (noise, clipping, quantisation, independent
+    noise per frame). Example: ``make_moving_object_stack(key, E, t, resp, centers=[(8, 8),
+    (8, 20)], radius=4, level=0.1)``."""
+    radiance = jnp.asarray(radiance)
+    if radiance.ndim != 3:
+        raise ValueError(f"radiance: expected shape (H, W, C), got {radiance.shape}")
+    t = jnp.asarray(exposure_times, radiance.dtype)
+    n = t.shape[0] if t.ndim == 1 else -1
+    centers = np.asarray(centers, np.float64)
+    if centers.shape != (n, 2):
+        raise ValueError(f"centers: expected shape ({n}, 2), one (row, col) per frame")
+    check_positive(radius, "radius")
+    check_positive(level, "level")
+    H, W, C = radiance.shape
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float64)
+    rng = np.random.default_rng(0)
+    tex_coarse = rng.standard_normal((8, 8))
+    tint = np.array([0.7, 0.9, 1.2, 1.0])[:C]
+    frames, masks = [], []
+    for cy, cx in centers:
+        r2 = (yy - cy) ** 2 + (xx - cx) ** 2
+        inside = r2 <= radius * radius
+        # texture in the object's own coordinates (it moves with the object)
+        u = np.clip((yy - cy) / radius * 3.5 + 4, 0, 7).astype(int)
+        v = np.clip((xx - cx) / radius * 3.5 + 4, 0, 7).astype(int)
+        tex = 1.0 + 0.3 * np.tanh(tex_coarse[u, v])
+        obj = (level * tex)[..., None] * tint
+        frames.append(np.where(inside[..., None], obj, np.asarray(radiance, np.float64)))
+        masks.append(inside)
+    frames_radiance = jnp.asarray(np.stack(frames), radiance.dtype)
+    keys = jax.random.split(key, n)
+    imgs = [
+        make_bracketed_stack(
+            keys[j], frames_radiance[j], t[j : j + 1], response, bits=bits, gain=gain,
+            read_sigma=read_sigma,
+        )
+        for j in range(n)
+    ]
+    stack = BracketedStack(
+        jnp.concatenate([s.images for s in imgs]),
+        t,
+        radiance,
+        imgs[0].response,
+        imgs[0].noise,
+        jnp.concatenate([s.linear for s in imgs]),
+    )
+    return MovingStack(stack, frames_radiance, jnp.asarray(np.stack(masks)))

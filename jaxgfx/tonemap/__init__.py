@@ -24,6 +24,9 @@ from ._local import tonemap_contrast_inversion as tonemap_contrast_inversion
 from ._local import tonemap_Durand2002 as tonemap_Durand2002
 from ._local import tonemap_Fattal2002 as tonemap_Fattal2002
 from ._local import tonemap_Reinhard2002_local as tonemap_Reinhard2002_local
+from ._mantiuk import mantiuk_transducer as mantiuk_transducer
+from ._mantiuk import mantiuk_transducer_inverse as mantiuk_transducer_inverse
+from ._mantiuk import tonemap_Mantiuk2006 as tonemap_Mantiuk2006
 from ._poisson import solve_poisson_neumann as solve_poisson_neumann
 from ._registry import GLOBAL_METHODS as GLOBAL_METHODS
 from ._registry import TONEMAP_METHODS as TONEMAP_METHODS
@@ -53,6 +56,9 @@ __all__ = [
     "tonemap_contrast_inversion",
     "tonemap_Durand2002",
     "tonemap_Fattal2002",
+    "tonemap_Mantiuk2006",
+    "mantiuk_transducer",
+    "mantiuk_transducer_inverse",
     "solve_poisson_neumann",
     "smooth_adaptation",
     "smoothed_stats",

@@ -20,6 +20,7 @@ from ._local import (
     tonemap_Fattal2002,
     tonemap_Reinhard2002_local,
 )
+from ._mantiuk import tonemap_Mantiuk2006
 
 __all__ = ["TONEMAP_METHODS", "TONEMAP_PARAMETERS", "ParamSpec", "tonemap"]
 
@@ -34,6 +35,7 @@ TONEMAP_METHODS = {
     "contrast_inversion": tonemap_contrast_inversion,
     "durand": tonemap_Durand2002,
     "fattal": tonemap_Fattal2002,
+    "mantiuk": tonemap_Mantiuk2006,
 }
 """Tone-mapping operators by short name; each is ``op(hdr, **params)`` with documented
 defaults (``op(hdr)`` works). ``"filmic"`` is the ACES fit (Narkowicz 2015)."""
@@ -127,6 +129,10 @@ _SPECS = {
         "beta": ("positive", "attenuation exponent"),
         "gamma": ("positive", "output gamma"),
         "saturation": ("positive", "colour saturation exponent"),
+    },
+    "mantiuk": {
+        "contrast": ("unit", "contrast factor l: responses scaled by l, in (0, 1]"),
+        "saturation": _SAT,
     },
 }
 
