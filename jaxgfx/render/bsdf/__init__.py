@@ -79,6 +79,14 @@ def make_bsdf(desc: dict) -> BSDF:
             raise ValueError(
                 f"desc[{k!r}]: unknown parameter for {kind!r}; expected one of {allowed}"
             )
+    required = [
+        n for n, p in inspect.signature(cls.__init__).parameters.items()
+        if n != "self" and p.default is inspect.Parameter.empty
+        and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)
+    ]  # fmt: skip
+    missing = [k for k in required if k not in params]
+    if missing:
+        raise ValueError(f"desc: {kind!r} needs {', '.join(repr(k) for k in missing)}")
     if kind == "blendbsdf":  # nested descriptions
         for k in ("bsdf0", "bsdf1"):
             if isinstance(params.get(k), dict):
