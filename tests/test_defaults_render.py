@@ -43,6 +43,8 @@ def _integrating_sphere(n):
     )
 
 
+# 3.8 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_render_default_integrator_is_path_depth_3():
     scene = _integrating_sphere(6)
     img = np.asarray(render(scene, KEY, spp=1))  # integrator, depth: defaults

@@ -25,6 +25,8 @@ from jaxgfx._checks import (
         (_math.safe_arccos, np.arccos, [-0.9, 0.0, 0.7]),
     ],
 )
+# 7.7 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_matches_numpy_and_grads(x64, fn, ref, xs):
     x = jnp.asarray(xs, jnp.float64)
     np.testing.assert_allclose(fn(x), ref(np.asarray(xs)), rtol=1e-12)
@@ -140,6 +142,8 @@ def test_sincos_range_reduction_is_exact_without_fma():
             assert all(Fraction(float(a)) == b for a, b in zip(prod, exact, strict=True))
 
 
+# 3.1 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_sincos_matches_numpy_f64_and_grads(x64):
     x = np.linspace(-1e6, 1e6, 200001)
     s, c = jax.jit(_math.sincos)(jnp.asarray(x))
@@ -163,6 +167,8 @@ def test_sum_max_last_and_vdot():
         )
 
 
+# 3.4 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_fusion_barrier_is_identity_with_gradients(x64):
     x = jnp.asarray([0.5, -2.0, 3.0])
     tree = {"a": x, "b": x > 0}
@@ -197,6 +203,8 @@ def test_fusion_barrier_keeps_boolean_leaves_materialised():
     )
 
 
+# 3.8 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_fusion_barrier_stays_a_cond_under_vmap(x64):
     """A batched predicate would turn the cond into a select (no barrier: render vmapped over
     keys was 7-31x slower per key, docs/performance.md); the predicate is read from one element

@@ -125,6 +125,8 @@ def test_lab_named_values_and_zero(x64):
     assert abs(lo[0] - hi[0]) < 1e-9
 
 
+# 3.4 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_check_grads_all_maps(rng, x64):
     """Every continuous map against finite differences, in one compiled program (outputs scaled
     to O(1) so that each map weighs in the random projection)."""

@@ -71,6 +71,8 @@ def test_phase_correlation_integer_matches_opencv():
     np.testing.assert_allclose(phase_correlation(base, rolled, upsample=4), [3, -5], atol=0.1)
 
 
+# 6.2 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_mtb_integer_and_subpixel_with_nonlinear_response():
     ref, img = _pair(5, 6.0, -9.0, 0.5)
     img = img ** (1 / 2.2)  # a different (monotonic) response: medians still match
@@ -97,6 +99,8 @@ def test_shift_image_against_numpy_and_scipy():
     np.testing.assert_allclose(shift_image(rgb, sub)[..., 1], 2 * np.asarray(bil), rtol=1e-5)
 
 
+# 3.4 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["fft", "bilinear"])
 def test_shift_image_gradients(mode, x64):
     img = jnp.asarray(_texture(8)[:8, :8])
@@ -158,6 +162,8 @@ def test_bad_inputs():
         phase_correlation(np.full((16, 16), np.nan), a)
 
 
+# 5.2 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_degenerate_inputs_are_finite():
     flat = np.ones((16, 16), np.float32)
     np.testing.assert_array_equal(phase_correlation(flat, flat), [0.0, 0.0])

@@ -81,6 +81,8 @@ def test_vignetting_closed_form_and_devignette():
         devignette(img[:, :40], v)
 
 
+# 4.2 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_vignetting_gradient_matches_finite_differences(x64):
     v0 = np.array([-0.3, 0.05, -0.02])
 

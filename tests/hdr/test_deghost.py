@@ -43,6 +43,8 @@ def moving():
     return ms, resp, same
 
 
+# 6.9 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_moving_object_merged_without_ghosts(moving):
     ms, resp, same = moving
     imgs, noise = ms.stack.images, ms.stack.noise
@@ -119,6 +121,8 @@ def test_statistic_is_chi_square_per_channel_under_the_noise_model():
     assert (np.asarray(res.statistic)[1] == 0).all()
 
 
+# 3.4 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_raw_path_moving_object():
     """Linear RAW frames (float, 1 = white level, response=None): the same ghost removal."""
     E = hdr.synthetic_radiance(jax.random.key(0), H, W, dynamic_range=1e3)
@@ -185,6 +189,8 @@ def _small_moving_stack():
     return frames, t, noise, w
 
 
+# 3.6 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_jit_matches_eager_and_drops_the_object():
     frames, t, noise, _ = _small_moving_stack()
     resp = hdr.CameraResponse.gamma(1.0, channels=1, anchor="unit")
@@ -256,6 +262,8 @@ def _fshift(img, dy, dx):
     return np.real(np.fft.ifft2(np.fft.fft2(img) * ph))
 
 
+# 3.0 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 @pytest.mark.parametrize("shift", [(4.0, -6.0), (3.0, 1.5)])
 def test_align_raw_stack_recovers_mosaic_shifts(shift):
     """A band-limited scene under an RGGB tile (gains 0.5 / 1 / 1 / 0.7), 3 exposures 2 stops

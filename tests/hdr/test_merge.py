@@ -40,6 +40,8 @@ def test_all_saturated_and_all_dark_pixels():
     assert np.all(np.isfinite(np.asarray(v))) and np.all(np.isfinite(np.asarray(e)))
 
 
+# 5.1 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_noise_free_merge_is_exact(x64):
     """Float, noise-free, true response: E = radiance · const wherever some frame is unclipped."""
     st = stack("filmic", bits=None, gain=0.0, read_sigma=0.0, size=32)
@@ -59,6 +61,8 @@ def test_noise_free_merge_is_exact(x64):
         np.testing.assert_allclose(ratio, np.median(ratio), rtol=4e-4, err_msg=w)
 
 
+# 4.7 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_no_dark_sun_and_no_nan():
     st = stack("srgb")
     resp = hdr.recover_response(st.images, st.exposure_times)

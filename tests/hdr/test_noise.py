@@ -70,6 +70,8 @@ def test_ptc_raw_units_with_clipping_excluded():
     assert abs(float(m_dn.gain[0]) - GAIN * k) < 4 * float(i_dn["gain_se"][0])
 
 
+# 3.6 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_ptc_float32_fit_of_clipped_bins_matches_float64(x64):
     """Clipped pixels left in (saturation=2) give zero-variance bins whose IRLS weights span
     ~1e18: the float32 line fit must still agree with the same fit in float64 (the textbook

@@ -229,6 +229,8 @@ def test_calibrate_raw_stack_report(bracket):
     assert cal2.linearity is None and cal2.black_method == "given"
 
 
+# 5.4 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_bad_inputs(bracket):
     kw = dict(black=BLACK, white=WHITE, cfa_pattern="RGGB")
     with pytest.raises(ValueError, match="nominal_times"):
@@ -253,6 +255,8 @@ def test_bad_inputs(bracket):
         calibrate_raw_stack(bracket, NOMINAL, noise_pairs=bracket[:3, None])
 
 
+# 6.2 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_no_usable_pixels_reported_not_hidden():
     sat = np.full((16, 16), WHITE, np.float32)
     r, se, n = pairwise_exposure_ratio(sat, sat, black=BLACK, white=WHITE)

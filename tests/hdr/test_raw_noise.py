@@ -43,6 +43,8 @@ def dng_bracket(tmp_path_factory):
     return mos, times
 
 
+# 6.9 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_bracket_noise_gain_read_ratios_linearity(dng_bracket):
     """Known 2 e-/DN, 3 DN read noise (3.014 DN with the 1/12 DN² of rounding), black 512,
     white 15600, shutter errors up to 4.5 %: gain and read noise within 10 % (measured

@@ -28,6 +28,8 @@ def _errors(resp, st):
     [pytest.param(n, marks=pytest.mark.slow) for n in ("gamma2.2", "srgb")]
     + ["filmic", pytest.param("log", marks=pytest.mark.slow)],
 )
+# 5.5 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_debevec_beats_opencv(name):
     st = stack(name)
     ours = _errors(_recover(st.images, st.exposure_times), st)
@@ -50,6 +52,8 @@ def test_debevec_beats_opencv(name):
     assert ours[0] < 0.05 and ours[1] < 0.03, msg
 
 
+# 6.2 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_robertson_agrees_with_opencv():
     """Same algorithm, same data: our Robertson curve is close to OpenCV's (independent
     implementation), and both are equally (in)accurate against the truth."""

@@ -181,6 +181,8 @@ def test_batch_vmap_and_dtype():
     np.testing.assert_allclose(np.asarray(out), np.asarray(outv), atol=1e-7)
 
 
+# 4.2 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_grads(x64):
     raw = jnp.asarray(np.random.default_rng(4).random((6, 7)))
     check_grads_jit(jax.jit(lambda r: demosaic(r, "GRBG")), (raw,), 1)

@@ -178,6 +178,8 @@ def test_soft_canny_tends_to_canny():
     assert _soft_canny_core._cache_size() - n0 <= 1
 
 
+# 5.2 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_soft_canny_grads(x64):
     yy, xx = np.mgrid[0:6, 0:6]
     im = jnp.asarray(1.0 / (1.0 + np.exp(-(xx - 2.6 + 0.3 * yy))))

@@ -144,6 +144,8 @@ def test_box_matches_cv2(size, img3):
     np.testing.assert_allclose(np.asarray(box_blur(img3, size)), want, atol=1e-6)
 
 
+# 3.5 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", PAD_MODES)
 def test_box_modes_match_scipy(mode, img3):
     for size in (5, 15):
@@ -154,6 +156,8 @@ def test_box_modes_match_scipy(mode, img3):
 # -------------------------------------------------------------------------- median
 
 
+# 3.5 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 @pytest.mark.parametrize("size", [3, 5, 7, 9])
 def test_median_exact_vs_scipy(size, img3):
     want = per_channel(lambda c: ndi.median_filter(c, size=size, mode="mirror"), img3)

@@ -22,6 +22,8 @@ def _sigmoid(u):
         (None, None, lambda u: u, lambda u: np.ones_like(u)),
     ],
 )
+# 3.1 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_forward_and_derivative_closed_form(x64, lo, hi, closed_form, dclosed):
     b = Interval(lo, hi)
     u = np.linspace(-8.0, 8.0, 17)

@@ -48,6 +48,8 @@ def _assert_same_response(q, r):
     np.testing.assert_array_equal(np.asarray(q.to_linear(z)), np.asarray(r.to_linear(z)))
 
 
+# 3.3 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_response_file_round_trips_exactly(tmp_path):
     """Bit-identical arrays (float32 values that no short decimal represents) and fields."""
     rng = np.random.default_rng(0)
@@ -108,6 +110,8 @@ def test_response_file_errors_name_the_file(tmp_path):
 # ------------------------------------------------------------------------- level tables
 
 
+# 4.0 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_level_table_matches_closed_forms():
     """G[q] = ln f⁻¹(q/255) (unit anchor): gamma z^γ, the sRGB EOTF; slots 0 and 255 are the
     half-codes ½ and 254.5."""
@@ -173,6 +177,8 @@ def test_censored_linear_loss_is_zero_at_the_truth_for_any_response():
         assert v0 < 2e-4 and v1 > 20 * v0
 
 
+# 7.2 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_clip_code_censors_a_jpeg_rung_highlight():
     """A highlight 4x above the clip level, photographed and JPEG-compressed (quality 90,
     4:2:0): its clipped codes ring down to ~235-254. Read as exact values (the default, only
@@ -210,6 +216,8 @@ def test_clip_code_censors_a_jpeg_rung_highlight():
     assert np.all(np.isfinite(np.asarray(g)))
 
 
+# 4.1 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_clipped_unmeasured_drops_only_bounds_another_photo_measures():
     """Two photos (gains 1 and 8) of radiance 0.05 / 0.5: pixel 1 clips in the bright photo
     only, pixel 0 in none. A render too dark at pixel 1 pays its bound in the bright photo by

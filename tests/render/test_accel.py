@@ -73,6 +73,8 @@ def scene():
 @pytest.mark.parametrize(
     "name", [n if n == "bvh" else pytest.param(n, marks=pytest.mark.slow) for n in BUILDERS]
 )
+# 4.5 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_matches_brute_force(scene, name):
     mesh, (o, d, tmin, tmax), ts = scene
     acc = BUILDERS[name](mesh)

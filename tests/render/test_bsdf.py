@@ -61,6 +61,8 @@ def _cases(cases):
     return [c.values if hasattr(c, "marks") else c for c in cases]
 
 
+# 18.1 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 @pytest.mark.parametrize("name,bsdf,cos_o", CHI2_CASES, ids=[c[0] for c in _cases(CHI2_CASES)])
 def test_chi2_and_pdf_mass(name, bsdf, cos_o):
     """Chi² of the sampler against its pdf; pdf mass; and weight == eval / pdf on the samples."""
@@ -122,6 +124,8 @@ RECIPROCAL = [
 ]
 
 
+# 3.8 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 @pytest.mark.parametrize("bsdf", RECIPROCAL, ids=lambda b: type(b).__name__)
 def test_reciprocity(bsdf):
     k1, k2 = jax.random.split(jax.random.key(2))
@@ -192,6 +196,8 @@ def test_furnace_ggx_conductor(alpha, cos_o):
         assert ref == pytest.approx(1 - math.log(2), abs=1e-9)
 
 
+# 4.5 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_furnace_closed_forms():
     wo = _dir(0.7)
     m, se = _furnace(Diffuse(1.0), wo, key=jax.random.key(0), n=20_000)
@@ -228,6 +234,8 @@ def _np_fresnel(mu, eta):
 # ------------------------------------------------------------------ closed-form values
 
 
+# 4.3 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_known_values():
     z = jnp.array([0.0, 0.0, 1.0])
     # Lambert: ρ/π cos θ_i

@@ -113,6 +113,8 @@ def test_diffuse_reflectance_reciprocity_identity(x64):
     np.testing.assert_allclose(lhs, rhs, rtol=1e-9)
 
 
+# 3.3 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_fresnel_grads(x64):
     c = jnp.array([0.9, 0.5, 0.2])
 

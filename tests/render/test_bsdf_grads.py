@@ -112,6 +112,8 @@ def test_hard_cases_values_and_grads_finite():
     assert np.isclose(float(vals[5][0, 0]), 1 / (4 * math.pi * 1e-8), rtol=1e-4)
 
 
+# 14.5 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_check_grads_core_parameters_fast(x64):
     """Default-run subset: α and IOR of the conductor, α / η / kd of rough plastic."""
     wo = _unit(jnp.array([[0.3, 0.1, 0.9], [-0.5, 0.2, 0.4]]))

@@ -63,6 +63,8 @@ CHI2_CASES = [
     CHI2_CASES,
     ids=[c.values[0] if hasattr(c, "marks") else c[0] for c in CHI2_CASES],
 )
+# 4.8 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_roughdielectric_chi2_weights_and_mass(name, bsdf, cos_o):
     """Chi² over the whole sphere (reflection and refraction), weight == eval / pdf, and the
     pdf integrates to the fraction of successful samples."""
@@ -206,6 +208,8 @@ def test_roughdielectric_hard_cases_finite(x64):
 # ------------------------------------------------------------------ smooth plastic
 
 
+# 3.6 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_plastic_sampling_weights_and_white_furnace():
     """Diffuse samples: weight == eval / pdf and pdf == pdf(wo, wi); specular samples are
     mirror deltas with weight F / p_s; white base: albedo 1 (F_dr identity) and the specular

@@ -115,6 +115,8 @@ def test_blendbsdf_chi2_weights_and_mixture():
     np.testing.assert_allclose(_eval(BLEND, wo, wi), 0.65 * f0 + 0.35 * f1, rtol=1e-6)
 
 
+# 3.2 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 @pytest.mark.parametrize("w", [0.0, 1.0])
 def test_blendbsdf_weight_zero_and_one_is_the_component(w):
     b = BlendBSDF(BLEND.bsdf0, BLEND.bsdf1, weight=w)
@@ -128,6 +130,8 @@ def test_blendbsdf_weight_zero_and_one_is_the_component(w):
     assert np.isfinite(np.asarray(s.weight)).all()
 
 
+# 3.1 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_blendbsdf_delta_component_and_weight_gradient_vs_fd(x64):
     # glass (delta) blended with diffuse: delta samples carry w_k, the choice's derivative
     b0 = make_bsdf({"type": "diffuse", "reflectance": 0.5})

@@ -106,6 +106,8 @@ PLANE = {
 }
 
 
+# 3.2 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_one_device_mesh_matches_render():
     """The same code on the test process's single device (AOV: albedo, normal, depth)."""
     scene = load_scene(PLANE)

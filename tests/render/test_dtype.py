@@ -35,6 +35,8 @@ def _point_plane():
     return plane_scene([point_light([0, 2, 0], 10.0)], cam={"width": 8, "height": 8})
 
 
+# 12.6 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_point_light_plane_float64_matches_closed_form_per_pixel(x64):
     # light 2 above the plane centre: L = rho / pi * I cos / r^2, cos = 2 / r, at the point
     # each camera sample sees; float64 makes the whole chain exact to rounding

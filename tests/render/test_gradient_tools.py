@@ -28,6 +28,8 @@ def _smooth(p, k):
     return p**2 * jnp.mean(jax.random.uniform(k, (M,)))
 
 
+# 3.2 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_grad_stats_closed_form():
     n = 200
     st = grad_stats(_smooth, jnp.float32(1.5), jax.random.key(0), n, fd_step=1e-2)

@@ -44,6 +44,8 @@ def test_white_furnace_sphere():
         _assert_mean(img, np.ones(3))
 
 
+# 4.1 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_diffuse_plane_under_constant_sky():
     scene = load_scene(plane_scene([{"type": "constant", "radiance": [1.0, 2.0, 0.5]}]))
     img = render(scene, KEY, spp=16, integrator="path", max_depth=2)

@@ -138,6 +138,8 @@ def test_passes_per_step_layout():
 
 # ~11 CPU s, 47 s wall at load 11 (two compiles of a 10 x 6 path render, depth 2); the default
 # run keeps it: it is the only check that the grouped layout keeps every sample's numbers
+# 9.5 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_several_passes_per_step_keep_every_sample():
     from jaxgfx.render.integrators import PathIntegrator
 

@@ -329,6 +329,8 @@ def test_example_yamls_load():
     assert sum(isinstance(s, SDFShape) for s in sdf.shapes) == 2
 
 
+# 3.6 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_sdf_hit_gradients_float64(x64):
     """Implicit differentiation of the SDF hit: ``t`` w.r.t. radius and centre against finite
     differences (check_grads) and the closed form ``dt/dr = -1`` for rays through the centre."""

@@ -114,6 +114,8 @@ def test_sphere_trace_box_and_torus():
     assert not h.valid[3] and np.isinf(h.t[3])
 
 
+# 5.6 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_sphere_trace_grads(x64):
     o = jnp.array([0.3, 0.1, -3.0])
     d = jnp.array([0.0, 0.0, 1.0])
@@ -132,6 +134,8 @@ def test_sphere_trace_grads(x64):
     np.testing.assert_allclose(g, -1 / np.sqrt(1 - 0.1), rtol=1e-6)
 
 
+# 4.8 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_normals_finite_at_singular_points():
     # the gradient of |p - c| at p = c and of the box at its centre must not be NaN
     z = jnp.zeros(3)

@@ -62,6 +62,8 @@ def test_sphere_nearest_of_many(rng):
     np.testing.assert_array_equal(np.asarray(h.prim_id)[hit], t.argmin(1)[hit])
 
 
+# 6.2 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_sphere_grads(x64):
     o = jnp.array([0.3, -0.2, -4.0])
     d = jnp.asarray(unit([0.05, 0.02, 1.0]))
@@ -174,6 +176,8 @@ def test_mesh_intersect_methods_and_attributes(method):
     np.testing.assert_allclose(h.p[2], [0, 0.2, -0.3], atol=1e-6)
 
 
+# 3.9 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_degenerate_triangles_never_hit():
     v = jnp.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 0, 0.0]])  # collinear + repeated
     f = jnp.array([[0, 1, 2], [0, 0, 0], [0, 3, 1]])

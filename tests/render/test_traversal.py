@@ -239,6 +239,8 @@ def grad_case(case):
     return mesh, (o, d, w), np.asarray(ref)
 
 
+# 5.8 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 @pytest.mark.parametrize("name", BACKENDS)
 def test_backend_gradients_equal_reference(grad_case, name):
     """d/d(vertices) of a loss over hit records (t, p, ng): identical to brute force's (the

@@ -78,6 +78,8 @@ def _run(vg, r, c, seed=0):
     return float(v), float(gr), np.asarray(gc, np.float64)
 
 
+# 7.4 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_primary_silhouette_matches_projected_disc(primary):
     _, vg, _, _ = primary
     _, gr, gc = _run(vg, 0.5, [0.0, 0.0, 0.0])

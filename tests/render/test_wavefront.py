@@ -32,6 +32,8 @@ def test_sort_positions_match_a_stable_argsort():
     np.testing.assert_array_equal(pos, expect)
 
 
+# 3.0 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_shade_sorted_equals_shading_every_ray():
     # fn depends on the key it is given: each live ray must see its own key and arguments
     rng = np.random.default_rng(0)

@@ -51,6 +51,8 @@ FD_CASES = [
 ]
 
 
+# 4.7 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 @pytest.mark.parametrize("method", FD_CASES)
 def test_parameter_gradients_match_finite_differences(method, x64):
     img = jnp.asarray(synthetic_hdr(8, 8, dynamic_range=30.0), jnp.float64) * 0.02
@@ -68,6 +70,8 @@ HARD_CASES = [
 ]
 
 
+# 3.7 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 @pytest.mark.parametrize("method", HARD_CASES)
 def test_gradients_finite_on_zeros_and_spike(method):
     img = synthetic_hdr(8, 8, zeros=True)

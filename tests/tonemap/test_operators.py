@@ -243,6 +243,8 @@ def _log_lum_rms_after_offset(a, b):
     return float(np.sqrt(np.mean((d - d.mean()) ** 2)))
 
 
+# 3.9 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 @pfs
 def test_durand_and_fattal_vs_pfstmo(hdr):
     """pfstmo_durand02 compresses the base to ``c`` natural-log units (ours: ``log10(c)``
@@ -281,6 +283,8 @@ def hard_images():
     }
 
 
+# 15.2 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 @pytest.mark.parametrize("method", METHODS)
 def test_hard_cases_finite_in_range(method, hard_images):
     op = tm.TONEMAP_METHODS[method]
@@ -361,6 +365,8 @@ def _srgb_to_linear(v):
     return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
 
+# 9.4 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 @pytest.mark.parametrize("method", METHODS)
 def test_zeros_stay_black_and_region_order_is_kept(method, zero_scenes):
     """Zero background, ~10^9:1, a 10^6 sun: exact zeros display at <= 0.02 (sRGB code value)
@@ -417,6 +423,8 @@ def test_mantiuk_transducer_is_the_integral_of_the_threshold():
     assert 100 < float(tm.mantiuk_transducer(math.log10(10511.0))) < 104
 
 
+# 3.2 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 @pfs
 def test_mantiuk_vs_pfstmo(hdr):
     """pfstmo_mantiuk06 with its defaults (contrast mapping, factor 0.1, saturation 0.8):

@@ -28,6 +28,8 @@ def bracket(tmp_path_factory):
     return d, np.stack(frames)
 
 
+# 3.3 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_cli_fuse_writes_the_library_result(bracket, tmp_path, capsys):
     d, frames = bracket
     ref = np.asarray(exposure_fusion(frames, sigma=0.3))

@@ -130,6 +130,8 @@ def test_reinhard_devlin_intensity_range_library_and_cli(tmp_path, capsys):
     assert not out.exists()
 
 
+# 7.1 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 @pytest.mark.parametrize("method", sorted(tm.TONEMAP_PARAMETERS))
 def test_registry_defaults_are_the_operator_defaults(method, capsys):
     import inspect

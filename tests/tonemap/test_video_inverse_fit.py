@@ -55,6 +55,8 @@ INVERTIBLE = {
 }
 
 
+# 5.9 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 @pytest.mark.parametrize("method", sorted(INVERTIBLE))
 def test_inverse_round_trip(method):
     hdr = synthetic_hdr(12, 12, dynamic_range=40.0)
@@ -155,6 +157,8 @@ def test_fit_recovers_every_operator(method):
             assert abs(fit.params[k] - v) < 0.02 * abs(v) + 1e-3, (method, init, fit.params)
 
 
+# 3.5 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
+@pytest.mark.slow
 def test_fit_adam_history_decreases():
     hdr = synthetic_hdr(16, 16)
     target = tm.tonemap_Reinhard2002(hdr, key=0.3, white=3.0)
