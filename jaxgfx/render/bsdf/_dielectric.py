@@ -19,24 +19,14 @@ from jaxgfx.render.bsdf._base import (
 )
 from jaxgfx.render.bsdf.fresnel import fresnel_dielectric
 
-__all__ = ["SmoothDielectric"]
+__all__ = ["SmoothDielectric", "DeltaDielectric"]
 
 
-class SmoothDielectric(BSDF):
-    """Smooth dielectric boundary (Mitsuba ``dielectric``), both sides usable.
-
-    ``eta`` = interior IOR / exterior IOR (> 0; e.g. 1.5 for glass in air). With the exact
-    Fresnel reflectance ``R(cos θ_o)`` the sampler picks reflection with probability ``R``
-    (``wi = (-wo_x, -wo_y, wo_z)``) else refraction (``wi = (-η_ti wo_x, -η_ti wo_y, cos θ_t)``,
-    Snell's law); total internal reflection always reflects. ``pdf`` is the discrete lobe
-    probability, ``weight = specular_reflectance`` for reflection and
-    ``specular_transmittance / η_it²`` for refraction: radiance is scaled by ``1/η²`` when it
-    enters a denser medium (radiance transport mode, as Mitsuba 3; Veach 1997 §5.2).
-    ``eta`` in the sample is 1 (reflection) or ``η_it`` (refraction). ``eval``/``pdf`` are 0.
-
-    Example: ``eta = 1.5``, normal incidence: reflection probability 0.04, refraction weight
-    ``1/2.25 ≈ 0.444``.
-    """
+class DeltaDielectric(BSDF):
+    """What the delta dielectrics share (:class:`SmoothDielectric`, ``ThinDielectric``): the
+    interior / exterior IOR ``eta`` (> 0), the specular reflectance and transmittance factors,
+    zero ``eval`` / ``pdf`` (delta lobes only) and a zero diffuse albedo; subclasses define
+    ``sample``."""
 
     eta: jnp.ndarray = float_field(1.5046, "eta")
     specular_reflectance: jnp.ndarray = rgb_field(1.0, "specular_reflectance", kw_only=True)
@@ -62,6 +52,23 @@ class SmoothDielectric(BSDF):
     def pdf(self, wo, wi):
         wo, wi = prep_dirs(wo, wi)
         return jnp.zeros(jnp.broadcast_shapes(wo.shape, wi.shape)[:-1], jnp.result_type(wo, wi))
+
+
+class SmoothDielectric(DeltaDielectric):
+    """Smooth dielectric boundary (Mitsuba ``dielectric``), both sides usable.
+
+    ``eta`` = interior IOR / exterior IOR (> 0; e.g. 1.5 for glass in air). With the exact
+    Fresnel reflectance ``R(cos θ_o)`` the sampler picks reflection with probability ``R``
+    (``wi = (-wo_x, -wo_y, wo_z)``) else refraction (``wi = (-η_ti wo_x, -η_ti wo_y, cos θ_t)``,
+    Snell's law); total internal reflection always reflects. ``pdf`` is the discrete lobe
+    probability, ``weight = specular_reflectance`` for reflection and
+    ``specular_transmittance / η_it²`` for refraction: radiance is scaled by ``1/η²`` when it
+    enters a denser medium (radiance transport mode, as Mitsuba 3; Veach 1997 §5.2).
+    ``eta`` in the sample is 1 (reflection) or ``η_it`` (refraction). ``eval``/``pdf`` are 0.
+
+    Example: ``eta = 1.5``, normal incidence: reflection probability 0.04, refraction weight
+    ``1/2.25 ≈ 0.444``.
+    """
 
     def sample(self, wo, u1, u2):
         wo, u1, u2, shape = sample_setup(wo, u1, u2)

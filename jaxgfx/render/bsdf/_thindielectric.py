@@ -7,16 +7,11 @@ import jax.numpy as jnp
 
 from jaxgfx._math import safe_div
 from jaxgfx.render.bsdf._base import (
-    BSDF,
     BSDFSample,
-    check_rgb,
-    check_scalar,
-    float_field,
     mask3,
-    prep_dirs,
-    rgb_field,
     sample_setup,
 )
+from jaxgfx.render.bsdf._dielectric import DeltaDielectric
 from jaxgfx.render.bsdf.fresnel import fresnel_dielectric
 
 __all__ = ["ThinDielectric", "thin_reflectance"]
@@ -29,7 +24,7 @@ def thin_reflectance(cos_theta, eta):
     return 2.0 * r / (1.0 + r)
 
 
-class ThinDielectric(BSDF):
+class ThinDielectric(DeltaDielectric):
     """Thin dielectric (Mitsuba 3 ``thindielectric``), both sides alike.
 
     ``eta`` = interior / exterior IOR. Reflection ``wi = (-wo_x, -wo_y, wo_z)`` with probability
@@ -40,31 +35,6 @@ class ThinDielectric(BSDF):
     contribution to ``d/dη``, as :class:`SmoothDielectric`. ``eval`` / ``pdf`` are 0 (delta).
     ``eta = 1``: everything is transmitted.
     """
-
-    eta: jnp.ndarray = float_field(1.5046, "eta")
-    specular_reflectance: jnp.ndarray = rgb_field(1.0, "specular_reflectance", kw_only=True)
-    specular_transmittance: jnp.ndarray = rgb_field(1.0, "specular_transmittance", kw_only=True)
-
-    has_delta = True
-    is_transmissive = True
-
-    def __check_init__(self):
-        check_scalar(self.eta, "eta", positive=True)
-        check_rgb(self.specular_reflectance, "specular_reflectance")
-        check_rgb(self.specular_transmittance, "specular_transmittance")
-
-    @property
-    def albedo(self):
-        return jnp.zeros_like(self.specular_reflectance)
-
-    def eval(self, wo, wi):
-        wo, wi = prep_dirs(wo, wi)
-        shape = jnp.broadcast_shapes(wo.shape, wi.shape)
-        return jnp.zeros(shape, jnp.result_type(wo, wi, self.eta))
-
-    def pdf(self, wo, wi):
-        wo, wi = prep_dirs(wo, wi)
-        return jnp.zeros(jnp.broadcast_shapes(wo.shape, wi.shape)[:-1], jnp.result_type(wo, wi))
 
     def sample(self, wo, u1, u2):
         wo, u1, u2, shape = sample_setup(wo, u1, u2)
