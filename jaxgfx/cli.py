@@ -119,6 +119,12 @@ def _calibrate_arguments(p):
         help="RAW white balance: as_shot (default) | grey_world | white_patch",
     )
     p.add_argument(
+        "--deghost",
+        action="store_true",
+        help="ghost-free merge of a bracket with moving objects (hdr.merge_deghosted): frames "
+        "that disagree with a per-region reference under the noise model are left out",
+    )
+    p.add_argument(
         "--flat-field",
         default=None,
         help="RAW flat-field frame (same camera and size): fits the lens vignetting and "
@@ -147,6 +153,13 @@ def calibrate_job(args):
             overrides["response"] = {**section, "method": args.method}
     if getattr(args, "tonemap", None):
         overrides["tonemap"] = [t.strip() for t in args.tonemap.split(",") if t.strip()]
+    if getattr(args, "deghost", False):
+        from jaxgfx.config import read_yaml
+
+        base = read_yaml(args.config) if args.config else {}
+        section = base.get("merge", {})
+        if isinstance(section, dict):  # else load_config reports the malformed section
+            overrides["merge"] = {**section, "deghost": True}
     for key in ("colorspace", "white_balance", "flat_field"):
         if getattr(args, key, None) is not None:
             overrides[key] = getattr(args, key)

@@ -87,9 +87,12 @@ class ResponseConfig:
 @dataclasses.dataclass(frozen=True)
 class MergeConfig:
     weighting: str = "hat"
+    deghost: bool = False  # hdr.merge_deghosted: frames inconsistent with a reference dropped
 
     def __post_init__(self):
         check_choice(self.weighting, "merge.weighting", MERGE_WEIGHTINGS)
+        if not isinstance(self.deghost, bool):
+            raise ValueError(f"merge.deghost: expected true/false, got {self.deghost!r}")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -47,9 +47,14 @@ def _load_ldr(cfg: CalibrateConfig, files, sidecar, steps, result_kw: dict):
 
 
 def merge(images, times, resp, cfg: MergeConfig, *, return_variance: bool = True):
-    """The merge stage: radiance (and its variance) of the bracket through ``resp``."""
+    """The merge stage: radiance (and its variance) of the bracket through ``resp``; with
+    ``merge.deghost`` the ghost-free merge (:func:`jaxgfx.hdr.merge_deghosted`: frames that
+    disagree with a per-region reference exposure under the noise model are left out)."""
     from jaxgfx import hdr
 
+    if cfg.deghost:
+        r = hdr.merge_deghosted(images, times, resp)
+        return (r.radiance, r.variance) if return_variance else r.radiance
     return hdr.merge_radiance(
         images, times, resp, weighting=cfg.weighting, return_variance=return_variance
     )

@@ -17,7 +17,7 @@ from .report import CalibrateResult
 __all__: list[str] = []  # the job's stages (tests patch _fit_raw here)
 
 
-def merge_mosaics(raws, times, cal):
+def merge_mosaics(raws, times, cal, *, deghost: bool = False):
     """The merge stage of a RAW bracket: the normalised mosaics merged as one channel with the
     measured exposure ratios (nominal times when a ratio could not be measured) and the CFA
     channels' noise model pooled. Returns ``(radiance, variance)`` mosaics ``(H, W, 1)``."""
@@ -36,6 +36,9 @@ def merge_mosaics(raws, times, cal):
             np.mean(np.asarray(cal.noise.gain), keepdims=True),
             np.mean(np.asarray(cal.noise.read_variance), keepdims=True),
         )
+    if deghost and noise is not None:  # ghost-free merge under the measured noise model
+        r = hdr.merge_deghosted(norm, eff_times, None, noise=noise)
+        return r.radiance, r.variance
     return hdr.merge_radiance(
         np.clip(norm, 0.0, 1.0),
         eff_times,
@@ -69,7 +72,7 @@ def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
     steps.start("raw calibration")
     cal = hdr.calibrate_raw_stack(mosaics, times, cfa_pattern=pattern, black=black, white=white)
     steps.start("merge")
-    rad, var = merge_mosaics(raws, times, cal)
+    rad, var = merge_mosaics(raws, times, cal, deghost=cfg.merge.deghost)
     if vig is not None:  # linear sensor: dividing the merge = dividing each frame by V
         rad, var = hdr.raw.devignette(np.asarray(rad)[..., 0], vig, np.asarray(var)[..., 0])
         rad, var = np.asarray(rad)[..., None], np.asarray(var)[..., None]
