@@ -11,6 +11,8 @@ built from; :func:`resolve_integrator` turns ``render``'s string options into an
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 
@@ -18,7 +20,7 @@ from jaxgfx._checks import check_choice, check_positive_int
 from jaxgfx._math import fusion_barrier
 from jaxgfx.render.film import pixel_samples
 from jaxgfx.render.integrators import INTEGRATORS, SAMPLING, Integrator, make_integrator
-from jaxgfx.render.integrators.path import STRATEGIES
+from jaxgfx.render.integrators.path import STRATEGIES, PathIntegrator
 from jaxgfx.render.sampler import uniform
 
 __all__ = ["render_partial", "resolve_integrator", "pass_scan", "passes_per_step"]
@@ -143,6 +145,13 @@ def resolve_integrator(
             )
         return integrator
     check_choice(integrator, "integrator", tuple(INTEGRATORS))
+    # an option the named integrator does not take is an error (make_integrator) unless it is
+    # render's default value (PathIntegrator's defaults: max_depth 3, rr_depth 5, "mis",
+    # "detached"), which changes nothing: render(integrator="whitted", strategy="mis") is fine,
+    # render(integrator="direct", max_depth=5) is refused
+    fields = {f.name for f in dataclasses.fields(INTEGRATORS[integrator])}
+    defaults = {f.name: f.default for f in dataclasses.fields(PathIntegrator)}
+    given = {k: v for k, v in given.items() if k in fields or v != defaults.get(k, object())}
     if "strategy" in given:
         check_choice(given["strategy"], "strategy", STRATEGIES)
     if "sampling" in given:

@@ -6,6 +6,8 @@ Each is an ``eqx.Module`` whose options are static fields; :func:`jaxgfx.render.
 an instance (``integrator=PathIntegrator(max_depth=3)``) or a registered name.
 """
 
+import dataclasses
+
 from jaxgfx._checks import check_choice
 from jaxgfx.render.integrators._common import SAMPLING as SAMPLING
 from jaxgfx.render.integrators._common import replace_grad as replace_grad
@@ -39,7 +41,7 @@ def make_integrator(name: str, **options) -> Integrator:
     """
     check_choice(name, "integrator", tuple(INTEGRATORS))
     cls = INTEGRATORS[name]
-    fields = set(cls.__dataclass_fields__)
+    fields = {f.name for f in dataclasses.fields(cls)}
     fixed = {k: getattr(cls, k) for k in options if k not in fields and hasattr(cls, k)}
     fixed = {k: v.fget(cls) if isinstance(v, property) else v for k, v in fixed.items()}
     bad = sorted(
