@@ -9,16 +9,14 @@ import jax.numpy as jnp
 from jaxgfx._checks import as_float_array
 from jaxgfx._math import safe_div
 from jaxgfx.render.bsdf._base import (
-    BSDF,
     INV_PI,
     BSDFSample,
-    check_rgb,
-    check_scalar,
     mask3,
     prep_dirs,
     sample_setup,
     to_rgb,
 )
+from jaxgfx.render.bsdf._roughplastic import PlasticBase
 from jaxgfx.render.bsdf.fresnel import fresnel_dielectric, fresnel_diffuse_reflectance
 from jaxgfx.render.geometry.frame import reflect
 from jaxgfx.render.sampling import square_to_cosine_hemisphere
@@ -26,7 +24,7 @@ from jaxgfx.render.sampling import square_to_cosine_hemisphere
 __all__ = ["SmoothPlastic"]
 
 
-class SmoothPlastic(BSDF):
+class SmoothPlastic(PlasticBase):
     """Smooth plastic after Mitsuba 3's ``plastic`` (Weidlich & Wilkie 2007 layering).
 
     A delta specular reflection ``F(cos θ_o) ks`` in the mirror direction plus the base seen
@@ -65,20 +63,6 @@ class SmoothPlastic(BSDF):
         self.specular_reflectance = to_rgb(specular_reflectance, "specular_reflectance")
         self.eta = as_float_array(eta, "eta")
         self.nonlinear = bool(nonlinear)
-
-    def __check_init__(self):
-        check_rgb(self.diffuse_reflectance, "diffuse_reflectance")
-        check_rgb(self.specular_reflectance, "specular_reflectance")
-        check_scalar(self.eta, "eta", positive=True)
-
-    @property
-    def albedo(self):
-        return self.diffuse_reflectance
-
-    def _spec_weight(self):
-        md = jnp.mean(self.diffuse_reflectance, axis=-1)
-        ms = jnp.mean(self.specular_reflectance, axis=-1)
-        return safe_div(ms, md + ms, fill=0.5)
 
     def _prob_spec(self, f_o):
         ws = self._spec_weight()

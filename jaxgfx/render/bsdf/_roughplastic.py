@@ -30,10 +30,30 @@ from jaxgfx.render.bsdf.microfacet import (
 from jaxgfx.render.geometry.frame import reflect
 from jaxgfx.render.sampling import square_to_cosine_hemisphere
 
-__all__ = ["RoughPlastic"]
+__all__ = ["RoughPlastic", "PlasticBase"]
 
 
-class RoughPlastic(BSDF):
+class PlasticBase(BSDF):
+    """What the plastics share (:class:`RoughPlastic`, ``SmoothPlastic``): the checks of
+    ``diffuse_reflectance``, ``specular_reflectance`` and ``eta``, the diffuse albedo, and the
+    specular lobe's selection weight from the mean reflectances (no fields of its own)."""
+
+    def __check_init__(self):
+        check_rgb(self.diffuse_reflectance, "diffuse_reflectance")
+        check_rgb(self.specular_reflectance, "specular_reflectance")
+        check_scalar(self.eta, "eta", positive=True)
+
+    @property
+    def albedo(self):
+        return self.diffuse_reflectance
+
+    def _spec_weight(self):
+        md = jnp.mean(self.diffuse_reflectance, axis=-1)
+        ms = jnp.mean(self.specular_reflectance, axis=-1)
+        return safe_div(ms, md + ms, fill=0.5)
+
+
+class RoughPlastic(PlasticBase):
     """Rough plastic after Mitsuba 3's ``roughplastic`` (Weidlich & Wilkie 2007 layering).
 
     ``eval = F(wo·h) D G / (4 cos θ_o) · ks
@@ -79,20 +99,6 @@ class RoughPlastic(BSDF):
         self.specular_reflectance = to_rgb(specular_reflectance, "specular_reflectance")
         self.eta = as_float_array(eta, "eta")
         self.nonlinear = bool(nonlinear)
-
-    def __check_init__(self):
-        check_rgb(self.diffuse_reflectance, "diffuse_reflectance")
-        check_rgb(self.specular_reflectance, "specular_reflectance")
-        check_scalar(self.eta, "eta", positive=True)
-
-    @property
-    def albedo(self):
-        return self.diffuse_reflectance
-
-    def _spec_weight(self):
-        md = jnp.mean(self.diffuse_reflectance, axis=-1)
-        ms = jnp.mean(self.specular_reflectance, axis=-1)
-        return safe_div(ms, md + ms, fill=0.5)
 
     def _coating(self):
         return CoatingTerms(self.distribution, self.eta)
