@@ -156,6 +156,17 @@ def _distribution(m, where) -> dict:
     return out
 
 
+
+def _dielectric_keys(m):
+    """Mitsuba's keys of a (rough) dielectric: the IOR ratio as ``int_ior`` over an exterior of
+    1, and the specular reflectance / transmittance factors."""
+    return {
+        "int_ior": _float(m.eta),
+        "ext_ior": 1.0,
+        "specular_reflectance": _rgb(m.specular_reflectance),
+        "specular_transmittance": _rgb(m.specular_transmittance),
+    }
+
 def _material(md, where) -> dict:
     """Mitsuba BSDF dict of one jaxgfx material description (validated by ``make_bsdf``)."""
     from jaxgfx.render import bsdf as B
@@ -183,22 +194,9 @@ def _material(md, where) -> dict:
     elif kind == "roughconductor":
         out = {"type": kind, **_distribution(m, where), **_conductor_fresnel(m, where)}
     elif kind == "dielectric":
-        out = {
-            "type": kind,
-            "int_ior": _float(m.eta),
-            "ext_ior": 1.0,
-            "specular_reflectance": _rgb(m.specular_reflectance),
-            "specular_transmittance": _rgb(m.specular_transmittance),
-        }
+        out = {"type": kind, **_dielectric_keys(m)}
     elif kind == "roughdielectric":
-        out = {
-            "type": kind,
-            **_distribution(m, where),
-            "int_ior": _float(m.eta),
-            "ext_ior": 1.0,
-            "specular_reflectance": _rgb(m.specular_reflectance),
-            "specular_transmittance": _rgb(m.specular_transmittance),
-        }
+        out = {"type": kind, **_distribution(m, where), **_dielectric_keys(m)}
     elif kind == "plastic":
         out = {
             "type": kind,
