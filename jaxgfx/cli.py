@@ -229,7 +229,12 @@ def _render_run(args) -> int:
         overwrite=args.overwrite,
         accel=args.accel,
     )
-    res = run_render(job)
+    try:
+        res = run_render(job)
+    except ValueError as e:  # the library names its argument `spp`; the user typed `--spp`
+        if str(e).startswith("spp:"):
+            raise ValueError(f"--{e}") from None
+        raise
     print(
         f"wrote {' and '.join(res['outputs'].values())} (render {res['seconds']:.3g} s, "
         f"{_rate(res['samples_per_second'])} samples/s; compile {res['compile_seconds']:.3g} s)"

@@ -422,3 +422,19 @@ def test_cli_case(name, setup, argv, status, needles, files, tmp_path, monkeypat
     assert_one_line_error(code, err, *needles, status=status)
     assert snapshot(tmp_path) == before
     assert no_partial_files(tmp_path) and no_partial_files(files["a_file"].parent)
+
+
+def test_cli_spp_over_the_key_limit_names_the_option(files, tmp_path):
+    # the library's message names `spp` (test_reliability_scene.py); the CLI names the option
+    # as the user typed it. 8x6 pixels: at most 2**32 // (8 * 6 * 2) = 44739242 spp per key
+    before = snapshot(tmp_path)
+    code, _, err = run_cli(["render", files["scene"], tmp_path / "o.exr", "--spp", "100000000"])
+    assert_one_line_error(
+        code,
+        err,
+        "jaxgfx render: error: --spp: 100000000 samples per pixel at 8x6 pixels need 9600000000 "
+        "random numbers, more than the 2**32 of one key; use spp <= 44739242 (and average "
+        "renders made with split keys for more)",
+    )
+    assert snapshot(tmp_path) == before
+    assert no_partial_files(tmp_path)

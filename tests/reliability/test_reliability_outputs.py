@@ -322,7 +322,7 @@ def test_render_speed_excludes_compile_time(files, tmp_path, monkeypatch):
     "exc, status, message",
     [(KeyboardInterrupt(), 130, "interrupted"),
      (_output.Terminated(signal.SIGTERM), 143, "terminated (SIGTERM)"),
-     (ValueError("spp: bad"), 1, "error: spp: bad")],
+     (ValueError("scene: bad"), 1, "error: scene: bad")],
 )  # fmt: skip
 def test_final_message_starts_its_own_line_after_a_progress_bar(
     files, tmp_path, monkeypatch, leave, exc, status, message
