@@ -10,16 +10,25 @@ fails here. ``tools/mutants.py`` holds one mutant per default (``defaults.*``).
   short frame's near-black levels pull dark pixels too bright).
 * ``image.canny``: ``sigma=1.0`` (and ``truncate=4``), scikit-image's defaults.
 * ``optim.fit``: ``optimizer="adam"``, ``learning_rate=1e-2``, ``patience=10``.
+* ``hdr.merge_deghosted``: ``threshold=4``, ``sigma=2``, ``region_sigma=4``,
+  ``saturation=0.98`` (commit f45ac79, docs/hdr.md).
+* ``tonemap.tonemap_contrast_inversion``: ``k=4``, ``strength=0.3`` (commit 7cdd24a: the
+  partial division keeps the order of regions).
+* ``tonemap.tonemap_Reinhard2002``: ``white=None``, the image maximum (commit ea6698c).
+* ``tonemap.tonemap_Reinhard2005``: ``intensity`` limited to [-8, 8] (commit ea6698c: 100 was
+  accepted and gave a black image).
 """
 
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import scipy.ndimage as ndi
 import skimage.draw as draw
 from skimage.feature import canny as sk_canny
 
 from jaxgfx import hdr
-from jaxgfx.hdr import CameraResponse
+from jaxgfx import tonemap as tm
+from jaxgfx.hdr import CameraResponse, NoiseModel
 from jaxgfx.image import canny
 from jaxgfx.optim import fit
 
@@ -100,3 +109,119 @@ def test_fit_default_patience_with_tol():
         lambda p: 0.0 * p["x"] + 1.0, {"x": jnp.float32(0.0)}, steps=100, tol=1e-6, progress=False
     )
     assert (res.stop_reason, res.n_steps) == ("tol", 11)
+
+
+# ------------------------------------------------------------------ hdr.merge_deghosted
+# Linear RAW frames with read noise only (variance READ at every level): frame j's estimate
+# E_j = x_j / t_j has variance READ / t_j^2, so its consistency statistic against the
+# reference (frame 0, t = 1, E = 0.3) is exactly d = (E_j - 0.3)^2 / (READ / t_j^2 + READ)
+# per pixel, and its window average is the Gaussian blur of d (uniform d: d itself).
+
+READ, E0 = 1e-4, 0.3
+
+
+def _raw_level(t, d):
+    """The RAW level of a frame of exposure ``t`` whose statistic against the reference is
+    ``d`` (its estimate above the reference's)."""
+    return (E0 + np.sqrt(d * (READ / t**2 + READ))) * t
+
+
+def _deghost(frames, times):
+    noise = NoiseModel(jnp.array([0.0]), jnp.array([READ]))
+    z, t = np.asarray(frames, np.float32), np.asarray(times, np.float32)
+    return hdr.merge_deghosted(z, t, None, noise=noise, reference=0)
+
+
+def test_merge_deghosted_default_threshold_window_and_saturation():
+    n = 33
+    spike = np.zeros((n, n))
+    spike[16, 16] = 10.0  # below the per-pixel cap (4 x threshold = 16)
+    frames = [
+        np.full((n, n), E0),  # the reference
+        np.full((n, n), _raw_level(2.0, 3.8)),  # d = 3.8: merged (threshold 4)
+        np.full((n, n), _raw_level(2.0, 4.2)),  # d = 4.2: dropped
+        _raw_level(2.0, spike),  # the window average of one inconsistent pixel
+        np.full((n, n), E0 * 3.25),  # level 0.975: consistent and below saturation 0.98
+        np.full((n, n), E0 * 0.985 / 0.3),  # level 0.985: clipped, so not used
+    ]
+    r = _deghost(frames, [1.0, 2.0, 2.0, 2.0, 3.25, 0.985 / 0.3])
+    stat, used = np.asarray(r.statistic), np.asarray(r.used)
+    np.testing.assert_allclose(stat[1], 3.8, rtol=1e-5)
+    np.testing.assert_allclose(stat[2], 4.2, rtol=1e-5)
+    assert used[1].all() and not used[2].any()  # threshold 4: 3.5 or 4.5 would flip one
+    # sigma 2: the statistic is d blurred by a Gaussian of 2 px (the blur's 3-sigma kernel)
+    ref = ndi.gaussian_filter(spike, 2.0, mode="mirror", truncate=3.0)
+    np.testing.assert_allclose(stat[3], ref, atol=1e-5)
+    for s in (1.8, 2.2):  # negative control: the centre moves by >= 0.07 (0.399 at 2)
+        other = ndi.gaussian_filter(spike, s, mode="mirror", truncate=3.0)
+        assert abs(other[16, 16] - ref[16, 16]) > 0.05
+    # saturation 0.98: level 0.975 is merged, level 0.985 is clipped
+    assert used[4].all() and not used[5].any()
+
+
+def test_merge_deghosted_default_region_window():
+    # frame 0 (the reference, t = 4) is clipped in four stripes 4-7 px wide; frame 1 (t = 1)
+    # sees everything. The reference moves to frame 1 where the fraction of valid reference
+    # pixels in a Gaussian window of region_sigma = 4 px falls below 1/2
+    h, w = 2, 160
+    valid = np.ones((h, w))
+    x0 = 10
+    for width in (4, 5, 6, 7):
+        valid[:, x0 : x0 + width] = 0.0
+        x0 += width + 30
+    frames = [np.where(valid > 0, 0.8, 1.0), np.full((h, w), 0.2)]
+    r = _deghost(frames, [4.0, 1.0])
+    frac = ndi.gaussian_filter(valid, 4.0, mode="mirror", truncate=3.0)
+    expect = np.where(frac >= 0.5, 0, 1)
+    assert 0 < expect.sum() < valid.size - valid.sum()  # some stripes keep frame 0, some not
+    np.testing.assert_array_equal(np.asarray(r.reference), expect)
+    for s in (3.5, 4.5):  # negative control: another window moves the switch
+        other = ndi.gaussian_filter(valid, s, mode="mirror", truncate=3.0)
+        assert (np.where(other >= 0.5, 0, 1) != expect).sum() >= 2
+
+
+# ------------------------------------------------------------------ tonemap
+
+
+def test_contrast_inversion_defaults_k4_strength_0_3():
+    # two flat regions 64 px wide, L = 1 and 16 (log-average 4: L_w = 0.25 and 4); 48 px from
+    # the border (6 sigma, past the 3-sigma kernel) the blur is L_w itself, so
+    # y = L_w / (k (L_w + 1e-6 mean(L_w))^c) and L_d = y / (1 + y)
+    img = np.ones((4, 128), np.float32)
+    img[:, 64:] = 16.0
+    got = np.asarray(tm.tonemap_contrast_inversion(img, encode="linear"))[0, [16, 112]]
+
+    def ref(k, c):
+        lw = np.array([0.25, 4.0])
+        y = lw / (k * (lw + 1e-6 * lw.mean()) ** c)
+        return y / (1 + y)
+
+    np.testing.assert_allclose(got, ref(4.0, 0.3), rtol=1e-5)  # measured: 0.0865, 0.3975
+    for k, c in ((4.4, 0.3), (4.0, 0.35)):  # negative controls: >= 4 % away
+        assert np.max(np.abs(ref(k, c) / ref(4.0, 0.3) - 1)) > 0.04
+
+
+def test_reinhard_default_white_is_the_image_maximum():
+    # L_white = the largest scaled luminance: the brightest pixel maps to exactly 1, the rest
+    # follow eq. 4 with that white (a fixed white of 4, what `--list` once showed, maps the
+    # maximum, L_m = 1.01 here, to 0.53)
+    img = np.array([[1.0, 1.0, 1.0, 10.0]], np.float32)
+    got = np.asarray(tm.tonemap_Reinhard2002(img, encode="linear"))[0]
+    lm = 0.18 * img[0] / 10.0**0.25  # key 0.18, log-average 10^(1/4)
+    lw = lm.max()
+    np.testing.assert_allclose(got, lm * (1 + lm / lw**2) / (1 + lm), rtol=1e-4)
+    assert got[3] == pytest.approx(1.0, abs=1e-6)
+    assert lm[3] * (1 + lm[3] / 16) / (1 + lm[3]) < 0.6
+
+
+def test_reinhard_devlin_intensity_is_limited_to_plus_minus_8():
+    # the range ends at +-8, where the image still spans [0, 1] with many levels; past it
+    # (100: every pixel the same, then black after the min-max normalisation) it is refused
+    x = np.random.default_rng(0).lognormal(0.0, 1.5, (8, 8, 3)).astype(np.float32)
+    for f in (-8.0, 8.0):
+        out = np.asarray(tm.tonemap_Reinhard2005(x, intensity=f, encode="linear"))
+        assert out.min() == 0.0 and out.max() == pytest.approx(1.0)
+        assert np.unique(np.round(out, 3)).size > 50  # measured 147 and 93
+    for f in (-8.5, 8.5, 100.0):
+        with pytest.raises(ValueError, match=r"^intensity: "):
+            tm.tonemap_Reinhard2005(x, intensity=f)

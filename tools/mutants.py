@@ -14,6 +14,8 @@ _SDF_HIT = (
 _RR = "tests/test_defaults_render.py::test_path_russian_roulette_starts_after_five_bounces"
 RR_OBJECT = _RR + "[object]"  # the defaults live once, on PathIntegrator
 
+_DEGHOST = "tests/test_defaults.py::test_merge_deghosted_default_threshold_window_and_saturation"
+
 MUTANTS = [
     # ------------------------------------------------------------------ colour
     {
@@ -314,5 +316,71 @@ MUTANTS = [
         "new": "default=3)\n    rr_depth: int = eqx.field(static=True, default=6)",
         "tests": [RR_OBJECT],
         "why": "a default changed (Russian roulette after 5 bounces, as Mitsuba)",
+    },
+    {
+        "name": "defaults.merge_deghosted.threshold_4.5",
+        "file": "jaxgfx/hdr/deghost.py",
+        "old": "    threshold: float = 4.0,\n",
+        "new": "    threshold: float = 4.5,\n",
+        "tests": [_DEGHOST],
+        "why": "a default changed (chi-square threshold 4, docs/hdr.md)",
+    },
+    {
+        "name": "defaults.merge_deghosted.sigma_2.5",
+        "file": "jaxgfx/hdr/deghost.py",
+        "old": "    sigma: float = 2.0,\n    region_sigma",
+        "new": "    sigma: float = 2.5,\n    region_sigma",
+        "tests": [_DEGHOST],
+        "why": "a default changed (consistency window 2 px)",
+    },
+    {
+        "name": "defaults.merge_deghosted.region_sigma_5",
+        "file": "jaxgfx/hdr/deghost.py",
+        "old": "    region_sigma: float = 4.0,\n",
+        "new": "    region_sigma: float = 5.0,\n",
+        "tests": ["tests/test_defaults.py::test_merge_deghosted_default_region_window"],
+        "why": "a default changed (per-region reference window 4 px)",
+    },
+    {
+        "name": "defaults.merge_deghosted.saturation_0.99",
+        "file": "jaxgfx/hdr/deghost.py",
+        "old": "    saturation: float = 0.98,\n",
+        "new": "    saturation: float = 0.99,\n",
+        "tests": [_DEGHOST],
+        "why": "a default changed (RAW clipping level 0.98)",
+    },
+    {
+        "name": "defaults.contrast_inversion.k_5",
+        "file": "jaxgfx/tonemap/_local.py",
+        "old": "    k=4.0,\n    strength=0.3,",
+        "new": "    k=5.0,\n    strength=0.3,",
+        "tests": ["tests/test_defaults.py::test_contrast_inversion_defaults_k4_strength_0_3"],
+        "why": "a default changed (k 4: the log-average to 0.2, commit 7cdd24a)",
+    },
+    {
+        "name": "defaults.contrast_inversion.strength_1",
+        "file": "jaxgfx/tonemap/_local.py",
+        "old": "    k=4.0,\n    strength=0.3,",
+        "new": "    k=4.0,\n    strength=1.0,",
+        "tests": ["tests/test_defaults.py::test_contrast_inversion_defaults_k4_strength_0_3"],
+        "why": "a default changed back to the lecture's full division (order of regions lost)",
+    },
+    {
+        "name": "defaults.Reinhard2002.white_4",
+        "file": "jaxgfx/tonemap/_global.py",
+        "old": "    key=0.18,\n    white=None,",
+        "new": "    key=0.18,\n    white=4.0,",
+        "tests": ["tests/test_defaults.py::test_reinhard_default_white_is_the_image_maximum"],
+        "why": "a default changed (white = the image maximum; `--list` once said 4)",
+    },
+    {
+        "name": "defaults.Reinhard2005.intensity_unlimited",
+        "file": "jaxgfx/tonemap/_global.py",
+        "old": 'check_scalar(intensity, "intensity", lo=-8.0, hi=8.0,',
+        "new": 'check_scalar(intensity, "intensity", lo=-1e9, hi=1e9,',
+        "tests": [
+            "tests/test_defaults.py::test_reinhard_devlin_intensity_is_limited_to_plus_minus_8"
+        ],
+        "why": "a range limit dropped (intensity 100 gave a black image, commit ea6698c)",
     },
 ]
