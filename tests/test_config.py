@@ -93,6 +93,20 @@ def test_duplicate_yaml_keys_are_refused_at_every_level(tmp_path, text, needle):
     assert needle in str(e.value)
 
 
+def test_fit_config_with_optimizer_twice_is_refused(tmp_path):
+    # issue 28's case: `optimizer:` twice in a `jaxgfx fit` config kept the last one silently
+    from jaxgfx.pipelines.fit.config import FitConfig
+
+    p = tmp_path / "fit.yaml"
+    p.write_text(
+        "scene: scene.yaml\ntarget: photo.exr\nparams: {materials.m.alpha: {init: 0.1}}\n"
+        "optimizer: {name: adam, lr: 0.01}\noptimizer: {name: sgd, lr: 0.5}\n"
+    )
+    with pytest.raises(ValueError) as e:
+        load_config(FitConfig, p)
+    assert "fit.yaml:5: duplicate key 'optimizer' (first given on line 4)" in str(e.value)
+
+
 def test_yaml_merge_keys_are_not_duplicates(tmp_path):
     p = tmp_path / "c.yaml"
     p.write_text("name: a\nbase: &b {lam: 1.0, method: robertson}\n")
