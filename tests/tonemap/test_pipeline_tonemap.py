@@ -28,6 +28,22 @@ def test_cli_tonemap_writes_the_operator_output(tmp_path, capsys):
     assert "fattal" in capsys.readouterr().out
 
 
+def test_cli_list_shows_reinhard_white_as_the_image_maximum(capsys):
+    # the default-run sibling of the slow test_registry_defaults_are_the_operator_defaults:
+    # `--list` once showed `white=4`, but the default (None) is the image maximum (what it
+    # does: tests/test_defaults.py::test_reinhard_default_white_is_the_image_maximum)
+    assert main(["tonemap", "--list"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    line = next(x for x in lines if x.split()[0] == "reinhard")
+    assert line.split() == [
+        "reinhard",
+        "tonemap_Reinhard2002",
+        "key=0.18,",
+        "white=image-max,",
+        "saturation=1",
+    ]
+
+
 def test_job_rejects_bad_arguments(tmp_path):
     src = tmp_path / "in.exr"
     io.write_exr(src, np.ones((4, 4, 3), np.float32))
