@@ -226,3 +226,15 @@ def test_frames_png_written_with_the_other_outputs(tmp_path):
     (tmp_path / "plain").mkdir()
     plain = CalibrateResult(rad, rad)
     assert "frames.png" not in write_outputs(str(tmp_path / "plain"), plain, cfg)
+
+
+def test_align_flag_sets_align_enabled_and_keeps_the_config_method(tmp_path):
+    """`--align` = `align.enabled: true`; the config file's other align keys are kept."""
+    from jaxgfx.cli import build_parser, calibrate_job
+
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("align: {method: mtb}\n")
+    parse = build_parser().parse_args
+    job = calibrate_job(parse(["calibrate", "--align", "--config", str(cfg), "--out", "o"]))
+    assert job.config.align == AlignConfig(enabled=True, method="mtb")
+    assert calibrate_job(parse(["calibrate", "--out", "o"])).config.align.enabled is False
