@@ -171,9 +171,10 @@ def figure(img, path):
         "contrast_inversion",
         "durand",
         "fattal",
+        "mantiuk",
     ]
     kws = {"exposure": {"exposure": -4.0}}
-    fig, axes = plt.subplots(2, 4, figsize=(16, 6.6))
+    fig, axes = plt.subplots(3, 3, figsize=(12, 9.9))
     for ax, name in zip(axes.ravel(), names, strict=True):
         ax.imshow(np.asarray(tm.TONEMAP_METHODS[name](img, **kws.get(name, {}))))
         ax.set_title(f"{name} ({tm.TONEMAP_METHODS[name].__name__})", fontsize=9)

@@ -125,6 +125,12 @@ def _calibrate_arguments(p):
         "that disagree with a per-region reference under the noise model are left out",
     )
     p.add_argument(
+        "--align",
+        action="store_true",
+        help="align the frames by a global translation first (align.enabled; LDR: "
+        "hdr.align_stack, RAW: hdr.align_raw_stack on the mosaics); shifts in report.json",
+    )
+    p.add_argument(
         "--flat-field",
         default=None,
         help="RAW flat-field frame (same camera and size): fits the lens vignetting and "
@@ -153,13 +159,14 @@ def calibrate_job(args):
             overrides["response"] = {**section, "method": args.method}
     if getattr(args, "tonemap", None):
         overrides["tonemap"] = [t.strip() for t in args.tonemap.split(",") if t.strip()]
-    if getattr(args, "deghost", False):
-        from jaxgfx.config import read_yaml
+    for flag, key, field in (("deghost", "merge", "deghost"), ("align", "align", "enabled")):
+        if getattr(args, flag, False):
+            from jaxgfx.config import read_yaml
 
-        base = read_yaml(args.config) if args.config else {}
-        section = base.get("merge", {})
-        if isinstance(section, dict):  # else load_config reports the malformed section
-            overrides["merge"] = {**section, "deghost": True}
+            base = read_yaml(args.config) if args.config else {}
+            section = base.get(key, {})
+            if isinstance(section, dict):  # else load_config reports the malformed section
+                overrides[key] = {**section, field: True}
     for key in ("colorspace", "white_balance", "flat_field"):
         if getattr(args, key, None) is not None:
             overrides[key] = getattr(args, key)

@@ -11,6 +11,8 @@ writes::
     radiance.exr        linear radiance (float32, relative units; see report.json "anchor")
     variance.exr        per-pixel variance of the radiance estimate
     confidence.png      per-pixel confidence (relative standard error mapped to [0, 1])
+    frames.png          merge.deghost only: hue = each pixel's reference frame (blue shortest
+                        .. red longest exposure), brightness = share of the frames merged there
     response.png        fitted response curves (and the ground truth for synthetic stacks)
     loo.png             leave-one-out self-check per level band and held frame (LDR)
     preview.png         exposure-normalised sRGB preview of the radiance map
@@ -23,8 +25,8 @@ into place); ``out`` holding a previous run's results is refused unless ``overwr
 :func:`run_calibrate`; the report is assembled in :func:`build_report` only.
 
 The package is the job's stages: ``config`` (frozen, self-validating dataclasses), ``inputs``
-(files, kind, sidecar), ``ldr`` (load, align, response fit, merge, self-check), ``raw`` (sensor
-calibration, merge, demosaic), ``report`` (result record, outputs, report.json), ``plots``
+(files, kind, sidecar), ``ldr`` (load, align, response fit, merge, self-check), ``raw`` (align,
+sensor calibration, merge, demosaic), ``report`` (result record, outputs, report.json), ``plots``
 and ``job`` (``run_calibrate``).
 """
 

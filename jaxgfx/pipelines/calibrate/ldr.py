@@ -46,14 +46,26 @@ def _load_ldr(cfg: CalibrateConfig, files, sidecar, steps, result_kw: dict):
     return images, times, truth
 
 
-def merge(images, times, resp, cfg: MergeConfig, *, return_variance: bool = True):
+def merge(
+    images,
+    times,
+    resp,
+    cfg: MergeConfig,
+    *,
+    return_variance: bool = True,
+    frames: dict | None = None,
+):
     """The merge stage: radiance (and its variance) of the bracket through ``resp``; with
     ``merge.deghost`` the ghost-free merge (:func:`jaxgfx.hdr.merge_deghosted`: frames that
-    disagree with a per-region reference exposure under the noise model are left out)."""
+    disagree with a per-region reference exposure under the noise model are left out), whose
+    :class:`jaxgfx.hdr.DeghostResult` (which frames each pixel came from) is stored as
+    ``frames["result"]`` when a dict ``frames`` is given."""
     from jaxgfx import hdr
 
     if cfg.deghost:
         r = hdr.merge_deghosted(images, times, resp)
+        if frames is not None:
+            frames["result"] = r
         return (r.radiance, r.variance) if return_variance else r.radiance
     return hdr.merge_radiance(
         images, times, resp, weighting=cfg.weighting, return_variance=return_variance
@@ -72,7 +84,9 @@ def _fit_ldr(cfg: CalibrateConfig, images, times, truth, steps, result_kw) -> Ca
     )
     jax.block_until_ready(jax.tree_util.tree_leaves(resp))
     steps.start("merge")
-    radiance, variance = merge(images, times, resp, cfg.merge)
+    frames: dict = {}
+    radiance, variance = merge(images, times, resp, cfg.merge, frames=frames)
+    result_kw["frames"] = frames.get("result")
     steps.start("evaluate")
     loo = hdr.leave_one_out(images, times, resp, weighting=cfg.merge.weighting)
     result_kw["loo"] = loo

@@ -1,5 +1,6 @@
 """The job's figures: fitted response curves (``response.png``), the leave-one-out
-self-check (``loo.png``) and the exposure-normalised preview (``preview.png``)."""
+self-check (``loo.png``), the exposure-normalised preview (``preview.png``) and, after a
+ghost-free merge, the map of which frame each pixel came from (``frames.png``)."""
 
 from __future__ import annotations
 
@@ -137,3 +138,27 @@ def _plot_vignetting(path, vig):
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
+
+def frame_colors(times) -> np.ndarray:
+    """``(N, 3)`` RGB in [0, 1] of each frame in ``frames.png``: fully saturated hues from blue
+    (shortest exposure) through green to red (longest), spaced evenly by exposure rank."""
+    from matplotlib.colors import hsv_to_rgb
+
+    t = np.asarray(times, np.float64)
+    n = t.shape[0]
+    rank = np.argsort(np.argsort(t, kind="stable"), kind="stable")
+    hue = (2.0 / 3.0) * (1.0 - rank / max(n - 1, 1))
+    return hsv_to_rgb(np.stack([hue, np.ones(n), np.ones(n)], -1))
+
+
+def frames_map(used, reference, times) -> np.ndarray:
+    """``frames.png`` of a ghost-free merge (``DeghostResult.used`` ``(N, H, W)`` and
+    ``.reference`` ``(H, W)``): each pixel in the colour of its reference frame
+    (:func:`frame_colors`), its brightness ``0.25 + 0.75 k / N`` for ``k`` of the ``N`` frames
+    merged there (dim: the pixel came from few frames; full: from all). ``(H, W, 3)`` float32."""
+    used = np.asarray(used) > 0.5
+    ref = np.asarray(reference, np.int64)
+    n = used.shape[0]
+    k = used.sum(axis=0)
+    value = 0.25 + 0.75 * k / n
+    return (frame_colors(times)[ref] * value[..., None]).astype(np.float32)

@@ -1,29 +1,47 @@
-"""The RAW path: read the bracket, calibrate the sensor (:func:`jaxgfx.hdr.calibrate_raw_stack`),
-merge the normalised mosaics with the measured exposure ratios and noise model (one call,
-:func:`merge_mosaics`), demosaic, then white-balance and convert camera RGB to
-``config.colorspace`` (:func:`jaxgfx.hdr.raw.color_transform`: the DNG colour tags, or
-LibRaw's matrix). With ``config.flat_field`` the lens vignetting is fitted from that frame
-(:func:`jaxgfx.hdr.raw.fit_vignetting`) and divided out of the merged mosaic: for a linear
-sensor that equals dividing every frame by it, while the saturation test of the merge still
-sees the recorded levels."""
+"""The RAW path: read the bracket, optionally align it (``config.align``:
+:func:`jaxgfx.hdr.align_raw_stack` on the normalised mosaics, each CFA plane moved by the same
+translation, before anything is measured), calibrate the sensor
+(:func:`jaxgfx.hdr.calibrate_raw_stack`), merge the normalised mosaics with the measured
+exposure ratios and noise model (one call, :func:`merge_mosaics`), demosaic, then white-balance
+and convert camera RGB to ``config.colorspace`` (:func:`jaxgfx.hdr.raw.color_transform`: the DNG
+colour tags, or LibRaw's matrix). With ``config.flat_field`` the lens vignetting is fitted from
+that frame (:func:`jaxgfx.hdr.raw.fit_vignetting`) and divided out of the merged mosaic: for a
+linear sensor that equals dividing every frame by it, while the saturation test of the merge
+still sees the recorded levels."""
 
 from __future__ import annotations
+
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from .config import CalibrateConfig
 from .report import CalibrateResult
 
-__all__: list[str] = []  # the job's stages (tests patch _fit_raw here)
+__all__: list[str] = []  # the job's stages (tests patch _fit_raw / merge_mosaics here)
 
 
-def merge_mosaics(raws, times, cal, *, deghost: bool = False):
-    """The merge stage of a RAW bracket: the normalised mosaics merged as one channel with the
+class MosaicMerge(NamedTuple):
+    """Output of :func:`merge_mosaics`: ``radiance`` and ``variance`` mosaics ``(H, W, 1)``;
+    with ``deghost`` also ``frames``, the :class:`jaxgfx.hdr.DeghostResult` (``used``
+    ``(N, H, W)``, ``reference`` ``(H, W)``: which frames each pixel came from), else None."""
+
+    radiance: Any
+    variance: Any
+    frames: Any = None
+
+
+def merge_mosaics(norm, times, cal, *, deghost: bool = False) -> MosaicMerge:
+    """The merge stage of a RAW bracket: the normalised mosaics ``norm`` ``(N, H, W)``
+    (``RawImage.normalized()``, aligned when ``align.enabled``) merged as one channel with the
     measured exposure ratios (nominal times when a ratio could not be measured) and the CFA
-    channels' noise model pooled. Returns ``(radiance, variance)`` mosaics ``(H, W, 1)``."""
+    channels' noise model pooled. ``deghost``: the ghost-free merge
+    (:func:`jaxgfx.hdr.merge_deghosted`), which needs the noise model measured from the
+    bracket; without one (``cal.noise is None``) it is refused with one error naming
+    ``--deghost`` (never a silent plain merge)."""
     from jaxgfx import hdr
 
-    norm = np.stack([r.normalized() for r in raws])[..., None]
+    norm = np.asarray(norm, np.float32)[..., None]
     ratios = np.asarray(cal.ratios.ratios, np.float64)
     ref = int(np.asarray(cal.ratios.reference))
     good = ratios.shape == times.shape and np.all(np.isfinite(ratios)) and np.all(ratios > 0)
@@ -36,10 +54,18 @@ def merge_mosaics(raws, times, cal, *, deghost: bool = False):
             np.mean(np.asarray(cal.noise.gain), keepdims=True),
             np.mean(np.asarray(cal.noise.read_variance), keepdims=True),
         )
-    if deghost and noise is not None:  # ghost-free merge under the measured noise model
+    if deghost:  # ghost-free merge under the measured noise model
+        if noise is None:
+            why = cal.noise_method or "not estimated"
+            raise ValueError(
+                "--deghost (merge.deghost): the ghost-free RAW merge decides what moved under "
+                f"the sensor noise model, and this bracket gave none ({why}); run without "
+                "--deghost, or shoot a bracket whose adjacent frames overlap in unclipped "
+                "pixels so that the noise model can be measured"
+            )
         r = hdr.merge_deghosted(norm, eff_times, None, noise=noise)
-        return r.radiance, r.variance
-    return hdr.merge_radiance(
+        return MosaicMerge(r.radiance, r.variance, r)
+    rad, var = hdr.merge_radiance(
         np.clip(norm, 0.0, 1.0),
         eff_times,
         resp,
@@ -47,18 +73,40 @@ def merge_mosaics(raws, times, cal, *, deghost: bool = False):
         noise=noise,
         return_variance=True,
     )
+    return MosaicMerge(rad, var)
+
+
+def align_mosaics(raws, pattern: str, method: str):
+    """The normalised mosaics of ``raws`` aligned to the middle frame
+    (:func:`jaxgfx.hdr.align_raw_stack`, the same shift for each CFA plane) and the raw-unit
+    mosaics rebuilt from them (with frame 0's black and white levels) for the sensor
+    calibration. Returns ``(norm, mosaics, shifts)``; ``shifts (N, 2)`` in full-resolution px."""
+    from jaxgfx import hdr
+
+    norm = np.stack([r.normalized() for r in raws])
+    aligned, shifts = hdr.align_raw_stack(norm, cfa_pattern=pattern, method=method)
+    norm = np.asarray(aligned, np.float32)
+    r0 = raws[0]
+    black = r0.black_level_per_color[r0.raw_colors]
+    mosaics = (norm * (r0.white_level - black) + black).astype(np.float32)
+    return norm, mosaics, np.asarray(shifts, np.float64)
 
 
 def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
-    """Read, calibrate the sensor, merge, demosaic."""
+    """Read, align (``align.enabled``), calibrate the sensor, merge, demosaic."""
     from jaxgfx import hdr, image, io
 
     steps.start("read raw")
     raws, times = io.read_raw_stack(files, exposure_times=cfg.exposure_times)
     pattern = raws[0].cfa_pattern
     mosaics = np.stack([r.mosaic for r in raws]).astype(np.float32)
+    norm = np.stack([r.normalized() for r in raws])
     black = np.asarray(raws[0].black_level, np.float32)
     white = float(raws[0].white_level)
+    shifts = None
+    if cfg.align.enabled:  # before any measurement: calibration and merge assume a static frame
+        steps.start("align")
+        norm, mosaics, shifts = align_mosaics(raws, pattern, cfg.align.method)
     vig = None
     if cfg.flat_field is not None:
         flat = io.read_raw(cfg.flat_field)
@@ -72,7 +120,8 @@ def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
     steps.start("raw calibration")
     cal = hdr.calibrate_raw_stack(mosaics, times, cfa_pattern=pattern, black=black, white=white)
     steps.start("merge")
-    rad, var = merge_mosaics(raws, times, cal, deghost=cfg.merge.deghost)
+    m = merge_mosaics(norm, times, cal, deghost=cfg.merge.deghost)
+    rad, var = m.radiance, m.variance
     if vig is not None:  # linear sensor: dividing the merge = dividing each frame by V
         rad, var = hdr.raw.devignette(np.asarray(rad)[..., 0], vig, np.asarray(var)[..., 0])
         rad, var = np.asarray(rad)[..., None], np.asarray(var)[..., None]
@@ -94,4 +143,6 @@ def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
         image_shape=mosaics.shape,
         raw_calibration=cal,
         vignetting=vig,
+        alignment_shifts=shifts,
+        frames=m.frames,
     )

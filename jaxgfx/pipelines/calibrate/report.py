@@ -28,6 +28,7 @@ OUTPUT_NAMES = (
     "radiance.exr",
     "variance.exr",
     "confidence.png",
+    "frames.png",
     "preview.png",
     "response.png",
     "loo.png",
@@ -81,6 +82,7 @@ class CalibrateResult:
     synthetic: dict | None = None
     color: Any = None  # hdr.raw.ColorTransform (RAW): camera RGB -> the output colour space
     vignetting: Any = None  # hdr.raw.Vignetting (RAW with a flat field)
+    frames: Any = None  # hdr.DeghostResult of a ghost-free merge (merge.deghost): frames.png
 
 
 def write_outputs(folder, result: CalibrateResult, cfg) -> list[str]:
@@ -100,6 +102,10 @@ def write_outputs(folder, result: CalibrateResult, cfg) -> list[str]:
     io.write_png(os.path.join(folder, "confidence.png"), conf.astype(np.float32))
     io.write_png(os.path.join(folder, "preview.png"), plots._preview(radiance, cfg.preview_key))
     names = ["radiance.exr", "variance.exr", "confidence.png", "preview.png"]
+    if result.frames is not None:  # which frame each pixel came from (merge.deghost)
+        fm = plots.frames_map(result.frames.used, result.frames.reference, result.times)
+        io.write_png(os.path.join(folder, "frames.png"), fm)
+        names.append("frames.png")
     if cfg.tonemap:
         from jaxgfx.pipelines.tonemap import tonemap_image
 
@@ -147,6 +153,7 @@ _OUTPUT_KEYS = {
     "radiance.exr": "radiance",
     "variance.exr": "variance",
     "confidence.png": "confidence",
+    "frames.png": "frames",
     "preview.png": "preview",
     "response.png": "response_plot",
     "loo.png": "loo_plot",
@@ -185,9 +192,35 @@ def build_report(job, files, result: CalibrateResult, timings: dict, outputs):
         report["leave_one_out"] = result.loo.to_dict()
     if result.errors is not None:
         report["errors_vs_ground_truth"] = result.errors
+    if result.frames is not None:
+        report["deghost"] = _frames_summary(result.frames, result.times)
     report["timings_s"] = timings
     report["outputs"] = outputs
     return report
+
+
+def _frames_summary(res, times) -> dict:
+    """``report.json`` "deghost": per frame (input order) its exposure time, its colour in
+    ``frames.png`` and the fractions of pixels where it is the reference / was merged."""
+    used = np.asarray(res.used) > 0.5
+    ref = np.asarray(res.reference)
+    n = used.shape[0]
+    colors = plots.frame_colors(times)
+    return {
+        "frames_png": "hue = reference frame (colour below); brightness 0.25 + 0.75 k / N for "
+        "k of the N frames merged at the pixel",
+        "mean_frames_used": float(used.sum(axis=0).mean()),
+        "per_frame": [
+            {
+                "index": j,
+                "exposure_time": float(np.asarray(times)[j]),
+                "color_rgb": [round(float(c), 4) for c in colors[j]],
+                "reference_fraction": float(np.mean(ref == j)),
+                "used_fraction": float(used[j].mean()),
+            }
+            for j in range(n)
+        ],
+    }
 
 
 def write_report(folder, report: dict) -> None:
