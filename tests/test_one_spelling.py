@@ -29,6 +29,24 @@ def test_aliases_are_their_owners_objects():
     assert io.kind_of("w.txt") is None
 
 
+def test_the_jobs_extension_lists_are_ios():
+    """The jobs' output (and input) extensions are jaxgfx.io's tables, not copies."""
+    from jaxgfx import io
+    from jaxgfx.pipelines import _output, filter_ops, fuse, render, tonemap
+
+    assert _output.WRITABLE_EXTENSIONS is io.WRITE_EXTENSIONS
+    assert render._LINEAR_EXT is io.LINEAR_WRITE_EXTENSIONS
+    assert render._DISPLAY_EXT is io.DISPLAY_WRITE_EXTENSIONS
+    for m in (fuse, filter_ops, tonemap):
+        assert m._DISPLAY_EXT is io.LDR_WRITE_EXTENSIONS
+    assert set(tonemap._INPUT_EXT) == io.HDR_EXTENSIONS
+    assert set(io.WRITE_EXTENSIONS) == set(io.LINEAR_WRITE_EXTENSIONS) | set(
+        io.DISPLAY_WRITE_EXTENSIONS
+    )
+    assert {io.kind_of("a" + e) for e in io.HDR_WRITE_EXTENSIONS} == {"hdr"}
+    assert {io.kind_of("a" + e) for e in io.LDR_WRITE_EXTENSIONS} == {"ldr"}
+
+
 def test_the_filmic_response_is_the_aces_fit():
     """hdr's "filmic" camera curve is the colour module's ACES fit, f(4x) / f(4)."""
     import jax.numpy as jnp
@@ -43,6 +61,7 @@ def test_the_filmic_response_is_the_aces_fit():
                                rtol=1e-6, atol=1e-7)  # fmt: skip
 
 
+_IMG = r"\"\.(?:exr|hdr|pic|rgbe|png|jpe?g|tiff?|bmp)\""  # a quoted image file extension
 # (constant, where it may be written): retyping it elsewhere is a second spelling
 OWNED = [
     (r"0\.2126\b", ("jaxgfx/color/",)),  # Rec. 709 luminance weights
@@ -50,6 +69,7 @@ OWNED = [
     (r"\b2\.51\b", ("jaxgfx/color/",)),  # the ACES fit's coefficients
     (r"\"BGGR\"", ("jaxgfx/image/bayer.py",)),  # Bayer tiles
     (r"\"\.nef\"|\"\.cr2\"", ("jaxgfx/io/_dispatch.py",)),  # camera raw extensions
+    (rf"{_IMG}\s*,\s*\"\.\w+\"|\"\.\w+\"\s*,\s*{_IMG}", ("jaxgfx/io/",)),  # image extension lists
 ]
 
 

@@ -16,11 +16,12 @@ import time
 
 import numpy as np
 
+from jaxgfx.io import LDR_WRITE_EXTENSIONS
 from jaxgfx.pipelines._output import StagedFiles, check_output_extension
 
 __all__ = ["FuseJob", "run_fuse", "FUSE_PARAMETERS"]
 
-_DISPLAY_EXT = (".png", ".jpg", ".jpeg", ".tif", ".tiff")
+_DISPLAY_EXT = LDR_WRITE_EXTENSIONS
 
 FUSE_PARAMETERS = {
     "contrast_weight": "exponent of the contrast measure (|Laplacian|), >= 0",
@@ -47,7 +48,7 @@ def _expand_inputs(inputs) -> list[str]:
             )
             if not found:
                 raise ValueError(
-                    f"inputs: directory {item!r} holds no LDR images ({' '.join(LDR_EXTENSIONS)})"
+                    f"inputs: directory {item!r} holds no LDR images ({' '.join(sorted(LDR_EXTENSIONS))})"
                 )
             files.extend(found)
         elif os.path.isfile(item):
@@ -55,7 +56,7 @@ def _expand_inputs(inputs) -> list[str]:
             if ext not in LDR_EXTENSIONS:
                 raise ValueError(
                     f"inputs: cannot fuse {item!r}: expected LDR images "
-                    f"({' '.join(LDR_EXTENSIONS)}), got {ext or '(no extension)'!r} (exposure "
+                    f"({' '.join(sorted(LDR_EXTENSIONS))}), got {ext or '(no extension)'!r} (exposure "
                     "fusion blends display-referred frames; OUTPUT comes last)"
                 )
             files.append(item)

@@ -30,6 +30,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgfx import io
 from jaxgfx._checks import as_float_array, check_choice, check_finite
 from jaxgfx.color import LUMINANCE_WEIGHTS
 from jaxgfx.render.bsdf.texture import TEXTURE_FILTERS, TEXTURE_WRAP_MODES, Texture, lookup
@@ -48,7 +49,6 @@ __all__ = [
 
 TEXTURE_TYPES = ("bitmap", "checkerboard")
 _LUMA = LUMINANCE_WEIGHTS["rec709"]
-_LDR = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
 
 class Checkerboard(eqx.Module):
@@ -141,13 +141,11 @@ def _expect(d, where, allowed):
 
 
 def _read_bitmap(path, raw, where):
-    from jaxgfx import io
-
     try:
         img = np.asarray(io.read_any(path), np.float32)
     except (OSError, ValueError) as e:
         raise ValueError(f"{where}.file: cannot read texture {path!r}: {e}") from None
-    if os.path.splitext(path)[1].lower() in _LDR and not raw:
+    if io.kind_of(path) == "ldr" and not raw:
         from jaxgfx.color.transfer import srgb_to_linear
 
         img = np.asarray(srgb_to_linear(img), np.float32)
