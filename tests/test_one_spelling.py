@@ -94,3 +94,29 @@ def test_owned_constants_are_not_retyped(pattern, owners):
                     ):
                         bad.append(f"{rel}:{n}: {line.strip()}")
     assert bad == []
+
+
+# hand-written "expected one of" messages that check_choice (a string among fixed names)
+# cannot give: file -> why. Every other choice error goes through jaxgfx._checks.check_choice.
+CHOICE_MESSAGES_ALLOWED = {
+    "jaxgfx/_checks.py": "check_choice itself",
+    "jaxgfx/config.py": "typing.Literal values of any type",
+    "jaxgfx/render/scene/mitsuba_xml.py": "the XML file and line come first (self.err)",
+    "jaxgfx/render/bsdf/__init__.py": "an unknown parameter key of a BSDF type",
+    "jaxgfx/hdr/camera.py": "integer bit depths",
+    "jaxgfx/color/spaces.py": "a white point name or an xy / XYZ array",
+}
+
+
+def test_choice_errors_go_through_check_choice():
+    found = set()
+    for dp, dirs, files in os.walk(os.path.join(ROOT, "jaxgfx")):
+        dirs[:] = [d for d in dirs if d != "__pycache__"]
+        for f in files:
+            if f.endswith(".py"):
+                path = os.path.join(dp, f)
+                with open(path, encoding="utf-8") as fh:
+                    if "expected one of" in fh.read():
+                        found.add(os.path.relpath(path, ROOT).replace(os.sep, "/"))
+    assert sorted(found - set(CHOICE_MESSAGES_ALLOWED)) == []  # use check_choice there
+    assert sorted(set(CHOICE_MESSAGES_ALLOWED) - found) == []  # stale entries

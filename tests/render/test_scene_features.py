@@ -302,7 +302,7 @@ def test_sdf_scene_errors():
         )
     with pytest.raises(ValueError, match=r"shapes\[0\].max_steps"):
         load_scene(base | {"shapes": [sdf | {"max_steps": 0}]})
-    with pytest.raises(ValueError, match=r"shapes\[0\].expr: unknown op"):
+    with pytest.raises(ValueError, match=r"shapes\[0\].expr.op: expected one of"):
         load_scene(base | {"shapes": [{"type": "sdf", "expr": {"op": "blob"}}]})
     with pytest.raises(ValueError, match=r"shapes\[0\]: unknown key"):
         load_scene(base | {"shapes": [sdf | {"steps": 3}]})
