@@ -92,6 +92,7 @@ def detach_bsdf_sample(scene, mat, wo, s, uv, frame, *, lazy=False):
 
 
 def intersect(scene, o, d, *, tmax=jnp.inf):
+    """Closest hit of the rays ``o + t d`` with the scene's shapes, ``0 < t < tmax``."""
     return intersect_scene(scene.shapes, o, d, tmin=0.0, tmax=tmax)
 
 
