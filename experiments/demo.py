@@ -11,7 +11,7 @@ import sys
 
 from jaxgfx.config import load_config
 from jaxgfx.pipelines.calibrate import CalibrateConfig, CalibrateJob, run_calibrate
-from jaxgfx.pipelines.image_demo import run_image_demo
+from jaxgfx.pipelines.image_demo import ImageDemoJob, run_image_demo
 from jaxgfx.pipelines.render import RenderJob, run_render
 
 
@@ -37,7 +37,7 @@ def main(argv=None) -> int:
         )
 
     img_dir = os.path.join(args.out, "image")
-    res = run_image_demo(img_dir)
+    res = run_image_demo(ImageDemoJob(img_dir))
     print(f"[image] {len(res['paths'])} outputs in {os.path.abspath(img_dir)}")
 
     # the example scene of issue 5, the textured-materials example (bitmap/checkerboard) and

@@ -185,3 +185,26 @@ def test_every_module_imports_inside_a_trace():
                        cwd=ROOT, timeout=300)  # fmt: skip
     assert r.returncode == 0, r.stderr[-3000:]
     assert r.stdout.strip() == "2.0"
+
+
+# a private module imported from outside its package: (importer, module) -> why
+PRIVATE_IMPORTS_ALLOWED = {
+    ("jaxgfx.cli", "jaxgfx.pipelines._output"): "the CLI installs the jobs' signal handling",
+}
+
+
+def test_private_modules_are_imported_only_inside_their_package():
+    """``P._m`` is P's own: other packages use the public names P re-exports (e.g.
+    ``render.integrators.replace_grad``, not ``render.integrators._common``)."""
+    bad = []
+    for m, deps in _graph().items():
+        for d in deps:
+            parts = d.split(".")
+            private = [i for i, p in enumerate(parts) if i > 0 and p.startswith("_")]
+            if not private:
+                continue
+            owner = ".".join(parts[: private[0]])
+            inside = m == owner or m.startswith(owner + ".")
+            if not inside and (m, d) not in PRIVATE_IMPORTS_ALLOWED:
+                bad.append(f"{m} -> {d}")
+    assert bad == []

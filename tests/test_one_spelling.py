@@ -29,6 +29,24 @@ def test_aliases_are_their_owners_objects():
     assert io.kind_of("w.txt") is None
 
 
+def test_the_jobs_extension_lists_are_ios():
+    """The jobs' output (and input) extensions are jaxgfx.io's tables, not copies."""
+    from jaxgfx import io
+    from jaxgfx.pipelines import _output, filter_ops, fuse, render, tonemap
+
+    assert _output.WRITABLE_EXTENSIONS is io.WRITE_EXTENSIONS
+    assert render._LINEAR_EXT is io.LINEAR_WRITE_EXTENSIONS
+    assert render._DISPLAY_EXT is io.DISPLAY_WRITE_EXTENSIONS
+    for m in (fuse, filter_ops, tonemap):
+        assert m._DISPLAY_EXT is io.LDR_WRITE_EXTENSIONS
+    assert set(tonemap._INPUT_EXT) == io.HDR_EXTENSIONS
+    assert set(io.WRITE_EXTENSIONS) == set(io.LINEAR_WRITE_EXTENSIONS) | set(
+        io.DISPLAY_WRITE_EXTENSIONS
+    )
+    assert {io.kind_of("a" + e) for e in io.HDR_WRITE_EXTENSIONS} == {"hdr"}
+    assert {io.kind_of("a" + e) for e in io.LDR_WRITE_EXTENSIONS} == {"ldr"}
+
+
 def test_the_filmic_response_is_the_aces_fit():
     """hdr's "filmic" camera curve is the colour module's ACES fit, f(4x) / f(4)."""
     import jax.numpy as jnp
@@ -43,6 +61,7 @@ def test_the_filmic_response_is_the_aces_fit():
                                rtol=1e-6, atol=1e-7)  # fmt: skip
 
 
+_IMG = r"\"\.(?:exr|hdr|pic|rgbe|png|jpe?g|tiff?|bmp)\""  # a quoted image file extension
 # (constant, where it may be written): retyping it elsewhere is a second spelling
 OWNED = [
     (r"0\.2126\b", ("jaxgfx/color/",)),  # Rec. 709 luminance weights
@@ -50,6 +69,7 @@ OWNED = [
     (r"\b2\.51\b", ("jaxgfx/color/",)),  # the ACES fit's coefficients
     (r"\"BGGR\"", ("jaxgfx/image/bayer.py",)),  # Bayer tiles
     (r"\"\.nef\"|\"\.cr2\"", ("jaxgfx/io/_dispatch.py",)),  # camera raw extensions
+    (rf"{_IMG}\s*,\s*\"\.\w+\"|\"\.\w+\"\s*,\s*{_IMG}", ("jaxgfx/io/",)),  # image extension lists
 ]
 
 
@@ -74,3 +94,29 @@ def test_owned_constants_are_not_retyped(pattern, owners):
                     ):
                         bad.append(f"{rel}:{n}: {line.strip()}")
     assert bad == []
+
+
+# hand-written "expected one of" messages that check_choice (a string among fixed names)
+# cannot give: file -> why. Every other choice error goes through jaxgfx._checks.check_choice.
+CHOICE_MESSAGES_ALLOWED = {
+    "jaxgfx/_checks.py": "check_choice itself",
+    "jaxgfx/config.py": "typing.Literal values of any type",
+    "jaxgfx/render/scene/mitsuba_xml.py": "the XML file and line come first (self.err)",
+    "jaxgfx/render/bsdf/__init__.py": "an unknown parameter key of a BSDF type",
+    "jaxgfx/hdr/camera.py": "integer bit depths",
+    "jaxgfx/color/spaces.py": "a white point name or an xy / XYZ array",
+}
+
+
+def test_choice_errors_go_through_check_choice():
+    found = set()
+    for dp, dirs, files in os.walk(os.path.join(ROOT, "jaxgfx")):
+        dirs[:] = [d for d in dirs if d != "__pycache__"]
+        for f in files:
+            if f.endswith(".py"):
+                path = os.path.join(dp, f)
+                with open(path, encoding="utf-8") as fh:
+                    if "expected one of" in fh.read():
+                        found.add(os.path.relpath(path, ROOT).replace(os.sep, "/"))
+    assert sorted(found - set(CHOICE_MESSAGES_ALLOWED)) == []  # use check_choice there
+    assert sorted(set(CHOICE_MESSAGES_ALLOWED) - found) == []  # stale entries

@@ -18,6 +18,7 @@ import os
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import check_choice
 from ._model import RESPONSE_KINDS, CameraResponse
 
 __all__ = [
@@ -143,11 +144,7 @@ def response_from_dict(doc: dict, path, *, bits: int | None = None) -> CameraRes
     missing = [k for k in _FIELDS if k not in doc]
     if missing:
         raise ValueError(f"response file {path}: missing field(s) {', '.join(missing)}")
-    if doc["kind"] not in RESPONSE_KINDS:
-        raise ValueError(
-            f"response file {path}: unknown curve kind {doc['kind']!r}; expected one of "
-            f"{RESPONSE_KINDS}"
-        )
+    check_choice(doc["kind"], f"response file {path}: kind", RESPONSE_KINDS)
     code_max = float(doc["code_max"])
     file_bits = _bits_of(code_max)
     if file_bits == "other":

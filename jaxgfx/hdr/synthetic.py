@@ -458,8 +458,7 @@ def write_dng_bracket(
 
     from .raw.color import DngColorProfile, dng_xyz_to_camera
 
-    if cfa_pattern not in BAYER_PATTERNS:
-        raise ValueError(f"cfa_pattern: expected one of {BAYER_PATTERNS}, got {cfa_pattern!r}")
+    check_choice(cfa_pattern, "cfa_pattern", BAYER_PATTERNS)
     rng = np.random.default_rng(seed)
     rgb = _patch_scene(rng, height, width, patch, dynamic_range)
     m709 = color.rgb_to_xyz_matrix("rec709")

@@ -5,10 +5,15 @@ arrays. Missing files raise ``FileNotFoundError``; corrupt, truncated or unsuppo
 ``ValueError`` naming the file.
 """
 
+from ._dispatch import DISPLAY_WRITE_EXTENSIONS as DISPLAY_WRITE_EXTENSIONS
 from ._dispatch import FILE_KINDS as FILE_KINDS
 from ._dispatch import HDR_EXTENSIONS as HDR_EXTENSIONS
+from ._dispatch import HDR_WRITE_EXTENSIONS as HDR_WRITE_EXTENSIONS
 from ._dispatch import LDR_EXTENSIONS as LDR_EXTENSIONS
+from ._dispatch import LDR_WRITE_EXTENSIONS as LDR_WRITE_EXTENSIONS
+from ._dispatch import LINEAR_WRITE_EXTENSIONS as LINEAR_WRITE_EXTENSIONS
 from ._dispatch import RAW_EXTENSIONS as RAW_EXTENSIONS
+from ._dispatch import WRITE_EXTENSIONS as WRITE_EXTENSIONS
 from ._dispatch import kind_of as kind_of
 from ._dispatch import read_any as read_any
 from ._dispatch import write_any as write_any
@@ -19,6 +24,7 @@ from .exr import write_exr as write_exr
 from .hdr_rgbe import read_hdr as read_hdr
 from .hdr_rgbe import read_hdr_header as read_hdr_header
 from .hdr_rgbe import write_hdr as write_hdr
+from .ldr import TIFF_EXTENSIONS as TIFF_EXTENSIONS
 from .ldr import exif_exposure_time as exif_exposure_time
 from .ldr import exposure_order as exposure_order
 from .ldr import exposure_values as exposure_values
@@ -37,6 +43,12 @@ __all__ = [
     "HDR_EXTENSIONS",
     "LDR_EXTENSIONS",
     "RAW_EXTENSIONS",
+    "WRITE_EXTENSIONS",
+    "HDR_WRITE_EXTENSIONS",
+    "LDR_WRITE_EXTENSIONS",
+    "LINEAR_WRITE_EXTENSIONS",
+    "DISPLAY_WRITE_EXTENSIONS",
+    "TIFF_EXTENSIONS",
     "kind_of",
     "read_exr",
     "read_exr_header",

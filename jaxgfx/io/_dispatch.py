@@ -12,7 +12,7 @@ from PIL import Image
 from ._common import as_image_array, existing_file, output_path
 from .exr import read_exr, write_exr
 from .hdr_rgbe import read_hdr, write_hdr
-from .ldr import read_image, write_png
+from .ldr import TIFF_EXTENSIONS, read_image, write_png
 from .raw import read_raw_linear_rgb
 
 __all__ = [
@@ -24,6 +24,11 @@ __all__ = [
     "LDR_EXTENSIONS",
     "HDR_EXTENSIONS",
     "WRITE_EXTENSIONS",
+    "HDR_WRITE_EXTENSIONS",
+    "LDR_WRITE_EXTENSIONS",
+    "LINEAR_WRITE_EXTENSIONS",
+    "DISPLAY_WRITE_EXTENSIONS",
+    "TIFF_EXTENSIONS",
 ]
 
 RAW_EXTENSIONS = frozenset(
@@ -52,12 +57,20 @@ RAW_EXTENSIONS = frozenset(
         ".raw",
     }
 )
-LDR_EXTENSIONS = frozenset({".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"})
-_HDR_EXTENSIONS = frozenset({".hdr", ".pic", ".rgbe"})
-HDR_EXTENSIONS = frozenset({".exr"}) | _HDR_EXTENSIONS
-"""Radiance files: OpenEXR and Radiance RGBE."""
-WRITE_EXTENSIONS = (".exr", ".hdr", ".pic", ".rgbe", ".png", ".jpg", ".jpeg", ".tif", ".tiff")
+HDR_WRITE_EXTENSIONS = (".exr", ".hdr", ".pic", ".rgbe")
+"""Radiance files :func:`write_any` writes (linear float): OpenEXR and Radiance RGBE."""
+LDR_WRITE_EXTENSIONS = (".png", ".jpg", ".jpeg", *TIFF_EXTENSIONS)
+"""Display-referred images :func:`write_any` writes (8/16-bit code values; TIFF also float)."""
+WRITE_EXTENSIONS = HDR_WRITE_EXTENSIONS + LDR_WRITE_EXTENSIONS
 """What :func:`write_any` can write (``.bmp`` and camera raws are read-only here)."""
+LINEAR_WRITE_EXTENSIONS = HDR_WRITE_EXTENSIONS + TIFF_EXTENSIONS
+"""Written extensions that can hold linear radiance (float): the radiance files and TIFF."""
+DISPLAY_WRITE_EXTENSIONS = tuple(e for e in LDR_WRITE_EXTENSIONS if e not in TIFF_EXTENSIONS)
+"""Written extensions that hold only display-encoded integer code values (``.png``, JPEG)."""
+LDR_EXTENSIONS = frozenset(LDR_WRITE_EXTENSIONS) | {".bmp"}
+_HDR_EXTENSIONS = frozenset(HDR_WRITE_EXTENSIONS) - {".exr"}
+HDR_EXTENSIONS = frozenset(HDR_WRITE_EXTENSIONS)
+"""Radiance files: OpenEXR and Radiance RGBE."""
 
 FILE_KINDS = {
     "raw": RAW_EXTENSIONS,
@@ -137,7 +150,7 @@ def write_any(path, image) -> None:
         Image.fromarray(np.ascontiguousarray(arr.astype(np.uint8).squeeze())).save(
             p, format="JPEG", quality=95
         )
-    elif ext in (".tif", ".tiff"):
+    elif ext in TIFF_EXTENSIONS:
         if np.issubdtype(arr.dtype, np.floating):
             arr = arr.astype(np.float32)
         tifffile.imwrite(p, np.ascontiguousarray(arr), photometric=_photometric(arr))

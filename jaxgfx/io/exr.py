@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 import OpenEXR
 
+from jaxgfx._checks import check_choice
+
 from ._common import as_image_array, existing_file, output_path
 
 __all__ = ["read_exr", "read_exr_header", "write_exr", "EXR_COMPRESSIONS"]
@@ -221,9 +223,7 @@ def write_exr(path, image, *, half=False, channels=None, compression="zip", head
     if len(set(names)) != c:
         raise ValueError(f"channels: names must be unique, got {names}")
     if not isinstance(compression, str) or compression.lower() not in EXR_COMPRESSIONS:
-        raise ValueError(
-            f"compression: expected one of {sorted(EXR_COMPRESSIONS)}, got {compression!r}"
-        )
+        check_choice(compression, "compression", sorted(EXR_COMPRESSIONS))  # (case-insensitive)
     extra = {} if header is None else dict(header)
     clash = set(extra) & _STANDARD_ATTRIBUTES
     if clash:

@@ -31,7 +31,8 @@ __all__ = [
     "exposure_order",
 ]
 
-_TIFF_EXT = {".tif", ".tiff"}
+TIFF_EXTENSIONS = (".tif", ".tiff")
+"""TIFF files (read and written with ``tifffile``; may hold integer or float samples)."""
 _EXIF_IFD = 0x8769
 _EXPOSURE_TIME = 0x829A
 
@@ -75,7 +76,7 @@ def read_image(path, *, as_float: bool = False) -> np.ndarray:
     and ``ValueError`` naming the file for an unreadable, corrupt or truncated one.
     """
     p = existing_file(path)
-    if p.suffix.lower() in _TIFF_EXT:
+    if p.suffix.lower() in TIFF_EXTENSIONS:
         try:
             img = tifffile.imread(p)
         except (tifffile.TiffFileError, OSError, ValueError, IndexError) as e:
@@ -251,7 +252,7 @@ def exif_exposure_time(path) -> float | None:
     """
     p = existing_file(path)
     try:
-        if p.suffix.lower() in _TIFF_EXT:
+        if p.suffix.lower() in TIFF_EXTENSIONS:
             with tifffile.TiffFile(p) as tif:
                 tags = tif.pages[0].tags
                 if _EXPOSURE_TIME in tags:
@@ -274,7 +275,7 @@ def _exif_aperture_iso(path) -> tuple[float | None, float | None]:
     """EXIF FNumber (0x829D) and ISO (0x8827) of a Pillow-readable image (``None``: absent or
     unreadable; TIFFs: not read here)."""
     p = existing_file(path)
-    if p.suffix.lower() in _TIFF_EXT:
+    if p.suffix.lower() in TIFF_EXTENSIONS:
         return None, None
     try:
         with Image.open(p) as im:

@@ -38,6 +38,8 @@ import socket
 import tempfile
 import threading
 
+from jaxgfx.io import WRITE_EXTENSIONS
+
 __all__ = [
     "StagedFiles",
     "StagedDir",
@@ -49,10 +51,8 @@ __all__ = [
     "remove_stale_staging",
 ]
 
-# format families by extension, and how many channels each can hold (None: any 1..4)
-HDR_EXTENSIONS = (".exr", ".hdr", ".pic", ".rgbe")
-LDR_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tif", ".tiff")
-WRITABLE_EXTENSIONS = HDR_EXTENSIONS + LDR_EXTENSIONS
+# what can be written, by extension: jaxgfx.io owns the table
+WRITABLE_EXTENSIONS = WRITE_EXTENSIONS
 
 
 class OutputExistsError(FileExistsError):

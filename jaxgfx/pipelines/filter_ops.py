@@ -14,6 +14,7 @@ from collections.abc import Callable
 import numpy as np
 
 from jaxgfx._checks import check_choice
+from jaxgfx.io import LDR_WRITE_EXTENSIONS
 
 __all__ = [
     "FILTER_OPS",
@@ -257,7 +258,7 @@ def apply_filter(image, op: str, **params):
     return np.asarray(FILTER_OPS[op].fn(image, **kwargs))
 
 
-_DISPLAY_EXT = (".png", ".jpg", ".jpeg", ".tif", ".tiff")
+_DISPLAY_EXT = LDR_WRITE_EXTENSIONS  # display formats: clipped to [0, 1]
 
 
 @dataclasses.dataclass(frozen=True)

@@ -16,11 +16,12 @@ import time
 
 import numpy as np
 
+from jaxgfx.io import LDR_WRITE_EXTENSIONS
 from jaxgfx.pipelines._output import StagedFiles, check_output_extension
 
 __all__ = ["FuseJob", "run_fuse", "FUSE_PARAMETERS"]
 
-_DISPLAY_EXT = (".png", ".jpg", ".jpeg", ".tif", ".tiff")
+_DISPLAY_EXT = LDR_WRITE_EXTENSIONS
 
 FUSE_PARAMETERS = {
     "contrast_weight": "exponent of the contrast measure (|Laplacian|), >= 0",
@@ -34,6 +35,7 @@ FUSE_PARAMETERS = {
 def _expand_inputs(inputs) -> list[str]:
     from jaxgfx.io import LDR_EXTENSIONS
 
+    known = " ".join(sorted(LDR_EXTENSIONS))
     if isinstance(inputs, (str, os.PathLike)):
         inputs = [inputs]
     files: list[str] = []
@@ -46,16 +48,14 @@ def _expand_inputs(inputs) -> list[str]:
                 if os.path.splitext(f)[1].lower() in LDR_EXTENSIONS and not f.startswith(".")
             )
             if not found:
-                raise ValueError(
-                    f"inputs: directory {item!r} holds no LDR images ({' '.join(LDR_EXTENSIONS)})"
-                )
+                raise ValueError(f"inputs: directory {item!r} holds no LDR images ({known})")
             files.extend(found)
         elif os.path.isfile(item):
             ext = os.path.splitext(item)[1].lower()
             if ext not in LDR_EXTENSIONS:
                 raise ValueError(
                     f"inputs: cannot fuse {item!r}: expected LDR images "
-                    f"({' '.join(LDR_EXTENSIONS)}), got {ext or '(no extension)'!r} (exposure "
+                    f"({known}), got {ext or '(no extension)'!r} (exposure "
                     "fusion blends display-referred frames; OUTPUT comes last)"
                 )
             files.append(item)

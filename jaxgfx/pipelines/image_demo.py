@@ -1,17 +1,20 @@
 """Image-processing demo: a procedural test image through the lecture-1 operations.
 
-Writes PNGs and a histogram plot to ``out_dir`` and returns a dict of output paths and
-timings. Used by ``make demo`` (``experiments/demo.py``).
+``run_image_demo(ImageDemoJob(out, size=...))`` writes PNGs and a histogram plot to ``out``
+and returns a dict of output paths and timings. Used by ``make demo`` (``experiments/demo.py``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 
 import numpy as np
 
-__all__ = ["procedural_image", "run_image_demo"]
+from jaxgfx._checks import check_positive_int
+
+__all__ = ["procedural_image", "ImageDemoJob", "run_image_demo"]
 
 
 def procedural_image(height: int = 256, width: int = 256, *, seed: int = 0) -> np.ndarray:
@@ -38,7 +41,27 @@ def procedural_image(height: int = 256, width: int = 256, *, seed: int = 0) -> n
     return np.clip(img, 0, 1).astype(np.float32)
 
 
-def run_image_demo(out_dir: str, *, size: int = 256) -> dict:
+@dataclasses.dataclass(frozen=True)
+class ImageDemoJob:
+    """One run of the image demo: ``out`` (the folder the PNGs and ``histograms.png`` are
+    written to, created if needed; existing files of the same names are replaced) and ``size``
+    (side of the square procedural test image, pixels)."""
+
+    out: str = "out/image"
+    size: int = 256
+
+    def validate(self):
+        check_positive_int(self.size, "size")
+
+
+def run_image_demo(job: ImageDemoJob) -> dict:
+    """Run the demo ``job``. Returns ``{"paths": {name: path}, "seconds": {name: float}}``
+    (one PNG per operation, plus ``"histograms"``)."""
+    if not isinstance(job, ImageDemoJob):
+        raise TypeError(f"job: expected an ImageDemoJob, got {type(job).__name__}")
+    job.validate()
+    out_dir, size = os.fspath(job.out), job.size
+
     import jax
     import matplotlib
 

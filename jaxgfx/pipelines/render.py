@@ -23,12 +23,14 @@ import time
 import numpy as np
 
 from jaxgfx._checks import check_choice
+from jaxgfx.io import DISPLAY_WRITE_EXTENSIONS, LINEAR_WRITE_EXTENSIONS
 from jaxgfx.pipelines._output import StagedFiles, check_output_extension
 
 __all__ = ["RenderJob", "run_render", "render_output_paths"]
 
-_LINEAR_EXT = (".exr", ".hdr", ".pic", ".rgbe", ".tif", ".tiff")
-_DISPLAY_EXT = (".png", ".jpg", ".jpeg")
+# linear outputs hold the radiance (float); display outputs the sRGB image (jaxgfx.io's table)
+_LINEAR_EXT = LINEAR_WRITE_EXTENSIONS
+_DISPLAY_EXT = DISPLAY_WRITE_EXTENSIONS
 
 
 @dataclasses.dataclass(frozen=True)

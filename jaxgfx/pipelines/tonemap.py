@@ -18,12 +18,13 @@ import time
 import numpy as np
 
 from jaxgfx._checks import check_choice
-from jaxgfx.pipelines._output import HDR_EXTENSIONS, StagedFiles, check_output_extension
+from jaxgfx.io import HDR_EXTENSIONS, LDR_WRITE_EXTENSIONS, TIFF_EXTENSIONS
+from jaxgfx.pipelines._output import StagedFiles, check_output_extension
 
 __all__ = ["TonemapJob", "run_tonemap", "tonemap_image", "prepare_radiance", "operator_help"]
 
-_DISPLAY_EXT = (".png", ".jpg", ".jpeg", ".tif", ".tiff")
-_INPUT_EXT = HDR_EXTENSIONS
+_DISPLAY_EXT = LDR_WRITE_EXTENSIONS
+_INPUT_EXT = tuple(sorted(HDR_EXTENSIONS))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -123,7 +124,7 @@ def to_display_file(image: np.ndarray, ext: str) -> np.ndarray:
     """The array written for a display image: 16-bit integer sRGB code values for TIFF
     (viewers read float TIFFs as linear light, which would show the sRGB-encoded values
     twice encoded); the float image for PNG/JPEG (quantised to 8 bits by the writers)."""
-    if ext in (".tif", ".tiff"):
+    if ext in TIFF_EXTENSIONS:
         return np.round(np.clip(image, 0.0, 1.0) * 65535.0).astype(np.uint16)
     return image
 

@@ -26,7 +26,7 @@ Both use the same estimator: uniform (stratified) samples of the circle paramete
 ``x(φ; θ)`` itself attached, so that ``b = Σ stop_gradient(ΔL |∂x/∂φ| / pdf · n) · x(φ; θ)`` has
 ``∂b/∂θ`` equal to the boundary integral. :class:`EdgeSampling` (composed by
 :func:`jaxgfx.render.render`) adds ``b`` to the image with
-:func:`~jaxgfx.render.integrators._common.replace_grad` (value of the image, derivative of
+:func:`~jaxgfx.render.integrators.replace_grad` (value of the image, derivative of
 ``image + b``): images are bit-identical, and a forward render never computes ``b``.
 See docs/render_gradients.md ("Visibility") for the derivation, measurements and what remains
 biased. Package-internal except through ``render(..., visibility="edge")``.
@@ -45,10 +45,12 @@ from jaxgfx._math import safe_div, safe_normalize, safe_sqrt, sum_last
 from jaxgfx.render.camera import PerspectiveCamera, look_at_basis
 from jaxgfx.render.estimator import pass_scan
 from jaxgfx.render.film import BoxFilter
+from jaxgfx.render.geometry.frame import to_local
 from jaxgfx.render.geometry.mesh import TriangleMesh
+from jaxgfx.render.geometry.ray import spawn_ray
 from jaxgfx.render.geometry.rectangle import Rectangles
 from jaxgfx.render.geometry.sphere import Spheres
-from jaxgfx.render.integrators import _common as C
+from jaxgfx.render.integrators import dispatch, hit_material, intersect, shading_frame
 from jaxgfx.render.integrators.path import DirectIntegrator, PathIntegrator
 from jaxgfx.render.sampler import uniform
 
@@ -373,9 +375,9 @@ def _first_vertex(scene_sg, key, dtype):
     px = jnp.stack([jj, ii], -1).astype(dtype) + u[..., :2]
     o, d = scene_sg.camera.generate_ray(px)
     o, d = o.astype(dtype), d.astype(dtype)
-    hit = C.intersect(scene_sg, o, d)
-    mat = C.hit_material(scene_sg, hit)
-    frame, ng, wo = C.shading_frame(scene_sg, hit, d, mat)
+    hit = intersect(scene_sg, o, d)
+    mat = hit_material(scene_sg, hit)
+    frame, ng, wo = shading_frame(scene_sg, hit, d, mat)
     return u[..., 2:], hit, mat, frame, ng, wo
 
 
@@ -389,11 +391,9 @@ def _jump(scene_sg, key, integrator, vertex, w_minus, w_plus):
     fs, os_, ds = [], [], []
     for wi in (w_minus, w_plus):
         fs.append(
-            C.dispatch(
-                scene_sg, mat, lambda mm, wi=wi: mm.eval(wo, C.to_local(frame, wi)), uv=hit.uv
-            )
+            dispatch(scene_sg, mat, lambda mm, wi=wi: mm.eval(wo, to_local(frame, wi)), uv=hit.uv)
         )
-        so, sd = C.spawn_ray(hit.p, ng, wi)
+        so, sd = spawn_ray(hit.p, ng, wi)
         os_.append(so)
         ds.append(sd)
     li = sub(scene_sg, jnp.concatenate(os_), jnp.concatenate(ds), jnp.concatenate([uu, uu]))

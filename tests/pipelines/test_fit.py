@@ -1,32 +1,17 @@
 """The fit job (jaxgfx/pipelines/fit/): clear errors before rendering; end-to-end (slow)."""
 
 import json
-import os
 
 import numpy as np
 import pytest
 
-from jaxgfx.config import load_config
-from jaxgfx.pipelines.fit import FitConfig, FitJob, apply_camera, prepare_fit, run_fit
+from jaxgfx.pipelines.fit import FitJob, apply_camera, prepare_fit, run_fit
 
-SCENE = os.path.join(os.path.dirname(__file__), "..", "..", "configs", "scenes", "inverse.yaml")
-
-
-def _cfg(**over):
-    base = {
-        "scene": SCENE,
-        "target": {"synthetic": {"materials.metal.alpha": 0.15}, "spp": 16},
-        "params": {"materials.metal.alpha": {"init": 0.5, "min": 0.01, "max": 1.0}},
-        "render": {"spp": 4, "width": 8, "height": 8},
-        "optimizer": {"steps": 3},
-        "progress": False,
-    }
-    base.update(over)
-    return load_config(FitConfig, base)
+from ._helpers import SCENE, fit_cfg
 
 
 def test_prepare_accepts_a_valid_config():
-    prep = prepare_fit(_cfg())
+    prep = prepare_fit(fit_cfg())
     assert prep.paths == ["materials.metal.alpha"]
     np.testing.assert_allclose(prep.init["materials.metal.alpha"], 0.5)
     assert prep.scene.width == 8 and not prep.ldr
@@ -58,24 +43,24 @@ def test_prepare_accepts_a_valid_config():
 )
 def test_bad_configs_fail_before_rendering(over, match):
     with pytest.raises(ValueError, match=match):
-        prepare_fit(_cfg(**over))
+        prepare_fit(fit_cfg(**over))
 
 
 def test_target_file_size_mismatch_and_missing(tmp_path):
     np.save(tmp_path / "t.npy", np.zeros((10, 12, 3), np.float32))
     with pytest.raises(ValueError, match="12x10.*differs.*8x8"):
-        prepare_fit(_cfg(target=str(tmp_path / "t.npy")))
+        prepare_fit(fit_cfg(target=str(tmp_path / "t.npy")))
     with pytest.raises(FileNotFoundError, match="target"):
-        prepare_fit(_cfg(target=str(tmp_path / "nope.exr")))
+        prepare_fit(fit_cfg(target=str(tmp_path / "nope.exr")))
 
 
 def test_config_field_errors():
     with pytest.raises(ValueError, match="camera.response.model"):
-        _cfg(camera={"response": {"model": "cubic"}})
+        fit_cfg(camera={"response": {"model": "cubic"}})
     with pytest.raises(ValueError, match="render.estimator"):
-        _cfg(render={"estimator": "both"})
+        fit_cfg(render={"estimator": "both"})
     with pytest.raises(ValueError, match="unknown config key"):
-        _cfg(optimiser={"steps": 3})
+        fit_cfg(optimiser={"steps": 3})
 
 
 def test_apply_camera_matches_closed_forms():
@@ -91,7 +76,7 @@ def test_apply_camera_matches_closed_forms():
 
 @pytest.mark.slow
 def test_run_fit_end_to_end(tmp_path):
-    out = run_fit(FitJob(_cfg(optimizer={"steps": 4}), str(tmp_path)))
+    out = run_fit(FitJob(fit_cfg(optimizer={"steps": 4}), str(tmp_path)))
     for name in ("result.json", "curves.png", "before.png", "after.png", "target.png"):
         assert (tmp_path / name).exists(), name
     with open(tmp_path / "result.json") as f:

@@ -2,8 +2,8 @@
 photos, texture priors. Default tests never compile a fit step (the loss is called on tiny
 arrays or traced with jax.eval_shape); end-to-end fits are slow-marked."""
 
+import functools
 import json
-import os
 
 import jax
 import jax.numpy as jnp
@@ -11,27 +11,20 @@ import numpy as np
 import pytest
 
 from jaxgfx import hdr
-from jaxgfx.config import load_config
-from jaxgfx.pipelines.fit import FitConfig, level_table, prepare_fit
+from jaxgfx.pipelines.fit import level_table, prepare_fit
 from jaxgfx.pipelines.fit.camera import code_levels, fit_level_table, free_init, free_response
 from jaxgfx.pipelines.fit.loss import censored_linear_loss, photo_gains, texture_prior
 
-SCENE = os.path.join(os.path.dirname(__file__), "..", "..", "configs", "scenes", "inverse.yaml")
+from ._helpers import fit_cfg
 
-
-def _cfg(**over):
-    base = {
-        "scene": SCENE,
-        "target": {"synthetic": {"materials.metal.alpha": 0.15}, "spp": 16,
-                   "camera": {"response": "camera", "exposures": [0.5, 1.0, 2.0]}},
-        "params": {"materials.metal.alpha": {"init": 0.5, "min": 0.01, "max": 1.0}},
-        "camera": {"response": {"model": "srgb"}},
-        "render": {"spp": 4, "width": 8, "height": 8},
-        "optimizer": {"steps": 3},
-        "progress": False,
-    }
-    base.update(over)
-    return load_config(FitConfig, base)
+# the shared small fit, from a bracket of three synthetic photos through a camera curve,
+# fitted through sRGB
+CAMERA_FIT = {
+    "target": {"synthetic": {"materials.metal.alpha": 0.15}, "spp": 16,
+               "camera": {"response": "camera", "exposures": [0.5, 1.0, 2.0]}},
+    "camera": {"response": {"model": "srgb"}},
+}  # fmt: skip
+_cfg = functools.partial(fit_cfg, CAMERA_FIT)
 
 
 # ------------------------------------------------------------------ response files (hdr)

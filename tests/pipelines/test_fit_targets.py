@@ -11,22 +11,19 @@ from jaxgfx.config import load_config
 from jaxgfx.io import write_exr, write_png
 from jaxgfx.pipelines.fit import FitConfig, FitJob, prepare_fit, run_fit
 
-SCENE = os.path.join(os.path.dirname(__file__), "..", "..", "configs", "scenes", "inverse.yaml")
+from ._helpers import SCENE, fit_cfg
+
 N = 8
+# the shared small fit from a photo file: its gamma curve and exposure fitted, 2 steps
+PHOTO_FIT = {
+    "render": {"spp": 4, "width": N, "height": N},
+    "optimizer": {"steps": 2},
+    "camera": {"response": {"model": "gamma", "fit": True}, "exposure": {"fit": True}},
+}
 
 
 def _cfg(target, **over):
-    base = {
-        "scene": SCENE,
-        "target": str(target),
-        "params": {"materials.metal.alpha": {"init": 0.5, "min": 0.01, "max": 1.0}},
-        "render": {"spp": 4, "width": N, "height": N},
-        "optimizer": {"steps": 2},
-        "camera": {"response": {"model": "gamma", "fit": True}, "exposure": {"fit": True}},
-        "progress": False,
-    }
-    base.update(over)
-    return load_config(FitConfig, base)
+    return fit_cfg(PHOTO_FIT, target=str(target), **over)
 
 
 def _codes(bits=8, channels=3, seed=0):

@@ -104,3 +104,35 @@ def test_filter_defaults_are_the_library_functions_defaults():
                 assert op.defaults[k] == d, (name, k)
                 checked += 1
     assert checked >= 3
+
+
+def test_every_run_takes_one_job():
+    """Every ``jaxgfx.pipelines`` entry point ``run_*`` takes one argument, a ``*Job``
+    dataclass (issue 21: ``run_image_demo(out_dir, *, size)`` was the exception)."""
+    import dataclasses
+    import typing
+
+    import jaxgfx.pipelines as P
+
+    runs = {}
+    for m in pkgutil.walk_packages(P.__path__, P.__name__ + "."):
+        mod = importlib.import_module(m.name)
+        for name, fn in vars(mod).items():
+            if name.startswith("run_") and inspect.isfunction(fn) and fn.__module__ == m.name:
+                runs[name] = fn
+    assert {"run_calibrate", "run_fit", "run_render", "run_image_demo"} <= set(runs)
+    for name, fn in runs.items():
+        assert list(inspect.signature(fn).parameters) == ["job"], name
+        job = typing.get_type_hints(fn)["job"]
+        assert dataclasses.is_dataclass(job) and job.__name__.endswith("Job"), name
+
+
+def test_image_demo_job(tmp_path):
+    import pytest
+
+    from jaxgfx.pipelines.image_demo import ImageDemoJob, run_image_demo
+
+    with pytest.raises(TypeError, match="job: expected an ImageDemoJob"):
+        run_image_demo(str(tmp_path))
+    with pytest.raises(ValueError, match="size: expected a positive integer"):
+        run_image_demo(ImageDemoJob(str(tmp_path), size=0))

@@ -14,13 +14,13 @@ estimated from the keys.
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
+from jaxgfx.testing import ad_fd_per_key
 
 ENV = {"type": "constant", "radiance": 0.3}  # copied into each scene: tests edit their descriptions
 
@@ -209,22 +209,8 @@ def apply(scene, params, x):
     return scene
 
 
-def _loss(scene, bases, x, key, opts):
+def _loss(x, key, scene, bases, opts):
     return jnp.mean(render(apply(scene, bases, x), key, **dict(opts)))
-
-
-@eqx.filter_jit
-def _value_and_grads(scene, bases, x, keys, opts):
-    """Per key: image mean at ``x`` and its reverse-mode gradient w.r.t. ``x`` (P,)."""
-    vg = jax.value_and_grad(lambda x, k: _loss(scene, bases, x, k, opts))
-    return jax.vmap(lambda k: vg(x, k))(keys)
-
-
-@eqx.filter_jit
-def _values(scene, bases, xs, keys, opts):
-    """Image means (N, K) at every row of ``xs`` (N, P) for every key: forward renders only."""
-    per_key = jax.vmap(lambda x, k: _loss(scene, bases, x, k, opts), in_axes=(None, 0))
-    return jax.lax.map(lambda x: per_key(x, keys), xs)
 
 
 def ad_fd(
@@ -233,10 +219,8 @@ def ad_fd(
     """Per key: image mean, AD gradient (reverse mode) and central FD w.r.t. each scale.
 
     Returns ``(values (K,), ad (K, P), fd (K, P))``. ``bases``: list of ``(path, base)``.
-    Two compiled programs per scene structure: value and gradient at ``x = 1`` (vmapped over
-    the keys), and the forward renders at the ``2P`` perturbed ``x`` of the central differences
-    (a ``lax.map`` over the perturbations of a vmap over the keys; a forward render costs about
-    a third of a value-and-gradient, and compiles in a fraction of its time).
+    :func:`jaxgfx.testing.ad_fd_per_key` at ``x = 1``: two compiled programs per scene
+    structure (value and gradient vmapped over the keys; the ``2P`` perturbed forward renders).
     The keys are vmapped: one program over all keys' rays (8² images are too small to fill a
     kernel alone). It is as fast per key as one key at a time since ``fusion_barrier`` stays a
     barrier under ``vmap`` (before, the batched program was 7-31x slower per key; the glossy
@@ -250,16 +234,8 @@ def ad_fd(
         ("strategy", strategy),
         ("sampling", sampling),
     )
-    P = len(bases)
-    x0 = np.ones((P,), np.float32)
-    vals, grads = _value_and_grads(scene, bases, jnp.asarray(x0), keys, opts)
-    e = np.float32(h) * np.eye(P, dtype=np.float32)
-    xs = np.concatenate([x0 + e, x0 - e])  # (2P, P): +h rows, then -h rows
-    v = np.asarray(_values(scene, bases, jnp.asarray(xs), keys, opts), np.float64)
-    # the step actually taken in float32
-    step = float(np.float32(1 + h) - np.float32(1 - h))
-    fd = (v[:P] - v[P:]) / step  # (P, K)
-    return vals, grads, fd.T
+    x0 = jnp.ones((len(bases),), jnp.float32)
+    return ad_fd_per_key(_loss, x0, keys, h, args=(scene, bases, opts))
 
 
 def summary(vals, ad, fd):

@@ -14,6 +14,7 @@ import pytest
 from jaxgfx.render.emitters import DirectionalLight, SpotLight
 from jaxgfx.render.integrators.path import path_radiance
 from jaxgfx.render.scene import load_scene
+from jaxgfx.testing import check_grads_fd
 from tests.render._scenes import camera, rectangle
 
 RHO = 0.6
@@ -125,17 +126,13 @@ def _dir_total(scene, a, k, o, d, u):
 
 
 def _check_fd(fn, x0, h=1e-5):
-    """Gradient of ``fn(*x)`` (jitted, one compile) against central differences, float64."""
-    x0 = [jnp.asarray(x, jnp.float64) for x in x0]
-    vg = jax.jit(jax.value_and_grad(fn, argnums=tuple(range(len(x0)))))
-    f = jax.jit(fn)
-    _, g = vg(*x0)
-    for i in range(len(x0)):
-        xp = [x + h * (j == i) for j, x in enumerate(x0)]
-        xm = [x - h * (j == i) for j, x in enumerate(x0)]
-        fd = (f(*xp) - f(*xm)) / (2 * h)
-        assert np.isfinite(g[i])
-        np.testing.assert_allclose(g[i], fd, rtol=1e-6, atol=1e-12)
+    """Gradient of ``fn(*x)`` against central differences in float64, jitted
+    (:func:`jaxgfx.testing.check_grads_fd`); returns the gradient."""
+    x0 = jnp.asarray(x0, jnp.float64)
+    ok, g, fd = check_grads_fd(lambda x: fn(*x), x0, eps=h, rtol=1e-6, atol=1e-12, jit=True)
+    assert np.all(np.isfinite(g))
+    np.testing.assert_allclose(g, fd, rtol=1e-6, atol=1e-12)
+    assert ok
     return g
 
 

@@ -25,6 +25,7 @@ from jaxgfx.render.geometry.sdf import SDFSphere
 from jaxgfx.render.geometry.sphere_tracing import SDFShape
 from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
+from jaxgfx.testing import ad_fd_per_key, check_grads_fd
 
 from ._scenes import camera, point_light, sphere, textured_plane_scene
 
@@ -138,8 +139,10 @@ def _img_and_grad(scene, path, value, w, key=KEY):
     return img, g
 
 
-def _weighted(img, w):
-    return float(np.sum(np.asarray(img, np.float64).mean((0, 1)) * np.asarray(w)))
+def _direct_loss(value, key, scene, path, w):
+    """``sum_c w_c mean(image_c)`` of the ``direct`` image (4 spp), ``path`` set to ``value``."""
+    img = render(scene.replace(path, value), key, spp=4, integrator="direct")
+    return jnp.sum(jnp.mean(img, (0, 1)) * w)
 
 
 @pytest.mark.slow  # issue 9: ~15 s of a loaded 2-core run; out of make test
@@ -154,15 +157,14 @@ def test_constant_texture_renders_like_plain_material_and_texel_gradient():
     np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-5, atol=1e-6)
 
     # texel gradient: the image is linear in the texels (direct light, diffuse), so central
-    # differences with the same key are exact up to float32 rounding
+    # differences with the same key are exact up to float32 rounding (every texel)
     x0 = jnp.asarray(TEX_IMG, jnp.float32)
-    _, g = _img_and_grad(scene, path, x0, w)
-    assert np.all(np.isfinite(g)) and float(jnp.max(jnp.abs(g))) > 1e-3
-    h = 0.05
-    for idx in [(0, 0, 0), (0, 1, 2), (1, 0, 1), (1, 1, 0)]:
-        hi = _weighted(_img_and_grad(scene, path, x0.at[idx].add(h), w)[0], w)
-        lo = _weighted(_img_and_grad(scene, path, x0.at[idx].add(-h), w)[0], w)
-        np.testing.assert_allclose(g[idx], (hi - lo) / (2 * h), rtol=2e-3, atol=1e-5)
+    ok, g, fd = check_grads_fd(
+        lambda x: _direct_loss(x, KEY, scene, path, w), x0, eps=0.05, rtol=2e-3, atol=1e-5, jit=True
+    )
+    assert np.all(np.isfinite(g)) and float(np.max(np.abs(g))) > 1e-3
+    np.testing.assert_allclose(g, fd, rtol=2e-3, atol=1e-5)
+    assert ok
     assert scene.get(path).shape == (2, 2, 3)
 
 
@@ -250,14 +252,13 @@ def test_sdf_sphere_renders_like_analytic_sphere():
     assert close.mean() > 0.95
 
 
-def _radius_grad_fd(kind, h=0.01, key=KEY):
+def _radius_grad_fd(kind, keys, h=0.01):
+    """Per key: AD and central-difference d(weighted image mean)/d radius at radius 1."""
     # zoomed in: every pixel sees the sphere, so there is no silhouette (whose motion AD of a
     # path tracer without edge sampling does not see) and d mean / d radius is smooth
     s = _sphere_scene(kind, origin=(0, 0, 2.2), fov=20)
-    _, g = _img_and_grad(s, _radius(kind), jnp.float32(1.0), W3, key)
-    hi = _weighted(_img_and_grad(s, _radius(kind), jnp.float32(1.0 + h), W3, key)[0], W3)
-    lo = _weighted(_img_and_grad(s, _radius(kind), jnp.float32(1.0 - h), W3, key)[0], W3)
-    return float(g), (hi - lo) / (2 * h)
+    _, g, fd = ad_fd_per_key(_direct_loss, jnp.float32(1.0), keys, h, args=(s, _radius(kind), W3))
+    return g, fd
 
 
 # issue 9: ~10 s of a loaded 2-core default run; the SDF hit gradients stay in the default run
@@ -274,8 +275,7 @@ def test_sdf_radius_gradient_matches_finite_differences():
     errors of the paired difference over the keys plus 0.5 % of |FD| for the central
     difference's O(h^2) error (measured 0.3 % at h = 0.01 when AD and FD shared directions).
     Measured: AD 0.06240, FD 0.06274, difference -0.00034 +- 0.00060 (0.6 se)."""
-    pairs = np.array([_radius_grad_fd("sdf", key=jax.random.key(100 + i)) for i in range(8)])
-    g, fd = pairs[:, 0], pairs[:, 1]
+    g, fd = _radius_grad_fd("sdf", jnp.stack([jax.random.key(100 + i) for i in range(8)]))
     assert np.all(np.isfinite(g)) and abs(g.mean()) > 1e-2
     d = g - fd
     se = d.std(ddof=1) / np.sqrt(len(d))
@@ -285,8 +285,8 @@ def test_sdf_radius_gradient_matches_finite_differences():
 
 @pytest.mark.slow
 def test_sdf_radius_gradient_matches_analytic_sphere():
-    g_sdf, _ = _radius_grad_fd("sdf")
-    g_ana, fd_ana = _radius_grad_fd("analytic")
+    g_sdf, _ = _radius_grad_fd("sdf", jnp.stack([KEY]))
+    g_ana, fd_ana = _radius_grad_fd("analytic", jnp.stack([KEY]))
     np.testing.assert_allclose(g_ana, fd_ana, rtol=0.05)
     np.testing.assert_allclose(g_sdf, g_ana, rtol=0.05)
 
@@ -302,7 +302,7 @@ def test_sdf_scene_errors():
         )
     with pytest.raises(ValueError, match=r"shapes\[0\].max_steps"):
         load_scene(base | {"shapes": [sdf | {"max_steps": 0}]})
-    with pytest.raises(ValueError, match=r"shapes\[0\].expr: unknown op"):
+    with pytest.raises(ValueError, match=r"shapes\[0\].expr.op: expected one of"):
         load_scene(base | {"shapes": [{"type": "sdf", "expr": {"op": "blob"}}]})
     with pytest.raises(ValueError, match=r"shapes\[0\]: unknown key"):
         load_scene(base | {"shapes": [sdf | {"steps": 3}]})

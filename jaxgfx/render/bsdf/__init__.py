@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import inspect
 
+from jaxgfx._checks import check_choice
 from jaxgfx.render.bsdf._base import BSDF as BSDF
 from jaxgfx.render.bsdf._base import BSDFSample as BSDFSample
 from jaxgfx.render.bsdf._base import rgb_param as rgb_param
@@ -68,9 +69,7 @@ def make_bsdf(desc: dict) -> BSDF:
         raise TypeError(f"desc: expected a dict, got {type(desc).__name__}")
     if "type" not in desc:
         raise ValueError("desc: missing key 'type'")
-    kind = desc["type"]
-    if kind not in BSDF_TYPES:
-        raise ValueError(f"desc['type']: expected one of {tuple(BSDF_TYPES)}, got {kind!r}")
+    kind = check_choice(desc["type"], "desc['type']", BSDF_TYPES)
     cls = BSDF_TYPES[kind]
     params = {k: v for k, v in desc.items() if k != "type"}
     allowed = [p for p in inspect.signature(cls.__init__).parameters if p != "self"]

@@ -30,6 +30,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgfx import io
 from jaxgfx._checks import as_float_array, check_choice, check_finite
 from jaxgfx.color import LUMINANCE_WEIGHTS
 from jaxgfx.render.bsdf.texture import TEXTURE_FILTERS, TEXTURE_WRAP_MODES, Texture, lookup
@@ -48,7 +49,6 @@ __all__ = [
 
 TEXTURE_TYPES = ("bitmap", "checkerboard")
 _LUMA = LUMINANCE_WEIGHTS["rec709"]
-_LDR = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
 
 class Checkerboard(eqx.Module):
@@ -141,13 +141,11 @@ def _expect(d, where, allowed):
 
 
 def _read_bitmap(path, raw, where):
-    from jaxgfx import io
-
     try:
         img = np.asarray(io.read_any(path), np.float32)
     except (OSError, ValueError) as e:
         raise ValueError(f"{where}.file: cannot read texture {path!r}: {e}") from None
-    if os.path.splitext(path)[1].lower() in _LDR and not raw:
+    if io.kind_of(path) == "ldr" and not raw:
         from jaxgfx.color.transfer import srgb_to_linear
 
         img = np.asarray(srgb_to_linear(img), np.float32)
@@ -160,7 +158,7 @@ def texture_from_dict(d, where="texture", *, base_dir=None, channels=3):
     scalar ones (sets the default checkerboard colours' length). Errors name ``where``."""
     if not is_texture_desc(d):
         raise ValueError(f"{where}: expected a mapping with a 'type' key")
-    kind = d["type"]
+    kind = check_choice(d["type"], f"{where}.type", TEXTURE_TYPES)
     if kind == "checkerboard":
         _expect(d, where, ("type", "color0", "color1", "scale"))
         cols = []
@@ -179,29 +177,28 @@ def texture_from_dict(d, where="texture", *, base_dir=None, channels=3):
             n = max(cols[0].shape[0], cols[1].shape[0])
             cols = [jnp.broadcast_to(c, (n,)) for c in cols]
         return Checkerboard(cols[0], cols[1], float(scale))
-    if kind == "bitmap":
-        _expect(d, where, ("type", "file", "image", "wrap", "filter", "raw"))
-        wrap = d.get("wrap", "repeat")
-        filt = d.get("filter", "bilinear")
-        check_choice(wrap, f"{where}.wrap", TEXTURE_WRAP_MODES)
-        check_choice(filt, f"{where}.filter", TEXTURE_FILTERS)
-        if ("file" in d) == ("image" in d):
-            raise ValueError(f"{where}: expected exactly one of 'file' or 'image'")
-        if "file" in d:
-            path = os.fspath(d["file"])
-            if not os.path.isabs(path) and base_dir:
-                path = os.path.join(base_dir, path)
-            img = _read_bitmap(path, bool(d.get("raw", False)), where)
-        else:
-            img = np.asarray(as_float_array(d["image"], f"{where}.image"))
-        if img.ndim == 2:
-            img = img[..., None]
-        if img.ndim != 3 or img.shape[-1] not in (1, 3, 4) or min(img.shape[:2]) < 1:
-            raise ValueError(f"{where}: expected an (H, W), (H, W, 1|3|4) image, got {img.shape}")
-        img = img[..., :3]
-        check_finite(img, f"{where}.image")
-        return Texture(jnp.asarray(img), wrap=wrap, filter=filt)
-    raise ValueError(f"{where}.type: expected one of {TEXTURE_TYPES}, got {kind!r}")
+    # "bitmap"
+    _expect(d, where, ("type", "file", "image", "wrap", "filter", "raw"))
+    wrap = d.get("wrap", "repeat")
+    filt = d.get("filter", "bilinear")
+    check_choice(wrap, f"{where}.wrap", TEXTURE_WRAP_MODES)
+    check_choice(filt, f"{where}.filter", TEXTURE_FILTERS)
+    if ("file" in d) == ("image" in d):
+        raise ValueError(f"{where}: expected exactly one of 'file' or 'image'")
+    if "file" in d:
+        path = os.fspath(d["file"])
+        if not os.path.isabs(path) and base_dir:
+            path = os.path.join(base_dir, path)
+        img = _read_bitmap(path, bool(d.get("raw", False)), where)
+    else:
+        img = np.asarray(as_float_array(d["image"], f"{where}.image"))
+    if img.ndim == 2:
+        img = img[..., None]
+    if img.ndim != 3 or img.shape[-1] not in (1, 3, 4) or min(img.shape[:2]) < 1:
+        raise ValueError(f"{where}: expected an (H, W), (H, W, 1|3|4) image, got {img.shape}")
+    img = img[..., :3]
+    check_finite(img, f"{where}.image")
+    return Texture(jnp.asarray(img), wrap=wrap, filter=filt)
 
 
 def texture_min(tex) -> float:

@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from jaxgfx._checks import check_positive
+from jaxgfx._checks import check_choice, check_positive
 from jaxgfx._math import max_last, safe_div, safe_norm, safe_normalize, sum_last
 
 __all__ = [
@@ -237,9 +237,7 @@ def sdf_from_dict(spec, *, path: str = "sdf") -> SDF:
     """
     if not isinstance(spec, dict):
         raise ValueError(f"{path}: expected a dict with an 'op' key, got {type(spec).__name__}")
-    op = spec.get("op")
-    if op not in SDF_OPS:
-        raise ValueError(f"{path}: unknown op {op!r}; expected one of {tuple(SDF_OPS)}")
+    op = check_choice(spec.get("op"), f"{path}.op", SDF_OPS)
     cls, nums, kids = SDF_OPS[op]
     keys = set(spec) - {"op"}
     need = set(nums) | set(kids)

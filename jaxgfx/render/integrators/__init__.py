@@ -10,7 +10,11 @@ import dataclasses
 
 from jaxgfx._checks import check_choice
 from jaxgfx.render.integrators._common import SAMPLING as SAMPLING
+from jaxgfx.render.integrators._common import dispatch as dispatch
+from jaxgfx.render.integrators._common import hit_material as hit_material
+from jaxgfx.render.integrators._common import intersect as intersect
 from jaxgfx.render.integrators._common import replace_grad as replace_grad
+from jaxgfx.render.integrators._common import shading_frame as shading_frame
 from jaxgfx.render.integrators.aov import AOV_CHANNELS as AOV_CHANNELS
 from jaxgfx.render.integrators.aov import AOVIntegrator as AOVIntegrator
 from jaxgfx.render.integrators.aov import aov as aov
@@ -62,6 +66,10 @@ __all__ = [
     "INTEGRATORS",
     "SAMPLING",
     "replace_grad",
+    "intersect",
+    "hit_material",
+    "shading_frame",
+    "dispatch",
     "AOV_CHANNELS",
     "Integrator",
     "PathIntegrator",

@@ -6,6 +6,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from jaxgfx._checks import check_choice
 from jaxgfx._math import safe_div, safe_sqrt, sum_last, take_rows
 from jaxgfx.render.geometry import area, intersect_scene, occluded_scene, sample_area
 from jaxgfx.render.geometry.frame import frame_from_normal, to_local, to_world
@@ -39,8 +40,7 @@ samplers; biased where a sampled ray crosses a discontinuity)."""
 
 
 def check_sampling(sampling) -> None:
-    if sampling not in SAMPLING:
-        raise ValueError(f"sampling: expected one of {SAMPLING}, got {sampling!r}")
+    check_choice(sampling, "sampling", SAMPLING)
 
 
 @jax.custom_jvp
@@ -92,6 +92,7 @@ def detach_bsdf_sample(scene, mat, wo, s, uv, frame, *, lazy=False):
 
 
 def intersect(scene, o, d, *, tmax=jnp.inf):
+    """Closest hit of the rays ``o + t d`` with the scene's shapes, ``0 < t < tmax``."""
     return intersect_scene(scene.shapes, o, d, tmin=0.0, tmax=tmax)
 
 

@@ -12,6 +12,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from jaxgfx._checks import check_choice
 from jaxgfx._math import fusion_barrier, max_last, safe_div
 from jaxgfx.render.integrators import _common as C
 from jaxgfx.render.integrators import _wavefront
@@ -77,8 +78,7 @@ def path_radiance(
     of wavefront shading (:func:`~jaxgfx.render.integrators._wavefront.shade_sorted`), used
     when a pass holds at least two chunks (whole rows of the batch's last axis).
     """
-    if strategy not in STRATEGIES:
-        raise ValueError(f"strategy: expected one of {STRATEGIES}, got {strategy!r}")
+    check_choice(strategy, "strategy", STRATEGIES)
     C.check_sampling(sampling)
     detached = sampling == "detached"
     detach = jax.lax.stop_gradient if detached else _identity
@@ -219,8 +219,7 @@ def _check_chunk(chunk):
 
 
 def _check_strategy(strategy):
-    if strategy not in STRATEGIES:
-        raise ValueError(f"strategy: expected one of {STRATEGIES}, got {strategy!r}")
+    check_choice(strategy, "strategy", STRATEGIES)
 
 
 class PathIntegrator(Integrator):

@@ -8,6 +8,7 @@ from collections.abc import Mapping
 import jax
 import jax.numpy as jnp
 
+from jaxgfx._checks import check_choice
 from jaxgfx.render.bsdf import BSDF_TYPES, make_bsdf
 from jaxgfx.render.bsdf.textured import (
     Textured,
@@ -210,7 +211,7 @@ def load_scene(
         where = f"emitters[{i}]"
         if not isinstance(ed, Mapping) or "type" not in ed:
             raise ValueError(f"{where}: expected a mapping with a 'type' key")
-        kind = ed["type"]
+        kind = check_choice(ed["type"], f"{where}.type", EMITTER_TYPES)
         if kind == "point":
             expect_keys(ed, where, ("type", "position", "intensity"))
             points_pos.append(vec(ed["position"], f"{where}.position"))
@@ -261,7 +262,7 @@ def load_scene(
             shape_mats.append(jnp.full((n_prims,), mi, jnp.int32))
             area_lights.append(AreaLight(rgb(ed["radiance"], f"{where}.radiance"), len(shapes) - 1))
             emitter_shapes.append(shape)
-        elif kind in ("constant", "envmap"):
+        else:  # "constant" / "envmap"
             if environment is not None:
                 raise ValueError(f"{where}: only one environment emitter is supported")
             if kind == "constant":
@@ -271,8 +272,6 @@ def load_scene(
                 environment = EnvironmentMap.create(
                     envmap_image(ed, where, base_dir), ed.get("scale", 1.0)
                 )
-        else:
-            raise ValueError(f"{where}.type: expected one of {EMITTER_TYPES}, got {kind!r}")
     if not shapes:
         raise ValueError("shapes: the scene has no geometry")
     point_lights = (

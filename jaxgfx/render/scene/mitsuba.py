@@ -55,6 +55,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from jaxgfx._checks import check_choice
 from jaxgfx.render.parameters import get_path
 from jaxgfx.render.scene.mitsuba_conventions import (
     BSDF_TO_MITSUBA,
@@ -233,7 +234,7 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
 
     if not isinstance(d, Mapping) or "type" not in d:
         raise ValueError(f"{where}: expected a mapping with a 'type' key")
-    kind = d["type"]
+    kind = check_choice(d["type"], f"{where}.type", S.SHAPE_TYPES)
     common = ("type", "material")
     if kind == "sdf":
         raise NotImplementedError(f"{where}.type: SDF shapes have no Mitsuba 3 counterpart")
@@ -250,41 +251,40 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
         r = S.rectangle_from_desc(d, where)  # validated as load_scene does
         m = rectangle_to_world(r.centers[0], r.edge_u[0], r.edge_v[0])
         return {"type": "rectangle", "to_world": _transform(m, mi)}
-    if kind == "mesh":
-        sources = ("file", "vertices", "faces", "normals", "uvs", "generator")
-        S.expect_keys(d, where, ("type",), (*common, *sources, "translate", "scale", "to_world"))
-        from jaxgfx.render.geometry import mesh_io
+    # "mesh"
+    sources = ("file", "vertices", "faces", "normals", "uvs", "generator")
+    S.expect_keys(d, where, ("type",), (*common, *sources, "translate", "scale", "to_world"))
+    from jaxgfx.render.geometry import mesh_io
 
-        # validated exactly as load_scene does (the untransformed mesh: to_world is Mitsuba's)
-        m = S.mesh_from_desc({k: d[k] for k in sources if k in d}, where, base_dir)
-        if "file" in d:
-            path = os.fspath(d["file"])
-            if not os.path.isabs(path) and base_dir:
-                path = os.path.join(base_dir, path)
-            ext = os.path.splitext(path)[1].lower()
-            out = {"type": ext[1:], "filename": os.path.abspath(path)}
-            if ext == ".obj":  # jaxgfx reads the file's v as is; Mitsuba flips it by default
-                out["flip_tex_coords"] = False
-        else:  # inline or generated: written as a PLY (with its normals and uvs)
-            name = re.sub(r"[^A-Za-z0-9]+", "_", where).strip("_")
-            path = os.path.join(work_dir(), f"{name}.ply")
-            mesh_io.save_ply(path, m)
-            out = {"type": "ply", "filename": path}
-        out["face_normals"] = m.normals is None
-        mat = np.eye(4)
-        if "translate" in d or "scale" in d:
-            sc = np.broadcast_to(np.asarray(d.get("scale", 1.0), np.float64), (3,))
-            tr = np.asarray(S.vec(d.get("translate", [0.0, 0.0, 0.0]), f"{where}.translate"))
-            mat = np.diag([*sc, 1.0])
-            mat[:3, 3] = tr
-        if "to_world" in d:  # applied after translate / scale (as schema.mesh_from_desc)
-            S.mesh_from_desc({"vertices": [[0.0, 0, 0]], "faces": [[0, 0, 0]],
-                              "to_world": d["to_world"]}, where, None)  # fmt: skip
-            mat = np.asarray(d["to_world"], np.float64) @ mat
-        if not np.allclose(mat, np.eye(4)):
-            out["to_world"] = _transform(mat, mi)
-        return out
-    raise ValueError(f"{where}.type: expected one of {S.SHAPE_TYPES}, got {kind!r}")
+    # validated exactly as load_scene does (the untransformed mesh: to_world is Mitsuba's)
+    m = S.mesh_from_desc({k: d[k] for k in sources if k in d}, where, base_dir)
+    if "file" in d:
+        path = os.fspath(d["file"])
+        if not os.path.isabs(path) and base_dir:
+            path = os.path.join(base_dir, path)
+        ext = os.path.splitext(path)[1].lower()
+        out = {"type": ext[1:], "filename": os.path.abspath(path)}
+        if ext == ".obj":  # jaxgfx reads the file's v as is; Mitsuba flips it by default
+            out["flip_tex_coords"] = False
+    else:  # inline or generated: written as a PLY (with its normals and uvs)
+        name = re.sub(r"[^A-Za-z0-9]+", "_", where).strip("_")
+        path = os.path.join(work_dir(), f"{name}.ply")
+        mesh_io.save_ply(path, m)
+        out = {"type": "ply", "filename": path}
+    out["face_normals"] = m.normals is None
+    mat = np.eye(4)
+    if "translate" in d or "scale" in d:
+        sc = np.broadcast_to(np.asarray(d.get("scale", 1.0), np.float64), (3,))
+        tr = np.asarray(S.vec(d.get("translate", [0.0, 0.0, 0.0]), f"{where}.translate"))
+        mat = np.diag([*sc, 1.0])
+        mat[:3, 3] = tr
+    if "to_world" in d:  # applied after translate / scale (as schema.mesh_from_desc)
+        S.mesh_from_desc({"vertices": [[0.0, 0, 0]], "faces": [[0, 0, 0]],
+                          "to_world": d["to_world"]}, where, None)  # fmt: skip
+        mat = np.asarray(d["to_world"], np.float64) @ mat
+    if not np.allclose(mat, np.eye(4)):
+        out["to_world"] = _transform(mat, mi)
+    return out
 
 
 class _WorkDir:
@@ -435,7 +435,7 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
         where = f"emitters[{i}]"
         if not isinstance(ed, Mapping) or "type" not in ed:
             raise ValueError(f"{where}: expected a mapping with a 'type' key")
-        kind = ed["type"]
+        kind = check_choice(ed["type"], f"{where}.type", S.EMITTER_TYPES)
         if kind == "area":
             S.expect_keys(ed, where, ("type", "shape", "radiance"), ("material",))
             if isinstance(ed["shape"], Mapping) and "material" in ed["shape"]:
@@ -469,8 +469,11 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
                 write_exr(path, envmap_for_mitsuba(img))
                 scale = S.num(ed.get("scale", 1.0), f"{where}.scale")
                 out[f"emitter_{i}"] = {"type": "envmap", "filename": path, "scale": float(scale)}
-        else:
-            raise ValueError(f"{where}.type: expected one of {S.EMITTER_TYPES}, got {kind!r}")
+        else:  # "directional" / "spot"
+            raise ValueError(
+                f"{where}.type: {kind!r} emitters are not exported to Mitsuba 3 "
+                "(exported: area, point, constant, envmap)"
+            )
     return out
 
 

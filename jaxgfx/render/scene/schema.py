@@ -13,7 +13,7 @@ from collections.abc import Mapping
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgfx._checks import as_float_array, check_finite
+from jaxgfx._checks import as_float_array, check_choice, check_finite
 from jaxgfx._math import safe_normalize
 from jaxgfx.render.bsdf import rgb_param
 from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera
@@ -301,7 +301,7 @@ def mesh_from_desc(d, where, base_dir):
 def shape_from_desc(d, where, base_dir):
     if not isinstance(d, Mapping) or "type" not in d:
         raise ValueError(f"{where}: expected a mapping with a 'type' key")
-    kind = d["type"]
+    kind = check_choice(d["type"], f"{where}.type", SHAPE_TYPES)
     common = ("type", "material")
     if kind == "sphere":
         expect_keys(d, where, ("type", "center", "radius"), common)
@@ -332,12 +332,11 @@ def shape_from_desc(d, where, base_dir):
             ),
         )
         return "mesh", mesh_from_desc(d, where, base_dir)
-    if kind == "sdf":
-        expect_keys(d, where, ("type", "expr"), (*common, "max_steps", "eps"))
-        expr = d["expr"]
-        sdf = sdf_from_dict(dict(expr) if isinstance(expr, Mapping) else expr, path=f"{where}.expr")
-        try:
-            return "sdf", SDFShape(sdf, d.get("max_steps", 128), d.get("eps", 1e-4))
-        except ValueError as e:
-            raise ValueError(f"{where}.{e}") from None
-    raise ValueError(f"{where}.type: expected one of {SHAPE_TYPES}, got {kind!r}")
+    # "sdf"
+    expect_keys(d, where, ("type", "expr"), (*common, "max_steps", "eps"))
+    expr = d["expr"]
+    sdf = sdf_from_dict(dict(expr) if isinstance(expr, Mapping) else expr, path=f"{where}.expr")
+    try:
+        return "sdf", SDFShape(sdf, d.get("max_steps", 128), d.get("eps", 1e-4))
+    except ValueError as e:
+        raise ValueError(f"{where}.{e}") from None
