@@ -32,6 +32,11 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
 * Mitsuba's one-sided BSDFs (``diffuse``, ``conductor``, ``roughconductor``, ``plastic``,
   ``roughplastic``) are shaded on both sides in jaxgfx: the image agrees where back faces are
   not seen (``twosided`` is therefore a pass-through wrapper).
+* ``directional``: the light travels along ``direction`` or ``to_world``'s +z (default +z);
+  ``spot``: at ``to_world``'s origin, pointing along its +z, ``beam_width`` defaulting to 3/4 of
+  ``cutoff_angle`` (20 degrees); the same falloff as :class:`jaxgfx.render.emitters.SpotLight`.
+* ``blendbsdf``: ``(1 - weight) bsdf_0 + weight bsdf_1``, the nested BSDFs in document order
+  (unnamed) or ordered by name (named), as Mitsuba orders its nested objects.
 * ``envmap``: same direction -> (u, v) map as jaxgfx (y up); Mitsuba places rows at
   ``v = j / (H - 1)``, jaxgfx at ``(j + 1/2) / H'``: the map is resampled to ``H' = 4 H`` rows
   with Mitsuba's linear interpolation along v (exact between Mitsuba's rows up to the
@@ -501,8 +506,9 @@ def _read_file(doc, path, out):
 class _Params:
     """Typed access to an object's parameters; :meth:`done` refuses the ones never read."""
 
-    def __init__(self, obj: _Obj, doc: _Doc):
-        self.obj, self.doc = obj, doc
+    def __init__(self, obj: _Obj, doc: _Doc, *, no_textures: str | None = None):
+        # no_textures: why texture-valued parameters are refused here (e.g. inside a blendbsdf)
+        self.obj, self.doc, self.no_textures = obj, doc, no_textures
 
     def _get(self, name, kinds):
         p = self.obj.props.get(name)
@@ -557,9 +563,10 @@ class _Params:
         """RGB list, or a texture description (``texture=True``)."""
         kinds = ("float", "rgb", "spectrum") + (("object",) if texture else ())
         p = self.obj.props.get(name)
-        if p is not None and p.kind == "object" and not texture:
+        if p is not None and p.kind == "object" and (not texture or self.no_textures):
             p.used = True
-            raise self.err(name, "textures are not supported for this parameter")
+            raise self.err(name, self.no_textures or "textures are not supported for this "
+                                                     "parameter")  # fmt: skip
         p = self._get(name, kinds)
         if p is None:
             return default
@@ -692,21 +699,50 @@ def _conductor(p: _Params) -> dict:
     return out
 
 
-def _bsdf(obj: _Obj, doc, desc, *, textured_ok=True, name=None) -> str:
-    """The material name of a BSDF object (converted once, shared by references): its ``id``,
-    else ``name`` (the id of an enclosing ``twosided``), else ``bsdf_N``."""
-    if obj.converted is not None:
-        return obj.converted
+def _twosided_child(obj: _Obj, doc) -> _Obj:
     p = _Params(obj, doc)
-    if obj.type == "twosided":
-        if len(obj.children) != 1 or obj.children[0].tag != "bsdf":
-            raise ValueError(f"{obj.where}: expected exactly one nested <bsdf> (different "
-                             "front and back BSDFs are not supported)")  # fmt: skip
-        p.done(children_ok=1)
-        name = _bsdf(obj.children[0], doc, desc, name=obj.id or name)
-        obj.converted = name
-        return name
+    if len(obj.children) != 1 or obj.children[0].tag != "bsdf":
+        raise ValueError(f"{obj.where}: expected exactly one nested <bsdf> (different "
+                         "front and back BSDFs are not supported)")  # fmt: skip
+    p.done(children_ok=1)
+    return obj.children[0]
+
+
+def _ior_ratio(p: _Params, int_default, ext_default) -> float:
+    return p.ior("int_ior", int_default) / p.ior("ext_ior", ext_default)
+
+
+def _blend_children(obj: _Obj, p: _Params) -> list:
+    """The two nested BSDFs of a ``blendbsdf`` in Mitsuba's order: unnamed ones (and ``<ref>``s)
+    in document order, or named ones sorted by name (Mitsuba orders them by name, and names
+    unnamed ones ``_arg_N``; a mix of both is refused rather than guessed)."""
+    for c in obj.children:
+        if c.tag != "bsdf":
+            raise ValueError(f"{c.node.at}: {obj.where}: nested <{c.tag} type={c.type!r}> is "
+                             "not supported here (a texture weight needs name=\"weight\")")
+    unnamed = list(obj.children)
+    named = sorted((k, q) for k, q in obj.props.items()
+                   if q.kind == "object" and q.value.tag == "bsdf")  # fmt: skip
+    for _, q in named:
+        q.used = True
+    if unnamed and named:
+        why = "would depend on Mitsuba's names for unnamed objects"
+        raise p.err(named[0][0], f"give both nested BSDFs a name or neither (their order {why})")
+    kids = unnamed or [q.value for _, q in named]
+    if len(kids) != 2:
+        raise ValueError(f"{obj.where}: expected exactly two nested <bsdf>, got {len(kids)}")
+    return kids
+
+
+def _bsdf_dict(obj: _Obj, doc, *, nested=False) -> dict:
+    """The jaxgfx description of a BSDF object (``twosided`` unwrapped). ``nested``: a BSDF
+    inside a ``blendbsdf``, whose parameters jaxgfx cannot texture."""
+    while obj.type == "twosided":
+        obj = _twosided_child(obj, doc)
+    why = "textures are not supported in a BSDF nested in a blendbsdf" if nested else None
+    p = _Params(obj, doc, no_textures=why)
     t = obj.type
+    children_ok = 0
     if t == "diffuse":
         rho = [DEFAULTS["diffuse.reflectance"]] * 3
         m = {"type": "diffuse", "reflectance": p.color("reflectance", rho, texture=True)}
@@ -714,32 +750,48 @@ def _bsdf(obj: _Obj, doc, desc, *, textured_ok=True, name=None) -> str:
         m = {"type": "conductor", **_conductor(p)}
     elif t == "roughconductor":
         m = {"type": "roughconductor", **_distribution(p), **_conductor(p)}
-    elif t == "dielectric":
-        eta = p.ior("int_ior", DEFAULTS["dielectric.int_ior"]) / p.ior(
-            "ext_ior", DEFAULTS["dielectric.ext_ior"])
-        m = {"type": "dielectric", "eta": eta,
-             "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
-             "specular_transmittance": p.color("specular_transmittance", [1.0] * 3,
-                                               texture=True)}  # fmt: skip
-    elif t == "roughdielectric":
-        eta = p.ior("int_ior", DEFAULTS["dielectric.int_ior"]) / p.ior(
-            "ext_ior", DEFAULTS["dielectric.ext_ior"])
-        m = {"type": "roughdielectric", **_distribution(p), "eta": eta,
+    elif t in ("dielectric", "roughdielectric", "thindielectric"):
+        eta = _ior_ratio(p, DEFAULTS["dielectric.int_ior"], DEFAULTS["dielectric.ext_ior"])
+        m = {"type": t, **(_distribution(p) if t == "roughdielectric" else {}), "eta": eta,
              "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
              "specular_transmittance": p.color("specular_transmittance", [1.0] * 3,
                                                texture=True)}  # fmt: skip
     elif t in ("plastic", "roughplastic"):
         m = {"type": t, **(_distribution(p) if t == "roughplastic" else {}),
-             "eta": p.ior("int_ior", DEFAULTS["roughplastic.int_ior"])
-             / p.ior("ext_ior", DEFAULTS["roughplastic.ext_ior"]),
+             "eta": _ior_ratio(p, DEFAULTS["roughplastic.int_ior"],
+                               DEFAULTS["roughplastic.ext_ior"]),
              "diffuse_reflectance": p.color("diffuse_reflectance",
                                              [DEFAULTS["roughplastic.diffuse_reflectance"]] * 3,
                                              texture=True),
              "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
              "nonlinear": p.bool("nonlinear", False)}  # fmt: skip
+    elif t == "blendbsdf":
+        kids = _blend_children(obj, p)
+        children_ok = len(obj.children)
+        if nested and "weight" in obj.props and obj.props["weight"].kind == "object":
+            obj.props["weight"].used = True
+            raise p.err("weight", "a texture weight is supported for a top-level blendbsdf "
+                                  "only, not one nested in another blendbsdf")  # fmt: skip
+        w = p.scalar_or_texture("weight", DEFAULTS["blendbsdf.weight"])
+        m = {"type": "blendbsdf", "weight": w,
+             "bsdf0": _bsdf_dict(kids[0], doc, nested=True),
+             "bsdf1": _bsdf_dict(kids[1], doc, nested=True)}  # fmt: skip
     else:
         raise ValueError(f"{obj.where}: BSDF plugin {t!r} is not supported")
-    p.done()
+    p.done(children_ok=children_ok)
+    return m
+
+
+def _bsdf(obj: _Obj, doc, desc, *, name=None) -> str:
+    """The material name of a BSDF object (converted once, shared by references): its ``id``,
+    else ``name`` (the id of an enclosing ``twosided``), else ``bsdf_N``."""
+    if obj.converted is not None:
+        return obj.converted
+    if obj.type == "twosided":
+        name = _bsdf(_twosided_child(obj, doc), doc, desc, name=obj.id or name)
+        obj.converted = name
+        return name
+    m = _bsdf_dict(obj, doc)
     name = obj.id or name or f"bsdf_{len(desc['materials'])}"
     while name in desc["materials"]:
         name += "_"
@@ -962,11 +1014,54 @@ def _emitter(obj: _Obj, doc, desc):
             raise p.err("filename", f"expected an RGB image of at least 2x2, got {img.shape}")
         d = {"type": "envmap", "image": envmap_from_mitsuba(img),
              "scale": p.float("scale", 1.0)}  # fmt: skip
+    elif t == "directional":
+        direction = p.vec("direction")
+        m = p.transform("to_world")
+        if m is not None:
+            if direction is not None:
+                raise p.err("direction", "give either direction or to_world (Mitsuba refuses "
+                                         "both)")  # fmt: skip
+            # Mitsuba uses to_world's image of +z as is (not normalised): a unit one only
+            z = m[:3, 2]
+            if not abs(float(np.linalg.norm(z)) - 1.0) < 1e-6:
+                raise p.err("to_world", "a to_world that scales the light's +z axis is not "
+                                        "supported (Mitsuba does not normalise it)")  # fmt: skip
+            direction = z.tolist()
+        direction = direction or list(DEFAULTS["directional.direction"])
+        if not np.linalg.norm(direction) > 0:
+            raise p.err("direction", "expected a nonzero vector")
+        d = {"type": "directional", "direction": _unit(direction),
+             "irradiance": p.color("irradiance", [1.0] * 3, emission=True)}  # fmt: skip
+    elif t == "spot":
+        if "texture" in obj.props:
+            obj.props["texture"].used = True
+            raise p.err("texture", "projected textures are not supported")
+        m = p.transform("to_world")
+        m = np.eye(4) if m is None else m
+        lin = m[:3, :3]
+        s2 = float(np.mean(np.sum(lin * lin, 0)))
+        if not np.allclose(lin.T @ lin, s2 * np.eye(3), rtol=1e-6, atol=1e-9 * s2):
+            raise p.err("to_world", "a spot light's to_world must be a rotation, uniform scale "
+                                    "and translation (the cone would not be circular)")  # fmt: skip
+        cutoff = p.float("cutoff_angle", DEFAULTS["spot.cutoff_angle"])
+        beam = p.float("beam_width", cutoff * DEFAULTS["spot.beam_width_fraction"])
+        if not 0 < cutoff <= 180:
+            raise p.err("cutoff_angle", f"expected degrees in (0, 180], got {cutoff}")
+        if not 0 <= beam <= cutoff:
+            raise p.err("beam_width", f"expected degrees in [0, cutoff_angle], got {beam}")
+        d = {"type": "spot", "position": m[:3, 3].tolist(), "direction": _unit(lin[:, 2]),
+             "intensity": p.color("intensity", [1.0] * 3, emission=True),
+             "cutoff_angle": cutoff, "beam_width": beam}  # fmt: skip
     else:
         raise ValueError(f"{obj.where}: emitter plugin {t!r} is not supported "
-                         "(area, point, constant, envmap)")  # fmt: skip
+                         "(area, point, constant, envmap, directional, spot)")  # fmt: skip
     p.done()
     desc["emitters"].append(d)
+
+
+def _unit(v) -> list:
+    v = np.asarray(v, np.float64)
+    return (v / np.linalg.norm(v)).tolist()
 
 
 def _fov_x_or_y(p: _Params, width, height):
@@ -1028,9 +1123,14 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
         elif rf.type == "box":
             _Params(rf, doc).done()
             film = {"filter": "box"}
+        elif rf.type == "tent":
+            rp = _Params(rf, doc)
+            film = {"filter": "tent", "radius": rp.float("radius", DEFAULTS["tent.radius"],
+                                                         positive=True)}  # fmt: skip
+            rp.done()
         else:
             raise ValueError(f"{rf.where}: reconstruction filter {rf.type!r} is not supported "
-                             "(box, gaussian)")  # fmt: skip
+                             "(box, gaussian, tent)")  # fmt: skip
         fp.done(children_ok=len(rfs))
         if len(rfs) > 1:
             raise ValueError(f"{fo.where}: expected at most one <rfilter>")
@@ -1234,7 +1334,8 @@ def _xml_object(tag, d, indent, name=None, ident=None) -> list[str]:
             body.append(f'{q}<transform name="to_world"><matrix value="'
                         f'{" ".join(map(_num, m))}"/></transform>')  # fmt: skip
         elif np.shape(v) == (3,):
-            body.append(f'{q}<point name={_xml_attr(k)} value="{", ".join(map(_num, v))}"/>')
+            tag3 = "vector" if k == "direction" else "point"  # a direction is a <vector>
+            body.append(f'{q}<{tag3} name={_xml_attr(k)} value="{", ".join(map(_num, v))}"/>')
         else:  # pragma: no cover - the exporter writes the kinds above only
             raise ValueError(f"{k}: cannot write {v!r} as Mitsuba XML")
     if not body:
