@@ -196,7 +196,15 @@ def test_integrator_mapping():
             NotImplementedError,
             "view_proj_inverse",
         ),
-        ({"emitters": [{"type": "spot"}]}, ValueError, r"emitters\[0\]\.type"),
+        ({"emitters": [{"type": "projector"}]}, ValueError, r"emitters\[0\]\.type"),
+        # spot and directional are exported since their XML mapping; validated as load_scene
+        ({"emitters": [{"type": "spot"}]}, ValueError, r"emitters\[0\]: missing key"),
+        (
+            {"emitters": [{"type": "spot", "position": [0, 1, 0], "direction": [0, -1, 0],
+                           "intensity": 1.0, "cutoff_angle": 10, "beam_width": 20}]},
+            ValueError,
+            r"emitters\[0\]\.beam_width",
+        ),  # fmt: skip
         ({"emitters": [{"type": "point", "position": [0, 1, 0]}]}, ValueError, "intensity"),
         (
             {"shapes": [{"type": "sphere", "center": [0, 0, 0], "radius": -1}]},
