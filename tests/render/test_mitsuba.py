@@ -191,11 +191,12 @@ def test_integrator_mapping():
             NotImplementedError,
             r"film\.radius",
         ),
-        (
-            {"camera": {"view_proj_inverse": np.eye(4).tolist(), "width": 4, "height": 4}},
+        (  # a projective matrix camera (affine ones are exported as `orthographic`)
+            {"camera": {"view_proj_inverse": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 0, -1],
+                                              [0, 0, -1, 1]], "width": 4, "height": 4}},
             NotImplementedError,
             "view_proj_inverse",
-        ),
+        ),  # fmt: skip
         ({"emitters": [{"type": "projector"}]}, ValueError, r"emitters\[0\]\.type"),
         # spot and directional are exported since their XML mapping; validated as load_scene
         ({"emitters": [{"type": "spot"}]}, ValueError, r"emitters\[0\]: missing key"),

@@ -10,7 +10,10 @@ set before ``import mitsuba``); ``scalar_rgb`` runs anywhere.
 Mapping of conventions (jaxgfx -> Mitsuba 3), each checked by ``tests/render/test_mitsuba.py``:
 
 * camera: ``perspective`` with ``to_world = look_at(origin, target, up)``, same ``fov`` and
-  ``fov_axis``; film ``hdrfilm`` (RGB, float32); ``box`` filter (radius 0.5 only) or
+  ``fov_axis``; a matrix camera with an affine ``view_proj_inverse`` -> ``orthographic`` (its
+  default ``near_clip``, ``to_world`` from
+  :func:`~jaxgfx.render.scene.mitsuba_conventions.orthographic_to_world`; projective ones are
+  refused); film ``hdrfilm`` (RGB, float32); ``box`` filter (radius 0.5 only) or
   ``gaussian`` (``stddev``; Mitsuba truncates at 4 stddev, so ``radius`` must be ``4 stddev``)
   or ``tent`` (``radius``), ``sample_border`` on for the Gaussian and the tent (jaxgfx's filter
   importance sampling also draws samples outside the image).
@@ -69,6 +72,7 @@ from jaxgfx.render.scene.mitsuba_conventions import (
     ONE_SIDED_BSDFS,
     envmap_for_mitsuba,
     look_at_matrix,
+    orthographic_to_world,
     rectangle_to_world,
 )
 
@@ -163,7 +167,6 @@ def _distribution(m, where) -> dict:
     return out
 
 
-
 def _dielectric_keys(m):
     """Mitsuba's keys of a (rough) dielectric: the IOR ratio as ``int_ior`` over an exterior of
     1, and the specular reflectance / transmittance factors."""
@@ -173,6 +176,7 @@ def _dielectric_keys(m):
         "specular_reflectance": _rgb(m.specular_reflectance),
         "specular_transmittance": _rgb(m.specular_transmittance),
     }
+
 
 def _material(md, where) -> dict:
     """Mitsuba BSDF dict of one jaxgfx material description (validated by ``make_bsdf``)."""
@@ -345,7 +349,7 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
     integrator (see :func:`mitsuba_integrator`). The sensor's sampler has ``sample_count`` 16;
     :func:`render_mitsuba` passes ``spp`` explicitly. Conventions mapped: see the module
     docstring. Unknown keys raise ``ValueError`` naming the field; features Mitsuba 3 lacks
-    (``phong``, Schlick Fresnel, matrix cameras, box filters with radius != 0.5, Gaussian
+    (``phong``, Schlick Fresnel, projective matrix cameras, box filters with radius != 0.5, Gaussian
     filters not truncated at 4 stddev) raise ``NotImplementedError`` naming the field.
 
     Example: ``to_mitsuba_dict(desc)["sensor"]["fov"] == desc["camera"]["fov"]``.
@@ -362,13 +366,21 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
 
     # -- sensor
     cam = desc["camera"]
+    ortho = None
     if isinstance(cam, Mapping) and "view_proj_inverse" in cam:
-        raise NotImplementedError(
-            "camera.view_proj_inverse: only look-at cameras are exported to Mitsuba"
-        )
-    S.expect_keys(cam, "camera", ("origin", "target", "fov", "width", "height"), ("up", "fov_axis"))
-    # validate exactly as load_scene does (fov range, resolution, degenerate look-at)
-    S.build_camera(cam)
+        S.build_camera(cam)  # validated as load_scene does
+        ortho = orthographic_to_world(cam["view_proj_inverse"], cam["width"], cam["height"],
+                                      DEFAULTS["near_clip"])  # fmt: skip
+        if ortho is None:
+            raise NotImplementedError(
+                "camera.view_proj_inverse: a projective matrix camera has no Mitsuba sensor "
+                "(look-at cameras and affine matrix cameras, as `orthographic`, are exported)"
+            )
+    else:
+        S.expect_keys(cam, "camera", ("origin", "target", "fov", "width", "height"),
+                      ("up", "fov_axis"))  # fmt: skip
+        # validate exactly as load_scene does (fov range, resolution, degenerate look-at)
+        S.build_camera(cam)
     film_d = desc.get("film", {}) or {}
     S.expect_keys(film_d, "film", (), ("filter", "stddev", "radius"))
     fname = film_d.get("filter", "box")
@@ -397,16 +409,19 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
             )
         film["rfilter"] = {"type": "gaussian", "stddev": float(rf.stddev)}
         film["sample_border"] = True
-    sensor = {
-        "type": "perspective",
-        "fov": float(cam["fov"]),
-        "fov_axis": str(cam.get("fov_axis", "x")),
-        "to_world": _transform(
-            look_at_matrix(cam["origin"], cam["target"], cam.get("up", [0.0, 1.0, 0.0])), mi
-        ),
-        "film": film,
-        "sampler": {"type": "independent", "sample_count": 16},
-    }
+    if ortho is not None:  # Mitsuba's default near_clip, where the rays start
+        sensor = {"type": "orthographic", "to_world": _transform(ortho, mi)}
+    else:
+        sensor = {
+            "type": "perspective",
+            "fov": float(cam["fov"]),
+            "fov_axis": str(cam.get("fov_axis", "x")),
+            "to_world": _transform(
+                look_at_matrix(cam["origin"], cam["target"], cam.get("up", [0.0, 1.0, 0.0])), mi
+            ),
+        }
+    sensor["film"] = film
+    sensor["sampler"] = {"type": "independent", "sample_count": 16}
     out: dict = {"type": "scene", "sensor": sensor}
 
     # -- materials
@@ -621,22 +636,29 @@ def scene_to_desc(scene) -> dict:
     be saved (:func:`jaxgfx.render.scene.mitsuba_xml.save_scene`) or exported. Spheres and
     rectangles become one shape each (rectangles by ``edge_u`` / ``edge_v``), a mesh one
     inline mesh per material it uses, the loader's own ``__default__`` / ``__black__``
-    materials ``jaxgfx_default`` / ``jaxgfx_black``. Matrix cameras, SDF shapes, Phong and
-    textured materials raise ``NotImplementedError`` naming the object. Host function.
+    materials ``jaxgfx_default`` / ``jaxgfx_black``, a matrix camera its ``view_proj_inverse``.
+    SDF shapes, Phong and textured materials raise ``NotImplementedError`` naming the object.
+    Host function.
 
     Example: ``load_scene(scene_to_desc(load_scene(desc)))`` renders like ``desc``.
     """
-    from jaxgfx.render.camera import PerspectiveCamera
+    from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera
     from jaxgfx.render.emitters import ConstantEnvironment, DirectionalLight
     from jaxgfx.render.film import GaussianFilter, TentFilter
     from jaxgfx.render.geometry import Rectangles, Spheres, TriangleMesh
+
     cam = scene.camera
-    if not isinstance(cam, PerspectiveCamera):
-        raise NotImplementedError("camera: only look-at cameras are exported")
+    if isinstance(cam, MatrixCamera):
+        cam_d = {"view_proj_inverse": _list(cam.view_proj_inverse), "width": int(cam.width),
+                 "height": int(cam.height)}  # fmt: skip
+    elif isinstance(cam, PerspectiveCamera):
+        cam_d = {"origin": _list(cam.origin), "target": _list(cam.target), "up": _list(cam.up),
+                 "fov": float(cam.fov), "fov_axis": cam.fov_axis, "width": int(cam.width),
+                 "height": int(cam.height)}  # fmt: skip
+    else:  # pragma: no cover - a Scene holds one of the two
+        raise NotImplementedError(f"camera: {type(cam).__name__} has no Mitsuba 3 mapping")
     desc = {
-        "camera": {"origin": _list(cam.origin), "target": _list(cam.target), "up": _list(cam.up),
-                   "fov": float(cam.fov), "fov_axis": cam.fov_axis, "width": int(cam.width),
-                   "height": int(cam.height)},  # fmt: skip
+        "camera": cam_d,
         "materials": {},
         "shapes": [],
         "emitters": [],

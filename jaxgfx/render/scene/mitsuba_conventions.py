@@ -16,7 +16,9 @@ Mitsuba 3.9.1 by tests/render/test_mitsuba*.py.
 * :data:`IOR_TABLE`: Mitsuba's named dielectric IORs; :data:`CONDUCTOR_IOR`: its named
   conductors (``material="Au"``) as the RGB ``(eta, k)`` its RGB variants use.
 * :func:`look_at_matrix`: Mitsuba's ``Transform4f.look_at`` (camera looks along local +z,
-  +y up); :func:`rectangle_to_world`: a jaxgfx parallelogram as Mitsuba's ``[-1, 1]^2``
+  +y up); :func:`orthographic_view_proj_inverse` / :func:`orthographic_to_world`: Mitsuba's
+  ``orthographic`` sensor as a jaxgfx :class:`~jaxgfx.render.camera.MatrixCamera` and back;
+  :func:`rectangle_to_world`: a jaxgfx parallelogram as Mitsuba's ``[-1, 1]^2``
   rectangle; :func:`spectrum_to_rgb`: spectra -> RGB as the RGB variants convert them;
   :func:`envmap_for_mitsuba` / :func:`envmap_from_mitsuba`: the two lat-long grids.
 """
@@ -38,6 +40,8 @@ __all__ = [
     "conductor_ior_from_spd",
     "read_spd",
     "look_at_matrix",
+    "orthographic_view_proj_inverse",
+    "orthographic_to_world",
     "rectangle_to_world",
     "spectrum_to_rgb",
     "envmap_for_mitsuba",
@@ -102,7 +106,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     # sensors, films, filters, samplers
     ("sensor", "perspective"): S + " (rigid `to_world`)",
     ("sensor", "thinlens"): "refused: no depth of field in jaxgfx",
-    ("sensor", "orthographic"): "refused: no orthographic camera in jaxgfx",
+    ("sensor", "orthographic"): S + " (as a matrix camera)",
     ("sensor", "radiancemeter"): "refused: jaxgfx renders images only",
     ("sensor", "irradiancemeter"): "refused: jaxgfx renders images only",
     ("sensor", "distant"): "refused: jaxgfx renders images only",
@@ -187,6 +191,8 @@ DEFAULTS = {
     "gaussian.stddev": 0.5,
     "tent.radius": 1.0,
     "fov_axis": "x",
+    "near_clip": 1e-2,
+    "far_clip": 1e4,
     "focal_length": "50mm",
     "sample_count": 4,
     "path.max_depth": -1,
@@ -376,6 +382,47 @@ def look_at_matrix(origin, target, up) -> np.ndarray:
     m = np.eye(4)
     m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, np.cross(d, left), d, o
     return m
+
+
+def _ortho_ndc_to_camera(near_clip, width, height) -> np.ndarray:
+    a = width / height
+    c = np.eye(4)
+    c[0, 0], c[1, 1], c[2, 3] = -1.0, 1.0 / a, near_clip + 1.0
+    return c
+
+
+def orthographic_view_proj_inverse(to_world, near_clip, width, height) -> np.ndarray:
+    """Mitsuba 3's ``orthographic`` sensor as the ``view_proj_inverse`` (OpenGL NDC -> world)
+    of a jaxgfx :class:`~jaxgfx.render.camera.MatrixCamera` with the same rays.
+
+    Mitsuba (``orthographic_projection``, ``sensors/orthographic.cpp``) maps the film position
+    ``(s_x, s_y)`` in ``[0, 1]^2`` (from the top left) to the camera-space point
+    ``(1 - 2 s_x, (1 - 2 s_y) / a, near_clip)``, ``a = width / height`` (the film width spans
+    ``[-1, 1]``; image left is camera +x, the ``left`` of its ``look_at``), starts the ray at
+    ``to_world`` of that point and sends it along ``normalize(to_world (0, 0, 1))``. With jaxgfx's
+    NDC ``x = 2 s_x - 1``, ``y = 1 - 2 s_y``: NDC ``(x, y, z)`` -> camera
+    ``(-x, y / a, near_clip + 1 + z)``, so the near point (``z = -1``) is Mitsuba's ray origin
+    and the far one (``z = 1``) lies 2 camera units further along +z (jaxgfx does not clip at
+    ``far_clip``; the loader checks that nothing lies beyond it). Returns ``to_world @ C``.
+
+    Example: the identity ``to_world`` with ``near_clip = 0``, a square film: the centre ray
+    starts at the origin and points along +z.
+    """
+    m = np.asarray(to_world, np.float64)
+    return m @ _ortho_ndc_to_camera(float(near_clip), width, height)
+
+
+def orthographic_to_world(view_proj_inverse, width, height, near_clip=1e-2):
+    """The ``to_world`` of a Mitsuba ``orthographic`` sensor (with ``near_clip``) whose rays
+    are those of a :class:`~jaxgfx.render.camera.MatrixCamera` with this affine
+    ``view_proj_inverse`` (the inverse of :func:`orthographic_view_proj_inverse`), or ``None``
+    when the matrix is projective (last row not ``(0, 0, 0, 1)``: no orthographic sensor)."""
+    m = np.asarray(view_proj_inverse, np.float64)
+    if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], rtol=0.0, atol=1e-7 * np.abs(m).max()):
+        return None
+    m = m.copy()
+    m[3] = [0.0, 0.0, 0.0, 1.0]
+    return m @ np.linalg.inv(_ortho_ndc_to_camera(float(near_clip), width, height))
 
 
 def rectangle_to_world(center, edge_u, edge_v) -> np.ndarray:

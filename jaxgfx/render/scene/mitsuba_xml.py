@@ -20,7 +20,10 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
   local +z with +y up. ``fov_axis`` ``diagonal`` / ``smaller`` / ``larger`` are converted to an
   x- or y-fov; without ``fov``, ``focal_length`` (default ``50mm``) is the diagonal fov of a
   36 x 24 mm film. ``near_clip`` / ``far_clip`` are accepted only when no geometry lies where
-  they would clip camera rays (checked on bounding boxes).
+  they would clip camera rays (checked on bounding boxes). ``orthographic``: any invertible
+  ``to_world`` (a scale sizes the sensor plane: the film width spans camera x in [-1, 1]),
+  loaded as a :class:`~jaxgfx.render.camera.MatrixCamera` whose rays start on the near plane
+  (:func:`~jaxgfx.render.scene.mitsuba_conventions.orthographic_view_proj_inverse`).
 * OBJ texture coordinates are flipped (``v -> 1 - v``, Mitsuba's ``flip_tex_coords``); PLY's
   are not. Meshes without vertex normals get Mitsuba's angle-weighted smooth normals unless
   ``face_normals`` is true.
@@ -59,6 +62,7 @@ from jaxgfx.render.scene.mitsuba_conventions import (
     IOR_TABLE,
     envmap_from_mitsuba,
     look_at_matrix,
+    orthographic_view_proj_inverse,
     plugin_status,
     spectrum_to_rgb,
 )
@@ -718,8 +722,10 @@ def _blend_children(obj: _Obj, p: _Params) -> list:
     unnamed ones ``_arg_N``; a mix of both is refused rather than guessed)."""
     for c in obj.children:
         if c.tag != "bsdf":
-            raise ValueError(f"{c.node.at}: {obj.where}: nested <{c.tag} type={c.type!r}> is "
-                             "not supported here (a texture weight needs name=\"weight\")")
+            raise ValueError(
+                f"{c.node.at}: {obj.where}: nested <{c.tag} type={c.type!r}> is "
+                'not supported here (a texture weight needs name="weight")'
+            )
     unnamed = list(obj.children)
     named = sorted((k, q) for k, q in obj.props.items()
                    if q.kind == "object" and q.value.tag == "bsdf")  # fmt: skip
@@ -879,7 +885,8 @@ def _shape(obj: _Obj, doc, desc, ctx):
     else:  # Mitsuba's default BSDF
         mat = "mitsuba_default"
         desc["materials"].setdefault(
-            mat, {"type": "diffuse", "reflectance": [DEFAULTS["diffuse.reflectance"]] * 3})
+            mat, {"type": "diffuse", "reflectance": [DEFAULTS["diffuse.reflectance"]] * 3}
+        )
     lin, det = m[:3, :3], float(np.linalg.det(m[:3, :3]))
     t = obj.type
     if t == "sphere":
@@ -1090,9 +1097,9 @@ def _fov_x_or_y(p: _Params, width, height):
 
 def _sensor(obj: _Obj, doc, ctx) -> dict:
     p = _Params(obj, doc)
-    if obj.type != "perspective":
+    if obj.type not in ("perspective", "orthographic"):
         raise ValueError(f"{obj.where}: sensor plugin {obj.type!r} is not supported "
-                         "(perspective)")  # fmt: skip
+                         "(perspective, orthographic)")  # fmt: skip
     films = [c for c in obj.children if c.tag == "film"]
     samplers = [c for c in obj.children if c.tag == "sampler"]
     for c in obj.children:
@@ -1148,6 +1155,8 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
         sp.done()
         if spp < 1:
             raise sp.err("sample_count", f"expected a positive integer, got {spp}")
+    if obj.type == "orthographic":
+        return _orthographic(p, obj, ctx, films, samplers, width, height, film, spp)
     fov, axis = _fov_x_or_y(p, width, height)
     m = p.transform("to_world")
     m = np.eye(4) if m is None else m
@@ -1155,9 +1164,7 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
     if not (np.allclose(r.T @ r, np.eye(3), atol=1e-6) and np.linalg.det(r) > 0):
         raise p.err("to_world", "the camera's to_world must be a rotation and translation "
                                 "(no scale, shear or mirroring)")  # fmt: skip
-    near, far = p.float("near_clip", 1e-2, positive=True), p.float("far_clip", 1e4)
-    if not far > near:
-        raise p.err("far_clip", f"expected far_clip > near_clip, got {far} <= {near}")
+    near, far = _clip_planes(p)
     for name in ("principal_point_offset_x", "principal_point_offset_y"):
         if p.float(name, 0.0) != 0.0:
             raise p.err(name, "an off-centre principal point is not supported")
@@ -1171,6 +1178,53 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
     tx, ty = (tx, tx * height / width) if axis == "x" else (tx * width / height, tx)
     ctx["clip"] = (o, near, far, math.sqrt(1 + tx * tx + ty * ty), obj)
     return cam, film, spp
+
+
+def _clip_planes(p: _Params):
+    near = p.float("near_clip", DEFAULTS["near_clip"], positive=True)
+    far = p.float("far_clip", DEFAULTS["far_clip"])
+    if not far > near:
+        raise p.err("far_clip", f"expected far_clip > near_clip, got {far} <= {near}")
+    return near, far
+
+
+def _orthographic(p: _Params, obj: _Obj, ctx, films, samplers, width, height, film, spp):
+    """Mitsuba's ``orthographic`` sensor -> a :class:`MatrixCamera` description
+    (:func:`orthographic_view_proj_inverse`): rays start on the near plane, as Mitsuba's, so
+    ``near_clip`` is reproduced exactly; ``far_clip`` is checked like the perspective one's."""
+    m = p.transform("to_world")
+    m = np.eye(4) if m is None else m
+    a = m[:3, :3]
+    if not abs(np.linalg.det(a)) > 1e-12 * max(float(np.abs(a).max()), 1e-100) ** 3:
+        raise p.err("to_world", "the orthographic sensor's to_world must be invertible "
+                                "(a degenerate sensor plane or direction)")  # fmt: skip
+    near, far = _clip_planes(p)
+    if len(films) > 1 or len(samplers) > 1:
+        raise ValueError(f"{obj.where}: expected at most one <film> and one <sampler>")
+    p.done(children_ok=len(obj.children))
+    vpi = orthographic_view_proj_inverse(m, near, width, height)
+    ctx["clip_ortho"] = (m, near, far, obj)
+    return {"view_proj_inverse": vpi.tolist(), "width": width, "height": height}, film, spp
+
+
+def _check_clip_ortho(ctx):
+    """Refuse geometry beyond Mitsuba's orthographic ``far_clip``: its rays start at the near
+    plane point and end after ``far_clip - near_clip`` along the unit direction; each bounding
+    box corner's distance along the ray through it (an affine function of the point, so the
+    corners bound it) must not exceed that."""
+    m, near, far, sensor = ctx["clip_ortho"]
+    a = m[:3, :3]
+    d = a[:, 2] / np.linalg.norm(a[:, 2])
+    basis = np.stack([a[:, 0], a[:, 1], d], 1)
+    o = a @ np.array([0.0, 0.0, near]) + m[:3, 3]
+    for (lo, hi), obj in ctx["bboxes"]:
+        corners = np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1)
+        t = np.linalg.solve(basis, corners - o[:, None])[2]
+        if float(t.max()) > far - near:
+            raise ValueError(
+                f"{sensor.where}: far_clip={far}: {obj.where} reaches beyond it (Mitsuba clips "
+                "it, jaxgfx does not)"
+            )
 
 
 def _integrator(obj: _Obj, doc):
@@ -1201,6 +1255,8 @@ def _integrator(obj: _Obj, doc):
 
 
 def _check_clip(ctx):
+    if "clip_ortho" in ctx:
+        _check_clip_ortho(ctx)
     if "clip" not in ctx:
         return
     o, near, far, k, sensor = ctx["clip"]
@@ -1322,7 +1378,7 @@ def _xml_object(tag, d, indent, name=None, ident=None) -> list[str]:
             nested_name = k if tags[0] == "texture" else None
             body += _xml_object(tags[0], v, indent + 1, name=nested_name)
         elif isinstance(v, bool):
-            body.append(f"{q}<boolean name={_xml_attr(k)} value=\"{str(v).lower()}\"/>")
+            body.append(f'{q}<boolean name={_xml_attr(k)} value="{str(v).lower()}"/>')
         elif isinstance(v, (int, np.integer)):
             body.append(f'{q}<integer name={_xml_attr(k)} value="{int(v)}"/>')
         elif isinstance(v, (float, np.floating)):
