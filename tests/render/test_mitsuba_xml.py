@@ -420,9 +420,9 @@ def test_disk_is_a_fan_of_256_triangles(tmp_path):
     "body,line,msg",
     [
         (
-            '<shape type="cylinder"/>',
+            '<shape type="sdfgrid"/>',
             10,
-            "<shape type='cylinder'>: shape plugin 'cylinder' is not supported",
+            "<shape type='sdfgrid'>: shape plugin 'sdfgrid' is not supported",
         ),  # fmt: skip
         (
             '<bsdf type="mask" id="p"/>',

@@ -59,7 +59,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("shape", "rectangle"): S,
     ("shape", "cube"): S + " (untextured)",
     ("shape", "disk"): S + " (untextured; 256-triangle fan)",
-    ("shape", "cylinder"): "refused: no cylinder primitive in jaxgfx",
+    ("shape", "cylinder"): S + " (untextured; 512-triangle tube, no caps)",
     ("shape", "shapegroup"): "refused: no instancing in jaxgfx",
     ("shape", "instance"): "refused: no instancing in jaxgfx",
     ("shape", "sdfgrid"): "refused: no SDF grids in jaxgfx",

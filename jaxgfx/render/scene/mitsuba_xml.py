@@ -24,6 +24,8 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
   ``to_world`` (a scale sizes the sensor plane: the film width spans camera x in [-1, 1]),
   loaded as a :class:`~jaxgfx.render.camera.MatrixCamera` whose rays start on the near plane
   (:func:`~jaxgfx.render.scene.mitsuba_conventions.orthographic_view_proj_inverse`).
+* ``disk`` and ``cylinder`` (open, no caps; ``p0``, ``p1``, ``radius``) are tessellated
+  (256-triangle fan, 512-triangle tube with radial vertex normals), untextured.
 * OBJ texture coordinates are flipped (``v -> 1 - v``, Mitsuba's ``flip_tex_coords``); PLY's
   are not. Meshes without vertex normals get Mitsuba's angle-weighted smooth normals unless
   ``face_normals`` is true.
@@ -79,6 +81,7 @@ __all__ = [
 ]
 
 DISK_SEGMENTS = 256
+CYLINDER_SEGMENTS = 256
 
 
 @dataclasses.dataclass(frozen=True)
@@ -857,6 +860,29 @@ def _disk(n_seg=DISK_SEGMENTS):
     return v, f, np.tile([0.0, 0.0, 1.0], (n_seg + 1, 1))
 
 
+def _cylinder(n_seg=CYLINDER_SEGMENTS):
+    """Mitsuba's unit cylinder (radius 1, axis z in [0, 1], no caps) as a strip of ``2 n_seg``
+    triangles between two rings of ``n_seg`` vertices, faces counter-clockwise seen from
+    outside (geometric normals outward, as Mitsuba's), vertex normals radial (the smooth
+    cylinder's shading normals)."""
+    ang = 2 * np.pi * np.arange(n_seg) / n_seg
+    ring = np.stack([np.cos(ang), np.sin(ang), np.zeros(n_seg)], 1)
+    v = np.concatenate([ring, ring + [0.0, 0.0, 1.0]])
+    i = np.arange(n_seg)
+    j = (i + 1) % n_seg
+    f = np.concatenate([np.stack([i, j, n_seg + j], 1), np.stack([i, n_seg + j, n_seg + i], 1)])
+    return v, f, np.concatenate([ring, ring])
+
+
+def _frame_to_world(n):
+    """A right-handed rotation taking +z to the unit vector ``n`` (the cylinder's frame; its
+    choice of x and y only turns the rotationally symmetric, untextured mesh about its axis)."""
+    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    s = np.cross(a, n)
+    s /= np.linalg.norm(s)
+    return np.stack([s, np.cross(n, s), n], 1)
+
+
 def _is_textured(desc, name):
     from jaxgfx.render.bsdf.textured import is_texture_desc
 
@@ -912,7 +938,7 @@ def _shape(obj: _Obj, doc, desc, ctx):
               "edge_u": (2 * lin[:, 0]).tolist(), "edge_v": (2 * lin[:, 1]).tolist()}  # fmt: skip
         corners = np.array([[x, y, 0, 1] for x in (-1, 1) for y in (-1, 1)]) @ m.T
         bbox = np.stack([corners[:, :3].min(0), corners[:, :3].max(0)])
-    elif t in ("obj", "ply", "serialized", "cube", "disk"):
+    elif t in ("obj", "ply", "serialized", "cube", "disk", "cylinder"):
         from jaxgfx.render.geometry import mesh_io
 
         uvs = normals = None
@@ -947,6 +973,29 @@ def _shape(obj: _Obj, doc, desc, ctx):
             if _is_textured(desc, mat):
                 raise ValueError(f"{obj.where}: textured cubes are not supported (uv layout)")
             v, f, _, _ = _cube()
+        elif t == "cylinder":
+            if _is_textured(desc, mat):
+                raise ValueError(f"{obj.where}: textured cylinders are not supported (uv layout)")
+            p0 = np.asarray(p.vec("p0", [0.0, 0.0, 0.0]), np.float64)
+            p1 = np.asarray(p.vec("p1", [0.0, 0.0, 1.0]), np.float64)
+            radius = p.float("radius", 1.0, positive=True)
+            length = float(np.linalg.norm(p1 - p0))
+            if not length > 0:
+                raise p.err("p1", "p0 and p1 coincide (a cylinder of length 0)")
+            local = np.eye(4)  # Mitsuba: to_world . translate(p0) . to_frame(d) . scale(r, r, l)
+            local[:3, :3] = _frame_to_world((p1 - p0) / length) @ np.diag([radius, radius, length])
+            local[:3, 3] = p0
+            m = m @ local
+            lin, det = m[:3, :3], float(np.linalg.det(m[:3, :3]))
+            cx, cy, cz = lin[:, 0], lin[:, 1], lin[:, 2]
+            r2 = float(cx @ cx)
+            if not (abs(float(cy @ cy) - r2) <= 1e-6 * r2
+                    and max(abs(float(cx @ cy)), abs(float(cx @ cz)), abs(float(cy @ cz)))
+                    <= 1e-6 * max(r2, float(cz @ cz))):  # fmt: skip
+                raise p.err("to_world", "a cylinder's to_world must keep its cross-section a "
+                                        "circle (no non-uniform scale across the axis, no "
+                                        "shear)")  # fmt: skip
+            v, f, normals = _cylinder()
         else:
             if _is_textured(desc, mat):
                 raise ValueError(f"{obj.where}: textured disks are not supported (uv layout)")
@@ -965,7 +1014,8 @@ def _shape(obj: _Obj, doc, desc, ctx):
         bbox = np.stack([vw.min(0), vw.max(0)])
     else:
         raise ValueError(f"{obj.where}: shape plugin {t!r} is not supported "
-                         "(obj, ply, serialized, sphere, rectangle, cube, disk)")  # fmt: skip
+                         "(obj, ply, serialized, sphere, rectangle, cube, disk, "
+                         "cylinder)")  # fmt: skip
     p.done(children_ok=len(obj.children))
     ctx["bboxes"].append((bbox, obj))
     if emitters:
