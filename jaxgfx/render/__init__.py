@@ -23,6 +23,7 @@ from jaxgfx.render.emitters import EnvironmentMap as EnvironmentMap
 from jaxgfx.render.emitters import PointLights as PointLights
 from jaxgfx.render.film import BoxFilter as BoxFilter
 from jaxgfx.render.film import GaussianFilter as GaussianFilter
+from jaxgfx.render.film import TentFilter as TentFilter
 from jaxgfx.render.geometry import Hit as Hit
 from jaxgfx.render.geometry import Rectangles as Rectangles
 from jaxgfx.render.geometry import SDFShape as SDFShape
@@ -64,6 +65,7 @@ __all__ = [
     "MatrixCamera",
     "BoxFilter",
     "GaussianFilter",
+    "TentFilter",
     "PointLights",
     "AreaLight",
     "ConstantEnvironment",

@@ -5,8 +5,9 @@ the pixel centre is drawn from the (normalised, non-negative) filter, and the sa
 contributes with weight 1 to its own pixel only. The pixel estimate is the plain mean of its
 samples — unbiased for the filtered image, without splatting or atomics.
 
-Filters follow Mitsuba 3's defaults: ``box`` (radius 0.5 px) and ``gaussian``
-(stddev 0.5 px, truncated at 4 stddev = 2 px).
+Filters follow Mitsuba 3's defaults: ``box`` (radius 0.5 px), ``gaussian``
+(stddev 0.5 px, truncated at 4 stddev = 2 px) and ``tent`` (radius 1 px: the separable
+``max(0, 1 - |x| / r) max(0, 1 - |y| / r)``, Mitsuba's ``tent``).
 """
 
 from __future__ import annotations
@@ -18,7 +19,14 @@ from jax.scipy.special import erf, erfinv
 from jaxgfx._checks import check_choice, check_positive
 from jaxgfx.render.sampler import uniform
 
-__all__ = ["BoxFilter", "GaussianFilter", "make_filter", "pixel_samples", "FILTERS"]
+__all__ = [
+    "BoxFilter",
+    "GaussianFilter",
+    "TentFilter",
+    "make_filter",
+    "pixel_samples",
+    "FILTERS",
+]
 
 
 class BoxFilter(eqx.Module):
@@ -46,11 +54,24 @@ class GaussianFilter(eqx.Module):
         return s * erfinv(v)
 
 
-FILTERS = {"box": BoxFilter, "gaussian": GaussianFilter}
+class TentFilter(eqx.Module):
+    """Separable tent ``max(0, 1 - |x| / r) max(0, 1 - |y| / r)`` of radius ``radius`` pixels
+    (Mitsuba 3 ``tent``, default radius 1)."""
+
+    radius: float = eqx.field(static=True, default=1.0)
+
+    def sample(self, u):
+        # inverse CDF of the triangle density on [-r, r], per axis
+        left = jnp.sqrt(2.0 * u) - 1.0
+        right = 1.0 - jnp.sqrt(jnp.maximum(2.0 - 2.0 * u, 0.0))
+        return jnp.where(u < 0.5, left, right) * self.radius
+
+
+FILTERS = {"box": BoxFilter, "gaussian": GaussianFilter, "tent": TentFilter}
 
 
 def make_filter(name: str = "box", **kwargs):
-    """Filter from its name (``box`` | ``gaussian``) and keyword options."""
+    """Filter from its name (``box`` | ``gaussian`` | ``tent``) and keyword options."""
     check_choice(name, "filter", sorted(FILTERS))
     for k, v in kwargs.items():
         check_positive(v, f"filter.{k}")

@@ -191,12 +191,21 @@ def test_integrator_mapping():
             NotImplementedError,
             r"film\.radius",
         ),
-        (
-            {"camera": {"view_proj_inverse": np.eye(4).tolist(), "width": 4, "height": 4}},
+        (  # a projective matrix camera (affine ones are exported as `orthographic`)
+            {"camera": {"view_proj_inverse": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 0, -1],
+                                              [0, 0, -1, 1]], "width": 4, "height": 4}},
             NotImplementedError,
             "view_proj_inverse",
-        ),
-        ({"emitters": [{"type": "spot"}]}, ValueError, r"emitters\[0\]\.type"),
+        ),  # fmt: skip
+        ({"emitters": [{"type": "projector"}]}, ValueError, r"emitters\[0\]\.type"),
+        # spot and directional are exported since their XML mapping; validated as load_scene
+        ({"emitters": [{"type": "spot"}]}, ValueError, r"emitters\[0\]: missing key"),
+        (
+            {"emitters": [{"type": "spot", "position": [0, 1, 0], "direction": [0, -1, 0],
+                           "intensity": 1.0, "cutoff_angle": 10, "beam_width": 20}]},
+            ValueError,
+            r"emitters\[0\]\.beam_width",
+        ),  # fmt: skip
         ({"emitters": [{"type": "point", "position": [0, 1, 0]}]}, ValueError, "intensity"),
         (
             {"shapes": [{"type": "sphere", "center": [0, 0, 0], "radius": -1}]},

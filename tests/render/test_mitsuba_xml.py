@@ -420,9 +420,9 @@ def test_disk_is_a_fan_of_256_triangles(tmp_path):
     "body,line,msg",
     [
         (
-            '<shape type="cylinder"/>',
+            '<shape type="sdfgrid"/>',
             10,
-            "<shape type='cylinder'>: shape plugin 'cylinder' is not supported",
+            "<shape type='sdfgrid'>: shape plugin 'sdfgrid' is not supported",
         ),  # fmt: skip
         (
             '<bsdf type="mask" id="p"/>',
@@ -431,9 +431,9 @@ def test_disk_is_a_fan_of_256_triangles(tmp_path):
             "'mask' is not supported (no opacity masks in jaxgfx)",
         ),  # fmt: skip
         (
-            '<emitter type="directional"/>',
+            '<emitter type="projector"/>',
             10,
-            "<emitter type='directional'>: emitter plugin 'directional' is not supported",
+            "<emitter type='projector'>: emitter plugin 'projector' is not supported",
         ),  # fmt: skip
         (
             '<shape type="sphere" id="s">\n<float name="foo" value="1"/></shape>',

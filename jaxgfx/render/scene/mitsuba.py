@@ -10,10 +10,13 @@ set before ``import mitsuba``); ``scalar_rgb`` runs anywhere.
 Mapping of conventions (jaxgfx -> Mitsuba 3), each checked by ``tests/render/test_mitsuba.py``:
 
 * camera: ``perspective`` with ``to_world = look_at(origin, target, up)``, same ``fov`` and
-  ``fov_axis``; film ``hdrfilm`` (RGB, float32); ``box`` filter (radius 0.5 only) or
-  ``gaussian`` (``stddev``; Mitsuba truncates at 4 stddev, so ``radius`` must be ``4 stddev``),
-  ``sample_border`` on for the Gaussian (jaxgfx's filter importance sampling also draws samples
-  outside the image).
+  ``fov_axis``; a matrix camera with an affine ``view_proj_inverse`` -> ``orthographic`` (its
+  default ``near_clip``, ``to_world`` from
+  :func:`~jaxgfx.render.scene.mitsuba_conventions.orthographic_to_world`; projective ones are
+  refused); film ``hdrfilm`` (RGB, float32); ``box`` filter (radius 0.5 only) or
+  ``gaussian`` (``stddev``; Mitsuba truncates at 4 stddev, so ``radius`` must be ``4 stddev``)
+  or ``tent`` (``radius``), ``sample_border`` on for the Gaussian and the tent (jaxgfx's filter
+  importance sampling also draws samples outside the image).
 * rectangle ``{center, normal, size: [w, h]}`` -> Mitsuba ``rectangle`` (``[-1, 1]^2`` in its
   local xy plane, normal +z) with ``to_world`` columns ``(s w/2, t h/2, n, center)`` where
   ``(s, t, n)`` is the same Duff et al. 2017 frame jaxgfx builds, so uv and normal agree.
@@ -30,7 +33,14 @@ Mapping of conventions (jaxgfx -> Mitsuba 3), each checked by ``tests/render/tes
   ``specular_reflectance``; ``fresnel: conductor`` -> ``eta``, ``k``, ``specular_reflectance``;
   ``fresnel: schlick`` and ``phong`` have no Mitsuba 3 counterpart (``NotImplementedError``).
 * area lights emit from the front side in both (Mitsuba ``area`` is one-sided); ``point``
-  intensity (W/sr), ``constant`` radiance map directly.
+  intensity (W/sr), ``constant`` radiance map directly. ``directional`` -> Mitsuba
+  ``directional`` with the same ``direction`` (of travel) and ``irradiance``; ``spot`` ->
+  ``spot`` with ``to_world = look_at(position, position + direction, up)`` (it points along its
+  local +z), the same ``intensity`` (W/sr on the axis), ``cutoff_angle`` and ``beam_width``
+  (degrees; the same linear-in-angle falloff, :class:`jaxgfx.render.emitters.SpotLight`).
+* ``thindielectric`` -> ``thindielectric`` (``int_ior = eta``, ``ext_ior = 1``, the specular
+  factors); ``blendbsdf`` -> ``blendbsdf`` (``weight``, nested ``bsdf_0`` / ``bsdf_1``, each
+  one-sided component wrapped in ``twosided`` as jaxgfx shades it on both sides).
 * ``envmap``: both map a direction to ``u = atan2(d_x, -d_z) / 2 pi``, ``v = acos(d_y) / pi``
   (y up). Interpolation differs: jaxgfx places texel centres at ``((i + .5) / W, (j + .5) / H)``
   and clamps v, Mitsuba 3 at ``((i + .5) / W, j / (H - 1))`` (rows at the poles). The map is
@@ -63,6 +73,7 @@ from jaxgfx.render.scene.mitsuba_conventions import (
     ONE_SIDED_BSDFS,
     envmap_for_mitsuba,
     look_at_matrix,
+    orthographic_to_world,
     rectangle_to_world,
 )
 
@@ -157,7 +168,6 @@ def _distribution(m, where) -> dict:
     return out
 
 
-
 def _dielectric_keys(m):
     """Mitsuba's keys of a (rough) dielectric: the IOR ratio as ``int_ior`` over an exterior of
     1, and the specular reflectance / transmittance factors."""
@@ -167,6 +177,7 @@ def _dielectric_keys(m):
         "specular_reflectance": _rgb(m.specular_reflectance),
         "specular_transmittance": _rgb(m.specular_transmittance),
     }
+
 
 def _material(md, where) -> dict:
     """Mitsuba BSDF dict of one jaxgfx material description (validated by ``make_bsdf``)."""
@@ -178,8 +189,9 @@ def _material(md, where) -> dict:
         raise NotImplementedError(f"{where}.type: 'phong' has no Mitsuba 3 counterpart")
     from jaxgfx.render.bsdf.textured import is_texture_desc
 
+    nested = ("bsdf0", "bsdf1") if md.get("type") == "blendbsdf" else ()
     for k, v in md.items():
-        if is_texture_desc(v):
+        if k not in nested and is_texture_desc(v):
             raise NotImplementedError(
                 f"{where}.{k}: textured parameters are not exported to Mitsuba (yet)"
             )
@@ -187,6 +199,11 @@ def _material(md, where) -> dict:
         m = B.make_bsdf(dict(md))
     except (ValueError, TypeError) as e:
         raise ValueError(f"{where}: {e}") from None
+    return _twosided(_mitsuba_bsdf(m, where))
+
+
+def _mitsuba_bsdf(m, where) -> dict:
+    """Mitsuba BSDF dict of a BSDF object (not yet wrapped in ``twosided``)."""
     kind = BSDF_TO_MITSUBA.get(type(m).__name__)
     if kind == "diffuse":
         out = {"type": kind, "reflectance": _rgb(m.reflectance)}
@@ -194,7 +211,7 @@ def _material(md, where) -> dict:
         out = {"type": kind, **_conductor_fresnel(m, where)}
     elif kind == "roughconductor":
         out = {"type": kind, **_distribution(m, where), **_conductor_fresnel(m, where)}
-    elif kind == "dielectric":
+    elif kind in ("dielectric", "thindielectric"):
         out = {"type": kind, **_dielectric_keys(m)}
     elif kind == "roughdielectric":
         out = {"type": kind, **_distribution(m, where), **_dielectric_keys(m)}
@@ -220,9 +237,19 @@ def _material(md, where) -> dict:
             "specular_reflectance": _rgb(m.specular_reflectance),
             "nonlinear": bool(m.nonlinear),
         }
+    elif kind == "blendbsdf":
+        # Mitsuba orders the nested BSDFs by name (bsdf_0, bsdf_1; unnamed in XML: document
+        # order). Each one-sided component is wrapped in twosided: jaxgfx shades it on both
+        # sides, also inside a transmissive blend (BlendBSDF mirrors it below the surface).
+        out = {
+            "type": kind,
+            "weight": _float(m.weight),
+            "bsdf_0": _twosided(_mitsuba_bsdf(m.bsdf0, f"{where}.bsdf0")),
+            "bsdf_1": _twosided(_mitsuba_bsdf(m.bsdf1, f"{where}.bsdf1")),
+        }
     else:
-        raise NotImplementedError(f"{where}.type: {md.get('type')!r} has no Mitsuba 3 mapping")
-    return _twosided(out)
+        raise NotImplementedError(f"{where}.type: {type(m).__name__} has no Mitsuba 3 mapping")
+    return out
 
 
 # -------------------------------------------------------------------------------------------
@@ -322,7 +349,7 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
     integrator (see :func:`mitsuba_integrator`). The sensor's sampler has ``sample_count`` 16;
     :func:`render_mitsuba` passes ``spp`` explicitly. Conventions mapped: see the module
     docstring. Unknown keys raise ``ValueError`` naming the field; features Mitsuba 3 lacks
-    (``phong``, Schlick Fresnel, matrix cameras, box filters with radius != 0.5, Gaussian
+    (``phong``, Schlick Fresnel, projective matrix cameras, box filters with radius != 0.5, Gaussian
     filters not truncated at 4 stddev) raise ``NotImplementedError`` naming the field.
 
     Example: ``to_mitsuba_dict(desc)["sensor"]["fov"] == desc["camera"]["fov"]``.
@@ -339,13 +366,21 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
 
     # -- sensor
     cam = desc["camera"]
+    ortho = None
     if isinstance(cam, Mapping) and "view_proj_inverse" in cam:
-        raise NotImplementedError(
-            "camera.view_proj_inverse: only look-at cameras are exported to Mitsuba"
-        )
-    S.expect_keys(cam, "camera", ("origin", "target", "fov", "width", "height"), ("up", "fov_axis"))
-    # validate exactly as load_scene does (fov range, resolution, degenerate look-at)
-    S.build_camera(cam)
+        S.build_camera(cam)  # validated as load_scene does
+        ortho = orthographic_to_world(cam["view_proj_inverse"], cam["width"], cam["height"],
+                                      DEFAULTS["near_clip"])  # fmt: skip
+        if ortho is None:
+            raise NotImplementedError(
+                "camera.view_proj_inverse: a projective matrix camera has no Mitsuba sensor "
+                "(look-at cameras and affine matrix cameras, as `orthographic`, are exported)"
+            )
+    else:
+        S.expect_keys(cam, "camera", ("origin", "target", "fov", "width", "height"),
+                      ("up", "fov_axis"))  # fmt: skip
+        # validate exactly as load_scene does (fov range, resolution, degenerate look-at)
+        S.build_camera(cam)
     film_d = desc.get("film", {}) or {}
     S.expect_keys(film_d, "film", (), ("filter", "stddev", "radius"))
     fname = film_d.get("filter", "box")
@@ -363,6 +398,9 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
         if float(rf.radius) != 0.5:
             raise NotImplementedError("film.radius: Mitsuba's box filter has radius 0.5 only")
         film["rfilter"] = {"type": "box"}
+    elif fname == "tent":
+        film["rfilter"] = {"type": "tent", "radius": float(rf.radius)}
+        film["sample_border"] = True  # as for the Gaussian: jaxgfx samples beyond the border
     else:
         if abs(float(rf.radius) - 4.0 * float(rf.stddev)) > 1e-6 * float(rf.radius):
             raise NotImplementedError(
@@ -371,16 +409,19 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
             )
         film["rfilter"] = {"type": "gaussian", "stddev": float(rf.stddev)}
         film["sample_border"] = True
-    sensor = {
-        "type": "perspective",
-        "fov": float(cam["fov"]),
-        "fov_axis": str(cam.get("fov_axis", "x")),
-        "to_world": _transform(
-            look_at_matrix(cam["origin"], cam["target"], cam.get("up", [0.0, 1.0, 0.0])), mi
-        ),
-        "film": film,
-        "sampler": {"type": "independent", "sample_count": 16},
-    }
+    if ortho is not None:  # Mitsuba's default near_clip, where the rays start
+        sensor = {"type": "orthographic", "to_world": _transform(ortho, mi)}
+    else:
+        sensor = {
+            "type": "perspective",
+            "fov": float(cam["fov"]),
+            "fov_axis": str(cam.get("fov_axis", "x")),
+            "to_world": _transform(
+                look_at_matrix(cam["origin"], cam["target"], cam.get("up", [0.0, 1.0, 0.0])), mi
+            ),
+        }
+    sensor["film"] = film
+    sensor["sampler"] = {"type": "independent", "sample_count": 16}
     out: dict = {"type": "scene", "sensor": sensor}
 
     # -- materials
@@ -469,12 +510,63 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
                 write_exr(path, envmap_for_mitsuba(img))
                 scale = S.num(ed.get("scale", 1.0), f"{where}.scale")
                 out[f"emitter_{i}"] = {"type": "envmap", "filename": path, "scale": float(scale)}
-        else:  # "directional" / "spot"
-            raise ValueError(
-                f"{where}.type: {kind!r} emitters are not exported to Mitsuba 3 "
-                "(exported: area, point, constant, envmap)"
-            )
+        else:  # "directional" / "spot" (check_choice above admits only S.EMITTER_TYPES)
+            out[f"emitter_{i}"] = _delta_light(ed, where, mi)
     return out
+
+
+def _delta_light(ed, where, mi) -> dict:
+    """Mitsuba ``directional`` / ``spot`` dict of a jaxgfx emitter description, validated as
+    :func:`load_scene` validates it (the same light objects are built)."""
+    from jaxgfx.render.emitters import DirectionalLight, SpotLight
+    from jaxgfx.render.scene import schema as S
+
+    try:
+        if ed["type"] == "directional":
+            S.expect_keys(ed, where, ("type", "direction", "irradiance"))
+            light = DirectionalLight.create(
+                S.rgb(ed["irradiance"], f"{where}.irradiance"),
+                S.vec(ed["direction"], f"{where}.direction"),
+            )
+        else:
+            S.expect_keys(ed, where, ("type", "position", "direction", "intensity"),
+                          ("cutoff_angle", "beam_width"))  # fmt: skip
+            light = SpotLight.create(
+                S.vec(ed["position"], f"{where}.position"),
+                S.vec(ed["direction"], f"{where}.direction"),
+                S.rgb(ed["intensity"], f"{where}.intensity"),
+                S.num(ed.get("cutoff_angle", DEFAULTS["spot.cutoff_angle"]),
+                      f"{where}.cutoff_angle"),
+                None if "beam_width" not in ed else S.num(ed["beam_width"], f"{where}.beam_width"),
+            )  # fmt: skip
+    except ValueError as e:
+        msg = str(e)
+        raise ValueError(msg if msg.startswith(where) else f"{where}.{msg}") from None
+    # the description's direction normalised in float64 (the light object holds float32)
+    return _delta_light_dict(light, mi, direction=np.asarray(ed["direction"], np.float64))
+
+
+def _delta_light_dict(light, mi, direction=None) -> dict:
+    """Mitsuba dict of a ``DirectionalLight`` / ``SpotLight`` object: the directional light by
+    its ``direction`` (Mitsuba's alternative to ``to_world``), the spot light by
+    ``to_world = look_at(position, position + direction, up)`` (Mitsuba's spot points along its
+    local +z; ``up`` is any perpendicular, the cone is round) and both angles in degrees."""
+    from jaxgfx.render.emitters import DirectionalLight
+
+    d = np.asarray(light.direction if direction is None else direction, np.float64)
+    d = d / np.linalg.norm(d)
+    if isinstance(light, DirectionalLight):
+        return {"type": "directional", "direction": d.tolist(),
+                "irradiance": _rgb(light.irradiance)}  # fmt: skip
+    p = np.asarray(light.position, np.float64)
+    up, _ = _frame_from_normal(d)
+    return {
+        "type": "spot",
+        "to_world": _transform(look_at_matrix(p, p + d, up), mi),
+        "intensity": _rgb(light.intensity),
+        "cutoff_angle": _float(light.cutoff_angle),
+        "beam_width": _float(light.beam_width),
+    }
 
 
 def _list(x):
@@ -521,6 +613,14 @@ def _bsdf_desc(m, where) -> dict:
                 "diffuse_reflectance": _list(m.diffuse_reflectance),
                 "specular_reflectance": _list(m.specular_reflectance),
                 "nonlinear": bool(m.nonlinear)}  # fmt: skip
+    if isinstance(m, B.ThinDielectric):
+        return {"type": "thindielectric", "eta": _list(m.eta),
+                "specular_reflectance": _list(m.specular_reflectance),
+                "specular_transmittance": _list(m.specular_transmittance)}  # fmt: skip
+    if isinstance(m, B.BlendBSDF):
+        return {"type": "blendbsdf", "weight": _list(m.weight),
+                "bsdf0": _bsdf_desc(m.bsdf0, f"{where}.bsdf0"),
+                "bsdf1": _bsdf_desc(m.bsdf1, f"{where}.bsdf1")}  # fmt: skip
     if isinstance(m, B.SmoothDielectric):
         return {"type": "dielectric", "eta": _list(m.eta),
                 "specular_reflectance": _list(m.specular_reflectance),
@@ -534,22 +634,29 @@ def scene_to_desc(scene) -> dict:
     be saved (:func:`jaxgfx.render.scene.mitsuba_xml.save_scene`) or exported. Spheres and
     rectangles become one shape each (rectangles by ``edge_u`` / ``edge_v``), a mesh one
     inline mesh per material it uses, the loader's own ``__default__`` / ``__black__``
-    materials ``jaxgfx_default`` / ``jaxgfx_black``. Matrix cameras, SDF shapes, Phong and
-    textured materials raise ``NotImplementedError`` naming the object. Host function.
+    materials ``jaxgfx_default`` / ``jaxgfx_black``, a matrix camera its ``view_proj_inverse``.
+    SDF shapes, Phong and textured materials raise ``NotImplementedError`` naming the object.
+    Host function.
 
     Example: ``load_scene(scene_to_desc(load_scene(desc)))`` renders like ``desc``.
     """
-    from jaxgfx.render.camera import PerspectiveCamera
-    from jaxgfx.render.emitters import ConstantEnvironment
-    from jaxgfx.render.film import GaussianFilter
+    from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera
+    from jaxgfx.render.emitters import ConstantEnvironment, DirectionalLight
+    from jaxgfx.render.film import GaussianFilter, TentFilter
     from jaxgfx.render.geometry import Rectangles, Spheres, TriangleMesh
+
     cam = scene.camera
-    if not isinstance(cam, PerspectiveCamera):
-        raise NotImplementedError("camera: only look-at cameras are exported")
+    if isinstance(cam, MatrixCamera):
+        cam_d = {"view_proj_inverse": _list(cam.view_proj_inverse), "width": int(cam.width),
+                 "height": int(cam.height)}  # fmt: skip
+    elif isinstance(cam, PerspectiveCamera):
+        cam_d = {"origin": _list(cam.origin), "target": _list(cam.target), "up": _list(cam.up),
+                 "fov": float(cam.fov), "fov_axis": cam.fov_axis, "width": int(cam.width),
+                 "height": int(cam.height)}  # fmt: skip
+    else:  # pragma: no cover - a Scene holds one of the two
+        raise NotImplementedError(f"camera: {type(cam).__name__} has no Mitsuba 3 mapping")
     desc = {
-        "camera": {"origin": _list(cam.origin), "target": _list(cam.target), "up": _list(cam.up),
-                   "fov": float(cam.fov), "fov_axis": cam.fov_axis, "width": int(cam.width),
-                   "height": int(cam.height)},  # fmt: skip
+        "camera": cam_d,
         "materials": {},
         "shapes": [],
         "emitters": [],
@@ -558,6 +665,8 @@ def scene_to_desc(scene) -> dict:
     if isinstance(rf, GaussianFilter):
         desc["film"] = {"filter": "gaussian", "stddev": float(rf.stddev),
                         "radius": float(rf.radius)}  # fmt: skip
+    elif isinstance(rf, TentFilter):
+        desc["film"] = {"filter": "tent", "radius": float(rf.radius)}
     else:
         desc["film"] = {"filter": "box", "radius": float(rf.radius)}
     internal = {"__default__": "jaxgfx_default", "__black__": "jaxgfx_black"}
@@ -615,6 +724,16 @@ def scene_to_desc(scene) -> dict:
     elif env is not None:
         desc["emitters"].append({"type": "envmap", "image": np.asarray(env.image, np.float32),
                                  "scale": float(env.scale)})  # fmt: skip
+    for e in scene.delta_lights:  # directional and spot lights, in their order
+        if isinstance(e, DirectionalLight):
+            desc["emitters"].append({"type": "directional", "direction": _list(e.direction),
+                                     "irradiance": _list(e.irradiance)})  # fmt: skip
+        else:
+            desc["emitters"].append({"type": "spot", "position": _list(e.position),
+                                     "direction": _list(e.direction),
+                                     "intensity": _list(e.intensity),
+                                     "cutoff_angle": _list(e.cutoff_angle),
+                                     "beam_width": _list(e.beam_width)})  # fmt: skip
     used = {d.get("material") for d in desc["shapes"] + desc["emitters"]}
     desc["materials"] = {k: v for k, v in desc["materials"].items() if k in used}
     return desc

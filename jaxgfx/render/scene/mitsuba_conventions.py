@@ -16,7 +16,9 @@ Mitsuba 3.9.1 by tests/render/test_mitsuba*.py.
 * :data:`IOR_TABLE`: Mitsuba's named dielectric IORs; :data:`CONDUCTOR_IOR`: its named
   conductors (``material="Au"``) as the RGB ``(eta, k)`` its RGB variants use.
 * :func:`look_at_matrix`: Mitsuba's ``Transform4f.look_at`` (camera looks along local +z,
-  +y up); :func:`rectangle_to_world`: a jaxgfx parallelogram as Mitsuba's ``[-1, 1]^2``
+  +y up); :func:`orthographic_view_proj_inverse` / :func:`orthographic_to_world`: Mitsuba's
+  ``orthographic`` sensor as a jaxgfx :class:`~jaxgfx.render.camera.MatrixCamera` and back;
+  :func:`rectangle_to_world`: a jaxgfx parallelogram as Mitsuba's ``[-1, 1]^2``
   rectangle; :func:`spectrum_to_rgb`: spectra -> RGB as the RGB variants convert them;
   :func:`envmap_for_mitsuba` / :func:`envmap_from_mitsuba`: the two lat-long grids.
 """
@@ -38,6 +40,8 @@ __all__ = [
     "conductor_ior_from_spd",
     "read_spd",
     "look_at_matrix",
+    "orthographic_view_proj_inverse",
+    "orthographic_to_world",
     "rectangle_to_world",
     "spectrum_to_rgb",
     "envmap_for_mitsuba",
@@ -55,7 +59,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("shape", "rectangle"): S,
     ("shape", "cube"): S + " (untextured)",
     ("shape", "disk"): S + " (untextured; 256-triangle fan)",
-    ("shape", "cylinder"): "refused: no cylinder primitive in jaxgfx",
+    ("shape", "cylinder"): S + " (untextured; 512-triangle tube, no caps)",
     ("shape", "shapegroup"): "refused: no instancing in jaxgfx",
     ("shape", "instance"): "refused: no instancing in jaxgfx",
     ("shape", "sdfgrid"): "refused: no SDF grids in jaxgfx",
@@ -71,13 +75,13 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("bsdf", "roughplastic"): S,
     ("bsdf", "plastic"): S,
     ("bsdf", "roughdielectric"): S + " (isotropic)",
-    ("bsdf", "thindielectric"): "refused: no thin dielectric in jaxgfx",
+    ("bsdf", "thindielectric"): S,
     ("bsdf", "principled"): "refused: no principled BSDF in jaxgfx",
     ("bsdf", "principledthin"): "refused: no principled BSDF in jaxgfx",
     ("bsdf", "mask"): "refused: no opacity masks in jaxgfx",
     ("bsdf", "bumpmap"): "refused: no bump mapping in jaxgfx",
     ("bsdf", "normalmap"): "refused: no normal mapping in jaxgfx",
-    ("bsdf", "blendbsdf"): "refused: no BSDF blending in jaxgfx",
+    ("bsdf", "blendbsdf"): S + " (two nested BSDFs; a texture weight at the top level only)",
     ("bsdf", "pplastic"): "refused: no polarized BSDFs in jaxgfx",
     ("bsdf", "polarizer"): "refused: no polarized BSDFs in jaxgfx",
     ("bsdf", "retarder"): "refused: no polarized BSDFs in jaxgfx",
@@ -94,15 +98,15 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("emitter", "point"): S,
     ("emitter", "constant"): S,
     ("emitter", "envmap"): S + " (no rotation)",
-    ("emitter", "directional"): "refused: not in jaxgfx yet",
-    ("emitter", "spot"): "refused: not in jaxgfx yet",
+    ("emitter", "directional"): S,
+    ("emitter", "spot"): S + " (no projected `texture`)",
     ("emitter", "projector"): "refused: not in jaxgfx",
     ("emitter", "directionalarea"): "refused: not in jaxgfx",
     ("emitter", "sunsky"): "refused: not in jaxgfx",
     # sensors, films, filters, samplers
     ("sensor", "perspective"): S + " (rigid `to_world`)",
     ("sensor", "thinlens"): "refused: no depth of field in jaxgfx",
-    ("sensor", "orthographic"): "refused: no orthographic camera in jaxgfx",
+    ("sensor", "orthographic"): S + " (as a matrix camera)",
     ("sensor", "radiancemeter"): "refused: jaxgfx renders images only",
     ("sensor", "irradiancemeter"): "refused: jaxgfx renders images only",
     ("sensor", "distant"): "refused: jaxgfx renders images only",
@@ -111,7 +115,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("film", "specfilm"): "refused: jaxgfx renders RGB only",
     ("rfilter", "box"): S,
     ("rfilter", "gaussian"): S,
-    ("rfilter", "tent"): "refused: no tent filter in jaxgfx",
+    ("rfilter", "tent"): S,
     ("rfilter", "mitchell"): "refused: no Mitchell filter in jaxgfx",
     ("rfilter", "catmullrom"): "refused: no Catmull-Rom filter in jaxgfx",
     ("rfilter", "lanczos"): "refused: no Lanczos filter in jaxgfx",
@@ -157,6 +161,8 @@ BSDF_TO_MITSUBA = {
     "RoughDielectric": "roughdielectric",
     "SmoothPlastic": "plastic",
     "RoughPlastic": "roughplastic",
+    "ThinDielectric": "thindielectric",
+    "BlendBSDF": "blendbsdf",
 }
 """jaxgfx BSDF class -> Mitsuba plugin (``Phong`` has none)."""
 
@@ -175,11 +181,18 @@ DEFAULTS = {
     "roughplastic.ext_ior": "air",
     "roughplastic.diffuse_reflectance": 0.5,
     "conductor.material": "none",
+    "blendbsdf.weight": 0.5,
+    "spot.cutoff_angle": 20.0,
+    "spot.beam_width_fraction": 0.75,
+    "directional.direction": (0.0, 0.0, 1.0),
     "film.width": 768,
     "film.height": 576,
     "rfilter": "gaussian",
     "gaussian.stddev": 0.5,
+    "tent.radius": 1.0,
     "fov_axis": "x",
+    "near_clip": 1e-2,
+    "far_clip": 1e4,
     "focal_length": "50mm",
     "sample_count": 4,
     "path.max_depth": -1,
@@ -369,6 +382,47 @@ def look_at_matrix(origin, target, up) -> np.ndarray:
     m = np.eye(4)
     m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, np.cross(d, left), d, o
     return m
+
+
+def _ortho_ndc_to_camera(near_clip, width, height) -> np.ndarray:
+    a = width / height
+    c = np.eye(4)
+    c[0, 0], c[1, 1], c[2, 3] = -1.0, 1.0 / a, near_clip + 1.0
+    return c
+
+
+def orthographic_view_proj_inverse(to_world, near_clip, width, height) -> np.ndarray:
+    """Mitsuba 3's ``orthographic`` sensor as the ``view_proj_inverse`` (OpenGL NDC -> world)
+    of a jaxgfx :class:`~jaxgfx.render.camera.MatrixCamera` with the same rays.
+
+    Mitsuba (``orthographic_projection``, ``sensors/orthographic.cpp``) maps the film position
+    ``(s_x, s_y)`` in ``[0, 1]^2`` (from the top left) to the camera-space point
+    ``(1 - 2 s_x, (1 - 2 s_y) / a, near_clip)``, ``a = width / height`` (the film width spans
+    ``[-1, 1]``; image left is camera +x, the ``left`` of its ``look_at``), starts the ray at
+    ``to_world`` of that point and sends it along ``normalize(to_world (0, 0, 1))``. With jaxgfx's
+    NDC ``x = 2 s_x - 1``, ``y = 1 - 2 s_y``: NDC ``(x, y, z)`` -> camera
+    ``(-x, y / a, near_clip + 1 + z)``, so the near point (``z = -1``) is Mitsuba's ray origin
+    and the far one (``z = 1``) lies 2 camera units further along +z (jaxgfx does not clip at
+    ``far_clip``; the loader checks that nothing lies beyond it). Returns ``to_world @ C``.
+
+    Example: the identity ``to_world`` with ``near_clip = 0``, a square film: the centre ray
+    starts at the origin and points along +z.
+    """
+    m = np.asarray(to_world, np.float64)
+    return m @ _ortho_ndc_to_camera(float(near_clip), width, height)
+
+
+def orthographic_to_world(view_proj_inverse, width, height, near_clip=1e-2):
+    """The ``to_world`` of a Mitsuba ``orthographic`` sensor (with ``near_clip``) whose rays
+    are those of a :class:`~jaxgfx.render.camera.MatrixCamera` with this affine
+    ``view_proj_inverse`` (the inverse of :func:`orthographic_view_proj_inverse`), or ``None``
+    when the matrix is projective (last row not ``(0, 0, 0, 1)``: no orthographic sensor)."""
+    m = np.asarray(view_proj_inverse, np.float64)
+    if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], rtol=0.0, atol=1e-7 * np.abs(m).max()):
+        return None
+    m = m.copy()
+    m[3] = [0.0, 0.0, 0.0, 1.0]
+    return m @ np.linalg.inv(_ortho_ndc_to_camera(float(near_clip), width, height))
 
 
 def rectangle_to_world(center, edge_u, edge_v) -> np.ndarray:

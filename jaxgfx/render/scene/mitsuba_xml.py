@@ -20,7 +20,12 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
   local +z with +y up. ``fov_axis`` ``diagonal`` / ``smaller`` / ``larger`` are converted to an
   x- or y-fov; without ``fov``, ``focal_length`` (default ``50mm``) is the diagonal fov of a
   36 x 24 mm film. ``near_clip`` / ``far_clip`` are accepted only when no geometry lies where
-  they would clip camera rays (checked on bounding boxes).
+  they would clip camera rays (checked on bounding boxes). ``orthographic``: any invertible
+  ``to_world`` (a scale sizes the sensor plane: the film width spans camera x in [-1, 1]),
+  loaded as a :class:`~jaxgfx.render.camera.MatrixCamera` whose rays start on the near plane
+  (:func:`~jaxgfx.render.scene.mitsuba_conventions.orthographic_view_proj_inverse`).
+* ``disk`` and ``cylinder`` (open, no caps; ``p0``, ``p1``, ``radius``) are tessellated
+  (256-triangle fan, 512-triangle tube with radial vertex normals), untextured.
 * OBJ texture coordinates are flipped (``v -> 1 - v``, Mitsuba's ``flip_tex_coords``); PLY's
   are not. Meshes without vertex normals get Mitsuba's angle-weighted smooth normals unless
   ``face_normals`` is true.
@@ -32,6 +37,11 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
 * Mitsuba's one-sided BSDFs (``diffuse``, ``conductor``, ``roughconductor``, ``plastic``,
   ``roughplastic``) are shaded on both sides in jaxgfx: the image agrees where back faces are
   not seen (``twosided`` is therefore a pass-through wrapper).
+* ``directional``: the light travels along ``direction`` or ``to_world``'s +z (default +z);
+  ``spot``: at ``to_world``'s origin, pointing along its +z, ``beam_width`` defaulting to 3/4 of
+  ``cutoff_angle`` (20 degrees); the same falloff as :class:`jaxgfx.render.emitters.SpotLight`.
+* ``blendbsdf``: ``(1 - weight) bsdf_0 + weight bsdf_1``, the nested BSDFs in document order
+  (unnamed) or ordered by name (named), as Mitsuba orders its nested objects.
 * ``envmap``: same direction -> (u, v) map as jaxgfx (y up); Mitsuba places rows at
   ``v = j / (H - 1)``, jaxgfx at ``(j + 1/2) / H'``: the map is resampled to ``H' = 4 H`` rows
   with Mitsuba's linear interpolation along v (exact between Mitsuba's rows up to the
@@ -54,6 +64,7 @@ from jaxgfx.render.scene.mitsuba_conventions import (
     IOR_TABLE,
     envmap_from_mitsuba,
     look_at_matrix,
+    orthographic_view_proj_inverse,
     plugin_status,
     spectrum_to_rgb,
 )
@@ -70,6 +81,7 @@ __all__ = [
 ]
 
 DISK_SEGMENTS = 256
+CYLINDER_SEGMENTS = 256
 
 
 @dataclasses.dataclass(frozen=True)
@@ -501,8 +513,9 @@ def _read_file(doc, path, out):
 class _Params:
     """Typed access to an object's parameters; :meth:`done` refuses the ones never read."""
 
-    def __init__(self, obj: _Obj, doc: _Doc):
-        self.obj, self.doc = obj, doc
+    def __init__(self, obj: _Obj, doc: _Doc, *, no_textures: str | None = None):
+        # no_textures: why texture-valued parameters are refused here (e.g. inside a blendbsdf)
+        self.obj, self.doc, self.no_textures = obj, doc, no_textures
 
     def _get(self, name, kinds):
         p = self.obj.props.get(name)
@@ -557,9 +570,10 @@ class _Params:
         """RGB list, or a texture description (``texture=True``)."""
         kinds = ("float", "rgb", "spectrum") + (("object",) if texture else ())
         p = self.obj.props.get(name)
-        if p is not None and p.kind == "object" and not texture:
+        if p is not None and p.kind == "object" and (not texture or self.no_textures):
             p.used = True
-            raise self.err(name, "textures are not supported for this parameter")
+            raise self.err(name, self.no_textures or "textures are not supported for this "
+                                                     "parameter")  # fmt: skip
         p = self._get(name, kinds)
         if p is None:
             return default
@@ -692,21 +706,52 @@ def _conductor(p: _Params) -> dict:
     return out
 
 
-def _bsdf(obj: _Obj, doc, desc, *, textured_ok=True, name=None) -> str:
-    """The material name of a BSDF object (converted once, shared by references): its ``id``,
-    else ``name`` (the id of an enclosing ``twosided``), else ``bsdf_N``."""
-    if obj.converted is not None:
-        return obj.converted
+def _twosided_child(obj: _Obj, doc) -> _Obj:
     p = _Params(obj, doc)
-    if obj.type == "twosided":
-        if len(obj.children) != 1 or obj.children[0].tag != "bsdf":
-            raise ValueError(f"{obj.where}: expected exactly one nested <bsdf> (different "
-                             "front and back BSDFs are not supported)")  # fmt: skip
-        p.done(children_ok=1)
-        name = _bsdf(obj.children[0], doc, desc, name=obj.id or name)
-        obj.converted = name
-        return name
+    if len(obj.children) != 1 or obj.children[0].tag != "bsdf":
+        raise ValueError(f"{obj.where}: expected exactly one nested <bsdf> (different "
+                         "front and back BSDFs are not supported)")  # fmt: skip
+    p.done(children_ok=1)
+    return obj.children[0]
+
+
+def _ior_ratio(p: _Params, int_default, ext_default) -> float:
+    return p.ior("int_ior", int_default) / p.ior("ext_ior", ext_default)
+
+
+def _blend_children(obj: _Obj, p: _Params) -> list:
+    """The two nested BSDFs of a ``blendbsdf`` in Mitsuba's order: unnamed ones (and ``<ref>``s)
+    in document order, or named ones sorted by name (Mitsuba orders them by name, and names
+    unnamed ones ``_arg_N``; a mix of both is refused rather than guessed)."""
+    for c in obj.children:
+        if c.tag != "bsdf":
+            raise ValueError(
+                f"{c.node.at}: {obj.where}: nested <{c.tag} type={c.type!r}> is "
+                'not supported here (a texture weight needs name="weight")'
+            )
+    unnamed = list(obj.children)
+    named = sorted((k, q) for k, q in obj.props.items()
+                   if q.kind == "object" and q.value.tag == "bsdf")  # fmt: skip
+    for _, q in named:
+        q.used = True
+    if unnamed and named:
+        why = "would depend on Mitsuba's names for unnamed objects"
+        raise p.err(named[0][0], f"give both nested BSDFs a name or neither (their order {why})")
+    kids = unnamed or [q.value for _, q in named]
+    if len(kids) != 2:
+        raise ValueError(f"{obj.where}: expected exactly two nested <bsdf>, got {len(kids)}")
+    return kids
+
+
+def _bsdf_dict(obj: _Obj, doc, *, nested=False) -> dict:
+    """The jaxgfx description of a BSDF object (``twosided`` unwrapped). ``nested``: a BSDF
+    inside a ``blendbsdf``, whose parameters jaxgfx cannot texture."""
+    while obj.type == "twosided":
+        obj = _twosided_child(obj, doc)
+    why = "textures are not supported in a BSDF nested in a blendbsdf" if nested else None
+    p = _Params(obj, doc, no_textures=why)
     t = obj.type
+    children_ok = 0
     if t == "diffuse":
         rho = [DEFAULTS["diffuse.reflectance"]] * 3
         m = {"type": "diffuse", "reflectance": p.color("reflectance", rho, texture=True)}
@@ -714,32 +759,48 @@ def _bsdf(obj: _Obj, doc, desc, *, textured_ok=True, name=None) -> str:
         m = {"type": "conductor", **_conductor(p)}
     elif t == "roughconductor":
         m = {"type": "roughconductor", **_distribution(p), **_conductor(p)}
-    elif t == "dielectric":
-        eta = p.ior("int_ior", DEFAULTS["dielectric.int_ior"]) / p.ior(
-            "ext_ior", DEFAULTS["dielectric.ext_ior"])
-        m = {"type": "dielectric", "eta": eta,
-             "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
-             "specular_transmittance": p.color("specular_transmittance", [1.0] * 3,
-                                               texture=True)}  # fmt: skip
-    elif t == "roughdielectric":
-        eta = p.ior("int_ior", DEFAULTS["dielectric.int_ior"]) / p.ior(
-            "ext_ior", DEFAULTS["dielectric.ext_ior"])
-        m = {"type": "roughdielectric", **_distribution(p), "eta": eta,
+    elif t in ("dielectric", "roughdielectric", "thindielectric"):
+        eta = _ior_ratio(p, DEFAULTS["dielectric.int_ior"], DEFAULTS["dielectric.ext_ior"])
+        m = {"type": t, **(_distribution(p) if t == "roughdielectric" else {}), "eta": eta,
              "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
              "specular_transmittance": p.color("specular_transmittance", [1.0] * 3,
                                                texture=True)}  # fmt: skip
     elif t in ("plastic", "roughplastic"):
         m = {"type": t, **(_distribution(p) if t == "roughplastic" else {}),
-             "eta": p.ior("int_ior", DEFAULTS["roughplastic.int_ior"])
-             / p.ior("ext_ior", DEFAULTS["roughplastic.ext_ior"]),
+             "eta": _ior_ratio(p, DEFAULTS["roughplastic.int_ior"],
+                               DEFAULTS["roughplastic.ext_ior"]),
              "diffuse_reflectance": p.color("diffuse_reflectance",
                                              [DEFAULTS["roughplastic.diffuse_reflectance"]] * 3,
                                              texture=True),
              "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
              "nonlinear": p.bool("nonlinear", False)}  # fmt: skip
+    elif t == "blendbsdf":
+        kids = _blend_children(obj, p)
+        children_ok = len(obj.children)
+        if nested and "weight" in obj.props and obj.props["weight"].kind == "object":
+            obj.props["weight"].used = True
+            raise p.err("weight", "a texture weight is supported for a top-level blendbsdf "
+                                  "only, not one nested in another blendbsdf")  # fmt: skip
+        w = p.scalar_or_texture("weight", DEFAULTS["blendbsdf.weight"])
+        m = {"type": "blendbsdf", "weight": w,
+             "bsdf0": _bsdf_dict(kids[0], doc, nested=True),
+             "bsdf1": _bsdf_dict(kids[1], doc, nested=True)}  # fmt: skip
     else:
         raise ValueError(f"{obj.where}: BSDF plugin {t!r} is not supported")
-    p.done()
+    p.done(children_ok=children_ok)
+    return m
+
+
+def _bsdf(obj: _Obj, doc, desc, *, name=None) -> str:
+    """The material name of a BSDF object (converted once, shared by references): its ``id``,
+    else ``name`` (the id of an enclosing ``twosided``), else ``bsdf_N``."""
+    if obj.converted is not None:
+        return obj.converted
+    if obj.type == "twosided":
+        name = _bsdf(_twosided_child(obj, doc), doc, desc, name=obj.id or name)
+        obj.converted = name
+        return name
+    m = _bsdf_dict(obj, doc)
     name = obj.id or name or f"bsdf_{len(desc['materials'])}"
     while name in desc["materials"]:
         name += "_"
@@ -799,6 +860,29 @@ def _disk(n_seg=DISK_SEGMENTS):
     return v, f, np.tile([0.0, 0.0, 1.0], (n_seg + 1, 1))
 
 
+def _cylinder(n_seg=CYLINDER_SEGMENTS):
+    """Mitsuba's unit cylinder (radius 1, axis z in [0, 1], no caps) as a strip of ``2 n_seg``
+    triangles between two rings of ``n_seg`` vertices, faces counter-clockwise seen from
+    outside (geometric normals outward, as Mitsuba's), vertex normals radial (the smooth
+    cylinder's shading normals)."""
+    ang = 2 * np.pi * np.arange(n_seg) / n_seg
+    ring = np.stack([np.cos(ang), np.sin(ang), np.zeros(n_seg)], 1)
+    v = np.concatenate([ring, ring + [0.0, 0.0, 1.0]])
+    i = np.arange(n_seg)
+    j = (i + 1) % n_seg
+    f = np.concatenate([np.stack([i, j, n_seg + j], 1), np.stack([i, n_seg + j, n_seg + i], 1)])
+    return v, f, np.concatenate([ring, ring])
+
+
+def _frame_to_world(n):
+    """A right-handed rotation taking +z to the unit vector ``n`` (the cylinder's frame; its
+    choice of x and y only turns the rotationally symmetric, untextured mesh about its axis)."""
+    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    s = np.cross(a, n)
+    s /= np.linalg.norm(s)
+    return np.stack([s, np.cross(n, s), n], 1)
+
+
 def _is_textured(desc, name):
     from jaxgfx.render.bsdf.textured import is_texture_desc
 
@@ -827,7 +911,8 @@ def _shape(obj: _Obj, doc, desc, ctx):
     else:  # Mitsuba's default BSDF
         mat = "mitsuba_default"
         desc["materials"].setdefault(
-            mat, {"type": "diffuse", "reflectance": [DEFAULTS["diffuse.reflectance"]] * 3})
+            mat, {"type": "diffuse", "reflectance": [DEFAULTS["diffuse.reflectance"]] * 3}
+        )
     lin, det = m[:3, :3], float(np.linalg.det(m[:3, :3]))
     t = obj.type
     if t == "sphere":
@@ -853,7 +938,7 @@ def _shape(obj: _Obj, doc, desc, ctx):
               "edge_u": (2 * lin[:, 0]).tolist(), "edge_v": (2 * lin[:, 1]).tolist()}  # fmt: skip
         corners = np.array([[x, y, 0, 1] for x in (-1, 1) for y in (-1, 1)]) @ m.T
         bbox = np.stack([corners[:, :3].min(0), corners[:, :3].max(0)])
-    elif t in ("obj", "ply", "serialized", "cube", "disk"):
+    elif t in ("obj", "ply", "serialized", "cube", "disk", "cylinder"):
         from jaxgfx.render.geometry import mesh_io
 
         uvs = normals = None
@@ -888,6 +973,29 @@ def _shape(obj: _Obj, doc, desc, ctx):
             if _is_textured(desc, mat):
                 raise ValueError(f"{obj.where}: textured cubes are not supported (uv layout)")
             v, f, _, _ = _cube()
+        elif t == "cylinder":
+            if _is_textured(desc, mat):
+                raise ValueError(f"{obj.where}: textured cylinders are not supported (uv layout)")
+            p0 = np.asarray(p.vec("p0", [0.0, 0.0, 0.0]), np.float64)
+            p1 = np.asarray(p.vec("p1", [0.0, 0.0, 1.0]), np.float64)
+            radius = p.float("radius", 1.0, positive=True)
+            length = float(np.linalg.norm(p1 - p0))
+            if not length > 0:
+                raise p.err("p1", "p0 and p1 coincide (a cylinder of length 0)")
+            local = np.eye(4)  # Mitsuba: to_world . translate(p0) . to_frame(d) . scale(r, r, l)
+            local[:3, :3] = _frame_to_world((p1 - p0) / length) @ np.diag([radius, radius, length])
+            local[:3, 3] = p0
+            m = m @ local
+            lin, det = m[:3, :3], float(np.linalg.det(m[:3, :3]))
+            cx, cy, cz = lin[:, 0], lin[:, 1], lin[:, 2]
+            r2 = float(cx @ cx)
+            if not (abs(float(cy @ cy) - r2) <= 1e-6 * r2
+                    and max(abs(float(cx @ cy)), abs(float(cx @ cz)), abs(float(cy @ cz)))
+                    <= 1e-6 * max(r2, float(cz @ cz))):  # fmt: skip
+                raise p.err("to_world", "a cylinder's to_world must keep its cross-section a "
+                                        "circle (no non-uniform scale across the axis, no "
+                                        "shear)")  # fmt: skip
+            v, f, normals = _cylinder()
         else:
             if _is_textured(desc, mat):
                 raise ValueError(f"{obj.where}: textured disks are not supported (uv layout)")
@@ -906,7 +1014,8 @@ def _shape(obj: _Obj, doc, desc, ctx):
         bbox = np.stack([vw.min(0), vw.max(0)])
     else:
         raise ValueError(f"{obj.where}: shape plugin {t!r} is not supported "
-                         "(obj, ply, serialized, sphere, rectangle, cube, disk)")  # fmt: skip
+                         "(obj, ply, serialized, sphere, rectangle, cube, disk, "
+                         "cylinder)")  # fmt: skip
     p.done(children_ok=len(obj.children))
     ctx["bboxes"].append((bbox, obj))
     if emitters:
@@ -962,11 +1071,54 @@ def _emitter(obj: _Obj, doc, desc):
             raise p.err("filename", f"expected an RGB image of at least 2x2, got {img.shape}")
         d = {"type": "envmap", "image": envmap_from_mitsuba(img),
              "scale": p.float("scale", 1.0)}  # fmt: skip
+    elif t == "directional":
+        direction = p.vec("direction")
+        m = p.transform("to_world")
+        if m is not None:
+            if direction is not None:
+                raise p.err("direction", "give either direction or to_world (Mitsuba refuses "
+                                         "both)")  # fmt: skip
+            # Mitsuba uses to_world's image of +z as is (not normalised): a unit one only
+            z = m[:3, 2]
+            if not abs(float(np.linalg.norm(z)) - 1.0) < 1e-6:
+                raise p.err("to_world", "a to_world that scales the light's +z axis is not "
+                                        "supported (Mitsuba does not normalise it)")  # fmt: skip
+            direction = z.tolist()
+        direction = direction or list(DEFAULTS["directional.direction"])
+        if not np.linalg.norm(direction) > 0:
+            raise p.err("direction", "expected a nonzero vector")
+        d = {"type": "directional", "direction": _unit(direction),
+             "irradiance": p.color("irradiance", [1.0] * 3, emission=True)}  # fmt: skip
+    elif t == "spot":
+        if "texture" in obj.props:
+            obj.props["texture"].used = True
+            raise p.err("texture", "projected textures are not supported")
+        m = p.transform("to_world")
+        m = np.eye(4) if m is None else m
+        lin = m[:3, :3]
+        s2 = float(np.mean(np.sum(lin * lin, 0)))
+        if not np.allclose(lin.T @ lin, s2 * np.eye(3), rtol=1e-6, atol=1e-9 * s2):
+            raise p.err("to_world", "a spot light's to_world must be a rotation, uniform scale "
+                                    "and translation (the cone would not be circular)")  # fmt: skip
+        cutoff = p.float("cutoff_angle", DEFAULTS["spot.cutoff_angle"])
+        beam = p.float("beam_width", cutoff * DEFAULTS["spot.beam_width_fraction"])
+        if not 0 < cutoff <= 180:
+            raise p.err("cutoff_angle", f"expected degrees in (0, 180], got {cutoff}")
+        if not 0 <= beam <= cutoff:
+            raise p.err("beam_width", f"expected degrees in [0, cutoff_angle], got {beam}")
+        d = {"type": "spot", "position": m[:3, 3].tolist(), "direction": _unit(lin[:, 2]),
+             "intensity": p.color("intensity", [1.0] * 3, emission=True),
+             "cutoff_angle": cutoff, "beam_width": beam}  # fmt: skip
     else:
         raise ValueError(f"{obj.where}: emitter plugin {t!r} is not supported "
-                         "(area, point, constant, envmap)")  # fmt: skip
+                         "(area, point, constant, envmap, directional, spot)")  # fmt: skip
     p.done()
     desc["emitters"].append(d)
+
+
+def _unit(v) -> list:
+    v = np.asarray(v, np.float64)
+    return (v / np.linalg.norm(v)).tolist()
 
 
 def _fov_x_or_y(p: _Params, width, height):
@@ -995,9 +1147,9 @@ def _fov_x_or_y(p: _Params, width, height):
 
 def _sensor(obj: _Obj, doc, ctx) -> dict:
     p = _Params(obj, doc)
-    if obj.type != "perspective":
+    if obj.type not in ("perspective", "orthographic"):
         raise ValueError(f"{obj.where}: sensor plugin {obj.type!r} is not supported "
-                         "(perspective)")  # fmt: skip
+                         "(perspective, orthographic)")  # fmt: skip
     films = [c for c in obj.children if c.tag == "film"]
     samplers = [c for c in obj.children if c.tag == "sampler"]
     for c in obj.children:
@@ -1028,9 +1180,14 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
         elif rf.type == "box":
             _Params(rf, doc).done()
             film = {"filter": "box"}
+        elif rf.type == "tent":
+            rp = _Params(rf, doc)
+            film = {"filter": "tent", "radius": rp.float("radius", DEFAULTS["tent.radius"],
+                                                         positive=True)}  # fmt: skip
+            rp.done()
         else:
             raise ValueError(f"{rf.where}: reconstruction filter {rf.type!r} is not supported "
-                             "(box, gaussian)")  # fmt: skip
+                             "(box, gaussian, tent)")  # fmt: skip
         fp.done(children_ok=len(rfs))
         if len(rfs) > 1:
             raise ValueError(f"{fo.where}: expected at most one <rfilter>")
@@ -1048,6 +1205,8 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
         sp.done()
         if spp < 1:
             raise sp.err("sample_count", f"expected a positive integer, got {spp}")
+    if obj.type == "orthographic":
+        return _orthographic(p, obj, ctx, films, samplers, width, height, film, spp)
     fov, axis = _fov_x_or_y(p, width, height)
     m = p.transform("to_world")
     m = np.eye(4) if m is None else m
@@ -1055,9 +1214,7 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
     if not (np.allclose(r.T @ r, np.eye(3), atol=1e-6) and np.linalg.det(r) > 0):
         raise p.err("to_world", "the camera's to_world must be a rotation and translation "
                                 "(no scale, shear or mirroring)")  # fmt: skip
-    near, far = p.float("near_clip", 1e-2, positive=True), p.float("far_clip", 1e4)
-    if not far > near:
-        raise p.err("far_clip", f"expected far_clip > near_clip, got {far} <= {near}")
+    near, far = _clip_planes(p)
     for name in ("principal_point_offset_x", "principal_point_offset_y"):
         if p.float(name, 0.0) != 0.0:
             raise p.err(name, "an off-centre principal point is not supported")
@@ -1071,6 +1228,53 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
     tx, ty = (tx, tx * height / width) if axis == "x" else (tx * width / height, tx)
     ctx["clip"] = (o, near, far, math.sqrt(1 + tx * tx + ty * ty), obj)
     return cam, film, spp
+
+
+def _clip_planes(p: _Params):
+    near = p.float("near_clip", DEFAULTS["near_clip"], positive=True)
+    far = p.float("far_clip", DEFAULTS["far_clip"])
+    if not far > near:
+        raise p.err("far_clip", f"expected far_clip > near_clip, got {far} <= {near}")
+    return near, far
+
+
+def _orthographic(p: _Params, obj: _Obj, ctx, films, samplers, width, height, film, spp):
+    """Mitsuba's ``orthographic`` sensor -> a :class:`MatrixCamera` description
+    (:func:`orthographic_view_proj_inverse`): rays start on the near plane, as Mitsuba's, so
+    ``near_clip`` is reproduced exactly; ``far_clip`` is checked like the perspective one's."""
+    m = p.transform("to_world")
+    m = np.eye(4) if m is None else m
+    a = m[:3, :3]
+    if not abs(np.linalg.det(a)) > 1e-12 * max(float(np.abs(a).max()), 1e-100) ** 3:
+        raise p.err("to_world", "the orthographic sensor's to_world must be invertible "
+                                "(a degenerate sensor plane or direction)")  # fmt: skip
+    near, far = _clip_planes(p)
+    if len(films) > 1 or len(samplers) > 1:
+        raise ValueError(f"{obj.where}: expected at most one <film> and one <sampler>")
+    p.done(children_ok=len(obj.children))
+    vpi = orthographic_view_proj_inverse(m, near, width, height)
+    ctx["clip_ortho"] = (m, near, far, obj)
+    return {"view_proj_inverse": vpi.tolist(), "width": width, "height": height}, film, spp
+
+
+def _check_clip_ortho(ctx):
+    """Refuse geometry beyond Mitsuba's orthographic ``far_clip``: its rays start at the near
+    plane point and end after ``far_clip - near_clip`` along the unit direction; each bounding
+    box corner's distance along the ray through it (an affine function of the point, so the
+    corners bound it) must not exceed that."""
+    m, near, far, sensor = ctx["clip_ortho"]
+    a = m[:3, :3]
+    d = a[:, 2] / np.linalg.norm(a[:, 2])
+    basis = np.stack([a[:, 0], a[:, 1], d], 1)
+    o = a @ np.array([0.0, 0.0, near]) + m[:3, 3]
+    for (lo, hi), obj in ctx["bboxes"]:
+        corners = np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1)
+        t = np.linalg.solve(basis, corners - o[:, None])[2]
+        if float(t.max()) > far - near:
+            raise ValueError(
+                f"{sensor.where}: far_clip={far}: {obj.where} reaches beyond it (Mitsuba clips "
+                "it, jaxgfx does not)"
+            )
 
 
 def _integrator(obj: _Obj, doc):
@@ -1101,6 +1305,8 @@ def _integrator(obj: _Obj, doc):
 
 
 def _check_clip(ctx):
+    if "clip_ortho" in ctx:
+        _check_clip_ortho(ctx)
     if "clip" not in ctx:
         return
     o, near, far, k, sensor = ctx["clip"]
@@ -1222,7 +1428,7 @@ def _xml_object(tag, d, indent, name=None, ident=None) -> list[str]:
             nested_name = k if tags[0] == "texture" else None
             body += _xml_object(tags[0], v, indent + 1, name=nested_name)
         elif isinstance(v, bool):
-            body.append(f"{q}<boolean name={_xml_attr(k)} value=\"{str(v).lower()}\"/>")
+            body.append(f'{q}<boolean name={_xml_attr(k)} value="{str(v).lower()}"/>')
         elif isinstance(v, (int, np.integer)):
             body.append(f'{q}<integer name={_xml_attr(k)} value="{int(v)}"/>')
         elif isinstance(v, (float, np.floating)):
@@ -1234,7 +1440,8 @@ def _xml_object(tag, d, indent, name=None, ident=None) -> list[str]:
             body.append(f'{q}<transform name="to_world"><matrix value="'
                         f'{" ".join(map(_num, m))}"/></transform>')  # fmt: skip
         elif np.shape(v) == (3,):
-            body.append(f'{q}<point name={_xml_attr(k)} value="{", ".join(map(_num, v))}"/>')
+            tag3 = "vector" if k == "direction" else "point"  # a direction is a <vector>
+            body.append(f'{q}<{tag3} name={_xml_attr(k)} value="{", ".join(map(_num, v))}"/>')
         else:  # pragma: no cover - the exporter writes the kinds above only
             raise ValueError(f"{k}: cannot write {v!r} as Mitsuba XML")
     if not body:
