@@ -429,7 +429,7 @@ class ChartCalibration(eqx.Module):
             "neutral": f(self.neutral),
             "delta_e_before": f(self.delta_e_before),
             "delta_e_after": f(self.delta_e_after),
-            "before": self.before,
+            "before_source": self.before,
             **self.summary(),
         }
 
@@ -447,7 +447,7 @@ class ChartCalibration(eqx.Module):
                 str(d["model"]),
                 str(d["illuminant"]),
                 bool(d.get("white_balance", True)),
-                str(d.get("before", "")),
+                str(d.get("before_source", "")),
             )
         except (KeyError, TypeError, ValueError) as e:
             raise ValueError(f"{where}: not a chart calibration record ({e!r})") from None
