@@ -478,7 +478,8 @@ def write_dng_bracket(
     rendered from a radiance map of known colours; returns ``(paths, rgb709)``.
 
     ``scene``: the radiance map, linear Rec.709 ``(height, width, 3)`` (e.g.
-    :func:`colorchecker_scene`); default the seeded patches below. ``true_camera``: colour
+    :func:`colorchecker_scene`; colours outside the Rec.709 gamut have negative components);
+    default the seeded patches below. ``true_camera``: colour
     tags of the camera that *renders* the scene (its sensitivities; default ``camera``), while
     ``camera``'s are written: a DNG profile that is off, as a chart calibration fixes.
 
@@ -508,10 +509,8 @@ def write_dng_bracket(
         rgb = _patch_scene(rng, height, width, patch, dynamic_range)
     else:
         rgb = np.asarray(scene, np.float64)
-        if rgb.shape != (height, width, 3) or not np.all(np.isfinite(rgb)) or rgb.min() < 0:
-            raise ValueError(
-                f"scene: expected finite non-negative ({height}, {width}, 3), got {rgb.shape}"
-            )
+        if rgb.shape != (height, width, 3) or not np.all(np.isfinite(rgb)):
+            raise ValueError(f"scene: expected finite ({height}, {width}, 3), got {rgb.shape}")
     m709 = color.rgb_to_xyz_matrix("rec709")
     wxy = np.asarray(color.WHITEPOINTS[scene_white], np.float64)
     wxyz = np.array([wxy[0] / wxy[1], 1.0, (1 - wxy.sum()) / wxy[1]])
