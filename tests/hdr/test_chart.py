@@ -172,7 +172,7 @@ def test_delta_e_residual_gradients_vs_finite_differences(x64, rng):
     """AD of the fit's least-squares objective ½ Σ ||r||² (r = delta_e_2000_residuals of the
     predicted Lab, ||r|| = ΔE00 per patch) w.r.t. the root-polynomial matrix (its linear part,
     the roots and the white-preserving column) and the white-balance gains, against central
-    differences in float64 (~2 s: two compiles)."""
+    differences in float64 (2-3 s on the loaded 2-core machine: two compiles)."""
     ref = colorchecker_reference()
     lab = color.xyz_to_lab(jnp.asarray(ref.xyz), white="D50")
     c = np.array([[0.9, 0.3, -0.1], [-0.2, 1.1, 0.1], [0.05, -0.3, 1.2]])  # XYZ -> camera
