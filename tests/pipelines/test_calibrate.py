@@ -285,7 +285,7 @@ def test_chart_bad_input_is_one_clear_error(tmp_path):
         calibrate_job(build_parser().parse_args(["calibrate", "--chart", "1,2,x"]))
 
 
-@pytest.mark.slow  # ~9 s on the loaded 2-core machine (RAW calibration, the LM compile)
+@pytest.mark.slow  # 9-13 s on the loaded 2-core machine (RAW calibration, the LM compile)
 def test_raw_chart_calibration_end_to_end(tmp_path):
     """`jaxgfx calibrate raw_dir/ --chart ...`: the DNG's (wrong) matrix gives median ΔE00 > 2
     on the chart, the fit < 1 (issue 26 target), radiance.exr holds the chart's colours,
