@@ -136,6 +136,20 @@ def _calibrate_arguments(p):
         help="RAW flat-field frame (same camera and size): fits the lens vignetting and "
         "divides it out before the colour step (vignetting.png, camera.json)",
     )
+    p.add_argument(
+        "--chart",
+        default=None,
+        metavar="X0,Y0,X1,Y1,X2,Y2,X3,Y3",
+        help="RAW: a ColorChecker 24 in view; the pixel corners of its patch grid in the merged "
+        "image, top-left (dark skin), top-right, bottom-right (black), bottom-left. Fits the "
+        "camera matrix and white balance on CIEDE2000 and uses it for the output (report.json "
+        "'chart': per-patch ΔE before/after; chart.png; camera.json)",
+    )
+    p.add_argument(
+        "--chart-model",
+        default=None,
+        help="chart fit: matrix (default, 3x3) | root-polynomial (Finlayson et al. 2015)",
+    )
 
 
 def calibrate_job(args):
@@ -167,9 +181,16 @@ def calibrate_job(args):
             section = base.get(key, {})
             if isinstance(section, dict):  # else load_config reports the malformed section
                 overrides[key] = {**section, field: True}
-    for key in ("colorspace", "white_balance", "flat_field"):
+    for key in ("colorspace", "white_balance", "flat_field", "chart_model"):
         if getattr(args, key, None) is not None:
             overrides[key] = getattr(args, key)
+    if getattr(args, "chart", None) is not None:
+        try:
+            overrides["chart"] = [float(v) for v in args.chart.split(",")]
+        except ValueError:
+            raise ValueError(
+                f"--chart: expected 8 comma-separated numbers x0,y0,...,x3,y3, got {args.chart!r}"
+            ) from None
     cfg = load_config(CalibrateConfig, args.config, **overrides)
     return CalibrateJob(
         config=cfg,

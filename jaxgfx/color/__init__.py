@@ -11,6 +11,7 @@ from .adaptation import chromatic_adaptation_matrix as chromatic_adaptation_matr
 from .adaptation import rgb_to_rgb as rgb_to_rgb
 from .difference import delta_e_1976 as delta_e_1976
 from .difference import delta_e_2000 as delta_e_2000
+from .difference import delta_e_2000_residuals as delta_e_2000_residuals
 from .spaces import LUMINANCE_WEIGHTS as LUMINANCE_WEIGHTS
 from .spaces import RGB_SPACES as RGB_SPACES
 from .spaces import WHITEPOINTS as WHITEPOINTS
@@ -109,6 +110,7 @@ __all__ = [
     "luminance",
     "delta_e_1976",
     "delta_e_2000",
+    "delta_e_2000_residuals",
     "CAT_MATRICES",
     "chromatic_adaptation_matrix",
     "chromatic_adaptation",

@@ -13,7 +13,7 @@ from .._checks import check_positive
 from .._math import safe_atan2, safe_norm, safe_sqrt
 from ._common import as_colour
 
-__all__ = ["delta_e_1976", "delta_e_2000"]
+__all__ = ["delta_e_1976", "delta_e_2000", "delta_e_2000_residuals"]
 
 _TWO_PI = 2.0 * jnp.pi
 _25_POW_7 = 25.0**7
@@ -71,8 +71,43 @@ def delta_e_2000(lab1, lab2, *, kL=1.0, kC=1.0, kH=1.0):
     return _delta_e_2000(lab1, lab2, kL, kC, kH)
 
 
+def delta_e_2000_residuals(lab1, lab2, *, kL=1.0, kC=1.0, kH=1.0):
+    """CIEDE2000 as a vector for least squares: ``(..., 3)`` residuals whose Euclidean norm is
+    :func:`delta_e_2000` (so ``Σ ||r||² = Σ ΔE00²``).
+
+    CIEDE2000 is ``ΔE² = tL² + tC² + tH² + RT·tC·tH`` with ``tL = ΔL'/(kL SL)``,
+    ``tC = ΔC'/(kC SC)``, ``tH = ΔH'/(kH SH)`` (Sharma, Wu & Dalal 2005, eq. 22); completing
+    the square gives ``r = (tL, tC + RT tH / 2, tH sqrt(1 - RT²/4))`` (``|RT| <= sqrt(3)``, so
+    the root is real). Unlike ``ΔE`` itself (a cone at 0), ``r`` is smooth where two colours
+    meet, which is what Gauss-Newton / Levenberg-Marquardt need; the colour-chart fit of
+    :mod:`jaxgfx.hdr.raw.chart` minimises it.
+
+    Example:
+      >>> a, b = jnp.array([50.0, 2.6772, -79.7751]), jnp.array([50.0, 0.0, -82.7485])
+      >>> round(float(jnp.linalg.norm(delta_e_2000_residuals(a, b))), 4)
+      2.0425
+    """
+    lab1 = as_colour(lab1, "lab1")
+    lab2 = as_colour(lab2, "lab2")
+    for v, n in ((kL, "kL"), (kC, "kC"), (kH, "kH")):
+        check_positive(v, n)
+    return _delta_e_2000_residuals(lab1, lab2, kL, kC, kH)
+
+
 @jax.jit
 def _delta_e_2000(lab1, lab2, kL, kC, kH):
+    tL, tC, tH, RT = _delta_e_2000_terms(lab1, lab2, kL, kC, kH)
+    return safe_sqrt(tL * tL + tC * tC + tH * tH + RT * tC * tH)
+
+
+@jax.jit
+def _delta_e_2000_residuals(lab1, lab2, kL, kC, kH):
+    tL, tC, tH, RT = _delta_e_2000_terms(lab1, lab2, kL, kC, kH)
+    return jnp.stack([tL, tC + 0.5 * RT * tH, tH * jnp.sqrt(1.0 - 0.25 * RT * RT)], axis=-1)
+
+
+def _delta_e_2000_terms(lab1, lab2, kL, kC, kH):
+    """``(tL, tC, tH, RT)`` of Sharma, Wu & Dalal (2005), eq. (2)-(22)."""
     L1, a1, b1 = lab1[..., 0], lab1[..., 1], lab1[..., 2]
     L2, a2, b2 = lab2[..., 0], lab2[..., 1], lab2[..., 2]
 
@@ -126,4 +161,4 @@ def _delta_e_2000(lab1, lab2, kL, kC, kH):
     tL = dLp / (kL * SL)
     tC = dCp / (kC * SC)
     tH = dHp / (kH * SH)
-    return safe_sqrt(tL * tL + tC * tC + tH * tH + RT * tC * tH)
+    return tL, tC, tH, RT

@@ -187,12 +187,13 @@ def whitepoint_xyz(white, name="white", *, like=None):
     w = jnp.asarray(white)
     if w.shape == (2,):
         w = as_colour(w, name, channels=2).astype(dtype)
-        if is_concrete(w) and not (0 < float(w[1]) and float(w[0]) >= 0):
+        # NumPy on the concrete value: inside a jit trace a jnp op on a constant is a tracer
+        if is_concrete(w) and not (0 < np.asarray(w)[1] and np.asarray(w)[0] >= 0):
             raise ValueError(f"{name}: expected chromaticity xy with x >= 0, y > 0, got {white!r}")
         return _xy_to_xyz(w, jnp)
     if w.shape == (3,):
         w = as_colour(w, name, channels=3).astype(dtype)
-        if is_concrete(w) and not bool(jnp.all(w > 0)):
+        if is_concrete(w) and not np.all(np.asarray(w) > 0):
             raise ValueError(f"{name}: expected a positive XYZ white point, got {white!r}")
         return w
     raise ValueError(

@@ -21,6 +21,7 @@ from .response_io import save_response as save_response
 from .synthetic import CANON_EOS_5D_MARK_II as CANON_EOS_5D_MARK_II
 from .synthetic import SYNTHETIC_RESPONSES as SYNTHETIC_RESPONSES
 from .synthetic import BracketedStack as BracketedStack
+from .synthetic import colorchecker_scene as colorchecker_scene
 from .synthetic import jpeg_roundtrip as jpeg_roundtrip
 from .synthetic import make_bracketed_stack as make_bracketed_stack
 from .synthetic import make_jpeg_stack as make_jpeg_stack
@@ -41,6 +42,7 @@ __all__ = [
     "SYNTHETIC_RESPONSES",
     "write_dng_bracket",
     "CANON_EOS_5D_MARK_II",
+    "colorchecker_scene",
     "BracketedStack",
     "Camera",
     "CAMERA_BITS",

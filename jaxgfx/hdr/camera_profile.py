@@ -4,11 +4,14 @@
 the response curve (the dict of :func:`jaxgfx.hdr.save_response`'s file, embedded: LDR
 brackets), the white balance gains and the camera -> output matrix with its colour space (RAW
 brackets, :class:`jaxgfx.hdr.raw.ColorTransform`), the noise model
-(:class:`jaxgfx.hdr.NoiseModel`, normalised units) and the lens vignetting
-(:class:`jaxgfx.hdr.raw.Vignetting`). :func:`load_camera_profile` returns a
-:class:`CameraProfile` with the same pieces: arrays are written with their dtype and as the
-Python float of equal value, so they come back bit-identical. :func:`jaxgfx.hdr.load_response`
-also reads the response out of a camera profile.
+(:class:`jaxgfx.hdr.NoiseModel`, normalised units), the lens vignetting
+(:class:`jaxgfx.hdr.raw.Vignetting`) and a colour-chart fit
+(:class:`jaxgfx.hdr.raw.ChartCalibration`: model, matrix, gains, neutral, per-patch ΔE00 before
+and after; :func:`jaxgfx.hdr.raw.apply_chart_calibration` applies it).
+:func:`load_camera_profile` returns a :class:`CameraProfile` with the same pieces: arrays are
+written with their dtype and as the Python float of equal value, so they come back
+bit-identical. :func:`jaxgfx.hdr.load_response` also reads the response out of a camera
+profile.
 
 ``matrix`` maps white-balanced-and-not camera RGB as ``radiance.exr`` does: ``out = matrix @
 camera_rgb``, the white balance gains included (``matrix = M @ diag(gains)``); the gains are
@@ -26,6 +29,7 @@ import numpy as np
 
 from ._model import CameraResponse
 from .noise import NoiseModel
+from .raw.chart import ChartCalibration
 from .raw.vignetting import Vignetting
 from .response_io import _array_entry, response_from_dict, response_to_dict
 
@@ -44,9 +48,10 @@ class CameraProfile(NamedTuple):
     colorspace: str | None = None
     noise: NoiseModel | None = None
     vignetting: Vignetting | None = None
+    chart: ChartCalibration | None = None
 
 
-def _array(entry, path, name, shape=None):
+def _array(entry, path, name, shape=None, *, allow_nan=False):
     err = f"camera profile {path}: {name}"
     if not (isinstance(entry, dict) and "data" in entry):
         raise ValueError(f"{err}: expected an array record (dtype, shape, data)")
@@ -57,7 +62,7 @@ def _array(entry, path, name, shape=None):
         raise ValueError(f"{err}: not an array ({e})") from None
     if shape is not None and a.shape != shape:
         raise ValueError(f"{err}: expected shape {shape}, got {a.shape}")
-    if not np.all(np.isfinite(a)):
+    if not np.all(np.isfinite(a) | (allow_nan and np.isnan(a))):
         raise ValueError(f"{err}: expected finite values")
     return a
 
@@ -71,6 +76,7 @@ def save_camera_profile(
     colorspace: str | None = None,
     noise: NoiseModel | None = None,
     vignetting: Vignetting | None = None,
+    chart: ChartCalibration | None = None,
     source: dict | None = None,
 ) -> str:
     """Write a camera profile to the JSON file ``path`` (format in the module doc); returns
@@ -88,6 +94,8 @@ def save_camera_profile(
         raise TypeError(f"noise: expected a NoiseModel, got {type(noise).__name__}")
     if vignetting is not None and not isinstance(vignetting, Vignetting):
         raise TypeError(f"vignetting: expected a Vignetting, got {type(vignetting).__name__}")
+    if chart is not None and not isinstance(chart, ChartCalibration):
+        raise TypeError(f"chart: expected a ChartCalibration, got {type(chart).__name__}")
     if (matrix is None) != (colorspace is None):
         raise ValueError("matrix, colorspace: give both (the matrix maps camera RGB to it)")
     for name, v, shape in (("white_balance_gains", white_balance_gains, (3,)),
@@ -116,6 +124,12 @@ def save_camera_profile(
             **vignetting.to_dict(),
             "coefficients": _array_entry(vignetting.coefficients),
             "center_yx_px": _array_entry(vignetting.center),
+        },
+        "chart": None
+        if chart is None
+        else {
+            **chart.to_dict(),
+            **{k: _nan_to_null(_array_entry(getattr(chart, k))) for k in _CHART_ARRAYS},
         },
         "source": source or {},
     }
@@ -180,4 +194,38 @@ def load_camera_profile(path) -> CameraProfile:
             },
             f"camera profile {path}: vignetting",
         )
-    return CameraProfile(response, gains, matrix, colorspace, noise, vig)
+    chart = None
+    if doc.get("chart") is not None:
+        cd = doc["chart"]
+        if not isinstance(cd, dict):
+            raise ValueError(f"camera profile {path}: chart: expected an object")
+        arrs = {k: _array(cd.get(k), path, f"chart.{k}") if k in ("matrix", "gains", "neutral")
+                else _array_nan(cd.get(k), path, f"chart.{k}") for k in _CHART_ARRAYS}  # fmt: skip
+        try:
+            chart = ChartCalibration(
+                *(jnp.asarray(arrs[k]) for k in _CHART_ARRAYS),
+                str(cd.get("model")),
+                str(cd.get("illuminant")),
+                bool(cd.get("white_balance", True)),
+                str(cd.get("before_source", "")),
+            )
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"camera profile {path}: chart: {e}") from None
+    return CameraProfile(response, gains, matrix, colorspace, noise, vig, chart)
+
+
+_CHART_ARRAYS = ("matrix", "gains", "neutral", "delta_e_before", "delta_e_after")
+
+
+def _nan_to_null(entry):
+    """Strict JSON: NaN (a chart patch left out) written as null."""
+    return {**entry, "data": [None if v != v else v for v in entry["data"]]}
+
+
+def _array_nan(entry, path, name):
+    """An array record that may hold NaN (written as null: patches left out)."""
+    if not (isinstance(entry, dict) and isinstance(entry.get("data"), list)):
+        raise ValueError(f"camera profile {path}: {name}: expected an array record")
+    data = [np.nan if v is None else v for v in entry["data"]]
+    return _array({**entry, "data": data, "dtype": entry.get("dtype", "float64")}, path, name,
+                  allow_nan=True)  # fmt: skip

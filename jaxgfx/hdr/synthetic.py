@@ -33,6 +33,7 @@ __all__ = [
     "smooth_hdr_scene",
     "hard_hdr_scenes",
     "CANON_EOS_5D_MARK_II",
+    "colorchecker_scene",
     "write_dng_bracket",
     "MovingStack",
     "make_moving_object_stack",
@@ -418,6 +419,42 @@ def _patch_scene(rng, height, width, patch, dynamic_range):
     return img
 
 
+def colorchecker_scene(height: int, width: int, corners, *, background: float = 0.18,
+                       body: float = 0.03, gap: float = 0.15, supersample: int = 3):  # fmt: skip
+    """A ColorChecker photographed in perspective: linear Rec.709 ``(H, W, 3)`` (float64) under
+    D65, in reflectance units (the chart's white patch at ``Y ≈ 0.88``).
+
+    The patch grid's outer corners are ``corners`` ``(4, 2)`` ``(x, y)`` in
+    :data:`jaxgfx.hdr.raw.chart.CORNER_ORDER`; each of its 24 cells shows its patch
+    (:func:`jaxgfx.hdr.raw.chart.colorchecker_reference`, ICC D50 Bradford-adapted to D65) with
+    a border of ``gap / 2`` of the cell in the chart body's grey ``body``; outside the grid, a
+    grey ``background``. Each pixel averages ``supersample²`` points (antialiased edges).
+    """
+    from ..color import chromatic_adaptation_matrix, rgb_to_xyz_matrix
+    from .raw.chart import _check_corners, _homography, colorchecker_reference
+
+    c = np.asarray(_check_corners(np.asarray(corners, np.float64), (height, width)), np.float64)
+    ref = colorchecker_reference()
+    cat = np.asarray(chromatic_adaptation_matrix(jnp.asarray(ref.illuminant_xy), "D65"),
+                     np.float64)  # fmt: skip
+    patches = ref.xyz @ (np.linalg.inv(rgb_to_xyz_matrix("rec709")) @ cat).T  # (24, 3)
+    hinv = np.linalg.inv(np.asarray(_homography(jnp.asarray(c)), np.float64))
+    o = (np.arange(supersample) + 0.5) / supersample - 0.5
+    y, x, dy, dx = np.meshgrid(np.arange(height), np.arange(width), o, o, indexing="ij")
+    q = np.stack([x + dx, y + dy, np.ones_like(x)], -1) @ hinv.T
+    u, v = q[..., 0] / q[..., 2], q[..., 1] / q[..., 2]
+    inside = (u >= 0) & (u < 1) & (v >= 0) & (v < 1)
+    col, row = (
+        np.clip(np.floor(u * 6), 0, 5).astype(int),
+        np.clip(np.floor(v * 4), 0, 3).astype(int),
+    )
+    fu, fv = u * 6 - col, v * 4 - row
+    on_patch = inside & (np.minimum(fu, 1 - fu) >= gap / 2) & (np.minimum(fv, 1 - fv) >= gap / 2)
+    out = np.where(inside[..., None], body, background) * np.ones(3)
+    out = np.where(on_patch[..., None], patches[row * 6 + col], out)
+    return out.mean(axis=(2, 3))
+
+
 def write_dng_bracket(
     folder,
     *,
@@ -434,9 +471,17 @@ def write_dng_bracket(
     electrons_at_white: float | None = 60000.0,
     read_dn: float = 2.0,
     cfa_pattern: str = "RGGB",
+    scene=None,
+    true_camera: dict | None = None,
 ):
     """Write a synthetic bracket of DNGs carrying a camera's colour tags and as-shot neutral,
     rendered from a radiance map of known colours; returns ``(paths, rgb709)``.
+
+    ``scene``: the radiance map, linear Rec.709 ``(height, width, 3)`` (e.g.
+    :func:`colorchecker_scene`; colours outside the Rec.709 gamut have negative components);
+    default the seeded patches below. ``true_camera``: colour
+    tags of the camera that *renders* the scene (its sensitivities; default ``camera``), while
+    ``camera``'s are written: a DNG profile that is off, as a chart calibration fixes.
 
     The scene (:func:`_patch_scene`, seeded) is linear Rec.709 under ``scene_white``; the
     sensor sees ``XYZtoCamera(scene_white) · XYZ``, with ``XYZtoCamera`` the camera's
@@ -460,12 +505,19 @@ def write_dng_bracket(
 
     check_choice(cfa_pattern, "cfa_pattern", BAYER_PATTERNS)
     rng = np.random.default_rng(seed)
-    rgb = _patch_scene(rng, height, width, patch, dynamic_range)
+    if scene is None:
+        rgb = _patch_scene(rng, height, width, patch, dynamic_range)
+    else:
+        rgb = np.asarray(scene, np.float64)
+        if rgb.shape != (height, width, 3) or not np.all(np.isfinite(rgb)):
+            raise ValueError(f"scene: expected finite ({height}, {width}, 3), got {rgb.shape}")
     m709 = color.rgb_to_xyz_matrix("rec709")
     wxy = np.asarray(color.WHITEPOINTS[scene_white], np.float64)
     wxyz = np.array([wxy[0] / wxy[1], 1.0, (1 - wxy.sum()) / wxy[1]])
     tags = {k: np.ravel(v).astype(np.float64) for k, v in camera.items()}
-    prof = DngColorProfile.from_tags(tags, "camera")
+    true_tags = tags if true_camera is None else {
+        k: np.ravel(v).astype(np.float64) for k, v in true_camera.items()}  # fmt: skip
+    prof = DngColorProfile.from_tags(true_tags, "true_camera")
     xyz_to_cam = np.asarray(dng_xyz_to_camera(prof, jnp.asarray(wxy)), np.float64)
     # the scene's colours seen under its white: adapt from D65 (Rec.709's white) to it
     cat = np.asarray(

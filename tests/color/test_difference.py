@@ -7,7 +7,7 @@ import pytest
 from colour.difference import delta_E_CIE1976, delta_E_CIE2000
 from jax.test_util import check_grads
 
-from jaxgfx.color import delta_e_1976, delta_e_2000
+from jaxgfx.color import delta_e_1976, delta_e_2000, delta_e_2000_residuals
 
 from .sharma2005 import SHARMA_2005
 
@@ -23,6 +23,21 @@ def test_sharma_2005_table(x64):
     np.testing.assert_allclose(
         np.asarray(_de00(lab1, lab2)), delta_E_CIE2000(lab1, lab2), rtol=0, atol=1e-10
     )
+
+
+def test_residual_vector_norm_is_delta_e_2000(x64, rng):
+    """The least-squares form: ||r|| = CIEDE2000 on the Sharma table and on random pairs, and
+    r is finite with a finite Jacobian where the two colours coincide (unlike the cone)."""
+    lab1 = np.concatenate([SHARMA_2005[:, :3], rng.uniform(-60, 90, (100, 3))])
+    lab2 = np.concatenate([SHARMA_2005[:, 3:6], lab1[34:] + rng.normal(0, 5, (100, 3))])
+    r = jax.jit(delta_e_2000_residuals)(lab1, lab2)
+    assert r.shape == (134, 3)
+    np.testing.assert_allclose(
+        np.linalg.norm(np.asarray(r), axis=-1), np.asarray(_de00(lab1, lab2)), rtol=1e-12
+    )
+    same = jnp.array([50.0, 10.0, -20.0])
+    jac = jax.jacfwd(lambda a: delta_e_2000_residuals(a, same))(same)
+    assert np.all(np.isfinite(np.asarray(jac))) and np.abs(np.asarray(jac)).max() > 0
 
 
 def test_sharma_float32():

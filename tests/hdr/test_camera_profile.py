@@ -43,6 +43,37 @@ def test_camera_profile_round_trip_exact(tmp_path):
     assert np.array_equal(np.asarray(r2.params), np.asarray(resp.params))
 
 
+def test_camera_profile_chart_round_trip(tmp_path):
+    """The colour-chart fit (hdr.raw.ChartCalibration) in camera.json: bit-identical arrays,
+    patches left out (NaN) as null in strict JSON, and a malformed piece named."""
+    from jaxgfx.hdr.raw import ChartCalibration
+
+    cal = ChartCalibration(
+        jnp.asarray(np.arange(18.0).reshape(3, 6) / 7.0, jnp.float32),
+        jnp.asarray([2.1234567, 1.0, 1.5987654], jnp.float32),
+        jnp.asarray([0.47, 1.0, 0.62], jnp.float32),
+        jnp.asarray([3.25, np.nan, 1.5], jnp.float32),
+        jnp.asarray([0.25, np.nan, 0.5], jnp.float32),
+        "root-polynomial", "D50", True, "DNG ColorMatrix1/2",
+    )  # fmt: skip
+    p = hdr.save_camera_profile(tmp_path / "camera.json", chart=cal)
+    text = (tmp_path / "camera.json").read_text()
+    assert "NaN" not in text
+    back = hdr.load_camera_profile(p).chart
+    for k in ("matrix", "gains", "neutral", "delta_e_before", "delta_e_after"):
+        a, b = np.asarray(getattr(back, k)), np.asarray(getattr(cal, k))
+        assert a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True), k
+    assert (back.model, back.illuminant, back.white_balance, back.before) == (
+        "root-polynomial", "D50", True, "DNG ColorMatrix1/2")  # fmt: skip
+    doc = json.loads(text)
+    doc["chart"]["model"] = "cubic"
+    (tmp_path / "bad.json").write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=r"bad.json: chart: .*model"):
+        hdr.load_camera_profile(tmp_path / "bad.json")
+    with pytest.raises(TypeError, match="chart: expected a ChartCalibration"):
+        hdr.save_camera_profile(tmp_path / "x.json", chart=np.eye(3))
+
+
 def test_camera_profile_partial_and_bad_files(tmp_path):
     p = hdr.save_camera_profile(tmp_path / "c.json", matrix=np.eye(3), colorspace="xyz")
     prof = hdr.load_camera_profile(p)

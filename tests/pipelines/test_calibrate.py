@@ -232,3 +232,87 @@ def test_merge_deghost_option_runs_the_ghost_free_merge():
     assert calibrate_job(args).config.merge.deghost is True
     args = build_parser().parse_args(["calibrate", "--out", "o"])
     assert calibrate_job(args).config.merge.deghost is False
+
+
+# ------------------------------------------------------------------ colour chart (issue 26)
+
+CHART_CORNERS = np.array([[10.3, 8.6], [101.2, 12.4], [98.7, 71.5], [12.8, 68.2]])
+CHART_FLAG = ",".join(f"{v:g}" for v in CHART_CORNERS.ravel())
+
+
+def _chart_bracket(folder):
+    """3 DNGs (80x112) of a ColorChecker in perspective, rendered by a Canon EOS 5D Mark II's
+    published colour matrices while the files carry a profile that is off (the matrices mixed
+    by up to 12 %): the case a chart calibration is for."""
+    cam = hdr.CANON_EOS_5D_MARK_II
+    mix = np.array([[1.0, 0.12, -0.06], [-0.05, 1.0, 0.1], [0.08, -0.1, 1.0]])
+    tagged = {**cam, **{k: mix @ np.asarray(cam[k]) for k in ("color_matrix1", "color_matrix2")}}
+    scene = hdr.colorchecker_scene(80, 112, CHART_CORNERS)
+    paths, _ = hdr.write_dng_bracket(folder, height=80, width=112, scene=scene, seed=3,
+                                     camera=tagged, true_camera=cam)  # fmt: skip
+    return paths
+
+
+def test_chart_bad_input_is_one_clear_error(tmp_path):
+    from jaxgfx.cli import build_parser, calibrate_job
+
+    paths = _chart_bracket(tmp_path / "dng")
+    off = CHART_CORNERS.copy()
+    off[2] = (130.0, 71.5)  # bottom-right outside the 112x80 image
+    cfg = CalibrateConfig(chart=tuple(off.ravel()))
+    with pytest.raises(ValueError, match=r"chart \(--chart\): the bottom-right point \(x=130, "
+                       r"y=71.5\) lies outside the 112x80 image"):  # fmt: skip
+        run_calibrate(CalibrateJob(cfg, paths, str(tmp_path / "out"), progress=False))
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(ValueError, match="chart: expected 8 numbers x0,y0"):
+        CalibrateConfig(chart=(1.0, 2.0, 3.0))
+    with pytest.raises(ValueError, match="chart: the chart fit .* colorspace 'camera'"):
+        CalibrateConfig(chart=tuple(CHART_CORNERS.ravel()), colorspace="camera")
+    with pytest.raises(ValueError, match="chart_model: .*expected one of"):
+        CalibrateConfig(chart_model="cubic")
+    ldr = [str(tmp_path / f"l{i}.png") for i in range(2)]
+    for p in ldr:
+        io.write_png(p, np.full((8, 8, 3), 0.5, np.float32))
+    with pytest.raises(ValueError, match="chart: the colour-chart fit needs RAW inputs"):
+        run_calibrate(CalibrateJob(CalibrateConfig(chart=tuple(CHART_CORNERS.ravel())), ldr,
+                                   str(tmp_path / "out2"), progress=False))  # fmt: skip
+    args = build_parser().parse_args(
+        ["calibrate", "d/", "--chart", CHART_FLAG, "--chart-model", "root-polynomial"]
+    )
+    cfg = calibrate_job(args).config
+    assert cfg.chart == tuple(CHART_CORNERS.ravel()) and cfg.chart_model == "root-polynomial"
+    with pytest.raises(ValueError, match="--chart: expected 8 comma-separated numbers"):
+        calibrate_job(build_parser().parse_args(["calibrate", "--chart", "1,2,x"]))
+
+
+@pytest.mark.slow  # 9-13 s on the loaded 2-core machine (RAW calibration, the LM compile)
+def test_raw_chart_calibration_end_to_end(tmp_path):
+    """`jaxgfx calibrate raw_dir/ --chart ...`: the DNG's (wrong) matrix gives median ΔE00 > 2
+    on the chart, the fit < 1 (issue 26 target), radiance.exr holds the chart's colours,
+    camera.json the fit, chart.png is written."""
+    from jaxgfx import color
+    from jaxgfx.hdr.raw import chart_patch_means, colorchecker_reference
+
+    _chart_bracket(tmp_path / "dng")
+    out = tmp_path / "out"
+    assert main(["calibrate", str(tmp_path / "dng"), "--chart", CHART_FLAG, "--out", str(out),
+                 "--quiet"]) == 0  # fmt: skip
+    rep = json.loads((out / "report.json").read_text())
+    ch = rep["chart"]
+    assert ch["patches_used"] == 24 and len(ch["delta_e_before"]) == 24
+    assert ch["before"]["median"] > 2.0 and ch["after"]["median"] < 1.0
+    assert "DNG ColorMatrix1/2" in ch["before_source"] and ch["model"] == "matrix"
+    assert rep["color"]["matrix_source"].startswith("ColorChecker chart fit (matrix")
+    # radiance.exr (linear Rec.709) at the chart: ΔE00 against the reference, white-scaled
+    rad = io.read_exr(str(out / "radiance.exr"))
+    got709 = np.asarray(chart_patch_means(rad, CHART_CORNERS), np.float64)
+    xyz50 = got709 @ (np.asarray(color.chromatic_adaptation_matrix("D65", "D50"), np.float64)
+                      @ color.rgb_to_xyz_matrix("rec709")).T  # fmt: skip
+    ref = colorchecker_reference().xyz
+    xyz50 *= ref[18, 1] / xyz50[18, 1]  # the white patch sets the exposure
+    lab = lambda x: color.xyz_to_lab(np.asarray(x, np.float32), white="D50")  # noqa: E731
+    assert float(np.median(np.asarray(color.delta_e_2000(lab(xyz50), lab(ref))))) < 1.0
+    prof = hdr.load_camera_profile(out / "camera.json")
+    np.testing.assert_allclose(prof.matrix, rep["color"]["matrix_camera_to_output"], atol=1e-7)
+    assert prof.chart is not None and prof.chart.model == "matrix"
+    assert os.path.getsize(out / "chart.png") > 0

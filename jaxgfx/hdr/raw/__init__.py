@@ -4,7 +4,9 @@ ratios, and a gathered, JSON-reportable :class:`RawCalibration`.
 Modules: ``_common`` (CFA planes of :mod:`jaxgfx.image.bayer`, checks), ``levels`` (black,
 white), ``linearity``, ``ratios`` (exposure ratios), ``calibration`` (the step functions with
 their typed results, and :func:`calibrate_raw_stack` running them), ``color`` (white balance
-and the camera matrix to a working colour space).
+and the camera matrix to a working colour space), ``chart`` (colour calibration from a
+photographed ColorChecker: patch sampling from its corners, the matrix / root-polynomial fit on
+CIEDE2000), ``vignetting`` (lens falloff from a flat field).
 
 Conventions: a *mosaic* is a raw Bayer frame ``(..., H, W)`` in DN; ``cfa_channels`` splits it
 into ``C = 4`` half-resolution planes ordered by position in the 2x2 tile
@@ -31,6 +33,19 @@ from .calibration import exposure_ratios_step as exposure_ratios_step
 from .calibration import linearity_step as linearity_step
 from .calibration import noise_step as noise_step
 from .calibration import white_level_step as white_level_step
+from .chart import CHART_MODELS as CHART_MODELS
+from .chart import COLORCHECKER24 as COLORCHECKER24
+from .chart import CORNER_ORDER as CORNER_ORDER
+from .chart import ChartCalibration as ChartCalibration
+from .chart import ChartReference as ChartReference
+from .chart import apply_chart_calibration as apply_chart_calibration
+from .chart import chart_delta_e as chart_delta_e
+from .chart import chart_homography as chart_homography
+from .chart import chart_patch_means as chart_patch_means
+from .chart import chart_sample_points as chart_sample_points
+from .chart import chart_terms as chart_terms
+from .chart import colorchecker_reference as colorchecker_reference
+from .chart import fit_chart_matrix as fit_chart_matrix
 from .color import COLORSPACES as COLORSPACES
 from .color import ILLUMINANT_CCT as ILLUMINANT_CCT
 from .color import RAW_WHITE_BALANCES as RAW_WHITE_BALANCES
@@ -91,6 +106,19 @@ __all__ = [
     "color_transform",
     "apply_color_transform",
     "exr_chromaticities",
+    "CHART_MODELS",
+    "COLORCHECKER24",
+    "CORNER_ORDER",
+    "ChartReference",
+    "ChartCalibration",
+    "colorchecker_reference",
+    "chart_homography",
+    "chart_sample_points",
+    "chart_patch_means",
+    "chart_terms",
+    "chart_delta_e",
+    "fit_chart_matrix",
+    "apply_chart_calibration",
     "Vignetting",
     "fit_vignetting",
     "devignette",

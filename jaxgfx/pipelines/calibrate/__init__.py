@@ -13,6 +13,9 @@ writes::
     confidence.png      per-pixel confidence (relative standard error mapped to [0, 1])
     frames.png          merge.deghost only: hue = each pixel's reference frame (blue shortest
                         .. red longest exposure), brightness = share of the frames merged there
+    vignetting.png      RAW with flat_field: the fitted lens falloff
+    chart.png           RAW with chart: patches reference | before | after and their ΔE00
+    camera.json         the fitted camera (hdr.load_camera_profile)
     response.png        fitted response curves (and the ground truth for synthetic stacks)
     loo.png             leave-one-out self-check per level band and held frame (LDR)
     preview.png         exposure-normalised sRGB preview of the radiance map

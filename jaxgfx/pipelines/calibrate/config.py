@@ -5,8 +5,8 @@ Choices are checked with :func:`jaxgfx._checks.check_choice` against the library
 registries (:data:`jaxgfx.hdr.RESPONSE_METHODS`, :data:`jaxgfx.hdr.merge.MERGE_WEIGHTINGS`,
 :data:`jaxgfx.hdr.ALIGN_METHODS`, :data:`jaxgfx.image.DEMOSAIC_METHODS`,
 :data:`jaxgfx.tonemap.TONEMAP_METHODS`, :data:`jaxgfx.hdr.SYNTHETIC_RESPONSES`,
-:data:`jaxgfx.hdr.raw.COLORSPACES`, :data:`jaxgfx.hdr.raw.RAW_WHITE_BALANCES`), never
-against a retyped list."""
+:data:`jaxgfx.hdr.raw.COLORSPACES`, :data:`jaxgfx.hdr.raw.RAW_WHITE_BALANCES`,
+:data:`jaxgfx.hdr.raw.CHART_MODELS`), never against a retyped list."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ import numpy as np
 from jaxgfx._checks import check_choice
 from jaxgfx.hdr.align import ALIGN_METHODS
 from jaxgfx.hdr.merge import MERGE_WEIGHTINGS
+from jaxgfx.hdr.raw.chart import CHART_MODELS, CORNER_ORDER
 from jaxgfx.hdr.raw.color import COLORSPACES, RAW_WHITE_BALANCES
 from jaxgfx.hdr.response import RESPONSE_METHODS, check_response_options
 from jaxgfx.hdr.synthetic import SYNTHETIC_RESPONSES
@@ -120,10 +121,34 @@ class CalibrateConfig:
     colorspace: str = "rec709"
     white_balance: str = "as_shot"
     flat_field: str | None = None
+    # a ColorChecker in view: its patch grid's corners x0,y0,...,x3,y3 (pixels of the merged
+    # image; top-left, top-right, bottom-right, bottom-left), fitted by hdr.raw.fit_chart_matrix
+    chart: tuple[float, ...] | None = None
+    chart_model: str = "matrix"
 
     def __post_init__(self):
         if self.flat_field is not None and not isinstance(self.flat_field, str):
             raise ValueError(f"flat_field: expected a RAW file path, got {self.flat_field!r}")
+        check_choice(self.chart_model, "chart_model", CHART_MODELS)
+        if self.chart is not None:
+            c = self.chart
+            if (
+                not isinstance(c, (tuple, list))
+                or len(c) != 8
+                or not all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
+                    for v in c
+                )
+            ):
+                raise ValueError(
+                    "chart: expected 8 numbers x0,y0,x1,y1,x2,y2,x3,y3, the chart's corners in "
+                    f"pixels ({', '.join(CORNER_ORDER)}), got {c!r}"
+                )
+            if self.colorspace == "camera":
+                raise ValueError(
+                    "chart: the chart fit maps camera RGB to a colour space; it does not go "
+                    "with colorspace 'camera' (choose e.g. rec709)"
+                )
         check_choice(self.demosaic, "demosaic", DEMOSAIC_METHODS)
         check_choice(self.colorspace, "colorspace", COLORSPACES)
         check_choice(self.white_balance, "white_balance", RAW_WHITE_BALANCES)

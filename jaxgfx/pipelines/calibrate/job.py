@@ -90,6 +90,8 @@ def run_calibrate(job: CalibrateJob) -> dict:
             raise ValueError(f"flat_field: a RAW flat-field frame needs RAW inputs, not {kind}")
         if not os.path.isfile(ff):
             raise FileNotFoundError(f"flat_field: file not found: {ff}")
+    if job.config.chart is not None and kind != "raw":
+        raise ValueError(f"chart: the colour-chart fit needs RAW inputs, not {kind}")
     t_all = time.perf_counter()
     with StagedDir(job.out, report.OUTPUT_NAMES, overwrite=job.overwrite) as stage:
         steps = _Steps(total=5 if files else 6, enabled=job.progress)

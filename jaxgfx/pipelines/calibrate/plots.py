@@ -1,6 +1,7 @@
 """The job's figures: fitted response curves (``response.png``), the leave-one-out
-self-check (``loo.png``), the exposure-normalised preview (``preview.png``) and, after a
-ghost-free merge, the map of which frame each pixel came from (``frames.png``)."""
+self-check (``loo.png``), the exposure-normalised preview (``preview.png``), after a
+ghost-free merge the map of which frame each pixel came from (``frames.png``), the vignetting
+(``vignetting.png``) and the colour chart's patches and ΔE00 before / after (``chart.png``)."""
 
 from __future__ import annotations
 
@@ -134,6 +135,54 @@ def _plot_vignetting(path, vig):
     a2.plot([float(vig.center[1])], [float(vig.center[0])], "r+", ms=12)
     a2.set_title("V over the frame (+ optical centre)")
     fig.colorbar(im, ax=a2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _plot_chart(path, chart):
+    """``chart.png``: each ColorChecker patch as three stripes (reference | before: the file's
+    matrix | after: the chart fit) in sRGB, and the per-patch CIEDE2000 before and after."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from jaxgfx.color import linear_to_srgb
+    from jaxgfx.hdr.raw import colorchecker_reference, xyz_d50_to_space_matrix
+
+    m = np.asarray(xyz_d50_to_space_matrix("srgb"), np.float64)
+
+    def srgb(xyz):
+        lin = np.nan_to_num(np.asarray(xyz, np.float64) @ m.T, nan=0.5)
+        return np.asarray(linear_to_srgb(np.clip(lin, 0.0, 1.0).astype(np.float32)))
+
+    cal = chart.calibration
+    sw = np.stack([srgb(chart.xyz_reference), srgb(chart.xyz_before), srgb(chart.xyz_after)], 1)
+    cell = 12  # px per stripe; 3 stripes and a 4 px gap per patch
+    img = np.ones((4 * (cell * 3 + 4), 6 * (cell * 3 + 4), 3), np.float32) * 0.15
+    for k in range(24):
+        r, c = divmod(k, 6)
+        y0, x0 = r * (3 * cell + 4) + 2, c * (3 * cell + 4) + 2
+        for j in range(3):
+            img[y0 : y0 + 3 * cell, x0 + j * cell : x0 + (j + 1) * cell] = sw[k, j]
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 3.9), gridspec_kw={"width_ratios": [1, 1.3]})
+    a1.imshow(img, interpolation="nearest")
+    a1.set_axis_off()
+    a1.set_title("each patch: reference | before | after (sRGB)", fontsize=9)
+    before = np.asarray(cal.delta_e_before, np.float64)
+    after = np.asarray(cal.delta_e_after, np.float64)
+    x = np.arange(before.size)
+    s = cal.summary()
+    a2.bar(x - 0.2, before, 0.4, label=f"before (median {s['before']['median']:.2f})")
+    a2.bar(x + 0.2, after, 0.4, label=f"after, {cal.model} (median {s['after']['median']:.2f})")
+    a2.axhline(1.0, color="k", lw=0.8, ls="--")
+    names = colorchecker_reference().patch_names
+    a2.set_xticks(x, [n.split(" (")[0] for n in names], rotation=90, fontsize=7)
+    a2.set_ylabel("CIEDE2000")
+    a2.grid(alpha=0.3, axis="y")
+    a2.legend(fontsize=8)
+    a2.set_title(f"patches used: {s['patches_used']} of {s['patches']}", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -7,7 +7,11 @@ and convert camera RGB to ``config.colorspace`` (:func:`jaxgfx.hdr.raw.color_tra
 colour tags, or LibRaw's matrix). With ``config.flat_field`` the lens vignetting is fitted from
 that frame (:func:`jaxgfx.hdr.raw.fit_vignetting`) and divided out of the merged mosaic: for a
 linear sensor that equals dividing every frame by it, while the saturation test of the merge
-still sees the recorded levels."""
+still sees the recorded levels. With ``config.chart`` (a ColorChecker's corners in the merged
+image) the chart's patches are sampled from the merged camera RGB, the camera matrix and white
+balance are fitted to them (:func:`fit_chart_step`: :func:`jaxgfx.hdr.raw.fit_chart_matrix`,
+CIEDE2000 least squares, the DNG / LibRaw matrix reported as "before") and that fit, not the
+file's matrix, makes the colour-managed output."""
 
 from __future__ import annotations
 
@@ -17,6 +21,97 @@ import numpy as np
 
 from .config import CalibrateConfig
 from .report import CalibrateResult
+
+
+class ChartResult(NamedTuple):
+    """The chart step's result: the fitted :class:`jaxgfx.hdr.raw.ChartCalibration`
+    (normalised: the neutral maps to Y = 1), the corners ``(4, 2)``, the patches' camera RGB
+    ``(24, 3)`` at the chart's exposure, and XYZ(D50) ``(24, 3)`` in the reference's units of the
+    reference, the "before" matrix (exposure matched in Y) and the fit (for ``chart.png``)."""
+
+    calibration: Any
+    corners: Any
+    camera_rgb: Any
+    xyz_reference: Any
+    xyz_before: Any
+    xyz_after: Any
+
+    def to_dict(self) -> dict:
+        """``report.json`` "chart"."""
+        from jaxgfx.hdr.raw import COLORCHECKER24, CORNER_ORDER, colorchecker_reference
+
+        f = lambda a: np.round(np.asarray(a, np.float64), 8).tolist()  # noqa: E731
+        return {
+            "reference": COLORCHECKER24 + " (colour-science), XYZ under D50",
+            "corners_xy_px": f(self.corners),
+            "corner_order": list(CORNER_ORDER),
+            "patch_names": list(colorchecker_reference().patch_names),
+            "camera_rgb": [[None if not np.isfinite(v) else v for v in row]
+                           for row in f(self.camera_rgb)],  # fmt: skip
+            **self.calibration.to_dict(),
+        }
+
+
+def check_chart_corners(cfg: CalibrateConfig, shape) -> None:
+    """``config.chart`` inside the merged image of ``shape`` ``(H, W)`` and a convex
+    quadrilateral in the documented order: one ``ValueError`` naming ``chart`` (``--chart``),
+    before anything is computed."""
+    from jaxgfx.hdr.raw.chart import _check_corners
+
+    try:
+        _check_corners(np.reshape(np.asarray(cfg.chart, np.float64), (4, 2)), tuple(shape))
+    except ValueError as e:
+        raise ValueError(f"chart (--chart): {str(e).removeprefix('corners: ')}") from None
+
+
+def fit_chart_step(cfg: CalibrateConfig, camera_rgb, ct, raw) -> tuple[ChartResult, Any]:
+    """Sample the chart at ``config.chart`` in the merged, demosaiced ``camera_rgb``
+    ``(H, W, 3)``, fit ``config.chart_model`` with white balance (D50, the ICC connection
+    space), the file's colour transform ``ct`` (:func:`jaxgfx.hdr.raw.color_transform`) giving
+    the "before". Returns the :class:`ChartResult` and the :class:`jaxgfx.hdr.raw.ColorTransform`
+    of the fit (its matrix: exact for ``"matrix"``, the root-polynomial's Jacobian at the
+    neutral otherwise; the white's xy / CCT from the DNG matrices when the file has them)."""
+    import jax.numpy as jnp
+
+    from jaxgfx import color
+    from jaxgfx.hdr import raw as hraw
+
+    corners = np.reshape(np.asarray(cfg.chart, np.float64), (4, 2))
+    patches = np.asarray(hraw.chart_patch_means(np.asarray(camera_rgb, np.float32), corners))
+    to_space = np.asarray(hraw.xyz_d50_to_space_matrix(cfg.colorspace), np.float64)
+    before = np.linalg.solve(to_space, np.asarray(ct.matrix, np.float64))  # camera -> XYZ(D50)
+    cal = hraw.fit_chart_matrix(
+        patches, model=cfg.chart_model, white_balance=True, illuminant="D50", before=before,
+        before_source=f"{ct.matrix_source}; white balance: {ct.white_balance_source}",
+    )  # fmt: skip
+    norm = cal.normalized()
+    ref = hraw.colorchecker_reference().xyz
+    ok = np.all(np.isfinite(patches), axis=1)
+    after = np.asarray(hraw.apply_chart_calibration(cal, np.where(ok[:, None], patches, 0.0)))
+    yb = (np.where(ok[:, None], patches, 0.0) @ before.T)[:, 1]
+    scale = float(yb[ok] @ ref[ok, 1] / (yb[ok] @ yb[ok]))
+    xyz_before = np.where(ok[:, None], patches, 0.0) @ (before * scale).T
+    nan = np.where(ok, 0.0, np.nan)[:, None]
+    result = ChartResult(norm, corners, patches, ref, xyz_before + nan, after + nan)
+
+    neutral = jnp.asarray(norm.neutral)
+    xy = jnp.asarray(color.WHITEPOINTS["D50"], neutral.dtype)
+    if "color_matrix1" in raw.dng_color:
+        prof = hraw.DngColorProfile.from_tags(raw.dng_color, f"'{raw.path}'")
+        xy = hraw.dng_neutral_to_xy(prof, neutral)
+    s = cal.summary()
+    src = (
+        f"ColorChecker chart fit ({cfg.chart_model}; CIEDE2000 least squares, median ΔE00 "
+        f"{s['before']['median']:.2f} before -> {s['after']['median']:.2f} after), "
+        f"Bradford XYZ(D50) -> {cfg.colorspace}"
+    )
+    if cfg.chart_model != "matrix":
+        src += "; this matrix is the root-polynomial's Jacobian at the neutral (report 'chart')"
+    ct_chart = hraw.ColorTransform(
+        jnp.asarray(to_space) @ norm.camera_to_xyz_matrix(), neutral, xy, color.xy_to_cct(xy),
+        cfg.colorspace, src, "chart", "the chart's fitted white-balance gains",
+    )  # fmt: skip
+    return result, ct_chart
 
 __all__: list[str] = []  # the job's stages (tests patch _fit_raw / merge_mosaics here)
 
@@ -100,6 +195,8 @@ def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
     raws, times = io.read_raw_stack(files, exposure_times=cfg.exposure_times)
     pattern = raws[0].cfa_pattern
     mosaics = np.stack([r.mosaic for r in raws]).astype(np.float32)
+    if cfg.chart is not None:  # the merged image has the mosaic's size
+        check_chart_corners(cfg, mosaics.shape[1:])
     norm = np.stack([r.normalized() for r in raws])
     black = np.asarray(raws[0].black_level, np.float32)
     white = float(raws[0].white_level)
@@ -134,7 +231,15 @@ def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
     ct = hdr.raw.color_transform(
         raws[0], rgb, colorspace=cfg.colorspace, white_balance=cfg.white_balance
     )
-    rgb, var_rgb = hdr.raw.apply_color_transform(rgb, ct, var_rgb)
+    chart = None
+    if cfg.chart is not None:
+        steps.start("chart")
+        chart, ct = fit_chart_step(cfg, rgb, ct, raws[0])
+        rgb, var_rgb = hdr.raw.apply_chart_calibration(
+            chart.calibration, rgb, var_rgb, colorspace=cfg.colorspace
+        )
+    else:
+        rgb, var_rgb = hdr.raw.apply_color_transform(rgb, ct, var_rgb)
     return CalibrateResult(
         radiance=np.asarray(rgb, np.float32),
         variance=np.asarray(var_rgb, np.float32),
@@ -143,6 +248,7 @@ def _fit_raw(cfg: CalibrateConfig, files, steps) -> CalibrateResult:
         image_shape=mosaics.shape,
         raw_calibration=cal,
         vignetting=vig,
+        chart=chart,
         alignment_shifts=shifts,
         frames=m.frames,
     )

@@ -33,6 +33,7 @@ OUTPUT_NAMES = (
     "response.png",
     "loo.png",
     "vignetting.png",
+    "chart.png",
     "camera.json",
     "report.json",
 ) + tuple(f"tonemap_{op}.png" for op in TONEMAP_METHODS)
@@ -82,6 +83,7 @@ class CalibrateResult:
     synthetic: dict | None = None
     color: Any = None  # hdr.raw.ColorTransform (RAW): camera RGB -> the output colour space
     vignetting: Any = None  # hdr.raw.Vignetting (RAW with a flat field)
+    chart: Any = None  # raw.ChartResult (RAW with config.chart): the fit, patches, corners
     frames: Any = None  # hdr.DeghostResult of a ghost-free merge (merge.deghost): frames.png
 
 
@@ -117,6 +119,9 @@ def write_outputs(folder, result: CalibrateResult, cfg) -> list[str]:
     if result.vignetting is not None:
         plots._plot_vignetting(os.path.join(folder, "vignetting.png"), result.vignetting)
         names.append("vignetting.png")
+    if result.chart is not None:
+        plots._plot_chart(os.path.join(folder, "chart.png"), result.chart)
+        names.append("chart.png")
     if result.loo is not None:
         plots._plot_loo(os.path.join(folder, "loo.png"), result.loo)
         names.append("loo.png")
@@ -135,6 +140,8 @@ def _write_camera_profile(path, result: CalibrateResult) -> None:
     from jaxgfx import hdr
 
     kw: dict = {"response": result.response, "vignetting": result.vignetting}
+    if result.chart is not None:
+        kw["chart"] = result.chart.calibration
     if result.color is not None:
         ct = result.color
         neutral = np.asarray(ct.neutral, np.float64)
@@ -158,6 +165,7 @@ _OUTPUT_KEYS = {
     "response.png": "response_plot",
     "loo.png": "loo_plot",
     "vignetting.png": "vignetting_plot",
+    "chart.png": "chart_plot",
     "camera.json": "camera_profile",
     "report.json": "report",
     **{n: n[: -len(".png")] for n in OUTPUT_NAMES if n.startswith("tonemap_")},
@@ -183,6 +191,8 @@ def build_report(job, files, result: CalibrateResult, timings: dict, outputs):
         report["color"] = result.color.to_dict()
     if result.vignetting is not None:
         report["vignetting"] = {"flat_field": cfg.flat_field, **result.vignetting.to_dict()}
+    if result.chart is not None:
+        report["chart"] = result.chart.to_dict()
     if result.response is not None:
         report["response"] = {
             "method": cfg.response.method,
