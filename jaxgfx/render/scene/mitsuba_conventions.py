@@ -72,8 +72,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("bsdf", "plastic"): S,
     ("bsdf", "roughdielectric"): S + " (isotropic)",
     ("bsdf", "thindielectric"): "refused: no thin dielectric in jaxgfx",
-    ("bsdf", "principled"): "refused: no principled BSDF in jaxgfx",
-    ("bsdf", "principledthin"): "refused: no principled BSDF in jaxgfx",
+    ("bsdf", "principled"): S + " (reflection lobes: `spec_trans`, `anisotropic` refused)",
+    ("bsdf", "principledthin"): "refused: no thin principled BSDF in jaxgfx",
     ("bsdf", "mask"): "refused: no opacity masks in jaxgfx",
     ("bsdf", "bumpmap"): "refused: no bump mapping in jaxgfx",
     ("bsdf", "normalmap"): "refused: no normal mapping in jaxgfx",
@@ -157,10 +157,13 @@ BSDF_TO_MITSUBA = {
     "RoughDielectric": "roughdielectric",
     "SmoothPlastic": "plastic",
     "RoughPlastic": "roughplastic",
+    "Principled": "principled",
 }
 """jaxgfx BSDF class -> Mitsuba plugin (``Phong`` has none)."""
 
-ONE_SIDED_BSDFS = ("diffuse", "conductor", "roughconductor", "plastic", "roughplastic")
+ONE_SIDED_BSDFS = (
+    "diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "principled"
+)  # fmt: skip
 """Mitsuba BSDFs that are black from behind; jaxgfx shades them on both sides, so the writer
 wraps them in ``twosided`` and the loader treats ``twosided`` as a pass-through."""
 
@@ -174,6 +177,9 @@ DEFAULTS = {
     "roughplastic.int_ior": "polypropylene",
     "roughplastic.ext_ior": "air",
     "roughplastic.diffuse_reflectance": 0.5,
+    "principled.base_color": 0.5,
+    "principled.roughness": 0.5,
+    "principled.specular": 0.5,
     "conductor.material": "none",
     "film.width": 768,
     "film.height": 576,

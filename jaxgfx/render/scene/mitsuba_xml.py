@@ -692,6 +692,37 @@ def _conductor(p: _Params) -> dict:
     return out
 
 
+def _principled(p: _Params) -> dict:
+    """``principled``: Mitsuba's parameter names and defaults (jaxgfx's are the same); every
+    weight may be a texture. ``spec_trans`` != 0 (transmission) and ``anisotropic`` != 0 (the
+    tangent frames of jaxgfx and Mitsuba differ) are refused, as both ``specular`` and ``eta``."""
+    d = DEFAULTS
+    m = {"type": "principled",
+         "base_color": p.color("base_color", [d["principled.base_color"]] * 3, texture=True),
+         "roughness": p.scalar_or_texture("roughness", d["principled.roughness"])}  # fmt: skip
+    for k in ("metallic", "spec_tint", "sheen", "sheen_tint", "flatness", "clearcoat",
+              "clearcoat_gloss"):  # fmt: skip
+        m[k] = p.scalar_or_texture(k, 0.0)
+    for k in ("spec_trans", "anisotropic"):
+        v = p.scalar_or_texture(k, 0.0)
+        if v != 0.0:
+            why = ("the transmission lobe is not implemented" if k == "spec_trans" else
+                   "anisotropy is not supported (the tangent frames of jaxgfx and Mitsuba "
+                   "differ)")  # fmt: skip
+            raise p.err(k, f"{why}; expected 0")
+    eta, spec = p.float("eta", positive=True), p.float("specular")
+    if eta is not None and spec is not None:
+        raise p.err("eta", "give either eta or specular, not both (as Mitsuba)")
+    if eta is not None:
+        m["eta"] = eta
+    else:
+        m["specular"] = d["principled.specular"] if spec is None else spec
+    for k in ("diffuse_reflectance_sampling_rate", "main_specular_sampling_rate",
+              "clearcoat_sampling_rate"):  # fmt: skip
+        m[k] = p.float(k, 1.0)
+    return m
+
+
 def _bsdf(obj: _Obj, doc, desc, *, textured_ok=True, name=None) -> str:
     """The material name of a BSDF object (converted once, shared by references): its ``id``,
     else ``name`` (the id of an enclosing ``twosided``), else ``bsdf_N``."""
@@ -737,6 +768,8 @@ def _bsdf(obj: _Obj, doc, desc, *, textured_ok=True, name=None) -> str:
                                              texture=True),
              "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True),
              "nonlinear": p.bool("nonlinear", False)}  # fmt: skip
+    elif t == "principled":
+        m = _principled(p)
     else:
         raise ValueError(f"{obj.where}: BSDF plugin {t!r} is not supported")
     p.done()
