@@ -1,7 +1,8 @@
 """BSDF values and densities against Mitsuba 3 evaluated in the same run (``mitsuba`` marker;
 skips without it): roughdielectric (GGX, both sides), plastic and roughplastic (the rough
-coat's tables). Tolerances: Mitsuba's float32 arithmetic (measured max relative differences
-in the comments); plastic also differs by Mitsuba's F_dr fit (documented)."""
+coat's tables), principled (reflection lobes). Tolerances: Mitsuba's float32 arithmetic
+(measured max relative differences in the comments); plastic also differs by Mitsuba's F_dr fit
+(documented)."""
 
 import jax
 import jax.numpy as jnp
@@ -62,6 +63,18 @@ CASES = [
      {"type": "plastic", "int_ior": 1.5, "ext_ior": 1.0,
       "diffuse_reflectance": {"type": "rgb", "value": [0.02, 0.2, 0.9]}},
      True, 3e-3),  # 1.15e-3: Mitsuba's fitted F_dr(1/eta) vs the exact integral
+    # principled: tolerances not yet measured (added without Mitsuba installed)
+    ({"type": "principled", "base_color": [0.8, 0.45, 0.2], "roughness": 0.35, "metallic": 0.3,
+      "specular": 0.6, "spec_tint": 0.4, "sheen": 0.7, "sheen_tint": 0.5, "flatness": 0.25,
+      "clearcoat": 0.8, "clearcoat_gloss": 0.6},
+     {"type": "principled", "base_color": {"type": "rgb", "value": [0.8, 0.45, 0.2]},
+      "roughness": 0.35, "metallic": 0.3, "specular": 0.6, "spec_tint": 0.4, "sheen": 0.7,
+      "sheen_tint": 0.5, "flatness": 0.25, "clearcoat": 0.8, "clearcoat_gloss": 0.6},
+     True, 2e-3),
+    ({"type": "principled", "base_color": [0.9, 0.6, 0.3], "roughness": 0.5, "metallic": 0.8,
+      "anisotropic": 0.6, "eta": 1.33},
+     {"type": "principled", "base_color": {"type": "rgb", "value": [0.9, 0.6, 0.3]},
+      "roughness": 0.5, "metallic": 0.8, "anisotropic": 0.6, "eta": 1.33}, True, 2e-3),
 ]  # fmt: skip
 
 

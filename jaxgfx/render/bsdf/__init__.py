@@ -20,6 +20,7 @@ from jaxgfx.render.bsdf._dielectric import SmoothDielectric as SmoothDielectric
 from jaxgfx.render.bsdf._diffuse import Diffuse as Diffuse
 from jaxgfx.render.bsdf._phong import Phong as Phong
 from jaxgfx.render.bsdf._plastic import SmoothPlastic as SmoothPlastic
+from jaxgfx.render.bsdf._principled import Principled as Principled
 from jaxgfx.render.bsdf._roughconductor import RoughConductor as RoughConductor
 from jaxgfx.render.bsdf._roughdielectric import RoughDielectric as RoughDielectric
 from jaxgfx.render.bsdf._roughplastic import RoughPlastic as RoughPlastic
@@ -31,6 +32,7 @@ __all__ = [
     "Diffuse",
     "Mirror",
     "Phong",
+    "Principled",
     "RoughConductor",
     "RoughDielectric",
     "SmoothDielectric",
@@ -55,6 +57,7 @@ BSDF_TYPES = {
     "phong": Phong,
     "thindielectric": ThinDielectric,
     "blendbsdf": BlendBSDF,
+    "principled": Principled,
 }
 
 

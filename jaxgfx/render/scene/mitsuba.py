@@ -247,8 +247,30 @@ def _mitsuba_bsdf(m, where) -> dict:
             "bsdf_0": _twosided(_mitsuba_bsdf(m.bsdf0, f"{where}.bsdf0")),
             "bsdf_1": _twosided(_mitsuba_bsdf(m.bsdf1, f"{where}.bsdf1")),
         }
+    elif kind == "principled":
+        out = _principled_keys(m, where)
     else:
         raise NotImplementedError(f"{where}.type: {type(m).__name__} has no Mitsuba 3 mapping")
+    return out
+
+
+PRINCIPLED_WEIGHTS = ("roughness", "metallic", "spec_tint", "anisotropic", "sheen", "sheen_tint",
+                      "flatness", "clearcoat", "clearcoat_gloss")  # fmt: skip
+PRINCIPLED_RATES = ("diffuse_reflectance_sampling_rate", "main_specular_sampling_rate",
+                    "clearcoat_sampling_rate")  # fmt: skip
+
+
+def _principled_keys(m, where) -> dict:
+    """Mitsuba's ``principled`` keys of a :class:`~jaxgfx.render.bsdf.Principled` (same names;
+    ``eta`` or ``specular``, whichever the material holds)."""
+    out = {"type": "principled", "base_color": _rgb(m.base_color)}
+    try:
+        out.update({k: _float(getattr(m, k)) for k in PRINCIPLED_WEIGHTS})
+        ior = "specular" if m.specular is not None else "eta"
+        out[ior] = _float(getattr(m, ior))
+    except ValueError as e:
+        raise ValueError(f"{where}: {e}") from None
+    out.update({k: getattr(m, k) for k in PRINCIPLED_RATES})
     return out
 
 
@@ -439,7 +461,8 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
         if name not in mats:
             raise ValueError(f"{where}.material: unknown material {name!r}; have {list(mats)}")
         inner = mats[name].get("bsdf", mats[name])
-        if "alpha_u" in inner and shape_type in ("sphere", "mesh"):
+        aniso = "alpha_u" in inner or inner.get("anisotropic", 0.0) != 0.0
+        if aniso and shape_type in ("sphere", "mesh"):
             # jaxgfx's tangent is the Duff et al. frame around the normal; Mitsuba's is dp/du
             # (longitude on spheres, the uv parametrisation on meshes): rotated highlights.
             raise NotImplementedError(
@@ -621,6 +644,12 @@ def _bsdf_desc(m, where) -> dict:
         return {"type": "blendbsdf", "weight": _list(m.weight),
                 "bsdf0": _bsdf_desc(m.bsdf0, f"{where}.bsdf0"),
                 "bsdf1": _bsdf_desc(m.bsdf1, f"{where}.bsdf1")}  # fmt: skip
+    if isinstance(m, B.Principled):
+        out = {"type": "principled", "base_color": _list(m.base_color)}
+        out.update({k: _list(getattr(m, k)) for k in PRINCIPLED_WEIGHTS})
+        ior = "specular" if m.specular is not None else "eta"
+        out[ior] = _list(getattr(m, ior))
+        return {**out, **{k: getattr(m, k) for k in PRINCIPLED_RATES}}
     if isinstance(m, B.SmoothDielectric):
         return {"type": "dielectric", "eta": _list(m.eta),
                 "specular_reflectance": _list(m.specular_reflectance),

@@ -76,8 +76,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("bsdf", "plastic"): S,
     ("bsdf", "roughdielectric"): S + " (isotropic)",
     ("bsdf", "thindielectric"): S,
-    ("bsdf", "principled"): "refused: no principled BSDF in jaxgfx",
-    ("bsdf", "principledthin"): "refused: no principled BSDF in jaxgfx",
+    ("bsdf", "principled"): S + " (reflection lobes: `spec_trans`, `anisotropic` refused)",
+    ("bsdf", "principledthin"): "refused: no thin principled BSDF in jaxgfx",
     ("bsdf", "mask"): "refused: no opacity masks in jaxgfx",
     ("bsdf", "bumpmap"): "refused: no bump mapping in jaxgfx",
     ("bsdf", "normalmap"): "refused: no normal mapping in jaxgfx",
@@ -163,10 +163,13 @@ BSDF_TO_MITSUBA = {
     "RoughPlastic": "roughplastic",
     "ThinDielectric": "thindielectric",
     "BlendBSDF": "blendbsdf",
+    "Principled": "principled",
 }
 """jaxgfx BSDF class -> Mitsuba plugin (``Phong`` has none)."""
 
-ONE_SIDED_BSDFS = ("diffuse", "conductor", "roughconductor", "plastic", "roughplastic")
+ONE_SIDED_BSDFS = (
+    "diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "principled"
+)  # fmt: skip
 """Mitsuba BSDFs that are black from behind; jaxgfx shades them on both sides, so the writer
 wraps them in ``twosided`` and the loader treats ``twosided`` as a pass-through."""
 
@@ -180,6 +183,9 @@ DEFAULTS = {
     "roughplastic.int_ior": "polypropylene",
     "roughplastic.ext_ior": "air",
     "roughplastic.diffuse_reflectance": 0.5,
+    "principled.base_color": 0.5,
+    "principled.roughness": 0.5,
+    "principled.specular": 0.5,
     "conductor.material": "none",
     "blendbsdf.weight": 0.5,
     "spot.cutoff_angle": 20.0,

@@ -706,6 +706,37 @@ def _conductor(p: _Params) -> dict:
     return out
 
 
+def _principled(p: _Params) -> dict:
+    """``principled``: Mitsuba's parameter names and defaults (jaxgfx's are the same); every
+    weight may be a texture. ``spec_trans`` != 0 (transmission) and ``anisotropic`` != 0 (the
+    tangent frames of jaxgfx and Mitsuba differ) are refused, as both ``specular`` and ``eta``."""
+    d = DEFAULTS
+    m = {"type": "principled",
+         "base_color": p.color("base_color", [d["principled.base_color"]] * 3, texture=True),
+         "roughness": p.scalar_or_texture("roughness", d["principled.roughness"])}  # fmt: skip
+    for k in ("metallic", "spec_tint", "sheen", "sheen_tint", "flatness", "clearcoat",
+              "clearcoat_gloss"):  # fmt: skip
+        m[k] = p.scalar_or_texture(k, 0.0)
+    for k in ("spec_trans", "anisotropic"):
+        v = p.scalar_or_texture(k, 0.0)
+        if v != 0.0:
+            why = ("the transmission lobe is not implemented" if k == "spec_trans" else
+                   "anisotropy is not supported (the tangent frames of jaxgfx and Mitsuba "
+                   "differ)")  # fmt: skip
+            raise p.err(k, f"{why}; expected 0")
+    eta, spec = p.float("eta", positive=True), p.float("specular")
+    if eta is not None and spec is not None:
+        raise p.err("eta", "give either eta or specular, not both (as Mitsuba)")
+    if eta is not None:
+        m["eta"] = eta
+    else:
+        m["specular"] = d["principled.specular"] if spec is None else spec
+    for k in ("diffuse_reflectance_sampling_rate", "main_specular_sampling_rate",
+              "clearcoat_sampling_rate"):  # fmt: skip
+        m[k] = p.float(k, 1.0)
+    return m
+
+
 def _twosided_child(obj: _Obj, doc) -> _Obj:
     p = _Params(obj, doc)
     if len(obj.children) != 1 or obj.children[0].tag != "bsdf":
@@ -785,6 +816,8 @@ def _bsdf_dict(obj: _Obj, doc, *, nested=False) -> dict:
         m = {"type": "blendbsdf", "weight": w,
              "bsdf0": _bsdf_dict(kids[0], doc, nested=True),
              "bsdf1": _bsdf_dict(kids[1], doc, nested=True)}  # fmt: skip
+    elif t == "principled":
+        m = _principled(p)
     else:
         raise ValueError(f"{obj.where}: BSDF plugin {t!r} is not supported")
     p.done(children_ok=children_ok)
