@@ -193,9 +193,12 @@ def frame_colors(times) -> np.ndarray:
     (shortest exposure) through green to red (longest), spaced evenly by exposure rank."""
     from matplotlib.colors import hsv_to_rgb
 
+    from jaxgfx.io import exposure_order
+
     t = np.asarray(times, np.float64)
     n = t.shape[0]
-    rank = np.argsort(np.argsort(t, kind="stable"), kind="stable")
+    rank = np.empty(n, np.int64)
+    rank[exposure_order(t)] = np.arange(n)  # the bracket's one sort (stable for equal times)
     hue = (2.0 / 3.0) * (1.0 - rank / max(n - 1, 1))
     return hsv_to_rgb(np.stack([hue, np.ones(n), np.ones(n)], -1))
 
