@@ -168,6 +168,9 @@ def test_jit_matches_eager(rng):
     )
 
 
+# 4.2 s of the default run (2026-12-04, load 4.5);
+# tests/color keeps delta_e_2000_residuals' fast checks
+@pytest.mark.slow
 def test_delta_e_residual_gradients_vs_finite_differences(x64, rng):
     """AD of the fit's least-squares objective ½ Σ ||r||² (r = delta_e_2000_residuals of the
     predicted Lab, ||r|| = ΔE00 per patch) w.r.t. the root-polynomial matrix (its linear part,

@@ -204,6 +204,9 @@ def test_raw_flat_field_and_camera_profile(tmp_path):
     assert os.path.getsize(rep["outputs"]["vignetting_plot"]) > 0
 
 
+# 7.6 s of the default run (2026-12-04, load 4.5);
+# tests/pipelines/test_calibrate_raw_motion.py keeps fast --deghost checks
+@pytest.mark.slow
 def test_merge_deghost_option_runs_the_ghost_free_merge():
     """`merge.deghost` (config, YAML, `--deghost`) routes the calibrate job's merge stage
     through hdr.merge_deghosted: on a bracket with a moving object its result equals the

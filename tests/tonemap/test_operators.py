@@ -439,6 +439,9 @@ def test_mantiuk_vs_pfstmo(hdr):
     assert abs(np.log(_lum(ref).min() / _lum(ours).min())) < 0.2
 
 
+# 8.2 s of the default run (2026-12-04, load 4.5);
+# the pfstmo agreement and transducer tests stay in make test
+@pytest.mark.slow
 def test_mantiuk_finite_where_opencv_is_nan_and_opencv_is_a_global_power_curve():
     """OpenCV's TonemapMantiuk is NaN on 35 / 96 / 44 % of the pixels of the hard scenes
     (zeros, ~1e9:1); ours is finite with black zeros. On a grey image OpenCV's output is
