@@ -34,11 +34,11 @@ def _desc():
 _PROBE = """
 import mitsuba as mi
 mi.set_variant("llvm_ad_rgb")
-import drjit as dr
 s = mi.load_dict({"type": "scene", "s": {"type": "sphere"}, "e": {"type": "constant"},
                   "i": {"type": "prb"}, "c": {"type": "perspective",
                   "film": {"type": "hdrfilm", "width": 8, "height": 8}}})
-print(float(dr.mean(mi.render(s, spp=4), axis=None)))
+import numpy as np
+print(float(np.mean(np.asarray(mi.render(s, spp=4)))))
 """
 
 
