@@ -3,8 +3,9 @@
 A layered material (rough plastic) sees its base through the coat: light enters and leaves
 with the coat's directional transmittance ``T(μ, η)`` (the albedo of the rough interface's
 *transmission* lobe, ``< 1 - R`` where masking loses energy) and bounces inside with the
-internal diffuse reflectance ``R_int = 2 ∫ R(μ, 1/η) μ dμ``, ``R`` the albedo of the
-*reflection* lobe. Mitsuba 3 (``roughplastic``, ``eval_transmittance`` /
+internal diffuse reflectance ``R_int = 2 mean_i R(μ_i, 1/η) μ_i`` over ``μ_i = i / 63``
+(Mitsuba 3's 64-point rule, a rectangle-rule approximation of ``2 ∫ R(μ, 1/η) μ dμ``), ``R`` the
+albedo of the *reflection* lobe. Mitsuba 3 (``roughplastic``, ``eval_transmittance`` /
 ``eval_reflectance``) tabulates both; the same tables are computed here, in JAX, as functions
 of ``alpha`` and ``eta`` (so they follow ``Scene.replace`` and carry derivatives).
 
@@ -18,8 +19,9 @@ square-root kink in ``F(wo·m, 1/η)`` (and masking kinks at the horizon), so a 
 the square is not smooth in ``(alpha, eta)`` and its AD derivative was off by 5–35 % (48² nodes;
 GGX α = 0.2, η = 1.49: ``∂R_int/∂(α, η)`` (-0.718, 0.831) vs converged (-0.707, 0.608)). For
 isotropic ``alpha`` in ``[1e-4, 1]`` and ``eta`` in ``[1, 4]``, :func:`r_int` interpolates a
-precomputed accurate table (``_coating_table.py``, made by ``tools/make_coating_table.py``) with
-a bicubic spline in ``(sqrt(alpha), 1/eta)``: value and derivative come from one C² function.
+precomputed table of Mitsuba's 64-point rule with ``R`` by an accurate (384²-node) quadrature
+(``_coating_table.py``, made by ``tools/make_coating_table.py``) with a bicubic spline in
+``(sqrt(alpha), 1/eta)``: value and derivative come from one C² function.
 """
 
 from __future__ import annotations
@@ -184,13 +186,12 @@ def _table_ok(distribution, eta):
 
 
 def r_int(distribution: MicrofacetDistribution, eta, *, nodes=_NODES_INT, n_mu=None):
-    """Internal diffuse reflectance ``R_int = 2 ∫_0^1 R(μ, 1/η) μ dμ`` of the rough coat
-    (scalar or batch-shaped ``alpha``/``eta``, broadcast).
+    """Internal diffuse reflectance ``R_int = 2 mean_i R(μ_i, 1/η) μ_i``, ``μ_i = i / 63``
+    (Mitsuba 3's rule) of the rough coat (scalar or batch-shaped ``alpha``/``eta``, broadcast).
 
     Isotropic ``alpha <= 1`` (clamped below at 1e-4 as the distribution) and ``1 <= eta <= 4``:
-    the table (:func:`r_int_table`; the accurate integral, which differs from Mitsuba 3's 64-point
-    rectangle rule ``2 mean_i R(i/63) i/63`` by the amount docs/render_bsdf.md gives), with its
-    exact derivative. Elsewhere (``eta < 1``: no total internal reflection, the quadrature is
+    the table (:func:`r_int_table`; Mitsuba's rule with ``R`` by 384² nodes, interpolated by a
+    smooth spline), with the spline's exact derivative. Elsewhere (``eta < 1``: no total internal reflection, the quadrature is
     smooth; ``eta > 4``, ``alpha > 1`` or anisotropic ``alpha``): :func:`r_int_quadrature`
     (``nodes``, ``n_mu``), whose AD derivative is that of a discrete sum. The fallback is
     computed only when some element needs it (``lax.cond``; under ``vmap`` both branches run).
