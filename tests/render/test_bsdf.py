@@ -204,18 +204,19 @@ def test_furnace_closed_forms():
     np.testing.assert_allclose(m, 1.0, rtol=1e-6)
     np.testing.assert_allclose(se, 0.0, atol=1e-7)
     # rough plastic, white base, nearly smooth coat (docs/render_bsdf.md): albedo
-    # F(μ_o) + (1 - F(μ_o)) (1 - F_dr(1/η)) / (1 - R_int), R_int the accurate integral
-    # 2 ∫ F(μ, 1/η) μ dμ = F_dr(1/η) as α → 0 (bsdf/_coating.py's table), so 1: energy conserved
-    # (Mitsuba 3's 64-point mean R_int, 1.1 % below F_dr, gave 0.977)
+    # F(μ_o) + (1 - F(μ_o)) (1 - F_dr(1/η)) / (1 - R_int), R_int Mitsuba 3's 64-point mean of
+    # F(μ, 1/η) μ (1.1 % below F_dr(1/η)), so not exactly 1; NumPy reference below
     m, se = _furnace(RoughPlastic(1.0, 0.02), wo, key=jax.random.key(0), n=20_000)
     eta = 1.49 / 1.000277
+    mu = np.linspace(0.0, 1.0, 64)
+    r_int = 2 * np.mean(_np_fresnel(mu, 1 / eta) * mu)
     x, w = np.polynomial.legendre.leggauss(400)  # F_dr(1/η): the TIR part analytic
     mu_c = math.sqrt(1 - 1 / eta**2)
     t = 0.5 * (1 - mu_c) * (x + 1) + mu_c
     fdr = mu_c**2 + np.sum(0.5 * (1 - mu_c) * w * 2 * _np_fresnel(t, 1 / eta) * t)
     f_o = float(_np_fresnel(np.array(0.7), eta))
-    ref = f_o + (1 - f_o) * (1 - fdr) / (1 - fdr)
-    assert ref == pytest.approx(1.0, abs=1e-12)
+    ref = f_o + (1 - f_o) * (1 - fdr) / (1 - r_int)
+    assert 0.97 < ref < 0.985
     assert float(m[0]) == pytest.approx(ref, abs=4 * float(se[0]) + 2e-3)
 
 
