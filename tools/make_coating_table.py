@@ -108,7 +108,7 @@ def write(tables, dt):
         "``R_int(alpha, eta) = 2 mean_i(R(μ_i, 1/η) μ_i)``, ``μ_i = i / 63`` (64 points),",
         f"on a {NS} × {NV} grid: ``s = sqrt(alpha)`` uniform on [{S_MIN}, {S_MAX}] (rows),",
         f"``v = 1/eta`` uniform on [{V_MIN}, {V_MAX}] (columns). ``R`` by {NODES_U}²",
-        "Gauss–Legendre nodes over the sampler's square (accurate), float64. Generation took "
+        "Gauss–Legendre nodes over the sampler's square (accurate), float64. Generation took",
         f"{dt:.0f} s on {jax.device_count()} CPU device(s) (2 cores, shared with a test suite).",
         '"""',
         "",

@@ -1,7 +1,6 @@
 """Rough plastic's internal diffuse reflectance ``R_int`` (bsdf/_coating.py): the precomputed
-table's spline against Mitsuba 3's 64-point rule with an accurate R, its derivatives, limits and the batched path."""
-
-import math
+table's spline against Mitsuba 3's 64-point rule with an accurate R, its derivatives, limits
+and the batched path."""
 
 import jax
 import jax.numpy as jnp

@@ -191,8 +191,9 @@ def r_int(distribution: MicrofacetDistribution, eta, *, nodes=_NODES_INT, n_mu=N
 
     Isotropic ``alpha <= 1`` (clamped below at 1e-4 as the distribution) and ``1 <= eta <= 4``:
     the table (:func:`r_int_table`; Mitsuba's rule with ``R`` by 384² nodes, interpolated by a
-    smooth spline), with the spline's exact derivative. Elsewhere (``eta < 1``: no total internal reflection, the quadrature is
-    smooth; ``eta > 4``, ``alpha > 1`` or anisotropic ``alpha``): :func:`r_int_quadrature`
+    smooth spline), with the spline's exact derivative. Elsewhere (``eta < 1``: no total
+    internal reflection, the quadrature is smooth; ``eta > 4``, ``alpha > 1`` or anisotropic
+    ``alpha``): :func:`r_int_quadrature`
     (``nodes``, ``n_mu``), whose AD derivative is that of a discrete sum. The fallback is
     computed only when some element needs it (``lax.cond``; under ``vmap`` both branches run).
     """
