@@ -40,6 +40,13 @@ def _delta_e_1976(lab1, lab2):
     return safe_norm(lab1 - lab2, axis=-1)
 
 
+def _checked_pair(lab1, lab2, kL, kC, kH):
+    """The two Lab arguments as arrays and the weights checked positive (CIEDE2000's checks)."""
+    for v, n in ((kL, "kL"), (kC, "kC"), (kH, "kH")):
+        check_positive(v, n)
+    return as_colour(lab1, "lab1"), as_colour(lab2, "lab2")
+
+
 def delta_e_2000(lab1, lab2, *, kL=1.0, kC=1.0, kH=1.0):
     """CIEDE2000 colour difference (CIE 142-2001), as specified by Sharma, Wu & Dalal (2005),
     "The CIEDE2000 color-difference formula: implementation notes, supplementary test data,
@@ -64,10 +71,7 @@ def delta_e_2000(lab1, lab2, *, kL=1.0, kC=1.0, kH=1.0):
       ...                          jnp.array([50.0, 0.0, -82.7485]))), 4)
       2.0425
     """
-    lab1 = as_colour(lab1, "lab1")
-    lab2 = as_colour(lab2, "lab2")
-    for v, n in ((kL, "kL"), (kC, "kC"), (kH, "kH")):
-        check_positive(v, n)
+    lab1, lab2 = _checked_pair(lab1, lab2, kL, kC, kH)
     return _delta_e_2000(lab1, lab2, kL, kC, kH)
 
 
@@ -87,10 +91,7 @@ def delta_e_2000_residuals(lab1, lab2, *, kL=1.0, kC=1.0, kH=1.0):
       >>> round(float(jnp.linalg.norm(delta_e_2000_residuals(a, b))), 4)
       2.0425
     """
-    lab1 = as_colour(lab1, "lab1")
-    lab2 = as_colour(lab2, "lab2")
-    for v, n in ((kL, "kL"), (kC, "kC"), (kH, "kH")):
-        check_positive(v, n)
+    lab1, lab2 = _checked_pair(lab1, lab2, kL, kC, kH)
     return _delta_e_2000_residuals(lab1, lab2, kL, kC, kH)
 
 
