@@ -89,3 +89,20 @@ def test_r_int_falls_back_to_quadrature_outside_the_table():
     assert float(v[0]) == pytest.approx(float(r_int_table("ggx", 0.3, 1.5)), abs=1e-6)
     q = r_int_quadrature(MicrofacetDistribution("ggx", 0.3), 0.8, nodes=8, n_mu=16)
     assert float(v[1]) == pytest.approx(float(q), abs=1e-6)
+
+
+def test_spline_knot_derivatives_equal_scipys_not_a_knot_spline():
+    """The library builds the table's spline with NumPy (SciPy is a test dependency only); its
+    knot derivatives equal SciPy's ``CubicSpline`` (not-a-knot) along each axis and crosswise."""
+    from scipy.interpolate import CubicSpline
+
+    from jaxgfx.render.bsdf import _coating as C
+    from jaxgfx.render.bsdf import _coating_table as T
+
+    for dist in ("ggx", "beckmann"):
+        f = np.asarray(getattr(T, dist.upper()), np.float64)
+        i_s, i_v = np.arange(T.NS, dtype=np.float64), np.arange(T.NV, dtype=np.float64)
+        fs = CubicSpline(i_s, f, axis=0).derivative()(i_s)
+        fv = CubicSpline(i_v, f, axis=1).derivative()(i_v)
+        fsv = CubicSpline(i_v, fs, axis=1).derivative()(i_v)
+        np.testing.assert_allclose(C._spline_coeffs(dist), np.stack([f, fs, fv, fsv]), atol=1e-13)

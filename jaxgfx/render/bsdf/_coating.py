@@ -134,18 +134,34 @@ def r_int_quadrature(distribution: MicrofacetDistribution, eta, *, nodes=_NODES_
     return 2.0 * jnp.sum(rough_reflectance(d, mu, 1.0 / e, nodes=nodes) * mu * w, axis=-1)
 
 
+def _spline_slopes(f, axis):
+    """Knot derivatives (grid units) of the not-a-knot cubic spline through ``f`` along
+    ``axis`` (unit knot spacing), as SciPy's ``CubicSpline(..., bc_type="not-a-knot")``:
+    second derivatives ``M`` from ``M[i-1] + 4 M[i] + M[i+1] = 6 Δ²f[i]`` with continuous third
+    derivatives at the second and second-to-last knots, then the slopes of the cubic pieces."""
+    f = np.moveaxis(np.asarray(f, np.float64), axis, 0)
+    n = f.shape[0]
+    a = np.zeros((n, n))
+    rhs = np.zeros_like(f)
+    a[0, :3] = a[-1, -3:] = (1.0, -2.0, 1.0)  # not-a-knot: M1 - M0 = M2 - M1 (both ends)
+    for i in range(1, n - 1):
+        a[i, i - 1 : i + 2] = (1.0, 4.0, 1.0)
+        rhs[i] = 6.0 * (f[i + 1] - 2.0 * f[i] + f[i - 1])
+    m = np.linalg.solve(a, rhs.reshape(n, -1)).reshape(f.shape)
+    slopes = np.empty_like(f)
+    slopes[:-1] = (f[1:] - f[:-1]) - (2.0 * m[:-1] + m[1:]) / 6.0
+    slopes[-1] = (f[-1] - f[-2]) + (m[-2] + 2.0 * m[-1]) / 6.0
+    return np.moveaxis(slopes, 0, axis)
+
+
 @functools.cache
 def _spline_coeffs(dist_type):
     """Knot values and derivatives ``(f, f_s, f_v, f_sv)`` (in grid units) of the tensor cubic
-    spline (not-a-knot) through the table: bicubic Hermite on them is that spline."""
-    from scipy.interpolate import CubicSpline
-
+    spline (not-a-knot) through the table: bicubic Hermite on them is that spline. NumPy only
+    (SciPy is not a runtime dependency)."""
     f = np.asarray(getattr(_tab, dist_type.upper()), np.float64)
-    i_s, i_v = np.arange(_tab.NS, dtype=np.float64), np.arange(_tab.NV, dtype=np.float64)
-    fs = CubicSpline(i_s, f, axis=0).derivative()(i_s)
-    fv = CubicSpline(i_v, f, axis=1).derivative()(i_v)
-    fsv = CubicSpline(i_v, fs, axis=1).derivative()(i_v)
-    return np.stack([f, fs, fv, fsv])  # (4, NS, NV)
+    fs = _spline_slopes(f, 0)
+    return np.stack([f, fs, _spline_slopes(f, 1), _spline_slopes(fs, 1)])  # (4, NS, NV)
 
 
 def _hermite(t):
