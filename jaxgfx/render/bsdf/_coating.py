@@ -21,7 +21,8 @@ GGX α = 0.2, η = 1.49: ``∂R_int/∂(α, η)`` (-0.718, 0.831) vs converged (
 isotropic ``alpha`` in ``[1e-4, 1]`` and ``eta`` in ``[1, 4]``, :func:`r_int` interpolates a
 precomputed table of Mitsuba's 64-point rule with ``R`` by an accurate (384²-node) quadrature
 (``_coating_table.py``, made by ``tools/make_coating_table.py``) with a bicubic spline in
-``(sqrt(alpha), 1/eta)``: value and derivative come from one C² function.
+``(sqrt(alpha), 1/eta)``: value and derivative come from one C² function (below ``alpha = 0.02``
+the value is the quadrature, :func:`small_alpha_weight`).
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ __all__ = [
     "lerp_table",
     "r_int",
     "r_int_table",
+    "small_alpha_weight",
     "CoatingTerms",
     "TABLE_RES",
 ]
@@ -226,7 +228,39 @@ def r_int(distribution: MicrofacetDistribution, eta, *, nodes=_NODES_INT, n_mu=N
         q = r_int_quadrature(d, eta, nodes=nodes, n_mu=n_mu)
         return jnp.where(ok, table(), jnp.broadcast_to(q, ok.shape)).astype(dt)
 
-    return jax.lax.cond(jnp.all(ok), table, mixed)
+    out = jax.lax.cond(jnp.all(ok), table, mixed)
+    if jnp.ndim(d.alpha_u) == 0 and eta.ndim == 0:
+        out = out + _small_alpha_correction(d, eta, ok, table)
+    return out
+
+
+# Below alpha ~ 0.02 Mitsuba's 64-point rule is not smooth in eta: as the critical cosine
+# sqrt(1 - 1/eta^2) crosses a node i/63, R(i/63, 1/eta) turns from total internal reflection
+# to Fresnel over a width ~ alpha, a feature the table's knots (1/eta every 0.031) cannot hold:
+# the spline is off by up to 3e-3 in R_int there (0.7 % in the diffuse lobe, 1/(1 - R_int)).
+# There the value is the quadrature's (48^2 nodes: within 1e-4 of 384^2 for alpha <= 0.02),
+# blended in over sqrt(alpha) in [_S_LO, _S_HI]; the derivative stays the table's smooth one
+# (plus the blend weight's): the rule's own derivative in eta jumps at every node crossing.
+_S_LO, _S_HI = 0.1, 0.1414  # alpha 0.01 ... 0.02
+
+
+def small_alpha_weight(alpha):
+    """The quadrature's weight in :func:`r_int`: 1 for ``alpha <= 0.01``, 0 for ``alpha >=
+    0.02``, a smoothstep in ``sqrt(alpha)`` between (C¹)."""
+    s = jnp.sqrt(jnp.maximum(alpha, 0.0))
+    t = jnp.clip((_S_HI - s) / (_S_HI - _S_LO), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def _small_alpha_correction(d, eta, ok, table):
+    w = small_alpha_weight(d.alpha_u)
+    need = ok & (d.alpha_u < _S_HI**2)
+
+    def diff():
+        q = r_int_quadrature(d, eta, nodes=_NODES_INT)
+        return jax.lax.stop_gradient(q - table())
+
+    return w * jax.lax.cond(need, diff, lambda: jnp.zeros((), w.dtype))
 
 
 def lerp_table(table, x):
