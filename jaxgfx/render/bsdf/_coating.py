@@ -33,6 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgfx._checks import is_concrete
 from jaxgfx._math import safe_div, safe_sqrt, sum_last
 from jaxgfx.render.bsdf import _coating_table as _tab
 from jaxgfx.render.bsdf.fresnel import fresnel_dielectric
@@ -228,7 +229,7 @@ def r_int(distribution: MicrofacetDistribution, eta, *, nodes=_NODES_INT, n_mu=N
         q = r_int_quadrature(d, eta, nodes=nodes, n_mu=n_mu)
         return jnp.where(ok, table(), jnp.broadcast_to(q, ok.shape)).astype(dt)
 
-    out = jax.lax.cond(jnp.all(ok), table, mixed)
+    out = _cond(jnp.all(ok), table, mixed)
     if jnp.ndim(d.alpha_u) == 0 and eta.ndim == 0:
         out = out + _small_alpha_correction(d, eta, ok, table)
     return out
@@ -260,7 +261,15 @@ def _small_alpha_correction(d, eta, ok, table):
         q = r_int_quadrature(d, eta, nodes=_NODES_INT)
         return jax.lax.stop_gradient(q - table())
 
-    return w * jax.lax.cond(need, diff, lambda: jnp.zeros((), w.dtype))
+    return w * _cond(need, diff, lambda: jnp.zeros((), w.dtype))
+
+
+def _cond(pred, true_fn, false_fn):
+    """``lax.cond``, decided in Python when ``pred`` is concrete (eager calls: a ``lax.cond``
+    compiles both branches, the quadrature included, on every eager call)."""
+    if is_concrete(pred):
+        return true_fn() if bool(pred) else false_fn()
+    return jax.lax.cond(pred, true_fn, false_fn)
 
 
 def lerp_table(table, x):
