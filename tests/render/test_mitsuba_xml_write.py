@@ -178,9 +178,15 @@ def test_to_mitsuba_dict_accepts_every_schema_key(tmp_path):
         "camera": {"origin": [0, 0, 5], "target": [0, 0, 0], "fov": 40, "width": 8, "height": 8},
         "shapes": [
             {"type": "rectangle", "center": [0, 1, 0], "edge_u": eu, "edge_v": ev},
-            {"type": "mesh", "vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]], "faces": [[0, 1, 2]],
-             "normals": [[0, 0, 1]] * 3, "uvs": [[0, 0], [1, 0], [0, 1]], "translate": [1, 2, 3],
-             "to_world": tw},  # fmt: skip
+            {
+                "type": "mesh",
+                "vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+                "faces": [[0, 1, 2]],
+                "normals": [[0, 0, 1]] * 3,
+                "uvs": [[0, 0], [1, 0], [0, 1]],
+                "translate": [1, 2, 3],
+                "to_world": tw,
+            },  # fmt: skip
         ],
     }
     d = to_mitsuba_dict(desc, work_dir=str(tmp_path))
