@@ -286,6 +286,43 @@ def test_per_photo_terms_of_several_views_are_each_photos_own_loss():
     assert np.all(terms > 0)
 
 
+def test_a_clipped_pixel_is_measured_only_by_photos_of_its_own_view():
+    """``camera.clipped: unmeasured`` drops a clipped code's bound only where another photo
+    *of the same view* measures that pixel: pixel (i, j) of another view is another point.
+    Two views, one photo each, the first clipped where the second is not: each term equals
+    that photo's loss alone (nothing else measures its pixels); pooling the photos across
+    views (the behaviour before ``view_of``) drops the first photo's bounds."""
+    from jaxgfx import hdr
+    from jaxgfx.pipelines.fit.camera import level_table
+
+    rng = np.random.default_rng(1)
+    imgs = jnp.asarray(rng.uniform(0.05, 0.6, (2, 4, 5, 3)), jnp.float32)
+    codes = np.asarray(np.round(255 * np.asarray(imgs) ** (1 / 2.2)), np.float32)
+    codes[0, :2] = 255.0  # view 0: the top rows clipped (the render is below the bound there)
+    codes = jnp.asarray(codes)
+    table = level_table(hdr.CameraResponse.gamma(2.2, anchor="unit"), 8)
+    gains = jnp.ones((2, 3), jnp.float32)
+    f = jax.jit(
+        lambda i, v: censored_linear_loss(
+            i, codes, table, gains, 255.0, unmeasured_only=1.0, per_photo=True, view_of=v
+        )
+    )
+    terms = np.asarray(f(imgs, jnp.asarray([0, 1])))
+    for j in range(2):
+        alone = censored_linear_loss(
+            imgs[j], codes[j][None], table, gains[j][None], 255.0, unmeasured_only=1.0
+        )
+        assert terms[j] == pytest.approx(float(alone), rel=1e-5)
+    assert terms[0] > 0.05  # the bound of the clipped rows counts
+    pooled = censored_linear_loss(
+        imgs, codes, table, gains, 255.0, unmeasured_only=1.0, per_photo=True
+    )
+    assert float(pooled[0]) < 0.5 * terms[0]  # pooled across views: the bounds are dropped
+    # a bracket of one view (same view_of) still drops a bound another photo measures
+    both = np.asarray(f(imgs, jnp.asarray([0, 0])))
+    np.testing.assert_allclose(both, np.asarray(pooled), rtol=1e-6)
+
+
 def test_radiance_photo_terms_are_mean_squared_errors():
     cfg = _views_cfg()
     img = jnp.asarray(np.arange(2 * 2 * 3 * 3, dtype=np.float32).reshape(2, 2, 3, 3) / 10)

@@ -47,7 +47,7 @@ def _masked_mean(v, mask, axes):
 
 def censored_linear_loss(
     img, codes, table, gain, code_max, mask=None, clip_code=None, unmeasured_only=None, *,
-    per_photo: bool = False,
+    per_photo: bool = False, view_of=None,
 ):
     """Censored L2 in linear radiance, summed over photos (``per_photo``: each photo's term,
     ``(N,)``).
@@ -73,7 +73,9 @@ def censored_linear_loss(
     censored code of one photo counts only where no other photo measures that pixel (an
     uncensored code there): the hinge of a bound is biased by the render's Monte Carlo noise
     (``E max(t − Î, 0) > max(t − E Î, 0)``: a noisy render is pushed above the bound), and a
-    pixel that a darker (brighter) photo of the bracket measures needs no bound."""
+    pixel that a darker (brighter) photo of the bracket measures needs no bound. ``view_of``
+    ``(N,)`` (several views): the view of each photo; a pixel is then "measured" only by the
+    photos of its own view (pixel ``(i, j)`` of another view is another point of the scene)."""
     single = codes.ndim == 3
     if single:
         codes = codes[None]
@@ -93,7 +95,12 @@ def censored_linear_loss(
                   jnp.where(q <= 0, jnp.maximum(img - t, 0.0), img - t))
     if unmeasured_only is not None:
         censored = (q >= c) | (q <= 0)
-        measured = jnp.sum(~censored, axis=0, keepdims=True) > 0
+        if view_of is None:
+            measured = jnp.sum(~censored, axis=0, keepdims=True) > 0
+        else:  # only the photos of the same view measure a pixel
+            vo = jnp.asarray(view_of)
+            same = (vo[:, None] == vo[None, :]).astype(img.dtype)
+            measured = jnp.einsum("jk,khwc->jhwc", same, (~censored).astype(img.dtype)) > 0
         drop = censored & measured & (jnp.asarray(unmeasured_only) > 0)
         e = jnp.where(drop, 0.0, e)
     axes = (1, 2, 3)
@@ -226,7 +233,7 @@ def photo_losses(cfg: FitConfig, ldr: bool, img, target, p_camera, cam_args, tab
         return code_space_loss(img, pixels, table, gain, code_max, mask, per_photo=True)
     return censored_linear_loss(img, pixels, table, gain, code_max, mask,
                                 cam_args.get("clip_code"), cam_args.get("unmeasured"),
-                                per_photo=True)
+                                per_photo=True, view_of=cam_args.get("view_of"))
 
 
 def make_loss(
