@@ -641,8 +641,8 @@ def mesh_case(tmp_path, seed, steps, size=24, n_tex=16, target_spp=64):
     return truth, visible, hidden0, fits[0], fits[1]
 
 
-# slow: 61 s of CPU (user), 209 s wall at load 8.6 on 2 cores (two fit programs compiled, a
-# 4-view and a 1-view one, 100 steps each; the photos' 64-spp renders; the AOV coverage renders)
+# slow: 43 s on 2 cores at load 4 (209 s at load 8.6; two fit programs compiled, a 4-view and
+# a 1-view one, 100 steps each; the photos' 64-spp renders; the AOV coverage renders)
 @pytest.mark.slow
 def test_a_hostile_textured_mesh_is_recovered_from_four_views_not_from_one(tmp_path):
     """The hostile case at small size (docs/inverse.md, "Several views: a textured mesh"): a
