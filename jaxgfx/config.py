@@ -138,7 +138,7 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
         if args and len(args) != len(value):
             raise ValueError(f"{where}: expected {len(args)} items, got {len(value)}")
         return tuple(
-            _coerce(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(args, value, strict=True))
+            _coerce(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args, strict=True))
         )
     if origin in (list,):
         if not isinstance(value, (list, tuple)):

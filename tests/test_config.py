@@ -166,3 +166,22 @@ def test_union_error_names_the_path_once():
         "params.p.value: 'abc' matches none of float | tuple[float, ...] | None "
         "(expected a number, got 'abc'; expected a list, got str; or null)"
     )
+
+
+@dataclasses.dataclass(frozen=True)
+class Fixed:
+    gains: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    pair: tuple[int, str] = (0, "a")
+
+
+def test_fixed_length_tuples_coerce_each_item_by_its_type():
+    """``tuple[float, float, float]`` (e.g. the fit's ``camera.white_balance.init``): each item
+    coerced by its own type, and a config round-trips through :func:`config_to_dict`."""
+    cfg = load_config(Fixed, {"gains": [2, 1, 0.5], "pair": [3, "b"]})
+    assert cfg == Fixed(gains=(2.0, 1.0, 0.5), pair=(3, "b"))
+    assert all(isinstance(g, float) for g in cfg.gains)
+    assert load_config(Fixed, config_to_dict(cfg)) == cfg
+    with pytest.raises(ValueError, match=r"pair\[1\]"):
+        load_config(Fixed, {"pair": [1, 2]})
+    with pytest.raises(ValueError, match="gains: expected 3 items, got 2"):
+        load_config(Fixed, {"gains": [1, 2]})

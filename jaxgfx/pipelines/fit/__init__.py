@@ -13,14 +13,15 @@ values), checks every parameter path, size and bound *before* rendering, fits wi
     result.json   fitted params {path: value}, camera, loss per step, seconds, truth and errors,
                   the parameter history per step (parameters of <= 16 values)
     curves.png    loss and each parameter against steps and against seconds
-    before.png    the initial scene (through the fitted camera for LDR targets)
+    before.png    the initial scene (through the fitted camera for LDR targets), every view
     after.png     the fitted scene
     target.png    the target
 
 Config (YAML, see configs/inverse_material.yaml and docs/inverse.md)::
 
     scene: configs/scenes/inverse.yaml     # any parameter path of Scene.replace
-    target: path/to/target.exr             # or target.png, or {synthetic: {...}} (below)
+    target: path/to/target.exr             # or target.png, or {synthetic: {...}} (below), or
+                                           # a list of photos [{file, exposure, view}, ...]
     params:
       materials.metal.alpha: {init: 0.5, min: 0.001, max: 1.0}
       materials.clay.reflectance: {init: [0.5, 0.5, 0.5], min: 0.0, max: 1.0}
@@ -35,6 +36,16 @@ A synthetic target: ``target: {synthetic: {materials.metal.alpha: 0.15}, spp: 25
 camera: {response: gamma, gamma: 1.8, exposure: 1.5, bits: 8}}`` renders the scene with those
 values (and, with ``camera``, makes an 8-bit photo through that camera: exposure, response,
 clipping, quantisation); ``result.json`` then reports the parameter errors.
+
+Several views (docs/inverse.md, "Several views"): each entry of a ``target`` list may carry
+its own pose, ``{file: photos/left.png, exposure: 0.01, view: {origin: [...], target: [...],
+up: [...], fov: 40}}`` in the scene file's ``camera`` keys (the size stays the scene
+camera's); a synthetic target takes ``views: [{}, {origin: [...]}, ...]`` (every view at every
+exposure of ``target.camera``). Photos of one pose share one render; the distinct views'
+cameras are stacked and rendered by ``jax.vmap`` inside the one jitted step, and the photos'
+losses are summed (the scene's lights and materials and the photo camera are shared).
+``result.json`` then lists each view's loss before and after (``views``), and the previews
+show the views side by side.
 
 The camera model for LDR targets: ``v = response(exposure · L)`` with a
 :class:`jaxgfx.hdr.CameraResponse` (anchor ``"unit"``, so ``response(1) = 1``: ``gamma`` is

@@ -16,7 +16,7 @@ from .loss import cached_loss
 from .report import OUTPUT_NAMES, plain, srgb8, write_outputs
 from .targets import Prepared, Target, build_scene, prepare_fit
 
-__all__ = ["FitJob", "run_fit", "auto_exposure"]
+__all__ = ["FitJob", "run_fit", "auto_exposure", "view_losses", "tile_views"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,6 +85,21 @@ def _render(cfg: FitConfig, scene, key, spp):
     return np.asarray(render(scene, key, spp=spp, integrator=r.integrator, max_depth=r.max_depth))
 
 
+def _render_views(cfg: FitConfig, prep: Prepared, scene, key, spp) -> np.ndarray:
+    """``(V, H, W, 3)``: ``scene`` through each view's camera (one view: the scene's), view
+    ``v`` with the key ``fold_in(key, v)``."""
+    import equinox as eqx
+    import jax
+
+    if prep.views is None:
+        return _render(cfg, scene, key, spp)[None]
+    return np.stack([
+        _render(cfg, eqx.tree_at(lambda s: s.camera, scene, cam), jax.random.fold_in(key, v),
+                spp)
+        for v, cam in enumerate(prep.views)
+    ])
+
+
 def _target_camera(tc: dict, exposure: float, channels: int):
     """The :class:`~jaxgfx.hdr.Camera` that takes a synthetic target's photo."""
     import jax.numpy as jnp
@@ -121,7 +136,7 @@ def _target(cfg: FitConfig, prep: Prepared, key=None) -> tuple[Target, np.ndarra
 
     if prep.targets is not None:
         ts = prep.targets
-        if not prep.ldr:
+        if not prep.ldr and len(ts) == 1:
             return ts[0], None
         pixels = np.stack([t.pixels for t in ts])
         mask = None
@@ -133,17 +148,26 @@ def _target(cfg: FitConfig, prep: Prepared, key=None) -> tuple[Target, np.ndarra
         return Target(pixels, grey=ts[0].grey, mask=mask, bits=ts[0].bits), None
     t = prep.target_spec
     tscene = build_scene(prep.scene, list(prep.truth), prep.truth)
-    linear = _render(cfg, tscene, jax.random.key(int(t.get("seed", 1))), int(t.get("spp", 256)))
+    key = jax.random.key(int(t.get("seed", 1)))
+    spp = int(t.get("spp", 256))
+    if prep.views is None:
+        linear = _render(cfg, tscene, key, spp)
+        per_photo = None
+    else:  # (V, H, W, C) and each photo's view
+        linear = _render_views(cfg, prep, tscene, key, spp)
+        per_photo = linear[prep.view_of]
     if not prep.ldr:
-        return Target(linear), linear
+        return Target(linear if per_photo is None else per_photo), linear
     tc = t["camera"]
     bits = int(tc.get("bits", 8))
     e0 = float(tc.get("exposure", 1.0))
     noise_key = jax.random.fold_in(jax.random.key(int(t.get("seed", 1))), 1)
+    ratios = list(tc.get("exposures", [1.0]))
     photos = []
-    for j, r in enumerate(tc.get("exposures", [1.0])):
-        cam = _target_camera(tc, e0 * float(r), linear.shape[-1])
-        photos.append(np.asarray(cam.capture(linear, jax.random.fold_in(noise_key, j))))
+    for j in range(prep.n_targets):  # a view at every exposure, the views in turn
+        img = linear if per_photo is None else per_photo[j]
+        cam = _target_camera(tc, e0 * float(ratios[j % len(ratios)]), img.shape[-1])
+        photos.append(np.asarray(cam.capture(img, jax.random.fold_in(noise_key, j))))
     photos = np.stack(photos)
     if tc.get("jpeg") is not None:
         from jaxgfx.hdr import jpeg_roundtrip
@@ -154,7 +178,8 @@ def _target(cfg: FitConfig, prep: Prepared, key=None) -> tuple[Target, np.ndarra
 
 def auto_exposure(img, codes, table, ratios, code_max: float) -> float:
     """The first photo's exposure ``e`` that maps a render ``img`` ``(H, W, C)`` onto photos
-    ``codes`` ``(N, H, W, C)`` of relative exposures ``ratios`` ``(N,)`` through a camera of
+    ``codes`` ``(N, H, W, C)`` (``img`` may be ``(N, H, W, C)``: each photo's view) of relative
+    exposures ``ratios`` ``(N,)`` through a camera of
     level table ``table`` (``ln f⁻¹``, :func:`~jaxgfx.pipelines.fit.camera.level_table`):
     the median of ``f⁻¹(q) / (r_j · img)`` over the uncensored codes (``0 < q < c``) of
     pixels with ``img > 0``. Robust to clipping and to a material that is still wrong over
@@ -166,10 +191,11 @@ def auto_exposure(img, codes, table, ratios, code_max: float) -> float:
     g = np.broadcast_to(np.asarray(table, np.float64), (c + 1, codes.shape[-1]))
     x = np.exp(np.take_along_axis(g, q.reshape(-1, codes.shape[-1]), 0)).reshape(codes.shape)
     r = np.asarray(ratios, np.float64).reshape(-1, 1, 1, 1)
-    ok = (q > 0) & (q < c) & (img[None] > 1e-8)
+    imgs = img if img.ndim == 4 else img[None]
+    ok = (q > 0) & (q < c) & (imgs > 1e-8)
     if not ok.any():
         raise ValueError("camera.exposure.auto: no pixel is both measured and lit in the render")
-    ri = np.broadcast_to(r * img[None], codes.shape)
+    ri = np.broadcast_to(r * imgs, codes.shape)
     return float(np.median(x[ok] / ri[ok]))
 
 
@@ -281,6 +307,11 @@ def _initial(cfg: FitConfig, prep: Prepared):
             ),
             "unmeasured": jnp.asarray(float(cam.clipped == "unmeasured"), jnp.float32),
         }
+    if prep.views is not None:
+        from .loss import stack_cameras
+
+        cam_args = {**(cam_args or {}), "views": stack_cameras(prep.views),
+                    "view_of": jnp.asarray(prep.view_of, jnp.int32)}
     return params, bounds, cam_args
 
 
@@ -407,28 +438,84 @@ def fitted_camera(cfg: FitConfig, prep: Prepared, cam_p, photo: int = 0, bits: i
     return Camera(resp, jnp.asarray(e, jnp.float32), white_balance=wb, bits=bits, clip=True)
 
 
-def _previews(cfg: FitConfig, prep: Prepared, target: Target, params, res, key, scene_after):
-    """(before, after, target) preview images: linear fits as sRGB scaled to the target's
-    99.5th percentile, LDR fits through the initial / fitted camera at 8 bits (the middle
-    photo of a bracket)."""
+def _shown_photos(prep: Prepared) -> list:
+    """The photo each view's preview shows: the middle photo of the view's bracket."""
+    if prep.views is None:
+        return [prep.n_targets // 2]
+    out = []
+    for v in range(prep.n_views):
+        idx = np.flatnonzero(prep.view_of == v)
+        out.append(int(idx[len(idx) // 2]))
+    return out
+
+
+def tile_views(images, gap: int = 2):
+    """The views ``(V, H, W, C)`` side by side, ``gap`` columns of white between them."""
+    images = np.asarray(images)
+    white = 255 if images.dtype == np.uint8 else 1.0
+    cols = []
+    for v, im in enumerate(images):
+        if v:
+            cols.append(np.full(im.shape[:1] + (gap,) + im.shape[2:], white, images.dtype))
+        cols.append(im)
+    return np.concatenate(cols, axis=1)
+
+
+def _previews(cfg: FitConfig, prep: Prepared, target: Target, params, res, key, scene_after,
+              renders=None):
+    """(before, after, target) preview images, every view side by side: linear fits as sRGB
+    scaled to the target's 99.5th percentile, LDR fits through the initial / fitted camera at
+    8 bits (the middle photo of each view's bracket). ``renders``: the ``(V, H, W, 3)``
+    renders ``{"before", "after"}`` when already made."""
     cam = cfg.camera
     show_spp = max(cfg.render.spp, 64)
-    j = prep.n_targets // 2
+    shown = _shown_photos(prep)
+    renders = renders or {}
 
-    def show(scene_params, cam_params):
-        img = _render(cfg, build_scene(prep.scene, prep.paths, scene_params), key, show_spp)
+    def show(scene_params, cam_params, imgs):
+        if imgs is None:
+            scene = build_scene(prep.scene, prep.paths, scene_params)
+            imgs = _render_views(cfg, prep, scene, key, show_spp)
         if cam is None:
-            return img
-        pc = fitted_camera(cfg, prep, cam_params, photo=j)
-        return np.asarray(pc.capture(img)) / 255.0
+            return imgs
+        return np.stack([
+            np.asarray(fitted_camera(cfg, prep, cam_params, photo=j).capture(imgs[v])) / 255.0
+            for v, j in enumerate(shown)
+        ])
 
-    before = show(prep.init, params["camera"])
-    after = show(scene_after, res.params["camera"])
-    pixels = target.pixels
+    before = show(prep.init, params["camera"], renders.get("before"))
+    after = show(scene_after, res.params["camera"], renders.get("after"))
+    pixels = target.pixels if target.pixels.ndim == 4 else target.pixels[None]
+    pixels = pixels[shown]
     if cam is None:
         scale = 1.0 / max(float(np.percentile(pixels, 99.5)), 1e-6)
-        return srgb8(before, scale), srgb8(after, scale), srgb8(pixels, scale)
-    return before, after, pixels[j] / (2**target.bits - 1)
+        return (tile_views(srgb8(before, scale)), tile_views(srgb8(after, scale)),
+                tile_views(srgb8(pixels, scale)))
+    return tile_views(before), tile_views(after), tile_views(pixels / (2**target.bits - 1))
+
+
+def view_losses(cfg: FitConfig, prep: Prepared, target: Target, renders, cam_p, cam_args):
+    """Each view's loss ``(V,)``: the sum of its photos' terms
+    (:func:`~jaxgfx.pipelines.fit.loss.photo_losses`, priors not included) with the renders
+    ``(V, H, W, 3)`` of each view and camera parameters ``cam_p``."""
+    import jax.numpy as jnp
+
+    from .camera import fit_level_table
+    from .loss import photo_losses, to_target_channels
+
+    imgs = to_target_channels(jnp.asarray(renders), target.grey)
+    view_of = np.zeros(prep.n_targets, np.int64) if prep.views is None else prep.view_of
+    if target.pixels.ndim == 4:
+        imgs = imgs[jnp.asarray(view_of)]
+    else:
+        imgs = imgs[0]
+    table = fit_level_table(cam_p, cam_args, cfg.camera.bits) if prep.ldr else None
+    pixels = jnp.asarray(target.pixels)
+    masked = target.mask is not None
+    t = (pixels, jnp.asarray(target.mask)) if masked else pixels
+    terms = np.asarray(photo_losses(cfg, prep.ldr, imgs, t, cam_p, cam_args, table, masked),
+                       np.float64)
+    return np.bincount(view_of[: terms.size], weights=terms, minlength=prep.n_views)
 
 
 def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
@@ -449,8 +536,9 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
         from .camera import fit_level_table
 
         bits = cfg.camera.bits
-        img = _render(cfg, build_scene(prep.scene, prep.paths, prep.init), k_show,
-                      max(cfg.render.spp, 16))
+        img = _render_views(cfg, prep, build_scene(prep.scene, prep.paths, prep.init), k_show,
+                            max(cfg.render.spp, 16))
+        img = img[prep.view_of] if prep.views is not None else img[0]
         if target.grey:
             from .loss import to_target_channels
 
@@ -462,7 +550,8 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
     priors, _, _ = _prior_specs(cfg, prep)
     scaled = _scaled_intervals(cfg, prep)
     masked = target.mask is not None
-    loss = cached_loss(cfg, prep.paths, prep.ldr, target.grey, masked, priors, scaled)
+    loss = cached_loss(cfg, prep.paths, prep.ldr, target.grey, masked, priors, scaled,
+                       views=prep.views is not None)
     pixels = jnp.asarray(target.pixels)
     target_arg = (pixels, jnp.asarray(target.mask)) if masked else pixels
     o = cfg.optimizer
@@ -483,9 +572,28 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
     scene_after = _unscale(res.params["scene"], scaled)
     _check_fitted(prep, scene_after, cfg)
     out = _result(cfg, prep, res, target_seconds, scene_after)
+    renders = None
+    if prep.views is not None:  # each view's loss before and after (one render per view)
+        spp = max(cfg.render.spp, 64)
+        renders = {
+            "before": _render_views(cfg, prep, build_scene(prep.scene, prep.paths, prep.init),
+                                    k_show, spp),
+            "after": _render_views(cfg, prep, build_scene(prep.scene, prep.paths, scene_after),
+                                   k_show, spp),
+        }
+        out["views"] = {
+            "poses": prep.view_poses,
+            "photo_view": [int(v) for v in prep.view_of],
+            "loss_before": view_losses(cfg, prep, target, renders["before"],
+                                       params["camera"], cam_args).tolist(),
+            "loss_after": view_losses(cfg, prep, target, renders["after"],
+                                      res.params["camera"], cam_args).tolist(),
+            "loss_spp": spp,
+        }
 
     if out_dir is not None:
-        before, after, tgt = _previews(cfg, prep, target, params, res, k_show, scene_after)
+        before, after, tgt = _previews(cfg, prep, target, params, res, k_show, scene_after,
+                                       renders)
         names = [("scene", p) for p in prep.paths]
         names += [("camera", c) for c in _fitted_camera_names(cfg.camera)
                   if np.size(res.params["camera"][c]) <= 16]

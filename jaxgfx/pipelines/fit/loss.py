@@ -15,6 +15,10 @@ from .targets import build_scene
 
 __all__ = [
     "make_loss",
+    "photo_losses",
+    "render_views",
+    "stack_cameras",
+    "VIEW_BATCHING",
     "cached_loss",
     "censored_linear_loss",
     "code_space_loss",
@@ -42,11 +46,14 @@ def _masked_mean(v, mask, axes):
 
 
 def censored_linear_loss(
-    img, codes, table, gain, code_max, mask=None, clip_code=None, unmeasured_only=None
+    img, codes, table, gain, code_max, mask=None, clip_code=None, unmeasured_only=None, *,
+    per_photo: bool = False, view_of=None,
 ):
-    """Censored L2 in linear radiance, summed over photos.
+    """Censored L2 in linear radiance, summed over photos (``per_photo``: each photo's term,
+    ``(N,)``).
 
-    ``img`` ``(H, W, C)`` the linear render; ``codes`` ``(N, H, W, C)`` integer codes of
+    ``img`` ``(H, W, C)`` the linear render (or ``(N, H, W, C)``: each photo's own, several
+    views); ``codes`` ``(N, H, W, C)`` integer codes of
     ``N`` photos (or ``(H, W, C)``: one); ``table`` the camera's level table ``(2^bits, C)``
     (:func:`~jaxgfx.pipelines.fit.camera.level_table`: ``ln f⁻¹`` at the codes and at the
     half-codes ½ and ``c − ½`` in slots 0 and ``c``); ``gain`` ``(N, C)`` (or broadcastable)
@@ -66,7 +73,9 @@ def censored_linear_loss(
     censored code of one photo counts only where no other photo measures that pixel (an
     uncensored code there): the hinge of a bound is biased by the render's Monte Carlo noise
     (``E max(t − Î, 0) > max(t − E Î, 0)``: a noisy render is pushed above the bound), and a
-    pixel that a darker (brighter) photo of the bracket measures needs no bound."""
+    pixel that a darker (brighter) photo of the bracket measures needs no bound. ``view_of``
+    ``(N,)`` (several views): the view of each photo; a pixel is then "measured" only by the
+    photos of its own view (pixel ``(i, j)`` of another view is another point of the scene)."""
     single = codes.ndim == 3
     if single:
         codes = codes[None]
@@ -86,19 +95,27 @@ def censored_linear_loss(
                   jnp.where(q <= 0, jnp.maximum(img - t, 0.0), img - t))
     if unmeasured_only is not None:
         censored = (q >= c) | (q <= 0)
-        measured = jnp.sum(~censored, axis=0, keepdims=True) > 0
+        if view_of is None:
+            measured = jnp.sum(~censored, axis=0, keepdims=True) > 0
+        else:  # only the photos of the same view measure a pixel
+            vo = jnp.asarray(view_of)
+            same = (vo[:, None] == vo[None, :]).astype(img.dtype)
+            measured = jnp.einsum("jk,khwc->jhwc", same, (~censored).astype(img.dtype)) > 0
         drop = censored & measured & (jnp.asarray(unmeasured_only) > 0)
         e = jnp.where(drop, 0.0, e)
     axes = (1, 2, 3)
     scale = jax.lax.stop_gradient(_masked_mean(t, mask, axes)) + 1e-6
-    return jnp.sum(_masked_mean(e * e, mask, axes) / (scale * scale))
+    terms = _masked_mean(e * e, mask, axes) / (scale * scale)
+    return terms if per_photo else jnp.sum(terms)
 
 
-def code_space_loss(img, codes, table, gain, code_max, mask=None):
+def code_space_loss(img, codes, table, gain, code_max, mask=None, *, per_photo: bool = False):
     """:func:`jaxgfx.optim.censored_l2_loss` on display values, summed over photos: the
     render through each photo's camera, ``v = f(gain · img)`` (the level table inverted by
     interpolation in ``ln x``), against the codes. Biased for low-spp renders (module doc of
-    :mod:`jaxgfx.pipelines.fit`); ``camera.space: code``."""
+    :mod:`jaxgfx.pipelines.fit`); ``camera.space: code``. ``img`` ``(H, W, C)``, or
+    ``(N, H, W, C)``: each photo's own render (several views); ``per_photo``: the terms
+    ``(N,)``."""
     from jaxgfx.optim import censored_l2_loss
 
     from .camera import code_levels
@@ -111,16 +128,17 @@ def code_space_loss(img, codes, table, gain, code_max, mask=None):
     nch = codes.shape[-1]
     table = jnp.broadcast_to(table, (table.shape[0], nch))
     gain = jnp.broadcast_to(jnp.asarray(gain, img.dtype), (codes.shape[0], nch))
-    total = 0.0
+    terms = []
     for j in range(codes.shape[0]):
-        lx = jnp.log(jnp.maximum(gain[j] * img, 1e-30))
+        lx = jnp.log(jnp.maximum(gain[j] * (img[j] if img.ndim == 4 else img), 1e-30))
         v = jnp.stack(
             [jnp.interp(lx[..., k], table[:, k], zl) for k in range(nch)], axis=-1
         )
-        total = total + censored_l2_loss(
+        terms.append(censored_l2_loss(
             v, codes[j], code_max=code_max, mask=None if mask is None else mask[j]
-        )
-    return total
+        ))
+    terms = jnp.stack(terms)
+    return terms if per_photo else jnp.sum(terms)
 
 
 def photo_gains(cam_p, cam_args, nch: int):
@@ -157,9 +175,70 @@ def curve_smoothness(cam_p):
     return jnp.mean(d2 * d2)
 
 
+VIEW_BATCHING = ("vmap", "loop")
+"""How the fit step renders several views: ``vmap`` (one batched render over the stacked
+cameras, one trace) or ``loop`` (one render per view in a Python loop: the render is traced
+once per view). docs/inverse.md, "Several views", has the measured compile and step times."""
+
+VIEW_BATCH = "vmap"  # the default (the measured faster one to compile, docs/inverse.md)
+
+
+def render_views(scene, cameras, key, render_fn, batching: str = VIEW_BATCH):
+    """``(V, H, W, C)``: ``render_fn(scene with camera v, key_v)`` for each camera of the
+    stacked camera pytree ``cameras`` (leaves with a leading axis ``V``), with independent
+    keys ``jax.random.split(key, V)``."""
+    import equinox as eqx
+
+    n = jax.tree.leaves(cameras)[0].shape[0]
+    keys = jax.random.split(key, n)
+
+    def one(cam, k):
+        return render_fn(eqx.tree_at(lambda sc: sc.camera, scene, cam), k)
+
+    if batching == "vmap":
+        return jax.vmap(one)(cameras, keys)
+    return jnp.stack([
+        one(jax.tree.map(lambda x, v=v: x[v], cameras), keys[v]) for v in range(n)
+    ])
+
+
+def stack_cameras(cameras):
+    """The cameras of several views (one class, one size) as one pytree with a leading view
+    axis."""
+    return jax.tree.map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *cameras)
+
+
+def photo_losses(cfg: FitConfig, ldr: bool, img, target, p_camera, cam_args, table,
+                 masked: bool = False):
+    """Each photo's loss term ``(N,)``: ``img`` the render ``(H, W, C)`` (one view) or each
+    photo's render ``(N, H, W, C)``, ``target`` the pixels ``(N, H, W, C)`` (or ``(pixels,
+    mask)`` when ``masked``); LDR photos through the camera (``p_camera``, ``cam_args``, level
+    ``table``), radiance targets by ``cfg.loss``. The fit minimises their sum (plus priors)."""
+    from jaxgfx.optim import image_loss
+
+    pixels, mask = target if masked else (target, None)
+    if not ldr:
+        if pixels.ndim == 3:
+            return image_loss(img, pixels, kind=cfg.loss.kind, space=cfg.loss.space,
+                              mask=mask)[None]
+        return jnp.stack([
+            image_loss(img[j] if img.ndim == 4 else img, pixels[j], kind=cfg.loss.kind,
+                       space=cfg.loss.space, mask=None if mask is None else mask[j])
+            for j in range(pixels.shape[0])
+        ])
+    bits = cfg.camera.bits
+    code_max = float(2**bits - 1)
+    gain = photo_gains(p_camera, cam_args, img.shape[-1])
+    if cfg.camera.space == "code":
+        return code_space_loss(img, pixels, table, gain, code_max, mask, per_photo=True)
+    return censored_linear_loss(img, pixels, table, gain, code_max, mask,
+                                cam_args.get("clip_code"), cam_args.get("unmeasured"),
+                                per_photo=True, view_of=cam_args.get("view_of"))
+
+
 def make_loss(
     cfg: FitConfig, paths, ldr: bool, grey: bool = False, masked: bool = False, priors=(),
-    scaled=(),
+    scaled=(), views: bool = False, batching: str | None = None,
 ):
     """The fit's loss ``loss(params, key, (scene, target, camera_args))`` for
     :func:`jaxgfx.optim.fit`.
@@ -176,17 +255,18 @@ def make_loss(
     weights are ``camera_args["priors"][path][kind]`` (arrays); ``scaled``: ``((path, (k,
     Interval)), ...)`` parameters with their own learning rate (``k`` times the optimiser's),
     fitted as ``v`` with ``x = Interval.forward(k · v)``. ``grey`` compares the render's
-    luminance."""
-    from jaxgfx.optim import decorrelated_loss, image_loss
+    luminance. ``views``: several views — ``camera_args["views"]`` the stacked cameras
+    (:func:`stack_cameras`, ``V`` views) and ``camera_args["view_of"]`` ``(N,)`` the view of
+    each photo: each view is rendered once per image (``batching``: :data:`VIEW_BATCHING`,
+    None: :data:`VIEW_BATCH`) and the photos' terms are summed."""
+    from jaxgfx.optim import decorrelated_loss
     from jaxgfx.render import render
 
     r = cfg.render
     bits = cfg.camera.bits if cfg.camera else 8
-    code_max = float(2**bits - 1)
     paths = tuple(paths)
-    kind, space = cfg.loss.kind, cfg.loss.space
-    code_space = cfg.camera is not None and cfg.camera.space == "code"
     scaled = dict(scaled)
+    batching = VIEW_BATCH if batching is None else batching
 
     def scene_values(p):
         """The scene parameters: a parameter with its own learning rate is fitted as ``v``
@@ -197,29 +277,31 @@ def make_loss(
             vals[path] = interval.forward(k * vals[path])
         return vals
 
-    def image(scene, p, key, spp):
+    def image(scene, p, key, spp, cam_args):
         s = build_scene(scene, paths, scene_values(p))
-        img = render(s, key, spp=spp, integrator=r.integrator, max_depth=r.max_depth)
-        return to_target_channels(img, grey)
+
+        def one(sc, k):
+            img = render(sc, k, spp=spp, integrator=r.integrator, max_depth=r.max_depth)
+            return to_target_channels(img, grey)
+
+        if not views:
+            return one(s, key)
+        imgs = render_views(s, cam_args["views"], key, one, batching)
+        return imgs[cam_args["view_of"]]  # each photo's view
 
     def per_image_loss(img, target, p, cam_args, table):
-        pixels, mask = target if masked else (target, None)
-        if not ldr:
-            return image_loss(img, pixels, kind=kind, space=space, mask=mask)
-        gain = photo_gains(p["camera"], cam_args, img.shape[-1])
-        if code_space:
-            return code_space_loss(img, pixels, table, gain, code_max, mask)
-        return censored_linear_loss(img, pixels, table, gain, code_max, mask,
-                                    cam_args.get("clip_code"), cam_args.get("unmeasured"))
+        return jnp.sum(photo_losses(cfg, ldr, img, target, p["camera"], cam_args, table,
+                                    masked))
 
     def loss(p, key, args):
         scene, target, cam_args = args
         table = fit_level_table(p["camera"], cam_args, bits) if ldr else None
         if r.estimator == "correlated":
-            value = per_image_loss(image(scene, p, key, r.spp), target, p, cam_args, table)
+            value = per_image_loss(image(scene, p, key, r.spp, cam_args), target, p, cam_args,
+                                   table)
         else:
             value = decorrelated_loss(
-                lambda k: image(scene, p, k, r.spp // 2),
+                lambda k: image(scene, p, k, r.spp // 2, cam_args),
                 lambda im: per_image_loss(im, target, p, cam_args, table),
                 key,
             )
@@ -238,14 +320,16 @@ _LOSS_CACHE: dict = {}
 
 def cached_loss(
     cfg: FitConfig, paths, ldr: bool, grey: bool = False, masked: bool = False, priors=(),
-    scaled=(),
+    scaled=(), views: bool = False, batching: str | None = None,
 ):
     """One loss object (hence one compiled fit step) per render / loss configuration and
     parameter set; camera choices and prior weights are arguments, not part of the
     program."""
     cam = (cfg.camera.bits, cfg.camera.space) if cfg.camera else None
+    batching = VIEW_BATCH if batching is None else batching
     key = (cfg.render, cfg.loss, cam, tuple(paths), ldr, grey, masked, tuple(priors),
-           tuple(scaled))
+           tuple(scaled), views, batching if views else None)
     if key not in _LOSS_CACHE:
-        _LOSS_CACHE[key] = make_loss(cfg, paths, ldr, grey, masked, priors, scaled)
+        _LOSS_CACHE[key] = make_loss(cfg, paths, ldr, grey, masked, priors, scaled, views,
+                                     batching)
     return _LOSS_CACHE[key]

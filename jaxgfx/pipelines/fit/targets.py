@@ -31,13 +31,15 @@ __all__ = [
     "is_texel_grid",
     "check_synthetic_camera",
     "fixed_response_of",
+    "scene_camera_desc",
+    "build_view",
 ]
 
 TARGET_CAMERA_KEYS = (
     "response", "gamma", "exposure", "exposures", "bits", "white_balance", "noise", "jpeg",
 )
-SYNTHETIC_TARGET_KEYS = ("synthetic", "spp", "seed", "camera")
-PHOTO_KEYS = ("file", "exposure")
+SYNTHETIC_TARGET_KEYS = ("synthetic", "spp", "seed", "camera", "views")
+PHOTO_KEYS = ("file", "exposure", "view")
 
 
 @dataclasses.dataclass
@@ -69,10 +71,21 @@ class Prepared:
     exposures: np.ndarray | None = None  # (N,) exposure of each photo relative to the first
     fixed_response: Any = None  # the camera's fixed CameraResponse (analytic or loaded)
     texture_paths: tuple = ()  # fitted parameters that are texel grids
+    # several views (None: the scene's camera only): one camera per distinct pose, the view
+    # of each photo (N,) and the pose each view was given as ({}: the scene's camera)
+    views: tuple | None = None
+    view_of: np.ndarray | None = None
+    view_poses: list | None = None
 
     @property
     def n_targets(self) -> int:
+        if self.view_of is not None:
+            return len(self.view_of)
         return len(self.exposures) if self.exposures is not None else 1
+
+    @property
+    def n_views(self) -> int:
+        return 1 if self.views is None else len(self.views)
 
 
 def resolve_path(path: str, base: str | None, what: str) -> str:
@@ -121,6 +134,71 @@ def build_scene(scene, paths, values):
     for path in paths:
         scene = scene.replace(path, values[path])
     return scene
+
+
+def scene_camera_desc(cam) -> dict:
+    """The ``camera`` description (the scene file's keys) of a loaded camera: ``origin``,
+    ``target``, ``up``, ``fov``, ``fov_axis`` of a look-at camera, ``view_proj_inverse`` of a
+    matrix camera, and ``width``, ``height``."""
+    from jaxgfx.render.camera import MatrixCamera
+
+    d = {"width": cam.width, "height": cam.height}
+    if isinstance(cam, MatrixCamera):
+        d["view_proj_inverse"] = np.asarray(cam.view_proj_inverse, np.float64).tolist()
+        return d
+    for k in ("origin", "target", "up"):
+        d[k] = np.asarray(getattr(cam, k), np.float64).tolist()
+    d["fov"] = float(np.asarray(cam.fov))
+    d["fov_axis"] = cam.fov_axis
+    return d
+
+
+def build_view(scene, pose, where: str):
+    """The camera of one view: the scene's camera with the keys of ``pose`` replaced (the
+    scene file's ``camera`` keys but the size: ``origin``, ``target``, ``up``, ``fov``,
+    ``fov_axis``, or ``view_proj_inverse`` for a matrix camera; ``{}``: the scene's camera).
+    Errors name ``where`` (``target[1].view.fov: ...``)."""
+    from jaxgfx.render.scene.schema import build_camera
+
+    base = scene_camera_desc(scene.camera)
+    keys = tuple(k for k in base if k not in ("width", "height"))
+    if not isinstance(pose, dict):
+        raise ValueError(f"{where}: expected a mapping of camera keys {list(keys)}, got {pose!r}")
+    bad = sorted(set(pose) - set(keys))
+    if bad:
+        size = [k for k in bad if k in ("width", "height")]
+        raise ValueError(
+            f"{where}: unknown key(s) {bad}; a view takes the scene camera's keys {list(keys)}"
+            + ("; its size is the scene camera's (render.width/height)" if size else "")
+        )
+    if pose.get("fov_axis", base.get("fov_axis")) != base.get("fov_axis"):
+        raise ValueError(
+            f"{where}.fov_axis: every view of a fit has the scene camera's fov_axis "
+            f"({base['fov_axis']!r}), got {pose['fov_axis']!r}"
+        )
+    return build_camera({**base, **pose}, where)
+
+
+def _view_key(cam) -> tuple:
+    import jax
+
+    return tuple(tuple(np.asarray(x, np.float64).ravel().tolist())
+                 for x in jax.tree.leaves(cam))
+
+
+def _views(scene, poses):
+    """``(cameras, view_of, given poses)`` of ``[(where, pose or None)]``: photos of one
+    pose share one view (and one render)."""
+    cams, keys, given, view_of = [], [], [], []
+    for where, pose in poses:
+        cam = scene.camera if pose is None else build_view(scene, pose, where)
+        k = _view_key(cam)
+        if k not in keys:
+            keys.append(k)
+            cams.append(cam)
+            given.append({} if pose is None else dict(pose))
+        view_of.append(keys.index(k))
+    return tuple(cams), np.asarray(view_of, np.int32), given
 
 
 def _param_spec(path, raw) -> FitParam:
@@ -230,7 +308,8 @@ def _synthetic_spec(t: dict, scene):
     unknown = set(t) - set(SYNTHETIC_TARGET_KEYS)
     if unknown or "synthetic" not in t:
         raise ValueError(
-            "target: expected a file path or {synthetic: {path: value}, spp, seed, camera}"
+            "target: expected a file path or {synthetic: {path: value}, spp, seed, camera, "
+            "views}"
             + (f"; unknown keys {sorted(unknown)}" if unknown else "")
         )
     for key in ("spp", "seed"):
@@ -253,6 +332,12 @@ def _synthetic_spec(t: dict, scene):
     ldr = t.get("camera") is not None
     if ldr:
         check_synthetic_camera(t["camera"])
+    views = t.get("views")
+    if views is not None and (not isinstance(views, (list, tuple)) or not views):
+        raise ValueError(
+            "target.views: expected a list of camera poses ({origin, target, up, fov}: the "
+            f"scene camera's keys), got {views!r}"
+        )
     return truth, ldr
 
 
@@ -315,14 +400,14 @@ def check_synthetic_camera(cam) -> None:
 
 
 def _photo_entries(target) -> list:
-    """``[(where, path, exposure or None)]`` of a file target (a path, ``{file, exposure}``
-    or a list of those)."""
+    """``[(where, path, exposure or None, pose or None)]`` of a file target (a path,
+    ``{file, exposure, view}`` or a list of those)."""
     items = list(target) if isinstance(target, (list, tuple)) else [target]
     out = []
     for i, item in enumerate(items):
         where = f"target[{i}]" if isinstance(target, (list, tuple)) else "target"
         if isinstance(item, str):
-            out.append((where, item, None))
+            out.append((where, item, None, None))
         elif isinstance(item, dict) and "file" in item and "synthetic" not in item:
             bad = set(item) - set(PHOTO_KEYS)
             if bad:
@@ -330,10 +415,17 @@ def _photo_entries(target) -> list:
             ex = item.get("exposure")
             if ex is not None and ex != "exif":
                 ex = _number(ex, f"{where}.exposure")
-            out.append((where, item["file"], ex))
+            pose = item.get("view")
+            if "view" in item and not isinstance(pose, dict):
+                raise ValueError(
+                    f"{where}.view: expected a mapping of camera keys (origin, target, up, "
+                    f"fov), got {pose!r}"
+                )
+            out.append((where, item["file"], ex, pose))
         else:
             raise ValueError(
-                f"{where}: expected a photo path or {{file: PATH, exposure: SECONDS | exif}}"
+                f"{where}: expected a photo path or {{file: PATH, exposure: SECONDS | exif, "
+                "view: {origin, target, up, fov}}"
                 + (" (a synthetic target cannot be one of a list)"
                    if isinstance(item, dict) and "synthetic" in item else "")
             )
@@ -433,17 +525,30 @@ def prepare_fit(cfg: FitConfig, *, base_dir: str | None = None) -> Prepared:
 
     h, w = scene.height, scene.width
     truth, targets, exposures = None, None, None
+    views = view_of = view_poses = None
     if isinstance(cfg.target, dict) and "file" not in cfg.target:
         truth, ldr = _synthetic_spec(dict(cfg.target), scene)
         target_spec = dict(cfg.target)
+        n_ex = 1
         if ldr:
             tc = target_spec["camera"]
             exposures = np.asarray(tc.get("exposures", [1.0]), np.float64)
             exposures = exposures / exposures[0]
+            n_ex = len(exposures)
+        if target_spec.get("views") is not None:  # photos: each view at every exposure
+            poses = [(f"target.views[{i}]", v) for i, v in enumerate(target_spec["views"])]
+            views, view_of, view_poses = _views(scene, poses)
+            view_of = np.repeat(view_of, n_ex)
+            if exposures is not None:
+                exposures = np.tile(exposures, len(poses))
     else:
         entries = _photo_entries(cfg.target)
+        if any(e[3] is not None for e in entries):
+            views, view_of, view_poses = _views(scene, [(e[0] + ".view", e[3])
+                                                        for e in entries])
+        per_view = np.bincount(view_of) if views is not None else [len(entries)]
         targets, seconds = [], []
-        for where, given_path, given_exposure in entries:
+        for i, (where, given_path, given_exposure, _) in enumerate(entries):
             path = resolve_path(given_path, base_dir, where)
             t = _read_target_file(path)
             th, tw = t.pixels.shape[:2]
@@ -460,14 +565,25 @@ def prepare_fit(cfg: FitConfig, *, base_dir: str | None = None) -> Prepared:
                     "be of one kind"
                 )
             if t.bits is not None:
-                t.exposure = _photo_exposure(where, path, given_exposure, len(entries))
+                n_bracket = per_view[0 if views is None else view_of[i]]
+                t.exposure = _photo_exposure(where, path, given_exposure, n_bracket)
                 seconds.append(t.exposure)
             targets.append(t)
         ldr = targets[0].bits is not None
-        if not ldr and len(targets) > 1:
-            raise ValueError("target: several targets must be photos (8/16-bit) of a bracket")
+        if not ldr and len(targets) > 1 and max(per_view) > 1:
+            raise ValueError(
+                "target: several radiance targets must be of distinct views "
+                "(target[i].view); only photos (8/16-bit) make a bracket"
+            )
         target_spec = [t.path for t in targets] if len(targets) > 1 else targets[0].path
         if ldr:
+            known = [s_ is not None for s_ in seconds]
+            if any(known) and not all(known):
+                i = known.index(False)
+                raise ValueError(
+                    f"{entries[i][0]}: {targets[i].path}: no exposure information (no EXIF "
+                    f"ExposureTime) while other photos have one; give {entries[i][0]}.exposure"
+                )
             s0 = seconds[0]
             exposures = np.asarray([1.0 if s0 is None else v / s0 for v in seconds])
         if ldr and cfg.camera is not None and cfg.camera.bits != targets[0].bits:
@@ -488,4 +604,5 @@ def prepare_fit(cfg: FitConfig, *, base_dir: str | None = None) -> Prepared:
     return Prepared(
         scene, paths, init, bounds, truth, target_spec, ldr,
         targets[0] if targets else None, targets, exposures, fixed, tuple(textures),
+        views, view_of, view_poses,
     )
