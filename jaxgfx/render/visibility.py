@@ -50,8 +50,13 @@ from jaxgfx.render.geometry.mesh import TriangleMesh
 from jaxgfx.render.geometry.ray import spawn_ray
 from jaxgfx.render.geometry.rectangle import Rectangles
 from jaxgfx.render.geometry.sphere import Spheres
-from jaxgfx.render.integrators import dispatch, hit_material, intersect, shading_frame
-from jaxgfx.render.integrators._common import tangent_space
+from jaxgfx.render.integrators import (
+    dispatch,
+    hit_material,
+    intersect,
+    shading_frame,
+    tangent_space,
+)
 from jaxgfx.render.integrators.path import DirectIntegrator, PathIntegrator
 from jaxgfx.render.sampler import uniform
 

@@ -10,8 +10,14 @@ import numpy as np
 import pytest
 
 from jaxgfx.render import load_scene, render
-from jaxgfx.render.bsdf import BumpMap, Diffuse, NormalMap, RoughConductor, make_bsdf
-from jaxgfx.render.bsdf._normalmap import TangentSpace
+from jaxgfx.render.bsdf import (
+    BumpMap,
+    Diffuse,
+    NormalMap,
+    RoughConductor,
+    TangentSpace,
+    make_bsdf,
+)
 from jaxgfx.render.bsdf.texture import Texture
 from jaxgfx.render.geometry import Rectangles, Spheres, TriangleMesh, intersect_scene
 from jaxgfx.render.geometry.tangent import surface_tangents

@@ -20,6 +20,7 @@ from jaxgfx.render.bsdf._dielectric import SmoothDielectric as SmoothDielectric
 from jaxgfx.render.bsdf._diffuse import Diffuse as Diffuse
 from jaxgfx.render.bsdf._normalmap import BumpMap as BumpMap
 from jaxgfx.render.bsdf._normalmap import NormalMap as NormalMap
+from jaxgfx.render.bsdf._normalmap import TangentSpace as TangentSpace
 from jaxgfx.render.bsdf._phong import Phong as Phong
 from jaxgfx.render.bsdf._plastic import SmoothPlastic as SmoothPlastic
 from jaxgfx.render.bsdf._principled import Principled as Principled
@@ -44,6 +45,7 @@ __all__ = [
     "BlendBSDF",
     "NormalMap",
     "BumpMap",
+    "TangentSpace",
     "BSDF_TYPES",
     "make_bsdf",
     "rgb_param",

@@ -177,7 +177,7 @@ def shading_frame(scene, hit, d, mat_id):
 
 
 def tangent_space(scene, hit, frame):
-    """The tangent space (:class:`~jaxgfx.render.bsdf._normalmap.TangentSpace`) at the hits,
+    """The tangent space (:class:`~jaxgfx.render.bsdf.TangentSpace`) at the hits,
     in the local coordinates of the shading ``frame``, or ``None`` when no material of the
     scene needs it (no normal or bump map: nothing is computed).
 
@@ -187,7 +187,7 @@ def tangent_space(scene, hit, frame):
     """
     if not any(getattr(m, "needs_tangents", False) for m in scene.materials):
         return None
-    from jaxgfx.render.bsdf._normalmap import TangentSpace  # noqa: PLC0415
+    from jaxgfx.render.bsdf import TangentSpace  # noqa: PLC0415
     from jaxgfx.render.geometry.tangent import surface_tangents  # noqa: PLC0415
 
     dpdu, dpdv = surface_tangents(scene.shapes, hit)
