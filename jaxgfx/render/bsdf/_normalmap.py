@@ -26,10 +26,26 @@ The perturbed frame is ``(s', t', n')`` with ``s'`` the Gram–Schmidt projectio
 
 Light leaks (Mitsuba 3's rule): a direction ``wi`` whose side of the unperturbed surface differs
 from its side of the perturbed one (``cos θ_i cos θ_i' <= 0``) gets ``eval = pdf = 0``, and a
-sampled direction that crosses is discarded (weight and pdf 0: the sampler's lost mass). A
-viewing direction ``wo`` below the perturbed surface is passed on to the nested BSDF, whose own
-rules apply (reflection-only BSDFs return 0 there: a black pixel, not a negative one). Where
+sampled direction that crosses is discarded (weight and pdf 0: the sampler's lost mass). Where
 the map value is the zero vector, ``n' = +z`` (the unperturbed frame).
+
+Two options, both on by default as in Mitsuba 3.9 (its ``normalmap`` / ``bumpmap`` parameters
+of the same names):
+
+* ``flip_invalid_normals``: a perturbed normal the viewer ``wo`` is behind
+  (``cos θ_o (wo · n') <= 0``) has its tangential part mirrored, ``(x, y, z) -> (-x, -y, z)``
+  in the local frame (Schüssler et al., "Microfacet-based normal mapping for robust Monte Carlo
+  path tracing", 2017, name this flip). Off: such a ``wo`` is passed on to the nested BSDF,
+  whose own rules apply (reflection-only BSDFs return 0: a black pixel).
+* ``use_shadowing_function``: ``eval`` and the sample weight are multiplied by
+  :func:`shadow_terminator` ``(n', wi)`` (Estevez et al., "A microfacet-based shadowing function
+  to solve the bump terminator problem", Ray Tracing Gems, 2019), the ``pdf`` is not.
+
+Checked against Mitsuba 3.9.1's plugins at the BSDF level (``tests/render/
+test_mitsuba_xml_normalmap.py``). One difference is kept: for ``bumpmap``, Mitsuba projects the
+world-space ``dp/du`` onto the local perturbed normal (mixing coordinate systems), so an
+anisotropic nested BSDF's tangent differs from Mitsuba's wherever the shading frame is not the
+world frame; jaxgfx uses the tangent ``s`` of the tangent space, as ``normalmap`` does.
 """
 
 from __future__ import annotations
@@ -39,6 +55,7 @@ from typing import ClassVar
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgfx._checks import as_float_array
 from jaxgfx._math import safe_normalize, sum_last
@@ -55,7 +72,14 @@ from jaxgfx.render.bsdf._base import (
 from jaxgfx.render.bsdf.texture import Texture, lookup
 from jaxgfx.render.geometry.frame import Frame, frame_from_normal, to_local, to_world
 
-__all__ = ["NormalMap", "BumpMap", "PerturbedBSDF", "TangentSpace", "perturbed_frame"]
+__all__ = [
+    "NormalMap",
+    "BumpMap",
+    "PerturbedBSDF",
+    "TangentSpace",
+    "perturbed_frame",
+    "shadow_terminator",
+]
 
 _LUMA = LUMINANCE_WEIGHTS["rec709"]
 
@@ -122,14 +146,33 @@ def perturbed_frame(n_local, s) -> Frame:
     return Frame(s=sp, t=tp, n=n)
 
 
+def shadow_terminator(n, w):
+    """Estevez et al.'s shadowing factor (Ray Tracing Gems, 2019, ch. 12) as Mitsuba 3 applies it
+    to bump and normal maps: ``2 / (1 + sqrt(1 + a² tan² θ_w))`` with
+    ``a² = min(tan² θ_n / 8, 1)``, ``θ`` measured from the unperturbed normal ``+z`` (``n``: the
+    unit perturbed normal, ``w``: the light direction, both local). 1 for ``n = +z`` or
+    ``w = +z``; tends to 0 as ``w`` grazes the surface. Finite values and gradients everywhere
+    (``n_z = 0`` gives ``a² = 1``; ``w_z = 0`` gives ~1e-15)."""
+    nz2 = n[..., 2] * n[..., 2]
+    wz2 = w[..., 2] * w[..., 2]
+    tiny = 1e-30
+    a2 = jnp.minimum(0.125 * jnp.maximum(1.0 - nz2, 0.0) / jnp.maximum(nz2, tiny), 1.0)
+    t2 = jnp.maximum(1.0 - wz2, 0.0) / jnp.maximum(wz2, tiny)
+    return 2.0 / (1.0 + jnp.sqrt(1.0 + a2 * t2))
+
+
 class PerturbedBSDF(BSDF):
-    """A BSDF evaluated in a perturbed frame ``frame`` (local coordinates, per ray) with
-    Mitsuba 3's light-leak rule (module docstring). Built per hit by :class:`NormalMap` /
-    :class:`BumpMap`; ``frame = None`` (no tangents given, e.g. the albedo AOV) allows only
-    ``albedo``."""
+    """A BSDF evaluated in a perturbed frame (local coordinates, per ray) with Mitsuba 3's
+    light-leak rule, ``flip_invalid_normals`` and ``use_shadowing_function`` (module
+    docstring). Built per hit by :class:`NormalMap` / :class:`BumpMap`: ``normal`` (..., 3,
+    not necessarily unit) and ``s`` (..., 3) the tangent the frame's ``s'`` is projected from;
+    ``normal = None`` (no tangents given, e.g. the albedo AOV) allows only ``albedo``."""
 
     bsdf: BSDF
-    frame: Frame | None
+    normal: jnp.ndarray | None
+    s: jnp.ndarray | None
+    flip_invalid_normals: bool = eqx.field(static=True, default=True)
+    use_shadowing_function: bool = eqx.field(static=True, default=True)
 
     @property
     def has_delta(self):
@@ -143,41 +186,62 @@ class PerturbedBSDF(BSDF):
     def albedo(self):
         return self.bsdf.albedo
 
-    def _frame(self):
-        if self.frame is None:
+    @property
+    def frame(self) -> Frame:
+        """The perturbed frame before ``flip_invalid_normals`` (which depends on ``wo``)."""
+        return perturbed_frame(self._normal(), self.s.astype(self.normal.dtype))
+
+    def _normal(self):
+        if self.normal is None:
             raise ValueError(
                 "tangents: a normalmap / bumpmap material needs the hit's tangent space "
                 "(dispatch(..., tangents=tangent_space(...)))"
             )
-        return self.frame
+        return self.normal
+
+    def _frame(self, wo):
+        n = self._normal()
+        if self.flip_invalid_normals:
+            # Mitsuba 3: a normal the viewer is behind gets its tangential part mirrored
+            bad = wo[..., 2] * sum_last(wo * n) <= 0
+            n = jnp.where(bad[..., None], n * jnp.asarray([-1.0, -1.0, 1.0], n.dtype), n)
+        return perturbed_frame(n, self.s.astype(n.dtype))
+
+    def _shadow(self, fr, wi, x):
+        if not self.use_shadowing_function:
+            return x
+        return x * shadow_terminator(fr.n, wi)[..., None]
 
     def _local(self, wo, wi):
-        fr = self._frame()
+        fr = self._frame(wo)
         wo_p, wi_p = to_local(fr, wo), to_local(fr, wi)
         ok = wi[..., 2] * wi_p[..., 2] > 0
-        return wo_p, wi_p, ok
+        return fr, wo_p, wi_p, ok
 
     def eval(self, wo, wi):
         wo, wi = prep_dirs(wo, wi)
-        wo_p, wi_p, ok = self._local(wo, wi)
-        return mask3(ok, self.bsdf.eval(wo_p, wi_p))
+        fr, wo_p, wi_p, ok = self._local(wo, wi)
+        return mask3(ok, self._shadow(fr, wi, self.bsdf.eval(wo_p, wi_p)))
 
     def pdf(self, wo, wi):
         wo, wi = prep_dirs(wo, wi)
-        wo_p, wi_p, ok = self._local(wo, wi)
+        _, wo_p, wi_p, ok = self._local(wo, wi)
         return jnp.where(ok, self.bsdf.pdf(wo_p, wi_p), 0.0)
 
     def sample(self, wo, u1, u2) -> BSDFSample:
         wo, u1, u2, _ = sample_setup(wo, u1, u2)
-        fr = self._frame()
+        fr = self._frame(wo)
         s = self.bsdf.sample(to_local(fr, wo), u1, u2)
         wi = to_world(fr, s.wi)
         ok = (s.pdf > 0) & (wi[..., 2] * s.wi[..., 2] > 0)
-        return s._replace(wi=wi, pdf=jnp.where(ok, s.pdf, 0.0), weight=mask3(ok, s.weight))
+        weight = self._shadow(fr, wi, s.weight)
+        return s._replace(wi=wi, pdf=jnp.where(ok, s.pdf, 0.0), weight=mask3(ok, weight))
 
 
 class _MapBase(eqx.Module):
     needs_tangents: ClassVar[bool] = True
+    flip_invalid_normals: bool = eqx.field(static=True, default=True)
+    use_shadowing_function: bool = eqx.field(static=True, default=True)
 
     @property
     def has_delta(self):
@@ -194,16 +258,28 @@ class _MapBase(eqx.Module):
     def _normal(self, uv, tangents):  # pragma: no cover - interface
         raise NotImplementedError
 
+    def _set_flags(self, flip_invalid_normals, use_shadowing_function):
+        for name, v in (
+            ("flip_invalid_normals", flip_invalid_normals),
+            ("use_shadowing_function", use_shadowing_function),
+        ):
+            if not isinstance(v, (bool, np.bool_)):
+                raise TypeError(f"{name}: expected a bool, got {type(v).__name__}")
+            setattr(self, name, bool(v))
+
     def at(self, uv, tangents=None) -> PerturbedBSDF:
         """The nested BSDF (textures resolved at ``uv``) in the perturbed frame at the hits."""
         if uv is None:
             raise ValueError("uv: a normalmap / bumpmap material needs the hit uv")
         uv = as_float_array(uv, "uv")
         nested = _resolve(self.bsdf, uv)
+        flags = (self.flip_invalid_normals, self.use_shadowing_function)
         if tangents is None:
-            return PerturbedBSDF(nested, None)
+            return PerturbedBSDF(nested, None, None, *flags)
         n = self._normal(uv, tangents)
-        return PerturbedBSDF(nested, perturbed_frame(n, tangents.s.astype(n.dtype)))
+        return PerturbedBSDF(
+            nested, n, jnp.broadcast_to(tangents.s.astype(n.dtype), n.shape), *flags
+        )
 
 
 class NormalMap(_MapBase):
@@ -219,8 +295,11 @@ class NormalMap(_MapBase):
     bsdf: eqx.Module
     normalmap: Texture | jnp.ndarray
 
-    def __init__(self, bsdf=None, normalmap=None):
+    def __init__(
+        self, bsdf=None, normalmap=None, *, flip_invalid_normals=True, use_shadowing_function=True
+    ):
         self.bsdf = _as_nested(bsdf, "bsdf")
+        self._set_flags(flip_invalid_normals, use_shadowing_function)
         if normalmap is None:
             raise ValueError("normalmap: missing texture")
         self.normalmap = _as_texture(normalmap, "normalmap", (3,))
@@ -250,8 +329,17 @@ class BumpMap(_MapBase):
     height: Texture
     scale: jnp.ndarray = float_field(1.0, "scale")
 
-    def __init__(self, bsdf=None, height=None, scale=1.0):
+    def __init__(
+        self,
+        bsdf=None,
+        height=None,
+        scale=1.0,
+        *,
+        flip_invalid_normals=True,
+        use_shadowing_function=True,
+    ):
         self.bsdf = _as_nested(bsdf, "bsdf")
+        self._set_flags(flip_invalid_normals, use_shadowing_function)
         if height is None:
             raise ValueError("height: missing texture")
         if not isinstance(height, Texture):

@@ -92,10 +92,12 @@ _MAP_TEXTURE = {"normalmap": ("normalmap", 3), "bumpmap": ("height", 1)}
 
 def _map_material(desc, pre, base_dir):
     """``normalmap`` / ``bumpmap``: ``{type, bsdf: {...}, normalmap | height: texture,
-    scale}`` (the nested material may itself be textured)."""
+    scale, flip_invalid_normals, use_shadowing_function}`` (the nested material may itself be
+    textured)."""
     kind = desc["type"]
     key, channels = _MAP_TEXTURE[kind]
-    allowed = ("type", "bsdf", key) + (("scale",) if kind == "bumpmap" else ())
+    flags = ("flip_invalid_normals", "use_shadowing_function")
+    allowed = ("type", "bsdf", key) + (("scale",) if kind == "bumpmap" else ()) + flags
     unknown = sorted(set(desc) - set(allowed))
     if unknown:
         raise ValueError(f"{pre}{unknown[0]}: unknown key for {kind!r}; expected {list(allowed)}")
@@ -107,7 +109,7 @@ def _map_material(desc, pre, base_dir):
     tex = desc[key]
     if is_texture_desc(tex):
         tex = texture_from_dict(tex, f"{pre}{key}", base_dir=base_dir, channels=channels)
-    kw = {"scale": desc["scale"]} if "scale" in desc else {}
+    kw = {k: desc[k] for k in ("scale", *flags) if k in desc}
     try:
         return make_bsdf({"type": kind, "bsdf": nested, key: tex, **kw})
     except (ValueError, TypeError) as e:

@@ -44,7 +44,8 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
   (unnamed) or ordered by name (named), as Mitsuba orders its nested objects.
 * ``normalmap`` / ``bumpmap``: :class:`jaxgfx.render.bsdf.NormalMap` /
   :class:`jaxgfx.render.bsdf.BumpMap` around the nested BSDF (the normal map is read as
-  written: give it ``raw`` true, as Mitsuba's documentation does).
+  written: give it ``raw`` true, as Mitsuba's documentation does); ``flip_invalid_normals``
+  and ``use_shadowing_function`` (default true, as Mitsuba 3.9) are read.
 * ``envmap``: same direction -> (u, v) map as jaxgfx (y up); Mitsuba places rows at
   ``v = j / (H - 1)``, jaxgfx at ``(j + 1/2) / H'``: the map is resampled to ``H' = 4 H`` rows
   with Mitsuba's linear interpolation along v (exact between Mitsuba's rows up to the
@@ -862,7 +863,12 @@ def _map_dict(obj: _Obj, p: _Params, doc) -> dict:
                              f"map), got {len(kids['texture'])}")  # fmt: skip
         m["height"] = _texture(kids["texture"][0], doc)
         m["scale"] = p.float("scale", 1.0)
+    for k in _MAP_FLAGS:  # Mitsuba 3's defaults: both on
+        m[k] = p.bool(k, True)
     return m
+
+
+_MAP_FLAGS = ("flip_invalid_normals", "use_shadowing_function")
 
 
 def _bsdf(obj: _Obj, doc, desc, *, name=None) -> str:
