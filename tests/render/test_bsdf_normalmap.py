@@ -482,3 +482,56 @@ def test_render_flat_map_bit_identical_and_gradients_match_fd(x64):
     )
     assert np.abs(fd).max() > 1e-3
     np.testing.assert_allclose(ad, fd, rtol=1e-5, atol=1e-8)
+
+
+def _mapped_scene_desc(folder):
+    """A rectangle with a normal map (inline image, clamp / nearest) on a diffuse BSDF and a
+    sphere with a bump map (an EXR file, raw, options off) on a rough conductor."""
+    from jaxgfx.io import write_exr
+
+    rng = np.random.default_rng(0)
+    img = rng.uniform(0.3, 0.7, (3, 4, 3))
+    img[..., 2] = 0.9
+    write_exr(str(folder / "h.exr"), rng.uniform(size=(5, 6, 1)).astype(np.float32))
+    nm = {"type": "normalmap", "bsdf": {"type": "diffuse", "reflectance": [0.2, 0.5, 0.8]},
+          "normalmap": {"type": "bitmap", "image": img.tolist(), "wrap": "clamp",
+                        "filter": "nearest"}}  # fmt: skip
+    bm = {"type": "bumpmap", "bsdf": {"type": "roughconductor", "alpha": 0.2}, "scale": 0.4,
+          "height": {"type": "bitmap", "file": "h.exr", "raw": True},
+          "flip_invalid_normals": False, "use_shadowing_function": False}  # fmt: skip
+    desc = _plane(nm) | {"materials": {"m": nm, "b": bm}}
+    desc["shapes"] = desc["shapes"] + [
+        {"type": "sphere", "center": [0, 0.5, 0], "radius": 0.3, "material": "b"}
+    ]
+    return desc
+
+
+def _same_materials(a, b):
+    assert type(a) is type(b)
+    la, ta = jax.tree_util.tree_flatten(a)
+    lb, tb = jax.tree_util.tree_flatten(b)
+    assert ta == tb  # the same classes, static options (wrap, filter, flags) and structure
+    for x, y in zip(la, lb, strict=True):
+        np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-6, atol=1e-7)
+
+
+@pytest.mark.parametrize("via", ["description", "scene"])
+def test_mapped_materials_survive_save_and_load(tmp_path, via):
+    """load -> save_scene (XML, the map images written next to it or referenced) -> load gives
+    the same materials: classes, nested parameters, texels, wrap / filter, scale, options."""
+    from jaxgfx.render.scene.mitsuba_xml import save_scene
+
+    desc = _mapped_scene_desc(tmp_path)
+    first = load_scene(desc, base_dir=str(tmp_path))
+    xml = save_scene(first if via == "scene" else desc, tmp_path / "out" / "s.xml",
+                     base_dir=str(tmp_path))  # fmt: skip
+    again = load_scene(xml)
+    names = dict(zip(again.material_names, again.materials, strict=True))
+    for name, m in zip(first.material_names, first.materials, strict=True):
+        _same_materials(m, names[name])
+    assert isinstance(names["m"], NormalMap) and isinstance(names["b"], BumpMap)
+    assert not names["b"].use_shadowing_function and names["m"].use_shadowing_function
+    if via == "description":  # a textured nested BSDF is not exported (yet): a clear error
+        desc["materials"]["m"]["bsdf"]["reflectance"] = {"type": "bitmap", "image": [[0.5]]}
+        with pytest.raises(NotImplementedError, match=r"materials\.m\.bsdf: textured"):
+            save_scene(desc, tmp_path / "t.xml", base_dir=str(tmp_path))
