@@ -50,7 +50,13 @@ from jaxgfx.render.geometry.mesh import TriangleMesh
 from jaxgfx.render.geometry.ray import spawn_ray
 from jaxgfx.render.geometry.rectangle import Rectangles
 from jaxgfx.render.geometry.sphere import Spheres
-from jaxgfx.render.integrators import dispatch, hit_material, intersect, shading_frame
+from jaxgfx.render.integrators import (
+    dispatch,
+    hit_material,
+    intersect,
+    shading_frame,
+    tangent_space,
+)
 from jaxgfx.render.integrators.path import DirectIntegrator, PathIntegrator
 from jaxgfx.render.sampler import uniform
 
@@ -389,9 +395,16 @@ def _jump(scene_sg, key, integrator, vertex, w_minus, w_plus):
     sub = _sub_integrator(integrator)
     uu = uniform(key, (*w_minus.shape[:-1], *sub.random_shape), w_minus.dtype)
     fs, os_, ds = [], [], []
+    tg = tangent_space(scene_sg, hit, frame)  # None without normal / bump maps
     for wi in (w_minus, w_plus):
         fs.append(
-            dispatch(scene_sg, mat, lambda mm, wi=wi: mm.eval(wo, to_local(frame, wi)), uv=hit.uv)
+            dispatch(
+                scene_sg,
+                mat,
+                lambda mm, wi=wi: mm.eval(wo, to_local(frame, wi)),
+                uv=hit.uv,
+                tangents=tg,
+            )
         )
         so, sd = spawn_ray(hit.p, ng, wi)
         os_.append(so)

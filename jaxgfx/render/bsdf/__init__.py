@@ -18,6 +18,9 @@ from jaxgfx.render.bsdf._blend import BlendBSDF as BlendBSDF
 from jaxgfx.render.bsdf._conductor import Mirror as Mirror
 from jaxgfx.render.bsdf._dielectric import SmoothDielectric as SmoothDielectric
 from jaxgfx.render.bsdf._diffuse import Diffuse as Diffuse
+from jaxgfx.render.bsdf._normalmap import BumpMap as BumpMap
+from jaxgfx.render.bsdf._normalmap import NormalMap as NormalMap
+from jaxgfx.render.bsdf._normalmap import TangentSpace as TangentSpace
 from jaxgfx.render.bsdf._phong import Phong as Phong
 from jaxgfx.render.bsdf._plastic import SmoothPlastic as SmoothPlastic
 from jaxgfx.render.bsdf._principled import Principled as Principled
@@ -40,6 +43,9 @@ __all__ = [
     "RoughPlastic",
     "ThinDielectric",
     "BlendBSDF",
+    "NormalMap",
+    "BumpMap",
+    "TangentSpace",
     "BSDF_TYPES",
     "make_bsdf",
     "rgb_param",
@@ -58,6 +64,8 @@ BSDF_TYPES = {
     "thindielectric": ThinDielectric,
     "blendbsdf": BlendBSDF,
     "principled": Principled,
+    "normalmap": NormalMap,
+    "bumpmap": BumpMap,
 }
 
 
@@ -89,8 +97,8 @@ def make_bsdf(desc: dict) -> BSDF:
     missing = [k for k in required if k not in params]
     if missing:
         raise ValueError(f"desc: {kind!r} needs {', '.join(repr(k) for k in missing)}")
-    if kind == "blendbsdf":  # nested descriptions
-        for k in ("bsdf0", "bsdf1"):
+    if kind in ("blendbsdf", "normalmap", "bumpmap"):  # nested descriptions
+        for k in ("bsdf0", "bsdf1", "bsdf"):
             if isinstance(params.get(k), dict):
                 try:
                     params[k] = make_bsdf(params[k])

@@ -15,6 +15,7 @@ from jaxgfx.render.integrators._common import hit_material as hit_material
 from jaxgfx.render.integrators._common import intersect as intersect
 from jaxgfx.render.integrators._common import replace_grad as replace_grad
 from jaxgfx.render.integrators._common import shading_frame as shading_frame
+from jaxgfx.render.integrators._common import tangent_space as tangent_space
 from jaxgfx.render.integrators.aov import AOV_CHANNELS as AOV_CHANNELS
 from jaxgfx.render.integrators.aov import AOVIntegrator as AOVIntegrator
 from jaxgfx.render.integrators.aov import aov as aov
@@ -69,6 +70,7 @@ __all__ = [
     "intersect",
     "hit_material",
     "shading_frame",
+    "tangent_space",
     "dispatch",
     "AOV_CHANNELS",
     "Integrator",

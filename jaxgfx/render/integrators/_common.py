@@ -19,6 +19,7 @@ __all__ = [
     "hit_material",
     "dispatch",
     "shading_frame",
+    "tangent_space",
     "emitted",
     "sample_light",
     "light_pdf_hit",
@@ -61,7 +62,7 @@ def _replace_grad_jvp(primals, tangents):
     return x, jnp.broadcast_to(ty, jnp.shape(x)).astype(jnp.result_type(x))
 
 
-def detach_bsdf_sample(scene, mat, wo, s, uv, frame, *, lazy=False):
+def detach_bsdf_sample(scene, mat, wo, s, uv, frame, *, lazy=False, tangents=None):
     """Detached BSDF sample ``(wi, weight)`` for the next path segment.
 
     Non-delta lobes: the direction carries no derivative and the weight has the value of the
@@ -83,7 +84,7 @@ def detach_bsdf_sample(scene, mat, wo, s, uv, frame, *, lazy=False):
     wi_w = to_world(frame, s.wi)
     wi_d = sg(wi_w)
     wi_eval = to_local(frame, wi_d)
-    f = dispatch(scene, mat, lambda m: m.eval(wo, wi_eval), uv=uv, lazy=lazy)
+    f = dispatch(scene, mat, lambda m: m.eval(wo, wi_eval), uv=uv, lazy=lazy, tangents=tangents)
     y = safe_div(f, sg(s.pdf)[..., None])
     delta = s.is_delta[..., None]
     wi = jnp.where(delta, wi_w, wi_d)
@@ -110,11 +111,13 @@ def hit_material(scene, hit):
     return mat
 
 
-def dispatch(scene, mat_id, fn, *, uv=None, lazy=False):
+def dispatch(scene, mat_id, fn, *, uv=None, lazy=False, tangents=None):
     """Evaluate ``fn(bsdf)`` for every material of the scene and select per ray by ``mat_id``.
 
     Only the materials the scene defines are evaluated (a one-material scene pays for one).
-    Textured materials (``jaxgfx.render.bsdf.textured.Textured``) are resolved at the hit ``uv``.
+    Textured materials (``jaxgfx.render.bsdf.textured.Textured``) are resolved at the hit ``uv``;
+    normal- and bump-mapped ones (class flag ``needs_tangents``) at ``uv`` and ``tangents``
+    (:func:`tangent_space`).
     ``lazy``: a material no ray of the batch uses is skipped at run time (a ``lax.cond``; its
     rays would get zeros): for the material-sorted chunks of
     :func:`~jaxgfx.render.integrators._wavefront.shade_sorted`, where most chunks hold one.
@@ -122,6 +125,8 @@ def dispatch(scene, mat_id, fn, *, uv=None, lazy=False):
 
     def call(m):
         # textures: only materials with an ``at`` method pay for a lookup
+        if getattr(m, "needs_tangents", False):
+            return fn(m.at(uv, tangents))
         return fn(m.at(uv) if hasattr(m, "at") else m)
 
     mats = scene.materials
@@ -169,6 +174,36 @@ def shading_frame(scene, hit, d, mat_id):
     frame = frame_from_normal(ns)
     wo = to_local(frame, -d)
     return frame, ng, wo
+
+
+def tangent_space(scene, hit, frame):
+    """The tangent space (:class:`~jaxgfx.render.bsdf.TangentSpace`) at the hits,
+    in the local coordinates of the shading ``frame``, or ``None`` when no material of the
+    scene needs it (no normal or bump map: nothing is computed).
+
+    ``s`` = ``dp/du`` projected onto the shading plane (``(1, 0, 0)`` where that vanishes),
+    ``t = n_front x s`` with ``n_front`` the unflipped side's normal (so a two-sided material's
+    back side sees the front's tangents mirrored, as Mitsuba 3 ``twosided`` does).
+    """
+    if not any(getattr(m, "needs_tangents", False) for m in scene.materials):
+        return None
+    from jaxgfx.render.bsdf import TangentSpace  # noqa: PLC0415
+    from jaxgfx.render.geometry.tangent import surface_tangents  # noqa: PLC0415
+
+    dpdu, dpdv = surface_tangents(scene.shapes, hit)
+    du_l, dv_l = to_local(frame, dpdu), to_local(frame, dpdv)
+    sigma = jnp.where(sum_last(frame.n * hit.ng) < 0, -1.0, 1.0).astype(du_l.dtype)
+    sx, sy = du_l[..., 0], du_l[..., 1]
+    r2 = sx * sx + sy * sy
+    ok = r2 > 1e-12 * jnp.maximum(sum_last(du_l * du_l), 1e-30)
+    inv = jnp.where(ok, jax.lax.rsqrt(jnp.where(ok, r2, 1.0)), 0.0)
+    sx, sy = jnp.where(ok, sx * inv, 1.0), jnp.where(ok, sy * inv, 0.0)
+    z0 = jnp.zeros_like(sx)
+    s = jnp.stack([sx, sy, z0], axis=-1)
+    t = jnp.stack([-sigma * sy, sigma * sx, z0], axis=-1)
+    du = jnp.stack([sum_last(du_l * s), sum_last(du_l * t)], axis=-1)
+    dv = jnp.stack([sum_last(dv_l * s), sum_last(dv_l * t)], axis=-1)
+    return TangentSpace(s=s, t=t, du=du, dv=dv)
 
 
 def emission_table(scene, dtype):

@@ -100,6 +100,7 @@ def path_radiance(
         """Light sampling, shadow ray, BSDF sampling at live hits -> the next segment."""
         hit, d, beta, ub, alive = args
         frame, ng, wo = fusion_barrier(C.shading_frame(scene, hit, d, mat))
+        tg = C.tangent_space(scene, hit, frame)  # None without normal / bump maps
         dL = jnp.zeros_like(beta)
         if has_lights:
             wi, dist, li, lpdf, l_delta = fusion_barrier(
@@ -118,6 +119,7 @@ def path_radiance(
                     lambda m: (m.eval(wo, wi_local), m.pdf(wo, wi_local)),
                     uv=hit.uv,
                     lazy=lazy,
+                    tangents=tg,
                 )
             )
             if strategy == "mis":
@@ -135,12 +137,13 @@ def path_radiance(
                 lambda m: m.sample(wo, ub[..., 3], ub[..., 4:6]),
                 uv=hit.uv,
                 lazy=lazy,
+                tangents=tg,
             )
         )
         if detached:
             # world-space detached direction (Mitsuba 3 prb): it does not turn with the normal
             wi_world, weight = C.detach_bsdf_sample(
-                scene, mat, wo, s, hit.uv, frame=frame, lazy=lazy
+                scene, mat, wo, s, hit.uv, frame=frame, lazy=lazy, tangents=tg
             )
             # a zero weight (e.g. reflectance 0) still has a derivative: keep the path
             alive = alive & (s.pdf > 0)

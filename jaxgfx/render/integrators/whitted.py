@@ -27,7 +27,7 @@ from jaxgfx.render.integrators.base import N_RANDOM, Integrator, check_depth
 __all__ = ["WhittedIntegrator", "whitted_radiance"]
 
 
-def _direct(scene, hit, frame, ng, wo, mat, alive, u, detached):
+def _direct(scene, hit, frame, ng, wo, mat, alive, u, detached, tg=None):
     L = jnp.zeros(hit.p.shape, hit.p.dtype)
     if scene.n_lights == 0:
         return L
@@ -36,7 +36,9 @@ def _direct(scene, hit, frame, ng, wo, mat, alive, u, detached):
         so, sd = C.spawn_ray(hit.p, ng, wi)
         tmax = jnp.where(jnp.isfinite(dist), dist * (1 - 1e-4), jnp.inf)
         vis = ~C.occluded(scene, so, sd, tmax)
-        f = C.dispatch(scene, mat, lambda m: m.eval(wo, C.to_local(frame, wi)), uv=hit.uv)
+        f = C.dispatch(
+            scene, mat, lambda m: m.eval(wo, C.to_local(frame, wi)), uv=hit.uv, tangents=tg
+        )
         ok = alive & vis & (pdf > 0)
         return jnp.where(ok[..., None], f * li * safe_div(1.0, pdf)[..., None], 0.0)
 
@@ -83,8 +85,9 @@ def whitted_radiance(scene, o, d, u, *, max_depth: int, sampling: str = "detache
         L = L + jnp.sum(beta * le, -2)
         mat = C.hit_material(scene, hit)
         frame, ng, wo = C.shading_frame(scene, hit, d, mat)
+        tg = C.tangent_space(scene, hit, frame)  # None without normal / bump maps
         delta = C.material_flag(scene, mat, "has_delta") & hit.valid
-        direct = _direct(scene, hit, frame, ng, wo, mat, hit.valid & ~delta, ub, detached)
+        direct = _direct(scene, hit, frame, ng, wo, mat, hit.valid & ~delta, ub, detached, tg)
         L = L + jnp.sum(beta * direct, -2)
         if level == max_depth - 1:
             break
@@ -98,6 +101,7 @@ def whitted_radiance(scene, o, d, u, *, max_depth: int, sampling: str = "detache
                 mat,
                 lambda m, u1=u1, wo=wo, u2=ub[..., 4:6]: m.sample(wo, u1, u2),
                 uv=hit.uv,
+                tangents=tg,
             )
             reflected = s.wi[..., 2] * wo[..., 2] > 0
             ok = delta & s.is_delta & (reflected if want_reflect else ~reflected)

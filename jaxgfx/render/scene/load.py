@@ -56,11 +56,13 @@ def material_from_desc(desc, *, where="material", base_dir=None):
     colour textures non-negative.
     """
     desc = dict(desc)
+    pre = f"{where}." if where else ""
+    if isinstance(desc.get("type"), str) and desc["type"] in _MAP_TEXTURE:
+        return _map_material(desc, pre, base_dir)
     # nested BSDF descriptions (blendbsdf's bsdf0 / bsdf1) are not textures
     tex_keys = [
         k for k, v in desc.items() if k != "type" and is_texture_desc(v) and not _is_bsdf_desc(v)
     ]
-    pre = f"{where}." if where else ""
     if not tex_keys:
         return make_bsdf(desc)
     plain = dict(desc)
@@ -83,6 +85,35 @@ def material_from_desc(desc, *, where="material", base_dir=None):
             raise ValueError(f"{pre}{k}: texture values must be {need}, got min {lo}")
         textures[k] = tex
     return Textured(bsdf, textures)
+
+
+_MAP_TEXTURE = {"normalmap": ("normalmap", 3), "bumpmap": ("height", 1)}
+
+
+def _map_material(desc, pre, base_dir):
+    """``normalmap`` / ``bumpmap``: ``{type, bsdf: {...}, normalmap | height: texture,
+    scale, flip_invalid_normals, use_shadowing_function}`` (the nested material may itself be
+    textured)."""
+    kind = desc["type"]
+    key, channels = _MAP_TEXTURE[kind]
+    flags = ("flip_invalid_normals", "use_shadowing_function")
+    allowed = ("type", "bsdf", key) + (("scale",) if kind == "bumpmap" else ()) + flags
+    unknown = sorted(set(desc) - set(allowed))
+    if unknown:
+        raise ValueError(f"{pre}{unknown[0]}: unknown key for {kind!r}; expected {list(allowed)}")
+    if not isinstance(desc.get("bsdf"), Mapping):
+        raise ValueError(f"{pre}bsdf: {kind!r} needs a nested material description")
+    nested = material_from_desc(desc["bsdf"], where=f"{pre}bsdf", base_dir=base_dir)
+    if key not in desc:
+        raise ValueError(f"{pre}{key}: {kind!r} needs a texture")
+    tex = desc[key]
+    if is_texture_desc(tex):
+        tex = texture_from_dict(tex, f"{pre}{key}", base_dir=base_dir, channels=channels)
+    kw = {k: desc[k] for k in ("scale", *flags) if k in desc}
+    try:
+        return make_bsdf({"type": kind, "bsdf": nested, key: tex, **kw})
+    except (ValueError, TypeError) as e:
+        raise type(e)(f"{pre}{e}") from None
 
 
 def _is_bsdf_desc(v):

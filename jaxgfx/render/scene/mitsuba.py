@@ -179,12 +179,14 @@ def _dielectric_keys(m):
     }
 
 
-def _material(md, where) -> dict:
+def _material(md, where, base_dir=None, work_dir=None) -> dict:
     """Mitsuba BSDF dict of one jaxgfx material description (validated by ``make_bsdf``)."""
     from jaxgfx.render import bsdf as B
 
     if not isinstance(md, Mapping):
         raise ValueError(f"{where}: expected a mapping with a 'type' key")
+    if md.get("type") in _MAP_KEYS:
+        return _map_material(md, where, base_dir, work_dir)
     if md.get("type") == "phong":
         raise NotImplementedError(f"{where}.type: 'phong' has no Mitsuba 3 counterpart")
     from jaxgfx.render.bsdf.textured import is_texture_desc
@@ -252,6 +254,59 @@ def _mitsuba_bsdf(m, where) -> dict:
     else:
         raise NotImplementedError(f"{where}.type: {type(m).__name__} has no Mitsuba 3 mapping")
     return out
+
+
+_MAP_KEYS = {"normalmap": "normalmap", "bumpmap": "height"}
+_MAP_FLAGS = ("flip_invalid_normals", "use_shadowing_function")
+
+
+def _map_material(md, where, base_dir, work_dir) -> dict:
+    """Mitsuba ``normalmap`` / ``bumpmap`` dict of a description (validated by the loader):
+    the map as a ``bitmap`` texture (a file the description names is referenced by absolute
+    path with its ``raw`` flag; an inline image or a constant is written to ``work_dir`` as a
+    float EXR, ``raw``), the nested BSDF (not textured), ``scale`` and both options; wrapped in
+    ``twosided`` when the nested BSDF is one-sided in Mitsuba (jaxgfx shades both sides)."""
+    from jaxgfx.render import bsdf as B
+    from jaxgfx.render.bsdf.textured import is_texture_desc, texture_from_dict
+
+    kind, key = md["type"], _MAP_KEYS[md["type"]]
+    nested = md.get("bsdf")
+    if not isinstance(nested, Mapping):
+        raise ValueError(f"{where}.bsdf: {kind!r} needs a nested material description")
+    if any(is_texture_desc(v) for v in nested.values()):
+        raise NotImplementedError(f"{where}.bsdf: textured materials are not exported (yet)")
+    tex_d = md.get(key)
+    try:
+        tex = tex_d
+        if is_texture_desc(tex_d):
+            ch = 3 if kind == "normalmap" else 1
+            tex = texture_from_dict(tex_d, f"{where}.{key}", base_dir=base_dir, channels=ch)
+        m = B.make_bsdf({**md, "bsdf": B.make_bsdf(dict(nested)), key: tex})
+    except (ValueError, TypeError) as e:
+        raise ValueError(f"{where}: {e}") from None
+    inner = _mitsuba_bsdf(m.bsdf, f"{where}.bsdf")
+    tex = getattr(m, key)
+    if is_texture_desc(tex_d) and "file" in tex_d:
+        path = os.fspath(tex_d["file"])
+        if not os.path.isabs(path) and base_dir:
+            path = os.path.join(base_dir, path)
+        bitmap = {"type": "bitmap", "filename": os.path.abspath(path),
+                  "raw": bool(tex_d.get("raw", False))}  # fmt: skip
+    else:
+        from jaxgfx.io import write_exr
+
+        img = np.asarray(getattr(tex, "image", tex), np.float32)
+        img = img.reshape(1, 1, -1) if img.ndim == 1 else img
+        path = os.path.join(work_dir(), re.sub(r"[^A-Za-z0-9_]", "_", where) + ".exr")
+        write_exr(path, img)
+        bitmap = {"type": "bitmap", "filename": path, "raw": True}
+    if hasattr(tex, "image"):
+        bitmap.update(filter_type=tex.filter, wrap_mode=tex.wrap)
+    out = {"type": kind, key: bitmap, "bsdf": inner}
+    if kind == "bumpmap":
+        out["scale"] = _float(m.scale)
+    out.update({k: bool(getattr(m, k)) for k in _MAP_FLAGS})
+    return {"type": "twosided", "bsdf": out} if inner["type"] in ONE_SIDED_BSDFS else out
 
 
 PRINCIPLED_WEIGHTS = ("roughness", "metallic", "spec_tint", "anisotropic", "sheen", "sheen_tint",
@@ -450,7 +505,8 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
     mats_desc = desc.get("materials", {}) or {}
     if not isinstance(mats_desc, Mapping):
         raise ValueError("materials: expected a mapping from names to material descriptions")
-    mats = {str(k): _material(v, f"materials.{k}") for k, v in mats_desc.items()}
+    mats = {str(k): _material(v, f"materials.{k}", base_dir, work_dir)
+            for k, v in mats_desc.items()}  # fmt: skip
     default = _twosided({"type": "diffuse", "reflectance": _rgb(DEFAULTS["diffuse.reflectance"])})
     black = {"type": "diffuse", "reflectance": _rgb(0.0)}
 
@@ -644,6 +700,17 @@ def _bsdf_desc(m, where) -> dict:
         return {"type": "blendbsdf", "weight": _list(m.weight),
                 "bsdf0": _bsdf_desc(m.bsdf0, f"{where}.bsdf0"),
                 "bsdf1": _bsdf_desc(m.bsdf1, f"{where}.bsdf1")}  # fmt: skip
+    if isinstance(m, (B.NormalMap, B.BumpMap)):
+        kind = "normalmap" if isinstance(m, B.NormalMap) else "bumpmap"
+        key = _MAP_KEYS[kind]
+        tex = getattr(m, key)
+        td = (_list(tex) if not hasattr(tex, "image") else
+              {"type": "bitmap", "image": np.asarray(tex.image, np.float32), "wrap": tex.wrap,
+               "filter": tex.filter})  # fmt: skip
+        out = {"type": kind, "bsdf": _bsdf_desc(m.bsdf, f"{where}.bsdf"), key: td}
+        if kind == "bumpmap":
+            out["scale"] = _float(m.scale)
+        return {**out, **{k: bool(getattr(m, k)) for k in _MAP_FLAGS}}
     if isinstance(m, B.Principled):
         out = {"type": "principled", "base_color": _list(m.base_color)}
         out.update({k: _list(getattr(m, k)) for k in PRINCIPLED_WEIGHTS})
@@ -664,7 +731,8 @@ def scene_to_desc(scene) -> dict:
     rectangles become one shape each (rectangles by ``edge_u`` / ``edge_v``), a mesh one
     inline mesh per material it uses, the loader's own ``__default__`` / ``__black__``
     materials ``jaxgfx_default`` / ``jaxgfx_black``, a matrix camera its ``view_proj_inverse``.
-    SDF shapes, Phong and textured materials raise ``NotImplementedError`` naming the object.
+    Normal and bump maps keep their texture as an inline image. SDF shapes, Phong and textured
+    materials (also inside a normal or bump map) raise ``NotImplementedError`` naming the object.
     Host function.
 
     Example: ``load_scene(scene_to_desc(load_scene(desc)))`` renders like ``desc``.

@@ -42,6 +42,10 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
   ``cutoff_angle`` (20 degrees); the same falloff as :class:`jaxgfx.render.emitters.SpotLight`.
 * ``blendbsdf``: ``(1 - weight) bsdf_0 + weight bsdf_1``, the nested BSDFs in document order
   (unnamed) or ordered by name (named), as Mitsuba orders its nested objects.
+* ``normalmap`` / ``bumpmap``: :class:`jaxgfx.render.bsdf.NormalMap` /
+  :class:`jaxgfx.render.bsdf.BumpMap` around the nested BSDF (the normal map is read as
+  written: give it ``raw`` true, as Mitsuba's documentation does); ``flip_invalid_normals``
+  and ``use_shadowing_function`` (default true, as Mitsuba 3.9) are read.
 * ``envmap``: same direction -> (u, v) map as jaxgfx (y up); Mitsuba places rows at
   ``v = j / (H - 1)``, jaxgfx at ``(j + 1/2) / H'``: the map is resampled to ``H' = 4 H`` rows
   with Mitsuba's linear interpolation along v (exact between Mitsuba's rows up to the
@@ -818,10 +822,53 @@ def _bsdf_dict(obj: _Obj, doc, *, nested=False) -> dict:
              "bsdf1": _bsdf_dict(kids[1], doc, nested=True)}  # fmt: skip
     elif t == "principled":
         m = _principled(p)
+    elif t in ("normalmap", "bumpmap"):
+        if nested:
+            raise ValueError(f"{obj.where}: a {t} nested in a blendbsdf is not supported")
+        m = _map_dict(obj, p, doc)
+        children_ok = len(obj.children)
     else:
         raise ValueError(f"{obj.where}: BSDF plugin {t!r} is not supported")
     p.done(children_ok=children_ok)
     return m
+
+
+def _map_dict(obj: _Obj, p: _Params, doc) -> dict:
+    """``normalmap`` (a texture named ``normalmap`` and one nested BSDF) / ``bumpmap`` (one
+    nested texture of any name, one nested BSDF and ``scale``), as Mitsuba 3 reads them."""
+    t = obj.type
+    kids = {"bsdf": [], "texture": []}
+    for c in obj.children:
+        if c.tag not in kids or (t == "normalmap" and c.tag == "texture"):
+            hint = ' (the normal map needs name="normalmap")' if c.tag == "texture" else ""
+            raise ValueError(f"{c.node.at}: {obj.where}: nested <{c.tag} type={c.type!r}> is "
+                             f"not supported here{hint}")  # fmt: skip
+        kids[c.tag].append(c)
+    for k, q in obj.props.items():
+        if q.kind == "object" and q.value.tag in kids and not (t == "normalmap" and k == t):
+            q.used = True
+            kids[q.value.tag].append(q.value)
+    if len(kids["bsdf"]) != 1:
+        raise ValueError(f"{obj.where}: expected exactly one nested <bsdf>, got "
+                         f"{len(kids['bsdf'])}")  # fmt: skip
+    m = {"type": t, "bsdf": _bsdf_dict(kids["bsdf"][0], doc)}
+    if t == "normalmap":
+        tex = p.color("normalmap", texture=True)
+        if tex is None:
+            raise ValueError(f"{obj.where}: missing the texture 'normalmap'")
+        m["normalmap"] = tex
+    else:
+        if len(kids["texture"]) != 1:
+            raise ValueError(f"{obj.where}: expected exactly one nested <texture> (the height "
+                             f"map), got {len(kids['texture'])}")  # fmt: skip
+        m["height"] = _texture(kids["texture"][0], doc)
+        m["scale"] = p.float("scale", 1.0)
+    for k in _MAP_FLAGS:  # Mitsuba 3's defaults: both on
+        m[k] = p.bool(k, True)
+    return m
+
+
+_MAP_FLAGS = ("flip_invalid_normals", "use_shadowing_function")
 
 
 def _bsdf(obj: _Obj, doc, desc, *, name=None) -> str:

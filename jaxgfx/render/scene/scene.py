@@ -140,6 +140,22 @@ def parameter_names(obj, *, aliases: bool = True) -> list[str]:
     return list(dict.fromkeys(out))
 
 
+def _listed_names(obj) -> list[str]:
+    """The names :meth:`Scene.parameters` lists after ``obj``: each leaf once, by its field
+    path; a textured material's texels, then the fields no texture overrides; a normal / bump
+    map's nested material under ``bsdf.`` (textured or not), then its own map and ``scale``."""
+    if isinstance(obj, Textured):  # texels, then the fields no texture overrides
+        from jaxgfx.render.bsdf.textured import texturable_paths
+
+        over = {".".join(p) for k in obj.textures for p in texturable_paths(obj.bsdf, k)}
+        names = [f"{k}.{p}" for k, t in obj.textures.items() for p in parameter_names(t)]
+        return names + [n for n in parameter_names(obj.bsdf, aliases=False) if n not in over]
+    if getattr(obj, "needs_tangents", False):
+        own = [n for n in parameter_names(obj, aliases=False) if n.split(".")[0] != "bsdf"]
+        return [f"bsdf.{n}" for n in _listed_names(obj.bsdf)] + own
+    return parameter_names(obj, aliases=False)
+
+
 def _delta_kind(light) -> str:
     return "spot" if type(light).__name__ == "SpotLight" else "directional"
 
@@ -260,15 +276,18 @@ class Scene(eqx.Module):
             raise ValueError(f"{path}: expected a field name after the object")
         obj = getter(self)
         prefix = []
+        if getattr(obj, "needs_tangents", False) and rest[0] == "bsdf" and len(rest) > 1:
+            # a normal / bump map's nested material (which may be textured)
+            prefix, obj, rest = ["bsdf"], obj.bsdf, rest[1:]
         if isinstance(obj, Textured):
             # textured parameter: materials.NAME.FIELD.image / .color0; others: the BSDF's
             if rest[0] in obj.textures:
                 if len(rest) < 2:
                     raise ValueError(f"{path}: {rest[0]!r} is a texture; name its parameter")
-                prefix = [("textures", rest[0])]
+                prefix = [*prefix, ("textures", rest[0])]
                 obj, rest = obj.textures[rest[0]], rest[1:]
             else:
-                prefix = ["bsdf"]
+                prefix = [*prefix, "bsdf"]
                 obj = obj.bsdf
         # aliases (e.g. isotropic `alpha` sets both microfacet alphas): the class's table
         aliases = getattr(type(obj), "PARAMETER_ALIASES", {})
@@ -327,15 +346,7 @@ class Scene(eqx.Module):
         objs += [(f"shapes.{i}", s) for i, s in enumerate(self.shapes)]
         out = []
         for prefix, obj in objs:
-            if isinstance(obj, Textured):  # texels, then the fields no texture overrides
-                from jaxgfx.render.bsdf.textured import texturable_paths
-
-                over = {".".join(p) for k in obj.textures for p in texturable_paths(obj.bsdf, k)}
-                names = [f"{k}.{p}" for k, t in obj.textures.items() for p in parameter_names(t)]
-                names += [n for n in parameter_names(obj.bsdf, aliases=False) if n not in over]
-            else:
-                names = parameter_names(obj, aliases=False)
-            for name in names:
+            for name in _listed_names(obj):
                 path = f"{prefix}.{name}"
                 try:
                     v = self.get(path)
