@@ -215,7 +215,7 @@ def _albedo_loss(x, key, scene, weights):
     return jnp.sum(weights * img[..., 0]) / weights.size
 
 
-# slow: ~5 s on 2 cores (one value-and-gradient and one finite-difference program, float64)
+# slow: ~4-8 s on 2 cores (one value-and-gradient and one finite-difference program, float64)
 @pytest.mark.slow
 def test_render_gradient_wrt_focus_and_aperture_matches_finite_differences(x64):
     """d(weighted mean of the image)/d(focus_distance, aperture_radius) by reverse mode
