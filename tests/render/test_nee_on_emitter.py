@@ -139,7 +139,8 @@ def _light_scene(dtype, **light):
     return load_scene(desc, dtype=dtype)
 
 
-@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+# float64: slow: ~8 s on 2 loaded cores (a second compile; the overflow was float32's)
+@pytest.mark.parametrize("dtype", [jnp.float32, pytest.param(jnp.float64, marks=pytest.mark.slow)])
 def test_sample_light_from_a_point_on_the_light_has_no_density(dtype, request):
     """From a point of the light's surface every sample lies in its plane: density 0 and no
     radiance (the NEE contribution is 0, not NaN), values and derivatives finite. The grid of
@@ -151,21 +152,27 @@ def test_sample_light_from_a_point_on_the_light_has_no_density(dtype, request):
     t = np.concatenate([np.linspace(0.01, 0.99, 9), 0.5 + np.asarray([1e-5, -1e-5, 1e-4, 3e-4])])
     u2 = jnp.asarray(np.stack(np.meshgrid(s, t), -1).reshape(-1, 2), dtype)
     p = jnp.broadcast_to(jnp.asarray([-0.4, 3.0, 0.3], dtype), u2.shape[:-1] + (3,))
-    # the point is on the light: a ray hits it there
-    hit = C.intersect(scene, p - jnp.asarray([0, 1.0, 0], dtype), jnp.asarray([0, 1.0, 0], dtype))
-    assert bool(jnp.all(hit.shape_id == 1)) and float(jnp.max(jnp.abs(hit.p - p))) < 1e-6
 
+    @jax.jit
     def nee(radiance, edge_v):
-        sc = scene.replace("emitters.area.0.radiance", radiance)
-        sc = sc.replace("shapes.1.edge_v", edge_v)
-        _, _, li, pdf, _ = C.sample_light(sc, hit.p, jnp.full(u2.shape[:-1], 0.5, dtype), u2)
-        return li, pdf
+        """Light sampling from the light's own surface, where a ray from below hits it."""
 
-    args = (scene.get("emitters.area.0.radiance"), scene.get("shapes.1.edge_v"))
-    li, pdf = jax.jit(nee)(*args)
+        def f(radiance, edge_v):
+            sc = scene.replace("emitters.area.0.radiance", radiance)
+            sc = sc.replace("shapes.1.edge_v", edge_v)
+            up = jnp.asarray([0, 1.0, 0], dtype)
+            hit = C.intersect(sc, p - up, up)
+            _, _, li, pdf, _ = C.sample_light(sc, hit.p, jnp.full(p.shape[:-1], 0.5, dtype), u2)
+            return jnp.sum(li) + jnp.sum(pdf), (hit, li, pdf)
+
+        return jax.value_and_grad(f, (0, 1), has_aux=True)(radiance, edge_v)
+
+    (_, (hit, li, pdf)), grads = nee(
+        scene.get("emitters.area.0.radiance"), scene.get("shapes.1.edge_v")
+    )
+    assert bool(jnp.all(hit.shape_id == 1)) and float(jnp.max(jnp.abs(hit.p - p))) < 1e-6
     np.testing.assert_array_equal(pdf, 0.0)
     np.testing.assert_array_equal(li, 0.0)
-    grads = jax.jit(jax.grad(lambda *a: jnp.sum(nee(*a)[0]) + jnp.sum(nee(*a)[1]), (0, 1)))(*args)
     for g in grads:
         assert np.isfinite(g).all()
 
@@ -192,10 +199,18 @@ def _radiance_and_grads(radiance, refl, edge_v, scene, o, d, u):
 def test_rays_onto_light_see_exactly_its_radiance():
     """float32, path of depth 3: rays from below onto the light see its radiance, and nothing
     else: light sampling from the light's own surface adds 0, and the bounce off its black
-    back material carries 0 weight. So every ray's radiance is exactly ``RADIANCE``, the
-    mean's derivative is 1 w.r.t. the radiance (per channel 1/3) and 0 w.r.t. the floor's
-    reflectance and the light's edge. Before the fix: 5 of these 65,536 rays were NaN."""
-    # cost: ~3 s of a loaded 2-core run (one compile of value + gradient)
+    back material carries 0 weight, so every ray's radiance is exactly ``RADIANCE``. Before
+    the fix: 5 of these 65,536 rays were NaN."""
+    scene = _light_scene(jnp.float32)
+    o, d, u = _rays_onto_light(65536, jnp.float32)
+    L = jax.jit(path_radiance, static_argnames="max_depth")(scene, o, d, u, max_depth=3)
+    np.testing.assert_array_equal(L, RADIANCE)
+
+
+@pytest.mark.slow  # slow: ~21 s on 2 loaded cores (reverse mode of 65,536 paths of depth 3)
+def test_rays_onto_light_gradients_closed_form():
+    """The same rays: the mean's derivative is 1/3 per channel w.r.t. the radiance, and exactly
+    0 w.r.t. the floor's reflectance and the light's edge (NaN before the fix)."""
     scene = _light_scene(jnp.float32)
     o, d, u = _rays_onto_light(65536, jnp.float32)
     args = (
@@ -278,42 +293,33 @@ def _failing():
     return rows[:, :3], rows[:, 3:6], rows[:, 6:].reshape(-1, 3, 7)
 
 
-_path = jax.jit(path_radiance, static_argnames=("max_depth", "sampling"))
-
-
-def test_failing_samples_finite_and_light_adds_nothing_from_itself(tmp_path):
+@pytest.mark.slow  # slow: ~30 s per sampling mode on 2 loaded cores (reverse mode, 15 leaves)
+@pytest.mark.parametrize("sampling", ["detached", "attached"])
+def test_failing_samples_finite_and_light_adds_nothing_from_itself(tmp_path, sampling):
     """The two samples, float32: the third vertex lies on the light, whose material is black
     and whose own light samples lie in its plane, so depth 3 adds exactly nothing to depth 2
-    (it was NaN)."""
-    scene, _ = _xml_scene(tmp_path)
-    o, d, u = _failing()
-    l3 = _path(scene, o, d, u, max_depth=3)
-    l2 = _path(scene, o, d, u[:, :2], max_depth=2)
-    assert np.isfinite(l3).all()
-    np.testing.assert_array_equal(l3, l2)
-    assert float(jnp.min(l2)) > 0  # the vertices before do see light
-
-
-@pytest.mark.slow  # slow: ~25 s per sampling mode on 2 loaded cores (reverse mode, 15 leaves)
-@pytest.mark.parametrize("sampling", ["detached", "attached"])
-def test_failing_samples_gradients_finite(tmp_path, sampling):
-    """Gradients of the two samples' radiance w.r.t. every material, emitter and shape
+    (it was NaN); the gradients of their radiance w.r.t. every material, emitter and shape
     parameter are finite (NaN for 10 of the 15 leaves before the fix, in both modes)."""
     scene, _ = _xml_scene(tmp_path)
     o, d, u = _failing()
     names = [p.path for p in scene.parameters() if not p.path.startswith("camera")]
 
     @jax.jit
-    def grads(vals):
+    def value_and_grads(vals):
         def loss(vals):
             sc = scene
             for n, v in zip(names, vals, strict=True):
                 sc = sc.replace(n, v)
-            return jnp.sum(path_radiance(sc, o, d, u, max_depth=3, sampling=sampling))
+            L = path_radiance(sc, o, d, u, max_depth=3, sampling=sampling)
+            return jnp.sum(L), L
 
-        return jax.grad(loss)(vals)
+        (_, l3), g = jax.value_and_grad(loss, has_aux=True)(vals)
+        return l3, path_radiance(scene, o, d, u[:, :2], max_depth=2, sampling=sampling), g
 
-    g = grads([scene.get(n) for n in names])
+    l3, l2, g = value_and_grads([scene.get(n) for n in names])
+    assert np.isfinite(l3).all()
+    np.testing.assert_array_equal(l3, l2)
+    assert float(jnp.min(l2)) > 0  # the vertices before do see light
     bad = [n for n, x in zip(names, g, strict=True) if not np.isfinite(x).all()]
     assert not bad, bad
 
@@ -351,7 +357,7 @@ def test_point_and_spot_light_at_distance_zero(dtype, request):
 # --- render level: the scene over a million samples, and Mitsuba 3 -------------------------
 
 
-@pytest.mark.slow  # slow: ~45 s on 2 loaded cores (1M samples of jaxgfx, 1M of Mitsuba 3)
+@pytest.mark.slow  # slow: ~27 s on 2 loaded cores (1M samples of jaxgfx, 1M of Mitsuba 3)
 @pytest.mark.mitsuba
 def test_rotated_light_scene_finite_and_matches_mitsuba(tmp_path):
     """The scene of the report, path of depth 3, 16 keys x 64 spp at 32²: every pixel finite
