@@ -139,7 +139,7 @@ def _light_scene(dtype, **light):
     return load_scene(desc, dtype=dtype)
 
 
-# float64: slow: ~8 s on 2 loaded cores (a second compile; the overflow was float32's)
+# float64: slow: ~2.3 s quiet, ~8 s loaded (a second compile; the overflow was float32's)
 @pytest.mark.parametrize("dtype", [jnp.float32, pytest.param(jnp.float64, marks=pytest.mark.slow)])
 def test_sample_light_from_a_point_on_the_light_has_no_density(dtype, request):
     """From a point of the light's surface every sample lies in its plane: density 0 and no
@@ -207,7 +207,7 @@ def test_rays_onto_light_see_exactly_its_radiance():
     np.testing.assert_array_equal(L, RADIANCE)
 
 
-@pytest.mark.slow  # slow: ~21 s on 2 loaded cores (reverse mode of 65,536 paths of depth 3)
+@pytest.mark.slow  # slow: ~7 s quiet, ~21 s loaded (reverse mode, 65,536 paths of depth 3)
 def test_rays_onto_light_gradients_closed_form():
     """The same rays: the mean's derivative is 1/3 per channel w.r.t. the radiance, and exactly
     0 w.r.t. the floor's reflectance and the light's edge (NaN before the fix)."""
@@ -293,7 +293,7 @@ def _failing():
     return rows[:, :3], rows[:, 3:6], rows[:, 6:].reshape(-1, 3, 7)
 
 
-@pytest.mark.slow  # slow: ~30 s per sampling mode on 2 loaded cores (reverse mode, 15 leaves)
+@pytest.mark.slow  # slow: ~10 s quiet, ~30 s loaded, per mode (reverse mode, 15 leaves)
 @pytest.mark.parametrize("sampling", ["detached", "attached"])
 def test_failing_samples_finite_and_light_adds_nothing_from_itself(tmp_path, sampling):
     """The two samples, float32: the third vertex lies on the light, whose material is black
@@ -357,7 +357,7 @@ def test_point_and_spot_light_at_distance_zero(dtype, request):
 # --- render level: the scene over a million samples, and Mitsuba 3 -------------------------
 
 
-@pytest.mark.slow  # slow: ~27 s on 2 loaded cores (1M samples of jaxgfx, 1M of Mitsuba 3)
+@pytest.mark.slow  # slow: ~7 s quiet, ~27 s loaded (1M samples of jaxgfx, 1M of Mitsuba 3)
 @pytest.mark.mitsuba
 def test_rotated_light_scene_finite_and_matches_mitsuba(tmp_path):
     """The scene of the report, path of depth 3, 16 keys x 64 spp at 32²: every pixel finite
