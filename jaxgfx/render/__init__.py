@@ -16,6 +16,7 @@ from jaxgfx.render.bsdf.textured import Checkerboard as Checkerboard
 from jaxgfx.render.bsdf.textured import Textured as Textured
 from jaxgfx.render.camera import MatrixCamera as MatrixCamera
 from jaxgfx.render.camera import PerspectiveCamera as PerspectiveCamera
+from jaxgfx.render.camera import ThinLensCamera as ThinLensCamera
 from jaxgfx.render.distributed import render_sharded as render_sharded
 from jaxgfx.render.emitters import AreaLight as AreaLight
 from jaxgfx.render.emitters import ConstantEnvironment as ConstantEnvironment
@@ -62,6 +63,7 @@ __all__ = [
     "WhittedIntegrator",
     "AOVIntegrator",
     "PerspectiveCamera",
+    "ThinLensCamera",
     "MatrixCamera",
     "BoxFilter",
     "GaussianFilter",

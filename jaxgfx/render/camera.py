@@ -1,9 +1,12 @@
 """Cameras: primary-ray generation.
 
-Two generators, as in lecture 4 of the course notes:
+Three generators (the first two as in lecture 4 of the course notes):
 
 - :class:`PerspectiveCamera` — pinhole from an eye position, a look-at target, an up vector and
   a field of view ("geometric" generator: pixel -> point on an image plane -> normalise).
+- :class:`ThinLensCamera` — the same look-at camera with a thin lens (depth of field): rays
+  start on a lens disk of radius ``aperture_radius`` and meet on the plane of focus at distance
+  ``focus_distance`` along the viewing axis (Mitsuba 3's ``thinlens`` sensor).
 - :class:`MatrixCamera` — from the inverse of a (view . projection) matrix, so that traced
   images line up exactly with a rasteriser using the same matrices (OpenGL NDC conventions:
   x, y in [-1, 1], y up, z = -1 on the near plane and +1 on the far plane).
@@ -12,18 +15,27 @@ Pixel coordinates are continuous: pixel (row i, column j) covers ``[j, j+1) x [i
 (0, 0) the top-left corner of the image. Conventions follow Mitsuba 3: ``fov`` is in degrees
 and by default spans the horizontal axis (``fov_axis="x"``); the image is not mirrored (image
 left is the camera's left).
+
+A camera's class attribute ``lens_uniforms`` is the number of uniform numbers in ``[0, 1)`` its
+``generate_ray`` takes per ray besides the pixel position (0: ``generate_ray(pixel)``; the thin
+lens: 2, ``generate_ray(pixel, u_lens)``). The renderer's estimator draws them only for a camera
+that asks (:func:`jaxgfx.render.estimator.render_partial`), so pinhole and matrix cameras trace
+exactly the rays and images they traced before the thin lens existed.
 """
 
 from __future__ import annotations
+
+from typing import ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgfx._checks import as_float_array, check_choice
+from jaxgfx._checks import as_float_array, check_choice, check_nonnegative, check_positive
 from jaxgfx._math import safe_normalize
+from jaxgfx.render.sampling import square_to_uniform_disk_concentric
 
-__all__ = ["PerspectiveCamera", "MatrixCamera", "look_at_basis"]
+__all__ = ["PerspectiveCamera", "ThinLensCamera", "MatrixCamera", "look_at_basis"]
 
 
 def look_at_basis(origin, target, up):
@@ -38,6 +50,47 @@ def _check_resolution(width, height):
     for name, v in (("width", width), ("height", height)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             raise ValueError(f"{name}: expected a positive integer, got {v!r}")
+
+
+def _look_at_args(origin, target, up, fov, width, height, fov_axis):
+    """The validated look-at arguments ``(origin, target, up, fov)`` as float arrays (concrete
+    values): shared by :meth:`PerspectiveCamera.look_at` and :meth:`ThinLensCamera.look_at`."""
+    _check_resolution(width, height)
+    check_choice(fov_axis, "fov_axis", ("x", "y"))
+    o = as_float_array(origin, "origin")
+    t = as_float_array(target, "target")
+    u = as_float_array(up, "up")
+    for name, v in (("origin", o), ("target", t), ("up", u)):
+        if v.shape != (3,):
+            raise ValueError(f"{name}: expected shape (3,), got {v.shape}")
+        if not np.all(np.isfinite(np.asarray(v))):
+            raise ValueError(f"{name}: expected finite values, got {np.asarray(v)}")
+    f = as_float_array(fov, "fov")
+    if f.shape != () or not (0.0 < float(f) < 180.0):
+        raise ValueError(f"fov: expected a scalar in (0, 180) degrees, got {fov!r}")
+    if np.allclose(np.asarray(t), np.asarray(o)):
+        raise ValueError("target: must differ from origin")
+    d = np.asarray(t) - np.asarray(o)
+    if np.linalg.norm(np.cross(d, np.asarray(u))) < 1e-8 * np.linalg.norm(d) * max(
+        np.linalg.norm(np.asarray(u)), 1e-30
+    ):
+        raise ValueError("up: must not be parallel to the viewing direction")
+    return o, t, u, f
+
+
+def _tan_half(fov, fov_axis, aspect):
+    """``(tan_x, tan_y)``: the half extents of the image plane at unit distance."""
+    t = jnp.tan(jnp.deg2rad(fov) * 0.5)
+    if fov_axis == "x":
+        return t, t / aspect
+    return t * aspect, t
+
+
+def _screen(pixel, width, height, tx, ty):
+    """Image-plane coordinates ``(s_x, s_y)`` at unit distance of continuous pixel positions."""
+    sx = (2.0 * pixel[..., 0] / width - 1.0) * tx
+    sy = (1.0 - 2.0 * pixel[..., 1] / height) * ty
+    return sx, sy
 
 
 class PerspectiveCamera(eqx.Module):
@@ -60,29 +113,12 @@ class PerspectiveCamera(eqx.Module):
     height: int = eqx.field(static=True)
     fov_axis: str = eqx.field(static=True, default="x")
 
+    lens_uniforms: ClassVar[int] = 0
+
     @classmethod
     def look_at(cls, origin, target, up, fov, width, height, *, fov_axis="x"):
         """Validated constructor (concrete arguments): fov in (0, 180) degrees."""
-        _check_resolution(width, height)
-        check_choice(fov_axis, "fov_axis", ("x", "y"))
-        o = as_float_array(origin, "origin")
-        t = as_float_array(target, "target")
-        u = as_float_array(up, "up")
-        for name, v in (("origin", o), ("target", t), ("up", u)):
-            if v.shape != (3,):
-                raise ValueError(f"{name}: expected shape (3,), got {v.shape}")
-            if not np.all(np.isfinite(np.asarray(v))):
-                raise ValueError(f"{name}: expected finite values, got {np.asarray(v)}")
-        f = as_float_array(fov, "fov")
-        if f.shape != () or not (0.0 < float(f) < 180.0):
-            raise ValueError(f"fov: expected a scalar in (0, 180) degrees, got {fov!r}")
-        if np.allclose(np.asarray(t), np.asarray(o)):
-            raise ValueError("target: must differ from origin")
-        d = np.asarray(t) - np.asarray(o)
-        if np.linalg.norm(np.cross(d, np.asarray(u))) < 1e-8 * np.linalg.norm(d) * max(
-            np.linalg.norm(np.asarray(u)), 1e-30
-        ):
-            raise ValueError("up: must not be parallel to the viewing direction")
+        o, t, u, f = _look_at_args(origin, target, up, fov, width, height, fov_axis)
         return cls(o, t, u, f, int(width), int(height), fov_axis)
 
     @property
@@ -90,10 +126,7 @@ class PerspectiveCamera(eqx.Module):
         return self.width / self.height
 
     def _tan_half(self):
-        t = jnp.tan(jnp.deg2rad(self.fov) * 0.5)
-        if self.fov_axis == "x":
-            return t, t / self.aspect
-        return t * self.aspect, t
+        return _tan_half(self.fov, self.fov_axis, self.aspect)
 
     def generate_ray(self, pixel):
         """Rays through continuous pixel positions ``pixel (..., 2)`` = (x, y) in pixels.
@@ -103,12 +136,118 @@ class PerspectiveCamera(eqx.Module):
         pixel = jnp.asarray(pixel)
         right, up, fwd = look_at_basis(self.origin, self.target, self.up)
         tx, ty = self._tan_half()
-        sx = (2.0 * pixel[..., 0] / self.width - 1.0) * tx
-        sy = (1.0 - 2.0 * pixel[..., 1] / self.height) * ty
+        sx, sy = _screen(pixel, self.width, self.height, tx, ty)
         d = sx[..., None] * right + sy[..., None] * up + fwd
         d = safe_normalize(d)
         o = jnp.broadcast_to(self.origin, d.shape)
         return o, d
+
+
+class ThinLensCamera(eqx.Module):
+    """Look-at camera with a thin lens: depth of field (Mitsuba 3's ``thinlens`` sensor).
+
+    Fields as :class:`PerspectiveCamera` (``origin``, ``target``, ``up`` (3,), ``fov`` in
+    degrees; static ``width``, ``height``, ``fov_axis``) plus two differentiable scalars:
+    ``aperture_radius`` (the lens radius in world units, >= 0) and ``focus_distance`` (the
+    distance of the plane of focus from the lens along the viewing axis, > 0; the plane is
+    perpendicular to that axis, as Mitsuba's).
+
+    A ray (:meth:`generate_ray`) starts at a point ``a`` of the lens disk (centre ``origin``,
+    spanned by the camera's right and up axes) drawn uniformly by Shirley and Chiu's concentric
+    map of two uniform numbers, and passes through the point where the pinhole ray of the same
+    pixel meets the plane of focus. So every point on that plane is imaged sharply, and a point
+    at depth ``z`` along the axis is spread over a disk (the circle of confusion) of diameter
+
+        c = 2 A |z - f| / (z f)          on the image plane at unit distance,
+
+    that is ``c W / (2 tan(fov_x / 2))`` pixels for an image ``W`` pixels wide (``A`` the
+    aperture radius, ``f`` the focus distance). ``aperture_radius`` 0 is the pinhole camera:
+    the same rays, bit for bit (tests/render/test_thinlens.py).
+
+    Example: every lens ray of the centre pixel of a camera focused at 2 meets ``(0, 0, -2)``::
+
+        cam = ThinLensCamera.look_at([0, 0, 0], [0, 0, -1], [0, 1, 0], 90.0, 4, 4,
+                                     aperture_radius=0.1, focus_distance=2.0)
+        o, d = cam.generate_ray(jnp.array([2.0, 2.0]), jnp.array([0.9, 0.3]))
+        # o + (2 / -d[2]) * d == [0, 0, -2]
+    """
+
+    origin: jnp.ndarray
+    target: jnp.ndarray
+    up: jnp.ndarray
+    fov: jnp.ndarray
+    aperture_radius: jnp.ndarray
+    focus_distance: jnp.ndarray
+    width: int = eqx.field(static=True)
+    height: int = eqx.field(static=True)
+    fov_axis: str = eqx.field(static=True, default="x")
+
+    lens_uniforms: ClassVar[int] = 2
+
+    def __check_init__(self):
+        # concrete values only (tracers pass): what look_at and Scene.replace refuse
+        check_nonnegative(self.aperture_radius, "aperture_radius")
+        check_positive(self.focus_distance, "focus_distance")
+
+    @classmethod
+    def look_at(
+        cls,
+        origin,
+        target,
+        up,
+        fov,
+        width,
+        height,
+        *,
+        aperture_radius,
+        focus_distance,
+        fov_axis="x",
+    ):
+        """Validated constructor (concrete arguments): fov in (0, 180) degrees, a finite
+        ``aperture_radius >= 0`` and a finite ``focus_distance > 0`` (world units)."""
+        o, t, u, f = _look_at_args(origin, target, up, fov, width, height, fov_axis)
+        a = as_float_array(aperture_radius, "aperture_radius")
+        fd = as_float_array(focus_distance, "focus_distance")
+        if a.shape != () or not (np.isfinite(float(a)) and float(a) >= 0.0):
+            raise ValueError(
+                f"aperture_radius: expected a finite number >= 0 (world units), got "
+                f"{aperture_radius!r}"
+            )
+        if fd.shape != () or not (np.isfinite(float(fd)) and float(fd) > 0.0):
+            raise ValueError(
+                f"focus_distance: expected a finite number > 0 (world units), got "
+                f"{focus_distance!r}"
+            )
+        return cls(o, t, u, f, a, fd, int(width), int(height), fov_axis)
+
+    @property
+    def aspect(self) -> float:
+        return self.width / self.height
+
+    def generate_ray(self, pixel, u_lens):
+        """Rays through continuous pixel positions ``pixel (..., 2)`` (pixels) and lens samples
+        ``u_lens (..., 2)`` in ``[0, 1)^2`` (broadcast together).
+
+        Returns ``(o, d)`` of shapes (..., 3): ``o`` on the lens disk, ``d`` unit length,
+        towards the point of the plane of focus the pinhole ray of ``pixel`` meets.
+        """
+        pixel = jnp.asarray(pixel)
+        right, up, fwd = look_at_basis(self.origin, self.target, self.up)
+        tx, ty = _tan_half(self.fov, self.fov_axis, self.aspect)
+        sx, sy = _screen(pixel, self.width, self.height, tx, ty)
+        lens = self.aperture_radius * square_to_uniform_disk_concentric(u_lens)
+        ax, ay = lens[..., 0], lens[..., 1]
+        # the focus point is origin + f (sx right + sy up + fwd); from the lens point
+        # origin + ax right + ay up the ray direction is, divided by f,
+        # (sx - ax / f) right + (sy - ay / f) up + fwd: with ax = ay = 0 the pinhole's
+        # operations exactly, so aperture 0 gives the pinhole camera's rays bit for bit
+        inv_f = 1.0 / self.focus_distance
+        sx = sx - ax * inv_f
+        sy = sy - ay * inv_f
+        d = sx[..., None] * right + sy[..., None] * up + fwd
+        d = safe_normalize(d)
+        o = self.origin + ax[..., None] * right + ay[..., None] * up
+        return jnp.broadcast_to(o, d.shape), d
 
 
 class MatrixCamera(eqx.Module):
@@ -122,6 +261,8 @@ class MatrixCamera(eqx.Module):
     view_proj_inverse: jnp.ndarray
     width: int = eqx.field(static=True)
     height: int = eqx.field(static=True)
+
+    lens_uniforms: ClassVar[int] = 0
 
     @classmethod
     def from_matrix(cls, view_proj_inverse, width, height):

@@ -32,6 +32,12 @@ traces several sample passes per ``lax.scan`` step (:func:`passes_per_step`), so
 about as many rays as a large image's and the per-step overhead is shared (issue 22)."""
 
 
+LENS_STREAM = 0x1E45
+"""What :func:`render_partial` folds into the camera key for the lens numbers of a camera with
+``lens_uniforms > 0`` (:class:`~jaxgfx.render.camera.ThinLensCamera`): pass ``s``'s numbers
+are ``uniform(fold_in(fold_in(camera key, LENS_STREAM), s), (H, W, lens_uniforms))``."""
+
+
 CHECKPOINT_ONE_STEP = False
 """Whether :func:`pass_scan` checkpoints a scan of a single step of several passes (``False``:
 it runs the step as plain code, see there)."""
@@ -90,8 +96,10 @@ def pass_scan(one_pass, passes, acc0, weights=None, *, per_step: int = 1):
     # intermediates as plain reverse mode (one step's), so it only adds a copy of the forward
     # program to compile and to run (issue 22: the 32x32 fit step); CHECKPOINT_ONE_STEP = True
     # restores it (benchmarks/render_compile.py)
-    group = one_pass if steps == 1 and not CHECKPOINT_ONE_STEP else jax.checkpoint(
-        one_pass, prevent_cse=False
+    group = (
+        one_pass
+        if steps == 1 and not CHECKPOINT_ONE_STEP
+        else jax.checkpoint(one_pass, prevent_cse=False)
     )
 
     def body_k(acc, sw):
@@ -179,7 +187,9 @@ def render_partial(
     ``render_partial(scene, key, integrator, spp=spp) / spp``:
     ``key`` splits into a camera key (``film.pixel_samples``: stratified when ``spp`` is a
     square, ``(H, W, spp, 2)``) and a key into which pass ``s`` is folded for the integrator's
-    uniform numbers of shape ``(H, W, *integrator.random_shape)``; pass ``s`` traces one ray per
+    uniform numbers of shape ``(H, W, *integrator.random_shape)``; a camera with a lens
+    (``camera.lens_uniforms > 0``) gets ``(H, W, lens_uniforms)`` more per pass from the camera
+    key (:data:`LENS_STREAM`), other cameras none; pass ``s`` traces one ray per
     pixel through camera sample ``s``; the passes run through :func:`pass_scan`,
     :func:`passes_per_step` ``(R W, P, rays_per_step)`` of them per scan step, stacked along the
     rows (``(k R, W)`` rays): a small image does not pay one step's overhead per pass, and
@@ -202,24 +212,35 @@ def render_partial(
     px = pixel_samples(kp, w, h, spp, scene.rfilter, rows=rows, dtype=dtype)  # (R, W, spp, 2)
     shape_u = integrator.random_shape
     r = px.shape[0]
+    # a camera with a lens (ThinLensCamera) takes `lens_uniforms` numbers per ray, drawn from
+    # their own key; a pinhole or matrix camera (0) draws nothing: its program is unchanged
+    n_lens = getattr(scene.camera, "lens_uniforms", 0)
+    kl = jax.random.fold_in(kp, LENS_STREAM) if n_lens else None
 
-    def rays(pxs):
-        o, d = scene.camera.generate_ray(pxs)
+    def rays(pxs, ul):
+        if ul is None:
+            o, d = scene.camera.generate_ray(pxs)
+        else:
+            o, d = scene.camera.generate_ray(pxs, ul)
         o, d = o.astype(dtype), d.astype(dtype)
         return fusion_barrier((o, d))  # measured 635 -> 518 ns/sample (direct, one core)
 
     def numbers(s):
         return uniform(jax.random.fold_in(ku, s), (h, w, *shape_u), dtype, rows=rows)
 
+    def lens(s):  # (R, W, n_lens): pass s's lens numbers of the rows, as `numbers`
+        return uniform(jax.random.fold_in(kl, s), (h, w, n_lens), dtype, rows=rows)
+
     def one_pass(s):
-        o, d = rays(px[:, :, s, :])
+        o, d = rays(px[:, :, s, :], lens(s) if n_lens else None)
         u = None if shape_u is None else numbers(s)
         return integrator(scene, o, d, u)
 
     def k_passes(ss):  # (k,) pass indices -> (k, R, W, C): the k passes as one (k R, W) batch
         k = ss.shape[0]
         pxs = jnp.moveaxis(px[:, :, ss, :], 2, 0).reshape(k * r, w, 2)
-        o, d = rays(pxs)
+        ul = jax.vmap(lens)(ss).reshape(k * r, w, n_lens) if n_lens else None
+        o, d = rays(pxs, ul)
         u = None
         if shape_u is not None:
             u = jax.vmap(numbers)(ss).reshape(k * r, w, *shape_u)

@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxgfx._checks import check_choice
-from jaxgfx._math import safe_div, safe_sqrt, sum_last, take_rows
+from jaxgfx._math import eps_for, safe_div, safe_sqrt, sum_last, take_rows
 from jaxgfx.render.geometry import area, intersect_scene, occluded_scene, sample_area
 from jaxgfx.render.geometry.frame import frame_from_normal, to_local, to_world
 from jaxgfx.render.geometry.ray import spawn_ray
@@ -25,6 +25,7 @@ __all__ = [
     "light_pdf_hit",
     "env_pdf",
     "mis_power",
+    "area_to_solid_angle",
     "spawn_ray",
     "to_local",
     "to_world",
@@ -227,9 +228,45 @@ def emitted(scene, hit, d):
 
 
 def mis_power(a, b):
-    """Power heuristic (beta = 2) weight of a strategy with density ``a`` against ``b``."""
-    a2, b2 = a * a, b * b
-    return safe_div(a2, a2 + b2)
+    """Power heuristic (beta = 2) weight ``a² / (a² + b²)`` of a strategy with density ``a``
+    against ``b`` (0 where both are 0).
+
+    Computed from the ratio of the smaller density to the larger, ``1 / (1 + (b/a)²)`` or
+    ``(a/b)² / (1 + (a/b)²)``, so that a density whose square overflows (a float32 density
+    above 1.8e19, e.g. an emitter seen edge-on) or an infinite one gives a weight in [0, 1]
+    and finite derivatives, not ``inf / inf`` = NaN; both infinite gives 1/2.
+    """
+    a, b = jnp.broadcast_arrays(a, b)
+    a_big = a >= b
+    lo = jnp.where(a_big, b, a)
+    hi = jnp.where(a_big, a, b)
+    both_inf = jnp.isinf(lo)  # lo <= hi: lo infinite means both are
+    ok = (hi > 0) & ~both_inf
+    r = jnp.where(jnp.isinf(hi), 0.0, safe_div(lo, jnp.where(ok, hi, 1.0)))  # lo/hi in [0, 1]
+    r2 = r * r
+    w = jnp.where(a_big, 1.0, r2) / (1.0 + r2)
+    return jnp.where(ok, w, jnp.where(both_inf, 0.5, 0.0))
+
+
+def area_to_solid_angle(pdf_area, dist2, cos_l):
+    """Solid-angle density ``pdf_area * dist2 / |cos_l|`` of a point on an emitter seen at
+    squared distance ``dist2`` under the cosine ``cos_l`` (at the emitter, to the direction).
+
+    0 where ``|cos_l|`` is below the dtype's epsilon, i.e. zero to working precision: the
+    direction lies in the emitter's tangent plane, as from a shading point on the emitter's own
+    surface (for a planar light, every light sample then lies in that plane). Such a point
+    subtends no solid angle, so it contributes nothing (pbrt-v4 likewise drops a light sample
+    whose solid-angle density is infinite); without the cut, a rounding-level cosine (3.7e-20:
+    a rectangle rotated by 90 degrees has a normal component of cos(pi/2) = 6.1e-17) gave a
+    float32 density of 2e19, whose square in :func:`mis_power` overflowed to ``inf / inf``.
+    The samples dropped have a contribution proportional to ``|cos_l| < eps`` (bias below the
+    dtype's rounding). Light sampling and :func:`light_pdf_hit` use this same function, so
+    the MIS weights of both strategies still sum to 1. Finite value and derivatives (double
+    ``where``: the ratio is formed only where the cosine is kept).
+    """
+    c = jnp.abs(cos_l)
+    ok = c > eps_for(c)
+    return jnp.where(ok, pdf_area * dist2 / jnp.where(ok, c, 1.0), 0.0)
 
 
 def _selection_prob(scene, dtype):
@@ -242,9 +279,9 @@ def light_pdf_hit(scene, p_prev, hit, d):
         return jnp.zeros(hit.t.shape, d.dtype)
     _, inv_area = emission_table(scene, d.dtype)
     sid = jnp.clip(hit.shape_id, 0, len(scene.shapes) - 1)
-    cos_l = jnp.abs(sum_last(hit.ng * d))
+    cos_l = sum_last(hit.ng * d)
     dist2 = sum_last((hit.p - p_prev) ** 2)
-    pdf = safe_div(take_rows(inv_area, sid) * dist2, cos_l)
+    pdf = area_to_solid_angle(take_rows(inv_area, sid), dist2, cos_l)
     return jnp.where(hit.valid, pdf * _selection_prob(scene, d.dtype), 0.0)
 
 
@@ -278,8 +315,8 @@ def sample_light(scene, p, u_sel, u2, *, detached=False):
         dist = safe_sqrt(d2)
         wi = safe_div(v, dist[..., None])
         cos_l = -sum_last(nl * wi)
-        li = jnp.where((cos_l > 0)[..., None], al.radiance.astype(dtype), 0.0)
-        pdf = safe_div(pdf_a * d2, jnp.abs(cos_l))
+        pdf = area_to_solid_angle(pdf_a, d2, cos_l)  # 0 for a point seen edge-on
+        li = jnp.where(((cos_l > 0) & (pdf > 0))[..., None], al.radiance.astype(dtype), 0.0)
         cands.append((wi, dist, li, pdf, jnp.zeros(p.shape[:-1], bool)))
     na = len(scene.area_lights)
     if scene.point_lights is not None:

@@ -10,7 +10,8 @@ set before ``import mitsuba``); ``scalar_rgb`` runs anywhere.
 Mapping of conventions (jaxgfx -> Mitsuba 3), each checked by ``tests/render/test_mitsuba.py``:
 
 * camera: ``perspective`` with ``to_world = look_at(origin, target, up)``, same ``fov`` and
-  ``fov_axis``; a matrix camera with an affine ``view_proj_inverse`` -> ``orthographic`` (its
+  ``fov_axis`` (``thinlens`` with the same ``aperture_radius`` and ``focus_distance`` for a
+  thin-lens camera); a matrix camera with an affine ``view_proj_inverse`` -> ``orthographic`` (its
   default ``near_clip``, ``to_world`` from
   :func:`~jaxgfx.render.scene.mitsuba_conventions.orthographic_to_world`; projective ones are
   refused); film ``hdrfilm`` (RGB, float32); ``box`` filter (radius 0.5 only) or
@@ -454,9 +455,8 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
                 "(look-at cameras and affine matrix cameras, as `orthographic`, are exported)"
             )
     else:
-        S.expect_keys(cam, "camera", ("origin", "target", "fov", "width", "height"),
-                      ("up", "fov_axis"))  # fmt: skip
-        # validate exactly as load_scene does (fov range, resolution, degenerate look-at)
+        # validate exactly as load_scene does (keys, fov range, resolution, degenerate look-at,
+        # a thin lens's aperture and focus)
         S.build_camera(cam)
     film_d = desc.get("film", {}) or {}
     S.expect_keys(film_d, "film", (), ("filter", "stddev", "radius"))
@@ -497,6 +497,10 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
                 look_at_matrix(cam["origin"], cam["target"], cam.get("up", [0.0, 1.0, 0.0])), mi
             ),
         }
+        if "aperture_radius" in cam:  # a thin lens (validated above: both keys)
+            sensor["type"] = "thinlens"
+            sensor["aperture_radius"] = float(cam["aperture_radius"])
+            sensor["focus_distance"] = float(cam["focus_distance"])
     sensor["film"] = film
     sensor["sampler"] = {"type": "independent", "sample_count": 16}
     out: dict = {"type": "scene", "sensor": sensor}
@@ -737,7 +741,7 @@ def scene_to_desc(scene) -> dict:
 
     Example: ``load_scene(scene_to_desc(load_scene(desc)))`` renders like ``desc``.
     """
-    from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera
+    from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera, ThinLensCamera
     from jaxgfx.render.emitters import ConstantEnvironment, DirectionalLight
     from jaxgfx.render.film import GaussianFilter, TentFilter
     from jaxgfx.render.geometry import Rectangles, Spheres, TriangleMesh
@@ -746,11 +750,14 @@ def scene_to_desc(scene) -> dict:
     if isinstance(cam, MatrixCamera):
         cam_d = {"view_proj_inverse": _list(cam.view_proj_inverse), "width": int(cam.width),
                  "height": int(cam.height)}  # fmt: skip
-    elif isinstance(cam, PerspectiveCamera):
+    elif isinstance(cam, (PerspectiveCamera, ThinLensCamera)):
         cam_d = {"origin": _list(cam.origin), "target": _list(cam.target), "up": _list(cam.up),
                  "fov": float(cam.fov), "fov_axis": cam.fov_axis, "width": int(cam.width),
                  "height": int(cam.height)}  # fmt: skip
-    else:  # pragma: no cover - a Scene holds one of the two
+        if isinstance(cam, ThinLensCamera):
+            cam_d["aperture_radius"] = float(cam.aperture_radius)
+            cam_d["focus_distance"] = float(cam.focus_distance)
+    else:  # pragma: no cover - a Scene holds one of the three
         raise NotImplementedError(f"camera: {type(cam).__name__} has no Mitsuba 3 mapping")
     desc = {
         "camera": cam_d,

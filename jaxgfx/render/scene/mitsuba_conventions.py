@@ -105,7 +105,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("emitter", "sunsky"): "refused: not in jaxgfx",
     # sensors, films, filters, samplers
     ("sensor", "perspective"): S + " (rigid `to_world`)",
-    ("sensor", "thinlens"): "refused: no depth of field in jaxgfx",
+    ("sensor", "thinlens"): S + " (rigid `to_world`; `aperture_radius` required)",
     ("sensor", "orthographic"): S + " (as a matrix camera)",
     ("sensor", "radiancemeter"): "refused: jaxgfx renders images only",
     ("sensor", "irradiancemeter"): "refused: jaxgfx renders images only",

@@ -20,7 +20,9 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
   local +z with +y up. ``fov_axis`` ``diagonal`` / ``smaller`` / ``larger`` are converted to an
   x- or y-fov; without ``fov``, ``focal_length`` (default ``50mm``) is the diagonal fov of a
   36 x 24 mm film. ``near_clip`` / ``far_clip`` are accepted only when no geometry lies where
-  they would clip camera rays (checked on bounding boxes). ``orthographic``: any invertible
+  they would clip camera rays (checked on bounding boxes). ``thinlens``: the same, plus
+  ``aperture_radius`` (required, >= 0) and ``focus_distance`` (default ``far_clip``, > 0):
+  a :class:`~jaxgfx.render.camera.ThinLensCamera`. ``orthographic``: any invertible
   ``to_world`` (a scale sizes the sensor plane: the film width spans camera x in [-1, 1]),
   loaded as a :class:`~jaxgfx.render.camera.MatrixCamera` whose rays start on the near plane
   (:func:`~jaxgfx.render.scene.mitsuba_conventions.orthographic_view_proj_inverse`).
@@ -1227,9 +1229,9 @@ def _fov_x_or_y(p: _Params, width, height):
 
 def _sensor(obj: _Obj, doc, ctx) -> dict:
     p = _Params(obj, doc)
-    if obj.type not in ("perspective", "orthographic"):
+    if obj.type not in ("perspective", "thinlens", "orthographic"):
         raise ValueError(f"{obj.where}: sensor plugin {obj.type!r} is not supported "
-                         "(perspective, orthographic)")  # fmt: skip
+                         "(perspective, thinlens, orthographic)")  # fmt: skip
     films = [c for c in obj.children if c.tag == "film"]
     samplers = [c for c in obj.children if c.tag == "sampler"]
     for c in obj.children:
@@ -1295,9 +1297,13 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
         raise p.err("to_world", "the camera's to_world must be a rotation and translation "
                                 "(no scale, shear or mirroring)")  # fmt: skip
     near, far = _clip_planes(p)
-    for name in ("principal_point_offset_x", "principal_point_offset_y"):
-        if p.float(name, 0.0) != 0.0:
-            raise p.err(name, "an off-centre principal point is not supported")
+    lens = None
+    if obj.type == "thinlens":  # Mitsuba's thinlens has no principal point offset
+        lens = _thin_lens(p, far)
+    else:
+        for name in ("principal_point_offset_x", "principal_point_offset_y"):
+            if p.float(name, 0.0) != 0.0:
+                raise p.err(name, "an off-centre principal point is not supported")
     if len(films) > 1 or len(samplers) > 1:
         raise ValueError(f"{obj.where}: expected at most one <film> and one <sampler>")
     p.done(children_ok=len(obj.children))
@@ -1306,8 +1312,32 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
            "fov": fov, "fov_axis": axis, "width": width, "height": height}  # fmt: skip
     tx = math.tan(math.radians(fov) / 2)
     tx, ty = (tx, tx * height / width) if axis == "x" else (tx * width / height, tx)
-    ctx["clip"] = (o, near, far, math.sqrt(1 + tx * tx + ty * ty), obj)
+    # how far from `o` a camera ray may be while in front of the near plane (z < near_clip in
+    # camera space, where Mitsuba clips): near k on a pinhole ray; a lens ray from the lens
+    # point a (|a| <= A) towards the focus point is a (1 - z/f) + z (s_x, s_y) off the axis at
+    # depth z, so at most A max(1, |1 - near/f|) further
+    reach = near * math.sqrt(1 + tx * tx + ty * ty)
+    if lens is not None:
+        cam["aperture_radius"], cam["focus_distance"] = lens
+        reach += lens[0] * max(1.0, abs(1.0 - near / lens[1]))
+    ctx["clip"] = (o, near, far, reach, obj)
     return cam, film, spp
+
+
+def _thin_lens(p: _Params, far):
+    """``(aperture_radius, focus_distance)`` of Mitsuba's ``thinlens`` sensor: the radius is
+    required (as in Mitsuba) and must be >= 0; the focus distance defaults to ``far_clip`` (as
+    in Mitsuba) and must be > 0 (Mitsuba accepts any; jaxgfx refuses what is not a thin lens)."""
+    a = p.float("aperture_radius")
+    if a is None:
+        raise ValueError(f"{p.obj.where}: parameter 'aperture_radius' is required "
+                         "(the lens radius in world units)")  # fmt: skip
+    if not (math.isfinite(a) and a >= 0):
+        raise p.err("aperture_radius", f"expected a finite number >= 0, got {a}")
+    f = p.float("focus_distance", far)
+    if not (math.isfinite(f) and f > 0):
+        raise p.err("focus_distance", f"expected a finite number > 0, got {f}")
+    return a, f
 
 
 def _clip_planes(p: _Params):
@@ -1389,15 +1419,15 @@ def _check_clip(ctx):
         _check_clip_ortho(ctx)
     if "clip" not in ctx:
         return
-    o, near, far, k, sensor = ctx["clip"]
+    o, near, far, reach, sensor = ctx["clip"]
     for bbox, obj in ctx["bboxes"]:
         lo, hi = bbox
         dmin = float(np.linalg.norm(np.maximum(0.0, np.maximum(lo - o, o - hi))))
         dmax = float(np.linalg.norm(np.maximum(np.abs(lo - o), np.abs(hi - o))))
-        if dmin < near * k:
+        if dmin < reach:
             raise ValueError(
                 f"{sensor.where}: near_clip={near}: {obj.where} comes closer than "
-                f"{near * k:.4g} to the camera, where Mitsuba may clip it (jaxgfx does not clip)"
+                f"{reach:.4g} to the camera, where Mitsuba may clip it (jaxgfx does not clip)"
             )
         if dmax > far:
             raise ValueError(

@@ -45,7 +45,7 @@ import jax.numpy as jnp
 
 from jaxgfx._checks import is_concrete
 from jaxgfx.render.bsdf.textured import Textured
-from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera
+from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera, ThinLensCamera
 from jaxgfx.render.emitters import ConstantEnvironment, EnvironmentMap, PointLights
 from jaxgfx.render.parameters import get_path, parameter_paths, revalidate
 
@@ -53,6 +53,8 @@ __all__ = ["Scene", "Parameter", "parameter_names", "is_internal_name", "PARAMET
 
 PARAMETER_BOUNDS = {
     "fov": (0.0, 180.0),
+    "aperture_radius": (0.0, float("inf")),
+    "focus_distance": (0.0, float("inf")),
     "reflectance": (0.0, 1.0),
     "diffuse_reflectance": (0.0, 1.0),
     "specular_reflectance": (0.0, 1.0),
@@ -88,7 +90,6 @@ class Parameter(NamedTuple):
     shape: tuple
     dtype: object
     bounds: tuple
-
 
 
 def is_internal_name(name: str) -> bool:
@@ -173,7 +174,7 @@ class Scene(eqx.Module):
     (tuple of DirectionalLight / SpotLight).
     """
 
-    camera: PerspectiveCamera | MatrixCamera
+    camera: PerspectiveCamera | ThinLensCamera | MatrixCamera
     shapes: tuple
     shape_materials: tuple
     materials: tuple

@@ -16,7 +16,7 @@ import numpy as np
 from jaxgfx._checks import as_float_array, check_choice, check_finite
 from jaxgfx._math import safe_normalize
 from jaxgfx.render.bsdf import rgb_param
-from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera
+from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera, ThinLensCamera
 from jaxgfx.render.geometry import Rectangles, SDFShape, Spheres, TriangleMesh, sdf_from_dict
 from jaxgfx.render.geometry.frame import frame_from_normal
 
@@ -118,16 +118,28 @@ def _build_camera(d, where):
     if "view_proj_inverse" in d:
         expect_keys(d, where, ("view_proj_inverse", "width", "height"))
         return MatrixCamera.from_matrix(d["view_proj_inverse"], d["width"], d["height"])
-    expect_keys(d, where, ("origin", "target", "fov", "width", "height"), ("up", "fov_axis"))
-    return PerspectiveCamera.look_at(
+    lens = ("aperture_radius", "focus_distance")
+    if any(k in d for k in lens):  # a thin lens: both keys (ThinLensCamera)
+        expect_keys(d, where, ("origin", "target", "fov", "width", "height", *lens),
+                    ("up", "fov_axis"))  # fmt: skip
+    else:
+        expect_keys(d, where, ("origin", "target", "fov", "width", "height"), ("up", "fov_axis"))
+    args = (
         vec(d["origin"], f"{where}.origin"),
         vec(d["target"], f"{where}.target"),
         vec(d.get("up", [0.0, 1.0, 0.0]), f"{where}.up"),
         num(d["fov"], f"{where}.fov"),
         d["width"],
         d["height"],
-        fov_axis=d.get("fov_axis", "x"),
     )
+    if "aperture_radius" in d:
+        return ThinLensCamera.look_at(
+            *args,
+            aperture_radius=num(d["aperture_radius"], f"{where}.aperture_radius"),
+            focus_distance=num(d["focus_distance"], f"{where}.focus_distance"),
+            fov_axis=d.get("fov_axis", "x"),
+        )
+    return PerspectiveCamera.look_at(*args, fov_axis=d.get("fov_axis", "x"))
 
 
 def rectangle_from_desc(d, where):
