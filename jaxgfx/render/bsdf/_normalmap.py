@@ -161,18 +161,8 @@ def shadow_terminator(n, w):
     return 2.0 / (1.0 + jnp.sqrt(1.0 + a2 * t2))
 
 
-class PerturbedBSDF(BSDF):
-    """A BSDF evaluated in a perturbed frame (local coordinates, per ray) with Mitsuba 3's
-    light-leak rule, ``flip_invalid_normals`` and ``use_shadowing_function`` (module
-    docstring). Built per hit by :class:`NormalMap` / :class:`BumpMap`: ``normal`` (..., 3,
-    not necessarily unit) and ``s`` (..., 3) the tangent the frame's ``s'`` is projected from;
-    ``normal = None`` (no tangents given, e.g. the albedo AOV) allows only ``albedo``."""
-
-    bsdf: BSDF
-    normal: jnp.ndarray | None
-    s: jnp.ndarray | None
-    flip_invalid_normals: bool = eqx.field(static=True, default=True)
-    use_shadowing_function: bool = eqx.field(static=True, default=True)
+class _ForwardsNested(eqx.Module):
+    """The flags and albedo of the nested ``bsdf`` (a wrapper changes neither)."""
 
     @property
     def has_delta(self):
@@ -185,6 +175,20 @@ class PerturbedBSDF(BSDF):
     @property
     def albedo(self):
         return self.bsdf.albedo
+
+
+class PerturbedBSDF(_ForwardsNested, BSDF):
+    """A BSDF evaluated in a perturbed frame (local coordinates, per ray) with Mitsuba 3's
+    light-leak rule, ``flip_invalid_normals`` and ``use_shadowing_function`` (module
+    docstring). Built per hit by :class:`NormalMap` / :class:`BumpMap`: ``normal`` (..., 3,
+    not necessarily unit) and ``s`` (..., 3) the tangent the frame's ``s'`` is projected from;
+    ``normal = None`` (no tangents given, e.g. the albedo AOV) allows only ``albedo``."""
+
+    bsdf: BSDF
+    normal: jnp.ndarray | None
+    s: jnp.ndarray | None
+    flip_invalid_normals: bool = eqx.field(static=True, default=True)
+    use_shadowing_function: bool = eqx.field(static=True, default=True)
 
     @property
     def frame(self) -> Frame:
@@ -238,22 +242,10 @@ class PerturbedBSDF(BSDF):
         return s._replace(wi=wi, pdf=jnp.where(ok, s.pdf, 0.0), weight=mask3(ok, weight))
 
 
-class _MapBase(eqx.Module):
+class _MapBase(_ForwardsNested):
     needs_tangents: ClassVar[bool] = True
     flip_invalid_normals: bool = eqx.field(static=True, default=True)
     use_shadowing_function: bool = eqx.field(static=True, default=True)
-
-    @property
-    def has_delta(self):
-        return self.bsdf.has_delta
-
-    @property
-    def is_transmissive(self):
-        return self.bsdf.is_transmissive
-
-    @property
-    def albedo(self):
-        return self.bsdf.albedo
 
     def _normal(self, uv, tangents):  # pragma: no cover - interface
         raise NotImplementedError
