@@ -26,7 +26,7 @@ def one(mode: str) -> dict:
     from jaxgfx.render import load_scene, render
 
     if mode == "off":
-        coating._small_alpha_correction = lambda d, eta, ok, table: 0.0
+        coating._small_alpha_correction = lambda d, eta, ok, spline: 0.0
     scene = load_scene(str(ROOT / "configs/scenes/textured.yaml"))
     f = jax.jit(lambda s, k: render(s, k, spp=4, integrator="path", max_depth=4))
     t = time.perf_counter()

@@ -44,6 +44,19 @@ class BSDFSample(NamedTuple):
     eta: jnp.ndarray
 
 
+class WrapsBSDF(eqx.Module):
+    """A module around one nested ``bsdf`` (textured materials, normal / bump maps): its
+    ``has_delta`` and ``is_transmissive`` are the nested BSDF's."""
+
+    @property
+    def has_delta(self):
+        return self.bsdf.has_delta
+
+    @property
+    def is_transmissive(self):
+        return self.bsdf.is_transmissive
+
+
 class BSDF(eqx.Module):
     """Interface every jaxgfx BSDF implements (local frame, normal ``+z``, Mitsuba conventions).
 

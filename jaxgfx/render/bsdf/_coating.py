@@ -231,7 +231,7 @@ def r_int(distribution: MicrofacetDistribution, eta, *, nodes=_NODES_INT, n_mu=N
 
     out = _cond(jnp.all(ok), table, mixed)
     if jnp.ndim(d.alpha_u) == 0 and eta.ndim == 0:
-        out = out + _small_alpha_correction(d, eta, ok, table)
+        out = out + _small_alpha_correction(d, eta, ok, out)
     return out
 
 
@@ -253,13 +253,15 @@ def small_alpha_weight(alpha):
     return t * t * (3.0 - 2.0 * t)
 
 
-def _small_alpha_correction(d, eta, ok, table):
+def _small_alpha_correction(d, eta, ok, spline):
+    """``w(alpha) (q - spline)`` with the difference held constant; ``spline`` is the table's
+    value (where ``ok``, which ``need`` implies)."""
     w = small_alpha_weight(d.alpha_u)
     need = ok & (d.alpha_u < _S_HI**2)
 
     def diff():
         q = r_int_quadrature(d, eta, nodes=_NODES_INT)
-        return jax.lax.stop_gradient(q - table())
+        return jax.lax.stop_gradient(q - spline)
 
     return w * _cond(need, diff, lambda: jnp.zeros((), w.dtype))
 

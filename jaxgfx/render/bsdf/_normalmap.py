@@ -63,6 +63,7 @@ from jaxgfx.color import LUMINANCE_WEIGHTS
 from jaxgfx.render.bsdf._base import (
     BSDF,
     BSDFSample,
+    WrapsBSDF,
     check_scalar,
     float_field,
     mask3,
@@ -161,16 +162,8 @@ def shadow_terminator(n, w):
     return 2.0 / (1.0 + jnp.sqrt(1.0 + a2 * t2))
 
 
-class _ForwardsNested(eqx.Module):
+class _ForwardsNested(WrapsBSDF):
     """The flags and albedo of the nested ``bsdf`` (a wrapper changes neither)."""
-
-    @property
-    def has_delta(self):
-        return self.bsdf.has_delta
-
-    @property
-    def is_transmissive(self):
-        return self.bsdf.is_transmissive
 
     @property
     def albedo(self):

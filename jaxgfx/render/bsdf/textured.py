@@ -33,6 +33,7 @@ import numpy as np
 from jaxgfx import io
 from jaxgfx._checks import as_float_array, check_choice, check_finite
 from jaxgfx.color import LUMINANCE_WEIGHTS
+from jaxgfx.render.bsdf._base import WrapsBSDF
 from jaxgfx.render.bsdf.texture import TEXTURE_FILTERS, TEXTURE_WRAP_MODES, Texture, lookup
 from jaxgfx.render.parameters import get_path, parameter_paths
 
@@ -82,7 +83,7 @@ def texturable_paths(bsdf, name):
         raise ValueError(f"{name}: not a texturable parameter of {type(bsdf).__name__}") from None
 
 
-class Textured(eqx.Module):
+class Textured(WrapsBSDF):
     """A BSDF whose parameters named in ``textures`` (dict ``key -> Bitmap/Checkerboard``) are
     looked up per hit. ``at(uv (..., 2))`` returns the plain BSDF with per-ray fields
     (RGB: ``(..., 3)``, scalar: ``(...)``). Forwards ``has_delta`` / ``is_transmissive``.
@@ -97,14 +98,6 @@ class Textured(eqx.Module):
     def __check_init__(self):
         for k in self.textures:
             texturable_paths(self.bsdf, k)
-
-    @property
-    def has_delta(self):
-        return self.bsdf.has_delta
-
-    @property
-    def is_transmissive(self):
-        return self.bsdf.is_transmissive
 
     def at(self, uv):
         if uv is None:
