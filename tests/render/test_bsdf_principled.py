@@ -427,8 +427,10 @@ def test_make_bsdf_refusals_and_defaults():
     assert isinstance(b, Principled)
     assert float(P.specular_to_eta(b.specular)) == pytest.approx(1.5)  # Mitsuba's default
     assert make_bsdf({"type": "principled", "eta": 1.33, "spec_trans": 0}).specular is None
-    with pytest.raises(ValueError, match="spec_trans: the principled BSDF's transmission lobe"):
-        make_bsdf({"type": "principled", "spec_trans": 0.4})
+    assert make_bsdf({"type": "principled", "spec_trans": 0}).spec_trans is None
+    assert make_bsdf({"type": "principled", "spec_trans": 0.4}).is_transmissive
+    with pytest.raises(ValueError, match=r"spec_trans: expected values in \[0, 1\]"):
+        make_bsdf({"type": "principled", "spec_trans": 1.4})
     with pytest.raises(ValueError, match="either 'specular' or 'eta'"):
         make_bsdf({"type": "principled", "specular": 0.3, "eta": 1.4})
     with pytest.raises(ValueError, match=r"metallic: expected values in \[0, 1\]"):
@@ -465,7 +467,7 @@ def test_yaml_scene_and_textured_base_color(tmp_path):
     at = m.at(jnp.array([[0.25, 0.25], [0.75, 0.25]]))
     np.testing.assert_allclose(np.asarray(at.base_color), [[0.9, 0.1, 0.1], [0.2, 0.2, 0.2]])
     with pytest.raises(ValueError, match=r"materials\.m.*spec_trans"):
-        load_scene(_scene_desc({"type": "principled", "spec_trans": 1.0}))
+        load_scene(_scene_desc({"type": "principled", "spec_trans": -1.0}))
 
 
 def test_dispatch_traces_only_the_scenes_materials(monkeypatch):

@@ -24,6 +24,7 @@ from jaxgfx.render.bsdf._normalmap import TangentSpace as TangentSpace
 from jaxgfx.render.bsdf._phong import Phong as Phong
 from jaxgfx.render.bsdf._plastic import SmoothPlastic as SmoothPlastic
 from jaxgfx.render.bsdf._principled import Principled as Principled
+from jaxgfx.render.bsdf._principledthin import PrincipledThin as PrincipledThin
 from jaxgfx.render.bsdf._roughconductor import RoughConductor as RoughConductor
 from jaxgfx.render.bsdf._roughdielectric import RoughDielectric as RoughDielectric
 from jaxgfx.render.bsdf._roughplastic import RoughPlastic as RoughPlastic
@@ -36,6 +37,7 @@ __all__ = [
     "Mirror",
     "Phong",
     "Principled",
+    "PrincipledThin",
     "RoughConductor",
     "RoughDielectric",
     "SmoothDielectric",
@@ -64,6 +66,7 @@ BSDF_TYPES = {
     "thindielectric": ThinDielectric,
     "blendbsdf": BlendBSDF,
     "principled": Principled,
+    "principledthin": PrincipledThin,
     "normalmap": NormalMap,
     "bumpmap": BumpMap,
 }

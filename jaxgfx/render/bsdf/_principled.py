@@ -1,7 +1,7 @@
 """Principled BSDF (Burley 2012 / 2015) as Mitsuba 3's ``principled`` plugin evaluates it:
-the reflection (opaque) lobes — Burley diffuse with retro-reflection and optional fake
-subsurface, sheen, the GGX main specular lobe with the metallic / specular-tint Fresnel blend,
-and the GTR1 clearcoat. ``spec_trans`` (transmission) is refused."""
+Burley diffuse with retro-reflection and optional fake subsurface, sheen, the GGX main
+specular lobe with the metallic / specular-tint Fresnel blend, the GTR1 clearcoat, and (when
+``spec_trans`` is given) the rough dielectric transmission lobe of Burley 2015 on both sides."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ from jaxgfx._math import safe_div, safe_normalize, safe_sqrt, sincos, vdot
 from jaxgfx.render.bsdf._base import (
     BSDF,
     INV_PI,
+    BSDFSample,
     check_rgb,
     glossy_sample,
     mask3,
@@ -35,6 +36,7 @@ __all__ = [
     "gtr1_sample",
     "principled_alphas",
     "specular_to_eta",
+    "optional_weight",
 ]
 
 # mitsuba::luminance of linear sRGB (Rec. 709 Y with Mitsuba's 6-digit constants)
@@ -121,6 +123,20 @@ def _luminance(rgb):
     return rgb[..., 0] * _LUM[0] + rgb[..., 1] * _LUM[1] + rgb[..., 2] * _LUM[2]
 
 
+def optional_weight(x, name):
+    """A lobe weight that Mitsuba switches off when it is absent or a plain number equal to 0
+    (its ``get_flag``): ``None`` then (the lobe is not traced at all), else a float array
+    (an array, even of zeros, keeps the lobe, e.g. to differentiate at 0)."""
+    if x is None or (isinstance(x, (int, float)) and not isinstance(x, bool) and x == 0):
+        return None
+    return as_float_array(x, name)
+
+
+def _sign(x):
+    """+1 where ``x >= 0``, else -1 (drjit's ``mulsign`` convention)."""
+    return jnp.where(x >= 0, 1.0, -1.0).astype(x.dtype)
+
+
 def _check_unit(x, name):
     if is_concrete(x):
         a = np.asarray(x)
@@ -129,15 +145,17 @@ def _check_unit(x, name):
 
 
 class Principled(BSDF):
-    """Burley's principled ("Disney") BSDF, reflection lobes, as Mitsuba 3's ``principled``.
+    """Burley's principled ("Disney") BSDF as Mitsuba 3's ``principled``.
 
     Parameters (Mitsuba's names and defaults; scalars or batch-shaped ``(...)``, ``base_color``
     RGB): ``base_color`` 0.5, ``roughness`` 0.5, ``metallic`` 0, ``specular`` 0.5 (or ``eta``,
     not both: ``specular = ((η-1)/(η+1))² / 0.08``), ``spec_tint`` 0, ``anisotropic`` 0,
     ``sheen`` 0, ``sheen_tint`` 0, ``flatness`` 0, ``clearcoat`` 0, ``clearcoat_gloss`` 0; static
     sampling rates ``diffuse_reflectance_sampling_rate``, ``main_specular_sampling_rate``,
-    ``clearcoat_sampling_rate`` (all 1, Mitsuba's code defaults). ``spec_trans`` must be 0
-    (``ValueError`` otherwise: the transmission lobe is not implemented).
+    ``clearcoat_sampling_rate`` (all 1, Mitsuba's code defaults); ``spec_trans`` (in [0, 1]):
+    absent or a plain number 0 -> no transmission lobe (``None``: nothing of it is traced, the
+    BSDF is reflection-only and ``is_transmissive`` is False); an array, even of zeros, keeps
+    the lobe (Mitsuba's ``get_flag``).
 
     With ``h = normalize(wo + wi)``, ``c_o, c_i`` the cosines, ``c_d = h·wi``, ``F_o = w(c_i)``,
     ``F_i = w(c_o)`` (``w(c) = (1 - c)^5``), ``eval = f c_i`` with ``f`` the sum of
@@ -160,8 +178,26 @@ class Principled(BSDF):
 
     Sampling (Mitsuba 3): lobe probabilities ∝ ``(1 - metallic) r_d`` (cosine),
     ``clearcoat/4 · r_cc`` (GTR1 ``D cos θ_m``, reflected) and ``r_s`` (GGX visible normals,
-    reflected); ``pdf`` is the mixture, ``weight = eval / pdf``. Only the front side
-    (``cos θ_o > 0``) reflects; jaxgfx shades reflection-only BSDFs two-sided.
+    reflected); ``pdf`` is the mixture, ``weight = eval / pdf``. Without ``spec_trans`` only
+    the front side (``cos θ_o > 0``) reflects; jaxgfx shades reflection-only BSDFs two-sided.
+
+    Transmission (``spec_trans`` given; Burley 2015 §4, Mitsuba's form): with
+    ``b = (1 - metallic) spec_trans`` the diffuse lobe's weight becomes
+    ``(1 - metallic)(1 - spec_trans)`` and, with ``η' = η`` seen from outside (``1/η`` from
+    inside), the generalised half vector ``h = ±normalize(wo + η' wi)`` (``+z`` side) and
+    ``F = F_diel(wo·h, η)``,
+
+    * refraction (both sides): ``sqrt(base) b (1 - F) D G |wo·h||wi·h| / (|c_o| (wo·h +
+      η' wi·h)²)`` (Walter et al. 2007 with the radiance scaling ``1/η'²``);
+    * back side (``c_o < 0``) reflection: ``b F D G / (4 |c_o|)`` (no tint, metal, diffuse,
+      sheen or clearcoat inside);
+    * front side: the reflection lobes above unchanged.
+
+    Sampling probabilities: front ``p_d, p_cc`` as above, main specular ``r_s`` split into
+    reflection ``r_s (1 - b (1 - F))`` and refraction ``r_s b (1 - F)``; back side reflection
+    ``F``, refraction ``1 - F`` (``F`` at the sampled microfacet). With ``spec_trans``, an
+    ``eta`` of exactly 1 is read as 1.001 and a ``specular`` of exactly 0 as 1e-3, as Mitsuba
+    (an index-matched rough interface has no finite lobe).
 
     Example: base 1, roughness 0.5, specular 0 at ``wo = wi = +z``: ``f_d = 1``,
     ``R_r = 1``, ``f_r = 0`` -> ``eval = 1/π``.
@@ -179,6 +215,7 @@ class Principled(BSDF):
     flatness: jnp.ndarray
     clearcoat: jnp.ndarray
     clearcoat_gloss: jnp.ndarray
+    spec_trans: jnp.ndarray | None
     diffuse_reflectance_sampling_rate: float = eqx.field(static=True, default=1.0)
     main_specular_sampling_rate: float = eqx.field(static=True, default=1.0)
     clearcoat_sampling_rate: float = eqx.field(static=True, default=1.0)
@@ -203,16 +240,6 @@ class Principled(BSDF):
         main_specular_sampling_rate=1.0,
         clearcoat_sampling_rate=1.0,
     ):
-        st = (
-            spec_trans
-            if isinstance(spec_trans, (int, float))
-            else as_float_array(spec_trans, "spec_trans")
-        )
-        if not is_concrete(st) or np.any(np.asarray(st) != 0):
-            raise ValueError(
-                "spec_trans: the principled BSDF's transmission lobe is not implemented in "
-                "jaxgfx (reflection lobes only); expected spec_trans = 0"
-            )
         if specular is not None and eta is not None:
             raise ValueError("specular: give either 'specular' or 'eta', not both (Mitsuba)")
         self.base_color = to_rgb(base_color, "base_color")
@@ -230,6 +257,7 @@ class Principled(BSDF):
         self.flatness = as_float_array(flatness, "flatness")
         self.clearcoat = as_float_array(clearcoat, "clearcoat")
         self.clearcoat_gloss = as_float_array(clearcoat_gloss, "clearcoat_gloss")
+        self.spec_trans = optional_weight(spec_trans, "spec_trans")
         rates = {
             "diffuse_reflectance_sampling_rate": diffuse_reflectance_sampling_rate,
             "main_specular_sampling_rate": main_specular_sampling_rate,
@@ -249,6 +277,8 @@ class Principled(BSDF):
         check_rgb(self.base_color, "base_color")
         for name in _UNIT:
             _check_unit(getattr(self, name), name)
+        if self.spec_trans is not None:
+            _check_unit(self.spec_trans, "spec_trans")
         for name in _NONNEG:
             check_nonnegative(getattr(self, name), name)
         if self.eta is not None:
@@ -267,9 +297,18 @@ class Principled(BSDF):
     def albedo(self):
         return self.base_color
 
+    @property
+    def is_transmissive(self):
+        return self.spec_trans is not None
+
     # ------------------------------------------------------------------ pieces
     def _eta(self):
-        return self.eta if self.eta is not None else specular_to_eta(self.specular)
+        if self.spec_trans is None:
+            return self.eta if self.eta is not None else specular_to_eta(self.specular)
+        # Mitsuba: an index-matched interface is not plausible for transmission
+        if self.eta is not None:
+            return jnp.where(self.eta == 1.0, 1.001, self.eta)
+        return specular_to_eta(jnp.where(self.specular == 0.0, 1e-3, self.specular))
 
     def _distribution(self):
         au, av = principled_alphas(self.roughness, self.anisotropic)
@@ -277,11 +316,17 @@ class Principled(BSDF):
 
     def _probs(self):
         """Normalised lobe probabilities ``(p_diffuse, p_clearcoat, p_specular)`` (front side)."""
-        pd = (1.0 - self.metallic) * self.diffuse_reflectance_sampling_rate
+        pd = self._brdf_weight() * self.diffuse_reflectance_sampling_rate
         pc = 0.25 * self.clearcoat * self.clearcoat_sampling_rate
         ps = self.main_specular_sampling_rate
         tot = pd + pc + ps
         return pd / tot, pc / tot, ps / tot
+
+    def _brdf_weight(self):
+        """Weight of the diffuse lobe: ``(1 - metallic)(1 - spec_trans)``."""
+        if self.spec_trans is None:
+            return 1.0 - self.metallic
+        return (1.0 - self.metallic) * (1.0 - self.spec_trans)
 
     def _eval(self, wo, wi, dist, eta):
         co, ci = wo[..., 2], wi[..., 2]
@@ -320,7 +365,7 @@ class Principled(BSDF):
         fss90 = 0.5 * rr
         fss = (1.0 + (fss90 - 1.0) * fo) * (1.0 + (fss90 - 1.0) * fi)
         f_ss = 1.25 * (fss * (safe_div(1.0, co + ci) - 0.5) + 0.5)
-        diff = (1.0 - m) * ci * INV_PI * (f_d + f_r + self.flatness * (f_ss - f_d - f_r))
+        diff = self._brdf_weight() * ci * INV_PI * (f_d + f_r + self.flatness * (f_ss - f_d - f_r))
         # sheen (no 1/pi)
         c_sheen = 1.0 + self.sheen_tint[..., None] * (c_tint - 1.0)
         sh = self.sheen * (1.0 - m) * schlick_weight(cos_d) * ci
@@ -339,17 +384,117 @@ class Principled(BSDF):
         p = ps * p_spec + pd * ci * INV_PI + pc * p_cc
         return jnp.where(valid, p, 0.0)
 
+    # ------------------------------------------------------------------ transmission
+    def _half_st(self, wo, wi, eta):
+        """Generalised half vector (``+z`` side) of the pair and what the lobes test:
+        ``(h, refl, eta_path, dot_oh, dot_ih, mac_r, mac_t)`` with ``mac_*`` Mitsuba's
+        macro/micro-surface side checks for reflection and refraction."""
+        co, ci = wo[..., 2], wi[..., 2]
+        refl = co * ci > 0
+        eta_path = jnp.where(co > 0, eta, 1.0 / eta)
+        h = safe_normalize(wo + wi * jnp.where(refl, 1.0, eta_path)[..., None])
+        h = h * _sign(h[..., 2])[..., None]
+        dot_oh, dot_ih = vdot(wo, h), vdot(wi, h)
+        s = _sign(co)
+        side_o = (co != 0) & (dot_oh * s > 0)
+        mac_r = side_o & refl & (dot_ih * s > 0)
+        mac_t = side_o & (co * ci < 0) & (dot_ih * s < 0)
+        return h, refl, eta_path, dot_oh, dot_ih, mac_r, mac_t
+
+    def _eval_st(self, wo, wi, dist, eta):
+        """``eval`` with the transmission lobe (both sides)."""
+        co = wo[..., 2]
+        val = self._eval(wo, wi, dist, eta)  # front side reflection lobes
+        h, _, eta_path, dot_oh, dot_ih, mac_r, mac_t = self._half_st(wo, wi, eta)
+        b = (1.0 - self.metallic) * self.spec_trans
+        F = fresnel_dielectric(dot_oh, eta).r
+        dg = dist.eval(h) * dist.G(wo, wi, h)
+        aco = jnp.abs(co)
+        back = mac_r & (co < 0) & (F > 0)
+        f_r = safe_div(b * F * dg, 4.0 * aco)
+        denom = dot_oh + eta_path * dot_ih
+        trans = mac_t & (F < 1) & (b > 0)
+        f_t = safe_div(b * (1.0 - F) * dg * jnp.abs(dot_oh * dot_ih), aco * denom * denom)
+        val = val + mask3(back, f_r[..., None]) + mask3(trans, f_t[..., None] * safe_sqrt(
+            self.base_color))  # fmt: skip
+        return val
+
+    def _pdf_st(self, wo, wi, dist, eta):
+        co, ci = wo[..., 2], wi[..., 2]
+        front = co > 0
+        h, refl, eta_path, dot_oh, dot_ih, mac_r, mac_t = self._half_st(wo, wi, eta)
+        pd, pc, ps = self._probs()
+        b = (1.0 - self.metallic) * self.spec_trans
+        F = fresnel_dielectric(dot_oh, eta).r
+        p_r = jnp.where(front, ps * (1.0 - b * (1.0 - F)), F)
+        p_t = jnp.where(front, ps * b * (1.0 - F), 1.0 - F)
+        wo_up = wo * _sign(co)[..., None]
+        p_m = dist.pdf(wo_up, h)
+        denom = dot_oh + eta_path * dot_ih
+        jac = jnp.where(refl, safe_div(1.0, 4.0 * jnp.abs(dot_ih)),
+                        safe_div(eta_path * eta_path * jnp.abs(dot_ih), denom * denom))  # fmt: skip
+        p_cc = gtr1_eval(h, _gtr1_alpha(self.clearcoat_gloss)) * h[..., 2] * jac
+        p_front = pd * jnp.maximum(ci, 0.0) * INV_PI + jnp.where(mac_r, pc * p_cc, 0.0)
+        p = jnp.where(mac_r, p_r * p_m * jac, 0.0) + jnp.where(mac_t, p_t * p_m * jac, 0.0)
+        p = p + jnp.where(front & refl, p_front, 0.0)
+        return jnp.where(co != 0, p, 0.0)
+
+    def _sample_st(self, wo, u1, u2, shape):
+        co = wo[..., 2]
+        front = co > 0
+        s = _sign(co)
+        dist, eta = self._distribution(), self._eta()
+        wo_up = jnp.where((co != 0)[..., None], wo * s[..., None],
+                          jnp.array([0.0, 0.0, 1.0], wo.dtype))  # fmt: skip
+        m_spec, _ = dist.sample(wo_up, u2)
+        fr = fresnel_dielectric(vdot(wo, m_spec), eta)
+        m_cc = gtr1_sample(u2, _gtr1_alpha(self.clearcoat_gloss))
+        pd, pc, ps = self._probs()
+        b = (1.0 - self.metallic) * self.spec_trans
+        pd, pc = jnp.where(front, pd, 0.0), jnp.where(front, pc, 0.0)
+        p_t = jnp.where(front, ps * b * (1.0 - fr.r), 1.0 - fr.r)
+        pick_d = u1 < pd
+        pick_c = ~pick_d & (u1 < pd + pc)
+        pick_t = ~pick_d & ~pick_c & (u1 < pd + pc + p_t)
+        m = jnp.where(pick_c[..., None], m_cc, m_spec)
+        wi_r = reflect(wo, m)
+        dot_om = vdot(wo, m)
+        wi_t = m * (dot_om * fr.eta_ti + fr.cos_theta_t)[..., None] - wo * fr.eta_ti[..., None]
+        wi = jnp.where(pick_t[..., None], wi_t, wi_r)
+        wi = jnp.where(pick_d[..., None], square_to_cosine_hemisphere(u2), wi)
+        ci = wi[..., 2]
+        ms = m * s[..., None]
+        ok_m = (vdot(wo, ms) > 0) & jnp.where(pick_t, vdot(wi, ms) < 0, vdot(wi, ms) > 0)
+        ok = (co != 0) & jnp.where(pick_t, co * ci < 0, co * ci > 0) & (pick_d | ok_m)
+        ok = ok & (front | (b > 0))  # inside, only the transmission lobe scatters
+        pdf = self._pdf_st(wo, wi, dist, eta)
+        ok = ok & (pdf > 0)
+        weight = self._eval_st(wo, wi, dist, eta) / jnp.where(ok, pdf, 1.0)[..., None]
+        return BSDFSample(
+            wi=wi,
+            pdf=jnp.where(ok, pdf, 0.0),
+            weight=mask3(ok, weight),
+            is_delta=jnp.zeros(shape, bool),
+            eta=jnp.where(ok & pick_t, fr.eta_it, 1.0),
+        )
+
     # ------------------------------------------------------------------ interface
     def eval(self, wo, wi):
         wo, wi = prep_dirs(wo, wi)
+        if self.spec_trans is not None:
+            return self._eval_st(wo, wi, self._distribution(), self._eta())
         return self._eval(wo, wi, self._distribution(), self._eta())
 
     def pdf(self, wo, wi):
         wo, wi = prep_dirs(wo, wi)
+        if self.spec_trans is not None:
+            return self._pdf_st(wo, wi, self._distribution(), self._eta())
         return self._pdf(wo, wi, self._distribution())
 
     def sample(self, wo, u1, u2):
         wo, u1, u2, shape = sample_setup(wo, u1, u2)
+        if self.spec_trans is not None:
+            return self._sample_st(wo, u1, u2, shape)
         co = wo[..., 2]
         dist = self._distribution()
         wo_up = jnp.where((co > 0)[..., None], wo, jnp.array([0.0, 0.0, 1.0], wo.dtype))
