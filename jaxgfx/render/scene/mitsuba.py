@@ -130,9 +130,15 @@ def _frame_from_normal(n):
 # materials
 
 
+def _one_sided(bsdf: dict) -> bool:
+    """Mitsuba's plugin is black from behind (ONE_SIDED_BSDFS; a principled with
+    ``spec_trans`` scatters on both sides)."""
+    return bsdf["type"] in ONE_SIDED_BSDFS and "spec_trans" not in bsdf
+
+
 def _twosided(bsdf: dict) -> dict:
-    """``bsdf`` wrapped in ``twosided`` when Mitsuba's plugin is one-sided (ONE_SIDED_BSDFS)."""
-    return {"type": "twosided", "bsdf": bsdf} if bsdf["type"] in ONE_SIDED_BSDFS else bsdf
+    """``bsdf`` wrapped in ``twosided`` when Mitsuba's plugin is one-sided (:func:`_one_sided`)."""
+    return {"type": "twosided", "bsdf": bsdf} if _one_sided(bsdf) else bsdf
 
 
 def _conductor_fresnel(m, where) -> dict:
@@ -250,7 +256,7 @@ def _mitsuba_bsdf(m, where) -> dict:
             "bsdf_0": _twosided(_mitsuba_bsdf(m.bsdf0, f"{where}.bsdf0")),
             "bsdf_1": _twosided(_mitsuba_bsdf(m.bsdf1, f"{where}.bsdf1")),
         }
-    elif kind == "principled":
+    elif kind in ("principled", "principledthin"):
         out = _principled_keys(m, where)
     else:
         raise NotImplementedError(f"{where}.type: {type(m).__name__} has no Mitsuba 3 mapping")
@@ -307,26 +313,49 @@ def _map_material(md, where, base_dir, work_dir) -> dict:
     if kind == "bumpmap":
         out["scale"] = _float(m.scale)
     out.update({k: bool(getattr(m, k)) for k in _MAP_FLAGS})
-    return {"type": "twosided", "bsdf": out} if inner["type"] in ONE_SIDED_BSDFS else out
+    return {"type": "twosided", "bsdf": out} if _one_sided(inner) else out
 
 
 PRINCIPLED_WEIGHTS = ("roughness", "metallic", "spec_tint", "anisotropic", "sheen", "sheen_tint",
                       "flatness", "clearcoat", "clearcoat_gloss")  # fmt: skip
 PRINCIPLED_RATES = ("diffuse_reflectance_sampling_rate", "main_specular_sampling_rate",
                     "clearcoat_sampling_rate")  # fmt: skip
+THIN_WEIGHTS = ("roughness", "eta", "spec_tint", "anisotropic", "sheen", "sheen_tint", "flatness")
+THIN_RATES = (
+    "diffuse_reflectance_sampling_rate",
+    "specular_reflectance_sampling_rate",
+    "specular_transmittance_sampling_rate",
+    "diffuse_transmittance_sampling_rate",
+)
+# lobes present only when given (None: absent)
+PRINCIPLED_OPTIONAL = {"principled": ("spec_trans",),
+                       "principledthin": ("spec_trans", "diff_trans")}  # fmt: skip
+
+
+def _principled_parts(m):
+    """``(kind, weights, rates, optional lobes)`` of a Principled / PrincipledThin."""
+    from jaxgfx.render import bsdf as B
+
+    if isinstance(m, B.PrincipledThin):
+        return "principledthin", THIN_WEIGHTS, THIN_RATES, PRINCIPLED_OPTIONAL["principledthin"]
+    ior = "specular" if m.specular is not None else "eta"
+    return ("principled", (*PRINCIPLED_WEIGHTS, ior), PRINCIPLED_RATES,
+            PRINCIPLED_OPTIONAL["principled"])  # fmt: skip
 
 
 def _principled_keys(m, where) -> dict:
-    """Mitsuba's ``principled`` keys of a :class:`~jaxgfx.render.bsdf.Principled` (same names;
-    ``eta`` or ``specular``, whichever the material holds)."""
-    out = {"type": "principled", "base_color": _rgb(m.base_color)}
+    """Mitsuba's ``principled`` / ``principledthin`` keys of a
+    :class:`~jaxgfx.render.bsdf.Principled` / :class:`~jaxgfx.render.bsdf.PrincipledThin`
+    (same names; ``eta`` or ``specular``, whichever the material holds; ``spec_trans`` /
+    ``diff_trans`` only where the lobe is present)."""
+    kind, weights, rates, optional = _principled_parts(m)
+    out = {"type": kind, "base_color": _rgb(m.base_color)}
     try:
-        out.update({k: _float(getattr(m, k)) for k in PRINCIPLED_WEIGHTS})
-        ior = "specular" if m.specular is not None else "eta"
-        out[ior] = _float(getattr(m, ior))
+        out.update({k: _float(getattr(m, k)) for k in weights})
+        out.update({k: _float(getattr(m, k)) for k in optional if getattr(m, k) is not None})
     except ValueError as e:
         raise ValueError(f"{where}: {e}") from None
-    out.update({k: getattr(m, k) for k in PRINCIPLED_RATES})
+    out.update({k: getattr(m, k) for k in rates})
     return out
 
 
@@ -715,12 +744,12 @@ def _bsdf_desc(m, where) -> dict:
         if kind == "bumpmap":
             out["scale"] = _float(m.scale)
         return {**out, **{k: bool(getattr(m, k)) for k in _MAP_FLAGS}}
-    if isinstance(m, B.Principled):
-        out = {"type": "principled", "base_color": _list(m.base_color)}
-        out.update({k: _list(getattr(m, k)) for k in PRINCIPLED_WEIGHTS})
-        ior = "specular" if m.specular is not None else "eta"
-        out[ior] = _list(getattr(m, ior))
-        return {**out, **{k: getattr(m, k) for k in PRINCIPLED_RATES}}
+    if isinstance(m, (B.Principled, B.PrincipledThin)):
+        kind, weights, rates, optional = _principled_parts(m)
+        out = {"type": kind, "base_color": _list(m.base_color)}
+        out.update({k: _list(getattr(m, k)) for k in weights})
+        out.update({k: _list(getattr(m, k)) for k in optional if getattr(m, k) is not None})
+        return {**out, **{k: getattr(m, k) for k in rates}}
     if isinstance(m, B.SmoothDielectric):
         return {"type": "dielectric", "eta": _list(m.eta),
                 "specular_reflectance": _list(m.specular_reflectance),

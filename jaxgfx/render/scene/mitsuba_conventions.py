@@ -76,8 +76,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("bsdf", "plastic"): S,
     ("bsdf", "roughdielectric"): S + " (isotropic)",
     ("bsdf", "thindielectric"): S,
-    ("bsdf", "principled"): S + " (reflection lobes: `spec_trans`, `anisotropic` refused)",
-    ("bsdf", "principledthin"): "refused: no thin principled BSDF in jaxgfx",
+    ("bsdf", "principled"): S + " (`anisotropic` refused)",
+    ("bsdf", "principledthin"): S + " (`anisotropic` refused)",
     ("bsdf", "mask"): "refused: no opacity masks in jaxgfx",
     ("bsdf", "bumpmap"): S + " (one nested bitmap texture, `scale`; not inside a blendbsdf)",
     ("bsdf", "normalmap"): S + " (texture `normalmap`, one nested BSDF; not inside a blendbsdf)",
@@ -164,14 +164,16 @@ BSDF_TO_MITSUBA = {
     "ThinDielectric": "thindielectric",
     "BlendBSDF": "blendbsdf",
     "Principled": "principled",
+    "PrincipledThin": "principledthin",
 }
 """jaxgfx BSDF class -> Mitsuba plugin (``Phong`` has none)."""
 
 ONE_SIDED_BSDFS = (
     "diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "principled"
 )  # fmt: skip
-"""Mitsuba BSDFs that are black from behind; jaxgfx shades them on both sides, so the writer
-wraps them in ``twosided`` and the loader treats ``twosided`` as a pass-through."""
+"""Mitsuba BSDFs that are black from behind (``principled`` only without ``spec_trans``);
+jaxgfx shades them on both sides, so the writer wraps them in ``twosided`` and the loader treats
+``twosided`` as a pass-through."""
 
 DEFAULTS = {
     "diffuse.reflectance": 0.5,
@@ -186,6 +188,7 @@ DEFAULTS = {
     "principled.base_color": 0.5,
     "principled.roughness": 0.5,
     "principled.specular": 0.5,
+    "principledthin.eta": 1.5,
     "conductor.material": "none",
     "blendbsdf.weight": 0.5,
     "spot.cutoff_angle": 20.0,

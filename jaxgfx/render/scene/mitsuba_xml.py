@@ -714,8 +714,9 @@ def _conductor(p: _Params) -> dict:
 
 def _principled(p: _Params) -> dict:
     """``principled``: Mitsuba's parameter names and defaults (jaxgfx's are the same); every
-    weight may be a texture. ``spec_trans`` != 0 (transmission) and ``anisotropic`` != 0 (the
-    tangent frames of jaxgfx and Mitsuba differ) are refused, as both ``specular`` and ``eta``."""
+    weight may be a texture; ``spec_trans`` 0 (or absent) is omitted (no transmission lobe, as
+    Mitsuba). ``anisotropic`` != 0 (the tangent frames of jaxgfx and Mitsuba differ) is refused,
+    as both ``specular`` and ``eta``."""
     d = DEFAULTS
     m = {"type": "principled",
          "base_color": p.color("base_color", [d["principled.base_color"]] * 3, texture=True),
@@ -723,13 +724,10 @@ def _principled(p: _Params) -> dict:
     for k in ("metallic", "spec_tint", "sheen", "sheen_tint", "flatness", "clearcoat",
               "clearcoat_gloss"):  # fmt: skip
         m[k] = p.scalar_or_texture(k, 0.0)
-    for k in ("spec_trans", "anisotropic"):
-        v = p.scalar_or_texture(k, 0.0)
-        if v != 0.0:
-            why = ("the transmission lobe is not implemented" if k == "spec_trans" else
-                   "anisotropy is not supported (the tangent frames of jaxgfx and Mitsuba "
-                   "differ)")  # fmt: skip
-            raise p.err(k, f"{why}; expected 0")
+    _no_anisotropy(p)
+    st = p.scalar_or_texture("spec_trans", 0.0)
+    if st != 0.0:
+        m["spec_trans"] = st
     eta, spec = p.float("eta", positive=True), p.float("specular")
     if eta is not None and spec is not None:
         raise p.err("eta", "give either eta or specular, not both (as Mitsuba)")
@@ -740,6 +738,34 @@ def _principled(p: _Params) -> dict:
     for k in ("diffuse_reflectance_sampling_rate", "main_specular_sampling_rate",
               "clearcoat_sampling_rate"):  # fmt: skip
         m[k] = p.float(k, 1.0)
+    return m
+
+
+def _no_anisotropy(p: _Params) -> None:
+    if p.scalar_or_texture("anisotropic", 0.0) != 0.0:
+        raise p.err("anisotropic", "anisotropy is not supported (the tangent frames of jaxgfx "
+                                   "and Mitsuba differ); expected 0")  # fmt: skip
+
+
+def _principledthin(p: _Params) -> dict:
+    """``principledthin``: Mitsuba's names and defaults (jaxgfx's are the same); weights and
+    ``eta`` may be textures; ``spec_trans`` / ``diff_trans`` 0 (or absent) are omitted;
+    ``anisotropic`` != 0 refused as for ``principled``."""
+    d = DEFAULTS
+    m = {"type": "principledthin",
+         "base_color": p.color("base_color", [d["principled.base_color"]] * 3, texture=True),
+         "roughness": p.scalar_or_texture("roughness", d["principled.roughness"]),
+         "eta": p.scalar_or_texture("eta", d["principledthin.eta"])}  # fmt: skip
+    for k in ("spec_tint", "sheen", "sheen_tint", "flatness"):
+        m[k] = p.scalar_or_texture(k, 0.0)
+    _no_anisotropy(p)
+    for k in ("spec_trans", "diff_trans"):
+        v = p.scalar_or_texture(k, 0.0)
+        if v != 0.0:
+            m[k] = v
+    for k in ("diffuse_reflectance", "specular_reflectance", "specular_transmittance",
+              "diffuse_transmittance"):  # fmt: skip
+        m[f"{k}_sampling_rate"] = p.float(f"{k}_sampling_rate", 1.0)
     return m
 
 
@@ -824,6 +850,8 @@ def _bsdf_dict(obj: _Obj, doc, *, nested=False) -> dict:
              "bsdf1": _bsdf_dict(kids[1], doc, nested=True)}  # fmt: skip
     elif t == "principled":
         m = _principled(p)
+    elif t == "principledthin":
+        m = _principledthin(p)
     elif t in ("normalmap", "bumpmap"):
         if nested:
             raise ValueError(f"{obj.where}: a {t} nested in a blendbsdf is not supported")
