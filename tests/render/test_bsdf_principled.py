@@ -1,4 +1,4 @@
-"""Principled BSDF (Burley 2012/2015 as Mitsuba 3's ``principled``; reflection lobes): eval
+"""Principled BSDF (Burley 2012/2015 as Mitsuba 3's ``principled``; no spec_trans): eval
 against a NumPy transcription of Mitsuba's ``principled.cpp`` and against closed forms (Burley
 diffuse, Lambert, the rough conductor it reduces to), chi² of the sampler, furnace, reciprocity,
 FD gradients, hard cases, loading and dispatch. Against Mitsuba 3 itself:

@@ -54,6 +54,8 @@ THIN = dict(base_color=[0.7, 0.3, 0.1], roughness=0.35, spec_tint=0.3, spec_tran
 # ------------------------------------------------------------------ closed forms
 
 
+# slow: ~5.3 s on the loaded 2-core box (compiles eval/pdf of two BSDFs in float64)
+@pytest.mark.slow
 @pytest.mark.parametrize("eta", [1.5, 1 / 1.3])
 def test_spec_trans_one_is_the_rough_dielectric(x64, eta):
     """base 1, metallic 0, spec_trans 1: eval and pdf equal ``RoughDielectric(α = r², η)`` on
@@ -166,11 +168,12 @@ def test_thin_diffuse_transmission_is_lambertian():
 # ------------------------------------------------------------------ reciprocity
 
 
-# slow: ~6 s on the loaded 2-core box (compiles eval of both BSDFs)
+# slow: 2.4-7.8 s on the loaded 2-core box (compiles eval of both BSDFs in float64)
 @pytest.mark.slow
 def test_reciprocity(x64):
     """Principled with spec_trans: reflection is reciprocal; refraction in radiance units obeys
-    ``f(wo, wi) η'(wo)² = f(wi, wo)`` (Veach 1997 §5.2). Thin: reciprocal everywhere."""
+    ``f(wo, wi) η'(wo)² = f(wi, wo)`` (Veach 1997 §5.2). Thin: reflection and diffuse
+    transmission are reciprocal."""
     wo, wi = _sphere_dirs(400, 8), _sphere_dirs(400, 9)
     co, ci = np.abs(wo[:, 2:]), np.abs(wi[:, 2:])
     eta = 2 / (1 - math.sqrt(0.08 * FULL["specular"])) - 1
@@ -182,10 +185,13 @@ def test_reciprocity(x64):
     np.testing.assert_allclose(f1[~refr], f2[~refr], rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose((f1 * eta_o**2)[refr], f2[refr], rtol=1e-9, atol=1e-12)
     assert np.sum(f1[refr][:, 0] > 1e-3) > 20
-    t = PrincipledThin(**THIN)
-    g1 = np.asarray(_ev(t, jnp.asarray(wo), jnp.asarray(wi))[0]) / ci
-    g2 = np.asarray(_ev(t, jnp.asarray(wi), jnp.asarray(wo))[0]) / co
-    np.testing.assert_allclose(g1, g2, rtol=1e-9, atol=1e-12)
+    # thin: reflection everywhere; transmission without the specular lobe, whose side test
+    # (Mitsuba's, on the unmirrored wi) is not symmetric in wo and wi
+    for desc, pairs in ((THIN, ~refr), (dict(THIN, spec_trans=0.0), refr | ~refr)):
+        t = PrincipledThin(**desc)
+        g1 = np.asarray(_ev(t, jnp.asarray(wo), jnp.asarray(wi))[0]) / ci
+        g2 = np.asarray(_ev(t, jnp.asarray(wi), jnp.asarray(wo))[0]) / co
+        np.testing.assert_allclose(g1[pairs], g2[pairs], rtol=1e-9, atol=1e-12)
 
 
 # ------------------------------------------------------------------ sampling
@@ -340,7 +346,7 @@ def _thin_fn(base, r, st, eta, dt, flat):
 @pytest.mark.slow
 def test_grads_vs_fd(x64, fn, args, names):
     """d(eval, pdf, sample weight) / d(each parameter) against central differences (float64,
-    jitted, a random direction per parameter; measured max relative difference 2e-8)."""
+    jitted, a random direction per parameter; measured max relative difference 3.4e-9)."""
     for name, (ad, fd) in zip(names.split(), _ad_fd(fn, args), strict=True):
         assert abs(fd) > 1e-3, name  # the parameter matters
         assert ad == pytest.approx(fd, rel=1e-6), name
