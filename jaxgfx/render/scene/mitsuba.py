@@ -340,7 +340,7 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
     if not isinstance(d, Mapping) or "type" not in d:
         raise ValueError(f"{where}: expected a mapping with a 'type' key")
     kind = check_choice(d["type"], f"{where}.type", S.SHAPE_TYPES)
-    common = ("type", "material")
+    common = ("type", "material", "id")
     if kind == "sdf":
         raise NotImplementedError(f"{where}.type: SDF shapes have no Mitsuba 3 counterpart")
     if kind == "sphere":
@@ -544,11 +544,39 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
         raise ValueError("shapes: expected a list")
     if not shapes:
         raise ValueError("shapes: the scene has no geometry")
+    given = set()  # the descriptions' ids: unnamed objects' keys avoid them
+    for d in [*shapes, *(desc.get("emitters", []) or [])]:
+        if isinstance(d, Mapping):
+            given |= {d.get("id"), (d.get("shape") or {}).get("id") if d.get("type") == "area"
+                      and isinstance(d.get("shape"), Mapping) else None}  # fmt: skip
+
+    def key(d, where, fallback):
+        """The object's Mitsuba id: its description's ``id`` (Mitsuba's ids are global: one
+        that is also a material's or another object's is refused), else ``fallback`` (made
+        unique: ``_`` appended while a description's id or a material has it)."""
+        ident = d.get("id") if isinstance(d, Mapping) else None
+        if ident is None:
+            if fallback is None:
+                return None
+            while fallback in given or fallback in out:
+                fallback += "_"
+            return fallback
+        from jaxgfx.render.scene.scene import id_problem
+
+        problem = id_problem(ident)
+        if problem:
+            raise ValueError(f"{where}.id: {problem}")
+        if ident in out or ident in ("type", "integrator"):
+            raise ValueError(f"{where}.id: {ident!r} is also the id of another Mitsuba "
+                             "object (a material, shape or emitter: Mitsuba's ids are "
+                             "global)")  # fmt: skip
+        return ident
+
     for i, sd in enumerate(shapes):
         where = f"shapes[{i}]"
         sh = _shape(sd, where, base_dir, work_dir, mi)
         sh["bsdf"] = material_of(sd, where, default, sd["type"])
-        out[f"shape_{i}"] = sh
+        out[key(sd, where, f"shape_{i}")] = sh
 
     # -- emitters
     em = desc.get("emitters", []) or []
@@ -561,16 +589,21 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
             raise ValueError(f"{where}: expected a mapping with a 'type' key")
         kind = check_choice(ed["type"], f"{where}.type", S.EMITTER_TYPES)
         if kind == "area":
-            S.expect_keys(ed, where, ("type", "shape", "radiance"), ("material",))
+            S.expect_keys(ed, where, ("type", "shape", "radiance"), ("material", "id"))
             if isinstance(ed["shape"], Mapping) and "material" in ed["shape"]:
                 raise ValueError(f"{where}.shape.material: put 'material' on the emitter")
             sh = _shape(ed["shape"], f"{where}.shape", base_dir, work_dir, mi)
             sh["bsdf"] = material_of(ed, where, black, ed["shape"]["type"])
             sh["emitter"] = {"type": "area", "radiance": _rgb(S.rgb(ed["radiance"], where))}
-            out[f"emitter_{i}"] = sh
+            # the shape (the top-level object) by its id, else by the emitter's
+            shape_key = ed["shape"].get("id") if isinstance(ed["shape"], Mapping) else None
+            top = key(ed["shape"] if shape_key else ed, where, f"emitter_{i}")
+            if refs and ed.get("id") not in (None, top):  # the nested <emitter id=...> (XML)
+                sh["emitter"]["id"] = key(ed, where, None)
+            out[top] = sh
         elif kind == "point":
-            S.expect_keys(ed, where, ("type", "position", "intensity"))
-            out[f"emitter_{i}"] = {
+            S.expect_keys(ed, where, ("type", "position", "intensity"), ("id",))
+            out[key(ed, where, f"emitter_{i}")] = {
                 "type": "point",
                 "position": np.asarray(S.vec(ed["position"], f"{where}.position")).tolist(),
                 "intensity": _rgb(S.rgb(ed["intensity"], f"{where}.intensity")),
@@ -580,8 +613,8 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
             if n_env > 1:
                 raise ValueError(f"{where}: only one environment emitter is supported")
             if kind == "constant":
-                S.expect_keys(ed, where, ("type", "radiance"))
-                out[f"emitter_{i}"] = {
+                S.expect_keys(ed, where, ("type", "radiance"), ("id",))
+                out[key(ed, where, f"emitter_{i}")] = {
                     "type": "constant",
                     "radiance": _rgb(S.rgb(ed["radiance"], f"{where}.radiance")),
                 }
@@ -592,9 +625,10 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
                 path = os.path.join(work_dir(), f"envmap_{i}.exr")
                 write_exr(path, envmap_for_mitsuba(img))
                 scale = S.num(ed.get("scale", 1.0), f"{where}.scale")
-                out[f"emitter_{i}"] = {"type": "envmap", "filename": path, "scale": float(scale)}
+                out[key(ed, where, f"emitter_{i}")] = {"type": "envmap", "filename": path,
+                                                      "scale": float(scale)}  # fmt: skip
         else:  # "directional" / "spot" (check_choice above admits only S.EMITTER_TYPES)
-            out[f"emitter_{i}"] = _delta_light(ed, where, mi)
+            out[key(ed, where, f"emitter_{i}")] = _delta_light(ed, where, mi)
     return out
 
 
@@ -606,14 +640,14 @@ def _delta_light(ed, where, mi) -> dict:
 
     try:
         if ed["type"] == "directional":
-            S.expect_keys(ed, where, ("type", "direction", "irradiance"))
+            S.expect_keys(ed, where, ("type", "direction", "irradiance"), ("id",))
             light = DirectionalLight.create(
                 S.rgb(ed["irradiance"], f"{where}.irradiance"),
                 S.vec(ed["direction"], f"{where}.direction"),
             )
         else:
             S.expect_keys(ed, where, ("type", "position", "direction", "intensity"),
-                          ("cutoff_angle", "beam_width"))  # fmt: skip
+                          ("cutoff_angle", "beam_width", "id"))  # fmt: skip
             light = SpotLight.create(
                 S.vec(ed["position"], f"{where}.position"),
                 S.vec(ed["direction"], f"{where}.direction"),
@@ -806,38 +840,61 @@ def scene_to_desc(scene) -> dict:
             raise NotImplementedError(f"{where}: {type(shape).__name__} has no Mitsuba 3 mapping")
         return [(d, names[int(k)]) for d, k in out] if keep else [(d, None) for d, _ in out]
 
-    lit = {a.shape_index: a for a in scene.area_lights}
+    # ids (Scene.object_ids): (kind, index, row) -> id
+    ids = {(k, i, r): ident for ident, k, i, r, _ in getattr(scene, "object_ids", ())}
+
+    def named(d, kind, index, row=None):
+        ident = ids.get((kind, index, row))
+        return {**d, "id": ident} if ident is not None else d
+
+    def rows(shape_descs, i):
+        """Each row of a sphere / rectangle batch by its own id; a mesh (one description per
+        material it uses) by the mesh's id when it is one description."""
+        batch = isinstance(scene.shapes[i], (Spheres, Rectangles))
+        if not batch and len(shape_descs) > 1:
+            return shape_descs
+        return [(named(d, "shape", i, j if batch else None), n)
+                for j, (d, n) in enumerate(shape_descs)]  # fmt: skip
+
+    lit = {a.shape_index: (j, a) for j, a in enumerate(scene.area_lights)}
     for i, (shape, mats) in enumerate(zip(scene.shapes, scene.shape_materials, strict=True)):
         if i in lit:
-            for d, name in one(shape, mats, f"emitters.area.{i}", True):
-                e = {"type": "area", "shape": d, "radiance": _list(lit[i].radiance)}
+            j, light = lit[i]
+            for d, name in rows(one(shape, mats, f"emitters.area.{i}", True), i):
+                e = named({"type": "area", "shape": d, "radiance": _list(light.radiance)},
+                          "area", j)  # fmt: skip
                 if name != "jaxgfx_black":
                     e["material"] = name
                 desc["emitters"].append(e)
             continue
-        for d, name in one(shape, mats, f"shapes.{i}", True):
+        for d, name in rows(one(shape, mats, f"shapes.{i}", True), i):
             d["material"] = name
             desc["shapes"].append(d)
     pl = scene.point_lights
     if pl is not None:
-        for p_, q in zip(np.asarray(pl.positions), np.asarray(pl.intensities), strict=True):
-            desc["emitters"].append({"type": "point", "position": _list(p_), "intensity": _list(q)})
+        for j, (p_, q) in enumerate(
+            zip(np.asarray(pl.positions), np.asarray(pl.intensities), strict=True)
+        ):
+            desc["emitters"].append(named({"type": "point", "position": _list(p_),
+                                           "intensity": _list(q)}, "point", 0, j))  # fmt: skip
     env = scene.environment
     if isinstance(env, ConstantEnvironment):
-        desc["emitters"].append({"type": "constant", "radiance": _list(env.radiance)})
+        desc["emitters"].append(named({"type": "constant", "radiance": _list(env.radiance)},
+                                      "environment", 0))  # fmt: skip
     elif env is not None:
-        desc["emitters"].append({"type": "envmap", "image": np.asarray(env.image, np.float32),
-                                 "scale": float(env.scale)})  # fmt: skip
+        desc["emitters"].append(named({"type": "envmap", "image": np.asarray(env.image, np.float32),
+                                       "scale": float(env.scale)}, "environment", 0))  # fmt: skip
+    counts = {"directional": 0, "spot": 0}
     for e in scene.delta_lights:  # directional and spot lights, in their order
         if isinstance(e, DirectionalLight):
-            desc["emitters"].append({"type": "directional", "direction": _list(e.direction),
-                                     "irradiance": _list(e.irradiance)})  # fmt: skip
+            d = {"type": "directional", "direction": _list(e.direction),
+                 "irradiance": _list(e.irradiance)}  # fmt: skip
         else:
-            desc["emitters"].append({"type": "spot", "position": _list(e.position),
-                                     "direction": _list(e.direction),
-                                     "intensity": _list(e.intensity),
-                                     "cutoff_angle": _list(e.cutoff_angle),
-                                     "beam_width": _list(e.beam_width)})  # fmt: skip
+            d = {"type": "spot", "position": _list(e.position), "direction": _list(e.direction),
+                 "intensity": _list(e.intensity), "cutoff_angle": _list(e.cutoff_angle),
+                 "beam_width": _list(e.beam_width)}  # fmt: skip
+        desc["emitters"].append(named(d, d["type"], counts[d["type"]]))
+        counts[d["type"]] += 1
     used = {d.get("material") for d in desc["shapes"] + desc["emitters"]}
     desc["materials"] = {k: v for k, v in desc["materials"].items() if k in used}
     return desc

@@ -1107,10 +1107,25 @@ def _shape(obj: _Obj, doc, desc, ctx):
             raise ValueError(f"{e.where}: only 'area' emitters can be attached to a shape")
         rad = ep.color("radiance", [1.0] * 3, emission=True)
         ep.done()
-        desc["emitters"].append({"type": "area", "shape": sd, "radiance": rad, "material": mat})
+        ed = {"type": "area", "shape": sd, "radiance": rad, "material": mat}
+        _name_by_id(ed, e.id or obj.id)  # an unnamed area emitter goes by its shape's id
+        _name_by_id(sd, obj.id)
+        desc["emitters"].append(ed)
     else:
         sd["material"] = mat
+        _name_by_id(sd, obj.id)
         desc["shapes"].append(sd)
+
+
+def _name_by_id(d, ident):
+    """Give description ``d`` the XML ``id`` as its name in parameter paths (``shapes.ID``,
+    ``emitters.ID``) when the id can be one (``id_problem``: no ``.``, not a number or an
+    emitter kind); such an object keeps its index name. Duplicate ids are refused by
+    ``_register`` (file and line)."""
+    from jaxgfx.render.scene.scene import id_problem
+
+    if ident and id_problem(ident) is None:
+        d["id"] = ident
 
 
 # ------------------------------------------------------------------------------------------
@@ -1195,6 +1210,7 @@ def _emitter(obj: _Obj, doc, desc):
         raise ValueError(f"{obj.where}: emitter plugin {t!r} is not supported "
                          "(area, point, constant, envmap, directional, spot)")  # fmt: skip
     p.done()
+    _name_by_id(d, obj.id)
     desc["emitters"].append(d)
 
 
@@ -1518,13 +1534,14 @@ def _xml_object(tag, d, indent, name=None, ident=None) -> list[str]:
 
     pad = "    " * indent
     attrs = f" type={_xml_attr(d['type'])}"
+    ident = d.get("id", ident)  # a nested object's own id (an area light's <emitter>)
     if ident is not None:
         attrs += f" id={_xml_attr(ident)}"
     if name is not None:
         attrs += f" name={_xml_attr(name)}"
     body = []
     for k, v in d.items():
-        if k == "type":
+        if k in ("type", "id"):
             continue
         q = "    " * (indent + 1)
         if isinstance(v, dict) and v.get("type") == "rgb":
@@ -1559,7 +1576,7 @@ def _xml_object(tag, d, indent, name=None, ident=None) -> list[str]:
     return [f"{pad}<{tag}{attrs}>", *body, f"{pad}</{tag}>"]
 
 
-def to_xml(mitsuba_dict: dict) -> str:
+def to_xml(mitsuba_dict: dict, *, anonymous=()) -> str:
     """Mitsuba 3 XML text of a ``load_dict`` dictionary as :func:`to_mitsuba_dict` builds it
     (transforms as nested lists, ``mi=None``): each top-level entry becomes an object whose
     ``id`` is its key; ``{"type": "rgb"}`` values become ``<rgb>``, ``{"type": "ref"}``
@@ -1577,7 +1594,7 @@ def to_xml(mitsuba_dict: dict) -> str:
         if key == "type":
             continue
         tag = next(t for (t, ty) in PLUGINS if ty == v["type"])
-        lines += _xml_object(tag, v, 1, ident=key)
+        lines += _xml_object(tag, v, 1, ident=None if key in anonymous else key)
     lines.append("</scene>")
     return "\n".join(lines) + "\n"
 
@@ -1621,6 +1638,11 @@ def save_scene(
         integ = M.mitsuba_integrator(integrator, max_depth=max_depth, rr_depth=rr_depth)
     if isinstance(scene, Scene):
         scene = M.scene_to_desc(scene)
+    elif isinstance(scene, (str, os.PathLike)):
+        from jaxgfx.config import read_yaml
+
+        base_dir = base_dir or os.path.dirname(os.path.abspath(os.fspath(scene)))
+        scene = read_yaml(scene)
     path = os.path.abspath(os.fspath(path))
     if not path.lower().endswith(".xml"):
         raise ValueError(f"path: expected a .xml file name, got {path!r}")
@@ -1637,7 +1659,12 @@ def save_scene(
                     for k, v in x.items()}  # fmt: skip
         return x
 
-    text = to_xml(relative(d))
+    # shapes and emitters without an id in the description are written without one (their
+    # dictionary keys are the exporter's own), so that read_xml names them by index again
+    objs = [*scene["shapes"], *(scene.get("emitters") or [])]
+    named = {x.get("id") for x in objs} | {x["shape"].get("id") for x in objs if "shape" in x}
+    anonymous = {k for k in d if re.fullmatch(r"(shape|emitter)_\d+_*", k) and k not in named}
+    text = to_xml(relative(d), anonymous=anonymous)
     os.makedirs(folder, exist_ok=True)
     with open(path, "w") as f:
         f.write(text)
