@@ -182,7 +182,6 @@ def _dielectric_keys(m):
 
 def _material(md, where, base_dir=None, work_dir=None) -> dict:
     """Mitsuba BSDF dict of one jaxgfx material description (validated by ``make_bsdf``)."""
-    from jaxgfx.render import bsdf as B
 
     if not isinstance(md, Mapping):
         raise ValueError(f"{where}: expected a mapping with a 'type' key")
@@ -190,19 +189,113 @@ def _material(md, where, base_dir=None, work_dir=None) -> dict:
         return _map_material(md, where, base_dir, work_dir)
     if md.get("type") == "phong":
         raise NotImplementedError(f"{where}.type: 'phong' has no Mitsuba 3 counterpart")
-    from jaxgfx.render.bsdf.textured import is_texture_desc
+    return _twosided(_textured_bsdf(md, where, base_dir, work_dir))
 
-    nested = ("bsdf0", "bsdf1") if md.get("type") == "blendbsdf" else ()
-    for k, v in md.items():
-        if k not in nested and is_texture_desc(v):
-            raise NotImplementedError(
-                f"{where}.{k}: textured parameters are not exported to Mitsuba (yet)"
-            )
+
+# Mitsuba's name of a jaxgfx material key that a texture may drive, where they differ
+_MITSUBA_TEXTURE_KEY = {("conductor", "reflectance"): "specular_reflectance",
+                        ("roughconductor", "reflectance"): "specular_reflectance"}  # fmt: skip
+# texturable in jaxgfx, a plain number in Mitsuba 3 (its plugins read these as floats)
+_MITSUBA_FLOAT_ONLY = {("roughplastic", "alpha"): "Mitsuba's roughplastic takes a constant alpha",
+                       ("roughplastic", "eta"): "Mitsuba's IORs are constants",
+                       ("plastic", "eta"): "Mitsuba's IORs are constants",
+                       ("dielectric", "eta"): "Mitsuba's IORs are constants",
+                       ("roughdielectric", "eta"): "Mitsuba's IORs are constants",
+                       ("thindielectric", "eta"): "Mitsuba's IORs are constants",
+                       ("principled", "eta"): "Mitsuba's principled eta is a constant",
+                       ("principled", "specular"): "Mitsuba's principled specular is a "
+                                                   "constant"}  # fmt: skip
+
+
+def _uv_transforms(d, mi):
+    """``d`` with each checkerboard's ``to_uv`` (nested lists) as ``mi.ScalarTransform4f``
+    when ``mi`` is given (``load_dict`` wants transform objects; XML is written from lists)."""
+    if mi is None or not isinstance(d, dict):
+        return d
+    return {k: _transform(v, mi) if k == "to_uv" else _uv_transforms(v, mi) for k, v in d.items()}
+
+
+def _textured_bsdf(md, where, base_dir, work_dir) -> dict:
+    """Mitsuba BSDF dict (not wrapped in ``twosided``) of a material description whose
+    parameters may be textures: validated and built as :func:`load_scene` builds it
+    (``material_from_desc``); each textured key becomes a nested ``bitmap`` / ``checkerboard``
+    texture under Mitsuba's name of the parameter (:func:`_texture_dict`)."""
+    from jaxgfx.render.bsdf.textured import Textured, is_texture_desc
+    from jaxgfx.render.scene.load import material_from_desc
+
     try:
-        m = B.make_bsdf(dict(md))
+        m = material_from_desc(dict(md), where="", base_dir=base_dir)
     except (ValueError, TypeError) as e:
         raise ValueError(f"{where}: {e}") from None
-    return _twosided(_mitsuba_bsdf(m, where))
+    if not isinstance(m, Textured):
+        return _mitsuba_bsdf(m, where)
+    out = _mitsuba_bsdf(m.bsdf, where)
+    for k, tex in m.textures.items():
+        if (out["type"], k) in _MITSUBA_FLOAT_ONLY:
+            raise NotImplementedError(f"{where}.{k}: {_MITSUBA_FLOAT_ONLY[out['type'], k]} "
+                                      "(a texture cannot be exported)")  # fmt: skip
+        mk = _MITSUBA_TEXTURE_KEY.get((out["type"], k), k)
+        if mk not in out:  # pragma: no cover - every texturable key is mapped above
+            raise NotImplementedError(f"{where}.{k}: no Mitsuba parameter takes this texture")
+        td = md[k] if is_texture_desc(md.get(k)) else None
+        out[mk] = _texture_dict(tex, f"{where}.{k}", work_dir, desc=td, base_dir=base_dir)
+    return out
+
+
+def _texture_dict(tex, where, work_dir, *, desc=None, base_dir=None) -> dict:
+    """Mitsuba texture dict of a jaxgfx texture object (``Texture`` / ``Checkerboard``).
+
+    ``checkerboard``: ``color0`` / ``color1`` (RGB, or a float for one channel) and ``to_uv``
+    the uniform scale. ``bitmap``: a file the description names (``desc["file"]``) is
+    referenced by absolute path with its ``raw`` flag; texels (an inline ``image`` or a built
+    texture) are written into ``work_dir`` as an 8-bit sRGB PNG (``raw`` false: Mitsuba and
+    jaxgfx decode it) when that PNG decodes to exactly these texels (a texture read from an
+    8-bit sRGB file), else as a float32 EXR (``raw`` true: linear). ``filter_type`` and
+    ``wrap_mode`` are the texture's."""
+    from jaxgfx.render.bsdf.textured import Checkerboard
+
+    if isinstance(tex, Checkerboard):
+
+        def colour(c):  # noqa: E306
+            c = np.asarray(c, np.float64)
+            return _float(c) if c.size == 1 else _rgb(c)
+
+        s = float(tex.scale)
+        return {"type": "checkerboard", "color0": colour(tex.color0),
+                "color1": colour(tex.color1),
+                "to_uv": np.diag([s, s, 1.0, 1.0]).tolist()}  # fmt: skip
+    out = {"type": "bitmap"}
+    if desc is not None and "file" in desc:
+        path = os.fspath(desc["file"])
+        if not os.path.isabs(path) and base_dir:
+            path = os.path.join(base_dir, path)
+        out.update(filename=os.path.abspath(path), raw=bool(desc.get("raw", False)))
+    else:
+        out.update(_write_texels(np.asarray(tex.image, np.float32), where, work_dir))
+    out.update(filter_type=tex.filter, wrap_mode=tex.wrap)
+    return out
+
+
+def _write_texels(img, where, work_dir) -> dict:
+    """``{filename, raw}`` of ``img`` (linear texels, ``(H, W, C)``) written into ``work_dir``:
+    an 8-bit sRGB PNG when reading it back as jaxgfx and Mitsuba read a non-raw PNG gives
+    exactly ``img``, else a float32 EXR (read as is: ``raw``)."""
+    from jaxgfx.io import write_exr, write_png
+    from jaxgfx.render.bsdf.textured import _read_bitmap
+
+    stem = os.path.join(work_dir(), re.sub(r"[^A-Za-z0-9_]+", "_", where).strip("_"))
+    if img.size and np.all(img >= 0) and np.all(img <= 1):
+        from jaxgfx.color.transfer import linear_to_srgb
+
+        codes = np.round(np.asarray(linear_to_srgb(img), np.float64) * 255).astype(np.uint8)
+        write_png(stem + ".png", codes)
+        back = _read_bitmap(stem + ".png", False, where)
+        back = back[..., None] if back.ndim == 2 else back
+        if back.shape == img.shape and np.array_equal(back, img):
+            return {"filename": stem + ".png", "raw": False}
+        os.remove(stem + ".png")
+    write_exr(stem + ".exr", img)
+    return {"filename": stem + ".exr", "raw": True}
 
 
 def _mitsuba_bsdf(m, where) -> dict:
@@ -269,23 +362,23 @@ def _map_material(md, where, base_dir, work_dir) -> dict:
     ``twosided`` when the nested BSDF is one-sided in Mitsuba (jaxgfx shades both sides)."""
     from jaxgfx.render import bsdf as B
     from jaxgfx.render.bsdf.textured import is_texture_desc, texture_from_dict
+    from jaxgfx.render.scene.load import material_from_desc
 
     kind, key = md["type"], _MAP_KEYS[md["type"]]
     nested = md.get("bsdf")
     if not isinstance(nested, Mapping):
         raise ValueError(f"{where}.bsdf: {kind!r} needs a nested material description")
-    if any(is_texture_desc(v) for v in nested.values()):
-        raise NotImplementedError(f"{where}.bsdf: textured materials are not exported (yet)")
     tex_d = md.get(key)
     try:
         tex = tex_d
         if is_texture_desc(tex_d):
             ch = 3 if kind == "normalmap" else 1
             tex = texture_from_dict(tex_d, f"{where}.{key}", base_dir=base_dir, channels=ch)
-        m = B.make_bsdf({**md, "bsdf": B.make_bsdf(dict(nested)), key: tex})
+        built = material_from_desc(dict(nested), where="bsdf", base_dir=base_dir)
+        m = B.make_bsdf({**md, "bsdf": built, key: tex})
     except (ValueError, TypeError) as e:
         raise ValueError(f"{where}: {e}") from None
-    inner = _mitsuba_bsdf(m.bsdf, f"{where}.bsdf")
+    inner = _textured_bsdf(nested, f"{where}.bsdf", base_dir, work_dir)  # may be textured
     tex = getattr(m, key)
     if is_texture_desc(tex_d) and "file" in tex_d:
         path = os.fspath(tex_d["file"])
@@ -509,7 +602,7 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
     mats_desc = desc.get("materials", {}) or {}
     if not isinstance(mats_desc, Mapping):
         raise ValueError("materials: expected a mapping from names to material descriptions")
-    mats = {str(k): _material(v, f"materials.{k}", base_dir, work_dir)
+    mats = {str(k): _uv_transforms(_material(v, f"materials.{k}", base_dir, work_dir), mi)
             for k, v in mats_desc.items()}  # fmt: skip
     default = _twosided({"type": "diffuse", "reflectance": _rgb(DEFAULTS["diffuse.reflectance"])})
     black = {"type": "diffuse", "reflectance": _rgb(0.0)}
@@ -695,8 +788,20 @@ def _bsdf_desc(m, where) -> dict:
     from jaxgfx.render import bsdf as B
     from jaxgfx.render.bsdf.textured import Textured
 
-    if isinstance(m, Textured):
-        raise NotImplementedError(f"{where}: textured materials are not exported (yet)")
+    if isinstance(m, Textured):  # the plain BSDF's keys, the textured ones as textures
+        from jaxgfx.render.bsdf.textured import Checkerboard
+
+        out = _bsdf_desc(m.bsdf, where)
+        for k, tex in m.textures.items():
+            if isinstance(tex, Checkerboard):
+                out[k] = {"type": "checkerboard", "color0": _list(tex.color0),
+                          "color1": _list(tex.color1), "scale": float(tex.scale)}  # fmt: skip
+            else:
+                out[k] = {"type": "bitmap", "image": np.asarray(tex.image, np.float32),
+                          "wrap": tex.wrap, "filter": tex.filter}  # fmt: skip
+            if k == "alpha":  # the texture sets both alphas
+                out.pop("alpha_v", None)
+        return out
     if isinstance(m, B.Diffuse):
         return {"type": "diffuse", "reflectance": _list(m.reflectance)}
     conductor = {}

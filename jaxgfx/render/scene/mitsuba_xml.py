@@ -1562,9 +1562,9 @@ def _xml_object(tag, d, indent, name=None, ident=None) -> list[str]:
             body.append(f'{q}<float name={_xml_attr(k)} value="{_num(v)}"/>')
         elif isinstance(v, str):
             body.append(f"{q}<string name={_xml_attr(k)} value={_xml_attr(v)}/>")
-        elif k == "to_world":
+        elif k in ("to_world", "to_uv"):
             m = np.asarray(v, np.float64).reshape(-1)
-            body.append(f'{q}<transform name="to_world"><matrix value="'
+            body.append(f'{q}<transform name={_xml_attr(k)}><matrix value="'
                         f'{" ".join(map(_num, m))}"/></transform>')  # fmt: skip
         elif np.shape(v) == (3,):
             tag3 = "vector" if k == "direction" else "point"  # a direction is a <vector>
