@@ -124,6 +124,25 @@ def test_textures_mitsuba_cannot_take_are_refused_naming_the_field():
         to_mitsuba_dict(scene_to_desc(load_scene(desc)))
 
 
+def test_scalar_checkerboards_are_read_and_written_with_mitsubas_eval_1_colours(xml, tmp_path):
+    """Mitsuba's checkerboard gives a scalar parameter (``eval_1``) ``color0`` where its RGB
+    ``eval`` gives ``color1`` (``swap_scalar_checkerboard``): the blend weight's colours are
+    swapped on reading and swapped back on writing; the RGB wall checkerboard is not."""
+    from jaxgfx.render.scene.mitsuba_conventions import swap_scalar_checkerboard
+
+    mats = read_xml(xml).desc["materials"]
+    assert mats["mix"]["weight"]["color0"] == [0.1] * 3
+    assert mats["mix"]["weight"]["color1"] == [0.9] * 3
+    assert mats["wall"]["reflectance"]["color0"] == [0.7, 0.2, 0.1]
+    text = Path(save_scene(load_scene(xml), tmp_path / "saved.xml")).read_text()
+    weight = text.split('name="weight">')[1].split("</texture>")[0].split()
+    assert weight[:6] == ["<rgb", 'name="color0"', 'value="0.9,', "0.9,", '0.9"/>', "<rgb"]
+    wall = text.split('name="reflectance">')[2].split()  # [1]: the floor's bitmap
+    assert wall[:5] == ["<rgb", 'name="color0"', 'value="0.7,', "0.2,", '0.1"/>']
+    bitmap = {"type": "bitmap", "file": "a.png"}
+    assert swap_scalar_checkerboard(bitmap) is bitmap
+
+
 @pytest.fixture(scope="module")
 def mi():
     mitsuba = pytest.importorskip("mitsuba")
@@ -152,11 +171,79 @@ def test_saved_textured_scene_renders_in_mitsuba_like_the_original_xml(mi, xml, 
 
 
 @pytest.mark.mitsuba
-@pytest.mark.slow  # slow: ~70 s on 2 cores (jaxgfx compile of the textured path program)
-@pytest.mark.xfail(strict=True, reason="jaxgfx renders this scene 3.4 % darker than Mitsuba "
-                   "(0.2115 vs 0.2187 red, z ~ 5-10), while Mitsuba renders the saved and the "
-                   "original XML alike: a renderer difference in one of its materials, not the "
-                   "writer's; not yet located (docs/render_scenes.md)")  # fmt: skip
+def test_mitsubas_checkerboard_eval_1_is_the_complement_of_its_eval(mi):
+    """Records Mitsuba 3's behaviour the loader and writer follow: one checkerboard, scalar
+    ``eval_1`` = ``color1`` where the RGB ``eval`` = ``color0`` (and vice versa); jaxgfx's
+    ``Checkerboard`` gives ``eval``'s pattern."""
+    import jax.numpy as jnp
+
+    from jaxgfx.render.bsdf.textured import Checkerboard, texture_eval
+
+    t = mi.load_dict({"type": "checkerboard", "color0": 0.9, "color1": 0.1,
+                      "to_uv": mi.ScalarTransform4f().scale([3, 3, 1])})  # fmt: skip
+    ours = Checkerboard(jnp.array([0.9]), jnp.array([0.1]), 3.0)
+    uv = np.random.default_rng(0).uniform(0, 1, (64, 2))
+    e, e1 = [], []
+    for u in uv:
+        si = mi.SurfaceInteraction3f()
+        si.uv = mi.Point2f(*u)
+        e.append(np.array(t.eval(si))[0])
+        e1.append(t.eval_1(si))
+    want = np.asarray(texture_eval(ours, jnp.asarray(uv)))[:, 0]
+    np.testing.assert_allclose(e, want, rtol=1e-6)
+    np.testing.assert_allclose(e1, 1.0 - want, rtol=1e-6)  # the other colour
+    assert 10 < np.sum(want > 0.5) < 54
+
+
+@pytest.mark.mitsuba
+@pytest.mark.parametrize("mat", ["mix", "metal_checker"])
+def test_scalar_checkerboard_bsdfs_evaluate_like_mitsubas(mi, mat, tmp_path):
+    """The XML's checkerboard blend weight, and a checkerboard roughness on a conductor, as
+    loaded by jaxgfx: ``Textured.at(uv).eval`` equals Mitsuba's ``eval`` of the same XML
+    ``<bsdf>`` at the same uv and random upper-hemisphere directions. GGX (Beckmann differs by
+    0.6 %: Mitsuba's rational fit of Lambda, docs/render_bsdf.md); rtol 1e-3 (float32; measured
+    5e-7 blend, 6e-6 Al). Before the colours were swapped on reading, jaxgfx used the other
+    colour at every uv (blend weights 0.9 / 0.1 exchanged: the scene's 3.4 % difference)."""
+    import jax.numpy as jnp
+
+    from jaxgfx.render.scene.load import material_from_desc
+
+    if mat == "mix":
+        frag = XML.split('<bsdf type="blendbsdf" id="mix">')[1].split("</bsdf></bsdf>")[0]
+        frag = '<bsdf type="blendbsdf">' + frag + "</bsdf></bsdf>"
+        ggx = '<bsdf type="roughconductor"><string name="distribution" value="ggx"/>'
+        frag = frag.replace('<bsdf type="roughconductor">', ggx)
+    else:
+        frag = ('<bsdf type="roughconductor"><string name="material" value="Al"/>'
+                '<string name="distribution" value="ggx"/>'
+                '<texture type="checkerboard" name="alpha"><float name="color0" value="0.05"/>'
+                '<float name="color1" value="0.5"/><transform name="to_uv"><scale value="3"/>'
+                "</transform></texture></bsdf>")  # fmt: skip
+    named = frag.replace("<bsdf ", '<bsdf id="m" ', 1)
+    sensor = XML.split("</film></sensor>")[0] + "</film></sensor>"
+    shape = '<shape type="sphere"><ref id="m"/></shape>'
+    (tmp_path / "b.xml").write_text(sensor + named + shape + "</scene>")
+    ours = material_from_desc(read_xml(str(tmp_path / "b.xml")).desc["materials"]["m"])
+    theirs = mi.load_string(frag.replace("<bsdf ", '<bsdf version="3.0.0" ', 1))
+    rng = np.random.default_rng(1)
+    uv = rng.uniform(0, 1, (200, 2))
+    wo, wi = rng.normal(size=(2, 200, 3))
+    wo[:, 2], wi[:, 2] = np.abs(wo[:, 2]), np.abs(wi[:, 2])  # upper hemisphere
+    wo, wi = (v / np.linalg.norm(v, axis=1, keepdims=True) for v in (wo, wi))
+    fm = []
+    for u, a, c in zip(uv, wo, wi, strict=True):
+        si = mi.SurfaceInteraction3f()
+        si.uv, si.wi = mi.Point2f(*u), mi.Vector3f(a)
+        si.sh_frame = mi.Frame3f(mi.Normal3f(0, 0, 1))
+        fm.append(np.array(theirs.eval(mi.BSDFContext(), si, mi.Vector3f(c))))
+    fm = np.array(fm)
+    f = jax.jit(lambda m, uv, a, c: m.at(uv).eval(a, c))(ours, jnp.asarray(uv), jnp.asarray(wo),
+                                                         jnp.asarray(wi))  # fmt: skip
+    np.testing.assert_allclose(np.asarray(f), fm, rtol=1e-3, atol=1e-6)
+
+
+@pytest.mark.mitsuba
+@pytest.mark.slow  # slow: ~62-68 s on 2 cores (jaxgfx compile of the textured path program)
 def test_saved_textured_scene_renders_in_mitsuba_like_jaxgfx(mi, xml, tmp_path):
     from jaxgfx.render.render import render
 
@@ -167,7 +254,9 @@ def test_saved_textured_scene_renders_in_mitsuba_like_jaxgfx(mi, xml, tmp_path):
     keys = jax.random.split(jax.random.key(11), K)
     f = jax.vmap(lambda k: render(scene, k, spp=SPP, max_depth=3))
     a = np.asarray(f(keys), np.float64)
-    assert_agree(a, b)
+    zc, zb = assert_agree(a, b)
+    print("textured channel means", a.mean((0, 1, 2)), b.mean((0, 1, 2)), "z", zc,
+          "block |z|<4", np.mean(np.abs(zb) < 4))  # fmt: skip
 
 
 def assert_agree(a, b, block=8):

@@ -76,6 +76,7 @@ from jaxgfx.render.scene.mitsuba_conventions import (
     look_at_matrix,
     orthographic_to_world,
     rectangle_to_world,
+    swap_scalar_checkerboard,
 )
 
 __all__ = [
@@ -220,7 +221,7 @@ def _textured_bsdf(md, where, base_dir, work_dir) -> dict:
     parameters may be textures: validated and built as :func:`load_scene` builds it
     (``material_from_desc``); each textured key becomes a nested ``bitmap`` / ``checkerboard``
     texture under Mitsuba's name of the parameter (:func:`_texture_dict`)."""
-    from jaxgfx.render.bsdf.textured import Textured, is_texture_desc
+    from jaxgfx.render.bsdf.textured import Textured, is_texture_desc, texturable_paths
     from jaxgfx.render.scene.load import material_from_desc
 
     try:
@@ -239,6 +240,8 @@ def _textured_bsdf(md, where, base_dir, work_dir) -> dict:
             raise NotImplementedError(f"{where}.{k}: no Mitsuba parameter takes this texture")
         td = md[k] if is_texture_desc(md.get(k)) else None
         out[mk] = _texture_dict(tex, f"{where}.{k}", work_dir, desc=td, base_dir=base_dir)
+        if np.ndim(get_path(m.bsdf, texturable_paths(m.bsdf, k)[0])) == 0:  # Mitsuba's eval_1
+            out[mk] = swap_scalar_checkerboard(out[mk])
     return out
 
 

@@ -73,6 +73,7 @@ from jaxgfx.render.scene.mitsuba_conventions import (
     orthographic_view_proj_inverse,
     plugin_status,
     spectrum_to_rgb,
+    swap_scalar_checkerboard,
 )
 
 __all__ = [
@@ -597,8 +598,8 @@ class _Params:
 
     def scalar_or_texture(self, name, default=None):
         p = self.obj.props.get(name)
-        if p is not None and p.kind == "object":
-            return self.color(name, texture=True)
+        if p is not None and p.kind == "object":  # Mitsuba's eval_1: see the swap's docstring
+            return swap_scalar_checkerboard(self.color(name, texture=True))
         return self.float(name, default)
 
     def ior(self, name, default):
