@@ -978,8 +978,15 @@ def _shape(obj: _Obj, doc, desc, ctx):
     p = _Params(obj, doc)
     m = p.transform("to_world")
     m = np.eye(4) if m is None else m
-    bsdfs = [c for c in obj.children if c.tag == "bsdf"]
-    emitters = [c for c in obj.children if c.tag == "emitter"]
+    # a named nested BSDF / emitter (``<ref name="bsdf" id=...>``, matpreview.xml): Mitsuba
+    # takes a shape's child objects whatever their name
+    named = [q for q in obj.props.values()
+             if q.kind == "object" and q.value.tag in ("bsdf", "emitter")]  # fmt: skip
+    for q in named:
+        q.used = True
+    kids = obj.children + [q.value for q in named]
+    bsdfs = [c for c in kids if c.tag == "bsdf"]
+    emitters = [c for c in kids if c.tag == "emitter"]
     other = [c for c in obj.children if c.tag not in ("bsdf", "emitter")]
     if other:
         c = other[0]
@@ -1095,6 +1102,7 @@ def _shape(obj: _Obj, doc, desc, ctx):
             sd["to_world"] = m.tolist()
         vw = v @ lin.T + m[:3, 3]
         bbox = np.stack([vw.min(0), vw.max(0)])
+        ctx.setdefault("triangles", {})[id(obj)] = vw[np.asarray(f)]  # _check_clip
     else:
         raise ValueError(f"{obj.where}: shape plugin {t!r} is not supported "
                          "(obj, ply, serialized, sphere, rectangle, cube, disk, "
@@ -1431,6 +1439,27 @@ def _integrator(obj: _Obj, doc):
     return "direct", 2, 5
 
 
+def _point_triangles_distance(o, tri) -> float:
+    """Smallest distance from the point ``o`` to the triangles ``tri`` (F, 3, 3)."""
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    n = np.cross(b - a, c - a)
+    nn = np.einsum("ij,ij->i", n, n)
+    ok = nn > 0
+    # the foot of the perpendicular, when inside the triangle (barycentric signs)
+    t = np.where(ok, np.einsum("ij,ij->i", o - a, n) / np.where(ok, nn, 1.0), 0.0)
+    q = o - t[:, None] * n
+    inside = ok.copy()
+    for p0, p1 in ((a, b), (b, c), (c, a)):
+        inside &= np.einsum("ij,ij->i", np.cross(p1 - p0, q - p0), n) >= 0
+    d = np.where(inside, np.abs(t) * np.sqrt(nn), np.inf)
+    for p0, p1 in ((a, b), (b, c), (c, a)):  # else the nearest point of an edge
+        e = p1 - p0
+        ee = np.einsum("ij,ij->i", e, e)
+        s = np.clip(np.einsum("ij,ij->i", o - p0, e) / np.where(ee > 0, ee, 1.0), 0.0, 1.0)
+        d = np.minimum(d, np.linalg.norm(o - (p0 + s[:, None] * e), axis=1))
+    return float(d.min())
+
+
 def _check_clip(ctx):
     if "clip_ortho" in ctx:
         _check_clip_ortho(ctx)
@@ -1441,6 +1470,8 @@ def _check_clip(ctx):
         lo, hi = bbox
         dmin = float(np.linalg.norm(np.maximum(0.0, np.maximum(lo - o, o - hi))))
         dmax = float(np.linalg.norm(np.maximum(np.abs(lo - o), np.abs(hi - o))))
+        if dmin < reach and id(obj) in ctx.get("triangles", {}):  # a mesh: its own distance
+            dmin = _point_triangles_distance(o, ctx["triangles"][id(obj)])
         if dmin < reach:
             raise ValueError(
                 f"{sensor.where}: near_clip={near}: {obj.where} comes closer than "
