@@ -148,6 +148,7 @@ def test_spot_from_xml_on_axis_intensity_and_falloff(tmp_path):
         "intensity": [1.0, 2.0, 3.0],
         "cutoff_angle": 30.0,
         "beam_width": 22.5,
+        "id": "lamp",  # the XML id names the light's parameters (emitters.lamp.*)
     }
     scene = load_scene(p)
     (light,) = scene.delta_lights
@@ -279,15 +280,17 @@ def test_blendbsdf_named_children_are_ordered_by_name_and_weight_can_be_a_textur
     p = write(tmp_path, scene_xml(body))
     m = read_xml(p).desc["materials"]["mix"]
     assert m["bsdf0"]["type"] == "conductor" and m["bsdf1"]["type"] == "diffuse"
-    assert m["weight"] == {"type": "checkerboard", "color0": [0.4] * 3, "color1": [0.2] * 3}
+    # Mitsuba's defaults 0.4 / 0.2, swapped: a scalar parameter reads its checkerboard through
+    # eval_1, the other pattern (swap_scalar_checkerboard)
+    assert m["weight"] == {"type": "checkerboard", "color0": [0.2] * 3, "color1": [0.4] * 3}
     from jaxgfx.render.bsdf.textured import Textured
 
     scene = load_scene(p)
     mix = scene.materials[scene.material_names.index("mix")]
     assert isinstance(mix, Textured) and isinstance(mix.bsdf, B.BlendBSDF)
-    # checkerboard colour0 (0.4) at uv (0.75, 0.75), colour1 (0.2) at (0.25, 0.75)
-    assert float(mix.at(jnp.asarray([0.75, 0.75])).weight) == pytest.approx(0.4)
-    assert float(mix.at(jnp.asarray([0.25, 0.75])).weight) == pytest.approx(0.2)
+    # as Mitsuba's eval_1: colour1 (0.2) at uv (0.75, 0.75), colour0 (0.4) at (0.25, 0.75)
+    assert float(mix.at(jnp.asarray([0.75, 0.75])).weight) == pytest.approx(0.2)
+    assert float(mix.at(jnp.asarray([0.25, 0.75])).weight) == pytest.approx(0.4)
 
 
 # ------------------------------------------------------------------------------ round trips

@@ -28,7 +28,7 @@ from jaxgfx.render.emitters import (
 from jaxgfx.render.film import make_filter
 from jaxgfx.render.geometry import Rectangles, SDFShape, Spheres, area
 from jaxgfx.render.parameters import get_path
-from jaxgfx.render.scene.scene import Scene, is_internal_name
+from jaxgfx.render.scene.scene import Scene, id_problem, is_internal_name
 from jaxgfx.render.scene.schema import (
     EMITTER_TYPES,
     SCENE_KEYS,
@@ -207,10 +207,16 @@ def load_scene(
     groups: dict[str, list] = {"sphere": [], "rectangle": []}
     group_mats: dict[str, list] = {"sphere": [], "rectangle": []}
     meshes = []
+    seen_ids: dict = {}  # (namespace, id) -> where first given
+    shape_ids = []  # (id, "sphere" / "rectangle" / "mesh", position in its list, material)
     for i, sd in enumerate(shapes_desc):
         where = f"shapes[{i}]"
         kind, shape = shape_from_desc(sd, where, base_dir)
         mi = material_index(sd, where)
+        ident = _object_id(sd, where, "shapes", seen_ids)
+        if ident is not None:
+            pos = len(meshes) if kind in ("mesh", "sdf") else len(groups[kind])
+            shape_ids.append((ident, "mesh" if kind in ("mesh", "sdf") else kind, pos, names[mi]))
         if kind in ("mesh", "sdf"):
             meshes.append((shape, mi))
         else:
@@ -218,10 +224,16 @@ def load_scene(
             group_mats[kind].append(mi)
 
     shapes, shape_mats = [], []
+    first: dict = {}  # index in `shapes` of the sphere batch, the rectangle batch, the meshes
     for kind in ("sphere", "rectangle"):
         if groups[kind]:
+            first[kind] = len(shapes)
             shapes.append(_concat(groups[kind]))
             shape_mats.append(jnp.asarray(group_mats[kind], jnp.int32))
+    first["mesh"] = len(shapes)
+    object_ids = [(ident, "shape", first[k] + (pos if k == "mesh" else 0),
+                   None if k == "mesh" else pos, mat)
+                  for ident, k, pos, mat in shape_ids]  # fmt: skip
     for m, mi in meshes:
         if isinstance(m, SDFShape):
             shapes.append(m)
@@ -243,12 +255,19 @@ def load_scene(
         if not isinstance(ed, Mapping) or "type" not in ed:
             raise ValueError(f"{where}: expected a mapping with a 'type' key")
         kind = check_choice(ed["type"], f"{where}.type", EMITTER_TYPES)
+        ident = _object_id(ed, where, "emitters", seen_ids) if isinstance(ed, Mapping) else None
+        n_delta = sum(_delta_kind(e) == kind for e in delta_lights)
+        if ident is not None:  # index of this emitter among its kind (row: point lights)
+            ek = "environment" if kind in ("constant", "envmap") else kind
+            index = {"point": 0, "area": len(area_lights), "environment": 0}.get(ek, n_delta)
+            row = len(points_pos) if ek == "point" else None
+            object_ids.append((ident, ek, index, row, None))
         if kind == "point":
-            expect_keys(ed, where, ("type", "position", "intensity"))
+            expect_keys(ed, where, ("type", "position", "intensity"), ("id",))
             points_pos.append(vec(ed["position"], f"{where}.position"))
             points_int.append(rgb(ed["intensity"], f"{where}.intensity"))
         elif kind == "directional":
-            expect_keys(ed, where, ("type", "direction", "irradiance"))
+            expect_keys(ed, where, ("type", "direction", "irradiance"), ("id",))
             delta_lights.append(
                 _prefixed(
                     where,
@@ -262,7 +281,7 @@ def load_scene(
                 ed,
                 where,
                 ("type", "position", "direction", "intensity"),
-                ("cutoff_angle", "beam_width"),
+                ("cutoff_angle", "beam_width", "id"),
             )
             delta_lights.append(
                 _prefixed(
@@ -278,8 +297,9 @@ def load_scene(
                 )
             )
         elif kind == "area":
-            expect_keys(ed, where, ("type", "shape", "radiance"), ("material",))
+            expect_keys(ed, where, ("type", "shape", "radiance"), ("material", "id"))
             sk, shape = shape_from_desc(ed["shape"], f"{where}.shape", base_dir)
+            shape_ident = _object_id(ed["shape"], f"{where}.shape", "shapes", seen_ids)
             if sk == "sdf":
                 raise ValueError(f"{where}.shape: SDF shapes cannot be area lights (no area)")
             if "material" in ed["shape"]:
@@ -289,6 +309,9 @@ def load_scene(
             else:
                 mi = _black_material(names, materials)
             shapes.append(shape)
+            if shape_ident is not None:
+                row = 0 if sk in ("sphere", "rectangle") else None  # a batch of one
+                object_ids.append((shape_ident, "shape", len(shapes) - 1, row, names[mi]))
             n_prims = shape.faces.shape[0] if sk == "mesh" else 1
             shape_mats.append(jnp.full((n_prims,), mi, jnp.int32))
             area_lights.append(AreaLight(rgb(ed["radiance"], f"{where}.radiance"), len(shapes) - 1))
@@ -297,7 +320,7 @@ def load_scene(
             if environment is not None:
                 raise ValueError(f"{where}: only one environment emitter is supported")
             if kind == "constant":
-                expect_keys(ed, where, ("type", "radiance"))
+                expect_keys(ed, where, ("type", "radiance"), ("id",))
                 environment = ConstantEnvironment(rgb(ed["radiance"], f"{where}.radiance"))
             else:
                 environment = EnvironmentMap.create(
@@ -323,8 +346,30 @@ def load_scene(
         material_names=tuple(names),
         rfilter=rfilter,
         delta_lights=tuple(delta_lights),
+        object_ids=tuple(object_ids),
     )
     return cast_floats(scene, dtype)
+
+
+def _object_id(d, where, namespace, seen):
+    """The ``id`` of a shape / emitter description (``None`` when it has none), checked: a name
+    :func:`~jaxgfx.render.scene.scene.id_problem` accepts, unique among the shapes (or the
+    emitters) of the scene."""
+    if not isinstance(d, Mapping) or "id" not in d:
+        return None
+    ident = d["id"]
+    problem = id_problem(ident)
+    if problem:
+        raise ValueError(f"{where}.id: {problem}")
+    if (namespace, ident) in seen:
+        raise ValueError(f"{where}.id: duplicate id {ident!r} (first given at "
+                         f"{seen[namespace, ident]})")  # fmt: skip
+    seen[namespace, ident] = where
+    return ident
+
+
+def _delta_kind(light) -> str:
+    return "spot" if isinstance(light, SpotLight) else "directional"
 
 
 def _prefixed(where, build, *args):

@@ -76,6 +76,7 @@ from jaxgfx.render.scene.mitsuba_conventions import (
     look_at_matrix,
     orthographic_to_world,
     rectangle_to_world,
+    swap_scalar_checkerboard,
 )
 
 __all__ = [
@@ -188,7 +189,6 @@ def _dielectric_keys(m):
 
 def _material(md, where, base_dir=None, work_dir=None) -> dict:
     """Mitsuba BSDF dict of one jaxgfx material description (validated by ``make_bsdf``)."""
-    from jaxgfx.render import bsdf as B
 
     if not isinstance(md, Mapping):
         raise ValueError(f"{where}: expected a mapping with a 'type' key")
@@ -196,19 +196,115 @@ def _material(md, where, base_dir=None, work_dir=None) -> dict:
         return _map_material(md, where, base_dir, work_dir)
     if md.get("type") == "phong":
         raise NotImplementedError(f"{where}.type: 'phong' has no Mitsuba 3 counterpart")
-    from jaxgfx.render.bsdf.textured import is_texture_desc
+    return _twosided(_textured_bsdf(md, where, base_dir, work_dir))
 
-    nested = ("bsdf0", "bsdf1") if md.get("type") == "blendbsdf" else ()
-    for k, v in md.items():
-        if k not in nested and is_texture_desc(v):
-            raise NotImplementedError(
-                f"{where}.{k}: textured parameters are not exported to Mitsuba (yet)"
-            )
+
+# Mitsuba's name of a jaxgfx material key that a texture may drive, where they differ
+_MITSUBA_TEXTURE_KEY = {("conductor", "reflectance"): "specular_reflectance",
+                        ("roughconductor", "reflectance"): "specular_reflectance"}  # fmt: skip
+# texturable in jaxgfx, a plain number in Mitsuba 3 (its plugins read these as floats)
+_MITSUBA_FLOAT_ONLY = {("roughplastic", "alpha"): "Mitsuba's roughplastic takes a constant alpha",
+                       ("roughplastic", "eta"): "Mitsuba's IORs are constants",
+                       ("plastic", "eta"): "Mitsuba's IORs are constants",
+                       ("dielectric", "eta"): "Mitsuba's IORs are constants",
+                       ("roughdielectric", "eta"): "Mitsuba's IORs are constants",
+                       ("thindielectric", "eta"): "Mitsuba's IORs are constants",
+                       ("principled", "eta"): "Mitsuba's principled eta is a constant",
+                       ("principled", "specular"): "Mitsuba's principled specular is a "
+                                                   "constant"}  # fmt: skip
+
+
+def _uv_transforms(d, mi):
+    """``d`` with each checkerboard's ``to_uv`` (nested lists) as ``mi.ScalarTransform4f``
+    when ``mi`` is given (``load_dict`` wants transform objects; XML is written from lists)."""
+    if mi is None or not isinstance(d, dict):
+        return d
+    return {k: _transform(v, mi) if k == "to_uv" else _uv_transforms(v, mi) for k, v in d.items()}
+
+
+def _textured_bsdf(md, where, base_dir, work_dir) -> dict:
+    """Mitsuba BSDF dict (not wrapped in ``twosided``) of a material description whose
+    parameters may be textures: validated and built as :func:`load_scene` builds it
+    (``material_from_desc``); each textured key becomes a nested ``bitmap`` / ``checkerboard``
+    texture under Mitsuba's name of the parameter (:func:`_texture_dict`)."""
+    from jaxgfx.render.bsdf.textured import Textured, is_texture_desc, texturable_paths
+    from jaxgfx.render.scene.load import material_from_desc
+
     try:
-        m = B.make_bsdf(dict(md))
+        m = material_from_desc(dict(md), where="", base_dir=base_dir)
     except (ValueError, TypeError) as e:
         raise ValueError(f"{where}: {e}") from None
-    return _twosided(_mitsuba_bsdf(m, where))
+    if not isinstance(m, Textured):
+        return _mitsuba_bsdf(m, where)
+    out = _mitsuba_bsdf(m.bsdf, where)
+    for k, tex in m.textures.items():
+        if (out["type"], k) in _MITSUBA_FLOAT_ONLY:
+            raise NotImplementedError(f"{where}.{k}: {_MITSUBA_FLOAT_ONLY[out['type'], k]} "
+                                      "(a texture cannot be exported)")  # fmt: skip
+        mk = _MITSUBA_TEXTURE_KEY.get((out["type"], k), k)
+        if mk not in out:  # pragma: no cover - every texturable key is mapped above
+            raise NotImplementedError(f"{where}.{k}: no Mitsuba parameter takes this texture")
+        td = md[k] if is_texture_desc(md.get(k)) else None
+        out[mk] = _texture_dict(tex, f"{where}.{k}", work_dir, desc=td, base_dir=base_dir)
+        if np.ndim(get_path(m.bsdf, texturable_paths(m.bsdf, k)[0])) == 0:  # Mitsuba's eval_1
+            out[mk] = swap_scalar_checkerboard(out[mk])
+    return out
+
+
+def _texture_dict(tex, where, work_dir, *, desc=None, base_dir=None) -> dict:
+    """Mitsuba texture dict of a jaxgfx texture object (``Texture`` / ``Checkerboard``).
+
+    ``checkerboard``: ``color0`` / ``color1`` (RGB, or a float for one channel) and ``to_uv``
+    the uniform scale. ``bitmap``: a file the description names (``desc["file"]``) is
+    referenced by absolute path with its ``raw`` flag; texels (an inline ``image`` or a built
+    texture) are written into ``work_dir`` as an 8-bit sRGB PNG (``raw`` false: Mitsuba and
+    jaxgfx decode it) when that PNG decodes to exactly these texels (a texture read from an
+    8-bit sRGB file), else as a float32 EXR (``raw`` true: linear). ``filter_type`` and
+    ``wrap_mode`` are the texture's."""
+    from jaxgfx.render.bsdf.textured import Checkerboard
+
+    if isinstance(tex, Checkerboard):
+
+        def colour(c):  # noqa: E306
+            c = np.asarray(c, np.float64)
+            return _float(c) if c.size == 1 else _rgb(c)
+
+        s = float(tex.scale)
+        return {"type": "checkerboard", "color0": colour(tex.color0),
+                "color1": colour(tex.color1),
+                "to_uv": np.diag([s, s, 1.0, 1.0]).tolist()}  # fmt: skip
+    out = {"type": "bitmap"}
+    if desc is not None and "file" in desc:
+        path = os.fspath(desc["file"])
+        if not os.path.isabs(path) and base_dir:
+            path = os.path.join(base_dir, path)
+        out.update(filename=os.path.abspath(path), raw=bool(desc.get("raw", False)))
+    else:
+        out.update(_write_texels(np.asarray(tex.image, np.float32), where, work_dir))
+    out.update(filter_type=tex.filter, wrap_mode=tex.wrap)
+    return out
+
+
+def _write_texels(img, where, work_dir) -> dict:
+    """``{filename, raw}`` of ``img`` (linear texels, ``(H, W, C)``) written into ``work_dir``:
+    an 8-bit sRGB PNG when reading it back as jaxgfx and Mitsuba read a non-raw PNG gives
+    exactly ``img``, else a float32 EXR (read as is: ``raw``)."""
+    from jaxgfx.io import write_exr, write_png
+    from jaxgfx.render.bsdf.textured import _read_bitmap
+
+    stem = os.path.join(work_dir(), re.sub(r"[^A-Za-z0-9_]+", "_", where).strip("_"))
+    if img.size and np.all(img >= 0) and np.all(img <= 1):
+        from jaxgfx.color.transfer import linear_to_srgb
+
+        codes = np.round(np.asarray(linear_to_srgb(img), np.float64) * 255).astype(np.uint8)
+        write_png(stem + ".png", codes)
+        back = _read_bitmap(stem + ".png", False, where)
+        back = back[..., None] if back.ndim == 2 else back
+        if back.shape == img.shape and np.array_equal(back, img):
+            return {"filename": stem + ".png", "raw": False}
+        os.remove(stem + ".png")
+    write_exr(stem + ".exr", img)
+    return {"filename": stem + ".exr", "raw": True}
 
 
 def _mitsuba_bsdf(m, where) -> dict:
@@ -275,23 +371,23 @@ def _map_material(md, where, base_dir, work_dir) -> dict:
     ``twosided`` when the nested BSDF is one-sided in Mitsuba (jaxgfx shades both sides)."""
     from jaxgfx.render import bsdf as B
     from jaxgfx.render.bsdf.textured import is_texture_desc, texture_from_dict
+    from jaxgfx.render.scene.load import material_from_desc
 
     kind, key = md["type"], _MAP_KEYS[md["type"]]
     nested = md.get("bsdf")
     if not isinstance(nested, Mapping):
         raise ValueError(f"{where}.bsdf: {kind!r} needs a nested material description")
-    if any(is_texture_desc(v) for v in nested.values()):
-        raise NotImplementedError(f"{where}.bsdf: textured materials are not exported (yet)")
     tex_d = md.get(key)
     try:
         tex = tex_d
         if is_texture_desc(tex_d):
             ch = 3 if kind == "normalmap" else 1
             tex = texture_from_dict(tex_d, f"{where}.{key}", base_dir=base_dir, channels=ch)
-        m = B.make_bsdf({**md, "bsdf": B.make_bsdf(dict(nested)), key: tex})
+        built = material_from_desc(dict(nested), where="bsdf", base_dir=base_dir)
+        m = B.make_bsdf({**md, "bsdf": built, key: tex})
     except (ValueError, TypeError) as e:
         raise ValueError(f"{where}: {e}") from None
-    inner = _mitsuba_bsdf(m.bsdf, f"{where}.bsdf")
+    inner = _textured_bsdf(nested, f"{where}.bsdf", base_dir, work_dir)  # may be textured
     tex = getattr(m, key)
     if is_texture_desc(tex_d) and "file" in tex_d:
         path = os.fspath(tex_d["file"])
@@ -369,7 +465,7 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
     if not isinstance(d, Mapping) or "type" not in d:
         raise ValueError(f"{where}: expected a mapping with a 'type' key")
     kind = check_choice(d["type"], f"{where}.type", S.SHAPE_TYPES)
-    common = ("type", "material")
+    common = ("type", "material", "id")
     if kind == "sdf":
         raise NotImplementedError(f"{where}.type: SDF shapes have no Mitsuba 3 counterpart")
     if kind == "sphere":
@@ -538,7 +634,7 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
     mats_desc = desc.get("materials", {}) or {}
     if not isinstance(mats_desc, Mapping):
         raise ValueError("materials: expected a mapping from names to material descriptions")
-    mats = {str(k): _material(v, f"materials.{k}", base_dir, work_dir)
+    mats = {str(k): _uv_transforms(_material(v, f"materials.{k}", base_dir, work_dir), mi)
             for k, v in mats_desc.items()}  # fmt: skip
     default = _twosided({"type": "diffuse", "reflectance": _rgb(DEFAULTS["diffuse.reflectance"])})
     black = {"type": "diffuse", "reflectance": _rgb(0.0)}
@@ -573,11 +669,39 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
         raise ValueError("shapes: expected a list")
     if not shapes:
         raise ValueError("shapes: the scene has no geometry")
+    given = set()  # the descriptions' ids: unnamed objects' keys avoid them
+    for d in [*shapes, *(desc.get("emitters", []) or [])]:
+        if isinstance(d, Mapping):
+            given |= {d.get("id"), (d.get("shape") or {}).get("id") if d.get("type") == "area"
+                      and isinstance(d.get("shape"), Mapping) else None}  # fmt: skip
+
+    def key(d, where, fallback):
+        """The object's Mitsuba id: its description's ``id`` (Mitsuba's ids are global: one
+        that is also a material's or another object's is refused), else ``fallback`` (made
+        unique: ``_`` appended while a description's id or a material has it)."""
+        ident = d.get("id") if isinstance(d, Mapping) else None
+        if ident is None:
+            if fallback is None:
+                return None
+            while fallback in given or fallback in out:
+                fallback += "_"
+            return fallback
+        from jaxgfx.render.scene.scene import id_problem
+
+        problem = id_problem(ident)
+        if problem:
+            raise ValueError(f"{where}.id: {problem}")
+        if ident in out or ident in ("type", "integrator"):
+            raise ValueError(f"{where}.id: {ident!r} is also the id of another Mitsuba "
+                             "object (a material, shape or emitter: Mitsuba's ids are "
+                             "global)")  # fmt: skip
+        return ident
+
     for i, sd in enumerate(shapes):
         where = f"shapes[{i}]"
         sh = _shape(sd, where, base_dir, work_dir, mi)
         sh["bsdf"] = material_of(sd, where, default, sd["type"])
-        out[f"shape_{i}"] = sh
+        out[key(sd, where, f"shape_{i}")] = sh
 
     # -- emitters
     em = desc.get("emitters", []) or []
@@ -590,16 +714,21 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
             raise ValueError(f"{where}: expected a mapping with a 'type' key")
         kind = check_choice(ed["type"], f"{where}.type", S.EMITTER_TYPES)
         if kind == "area":
-            S.expect_keys(ed, where, ("type", "shape", "radiance"), ("material",))
+            S.expect_keys(ed, where, ("type", "shape", "radiance"), ("material", "id"))
             if isinstance(ed["shape"], Mapping) and "material" in ed["shape"]:
                 raise ValueError(f"{where}.shape.material: put 'material' on the emitter")
             sh = _shape(ed["shape"], f"{where}.shape", base_dir, work_dir, mi)
             sh["bsdf"] = material_of(ed, where, black, ed["shape"]["type"])
             sh["emitter"] = {"type": "area", "radiance": _rgb(S.rgb(ed["radiance"], where))}
-            out[f"emitter_{i}"] = sh
+            # the shape (the top-level object) by its id, else by the emitter's
+            shape_key = ed["shape"].get("id") if isinstance(ed["shape"], Mapping) else None
+            top = key(ed["shape"] if shape_key else ed, where, f"emitter_{i}")
+            if refs and ed.get("id") not in (None, top):  # the nested <emitter id=...> (XML)
+                sh["emitter"]["id"] = key(ed, where, None)
+            out[top] = sh
         elif kind == "point":
-            S.expect_keys(ed, where, ("type", "position", "intensity"))
-            out[f"emitter_{i}"] = {
+            S.expect_keys(ed, where, ("type", "position", "intensity"), ("id",))
+            out[key(ed, where, f"emitter_{i}")] = {
                 "type": "point",
                 "position": np.asarray(S.vec(ed["position"], f"{where}.position")).tolist(),
                 "intensity": _rgb(S.rgb(ed["intensity"], f"{where}.intensity")),
@@ -609,8 +738,8 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
             if n_env > 1:
                 raise ValueError(f"{where}: only one environment emitter is supported")
             if kind == "constant":
-                S.expect_keys(ed, where, ("type", "radiance"))
-                out[f"emitter_{i}"] = {
+                S.expect_keys(ed, where, ("type", "radiance"), ("id",))
+                out[key(ed, where, f"emitter_{i}")] = {
                     "type": "constant",
                     "radiance": _rgb(S.rgb(ed["radiance"], f"{where}.radiance")),
                 }
@@ -621,9 +750,10 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
                 path = os.path.join(work_dir(), f"envmap_{i}.exr")
                 write_exr(path, envmap_for_mitsuba(img))
                 scale = S.num(ed.get("scale", 1.0), f"{where}.scale")
-                out[f"emitter_{i}"] = {"type": "envmap", "filename": path, "scale": float(scale)}
+                out[key(ed, where, f"emitter_{i}")] = {"type": "envmap", "filename": path,
+                                                      "scale": float(scale)}  # fmt: skip
         else:  # "directional" / "spot" (check_choice above admits only S.EMITTER_TYPES)
-            out[f"emitter_{i}"] = _delta_light(ed, where, mi)
+            out[key(ed, where, f"emitter_{i}")] = _delta_light(ed, where, mi)
     return out
 
 
@@ -635,14 +765,14 @@ def _delta_light(ed, where, mi) -> dict:
 
     try:
         if ed["type"] == "directional":
-            S.expect_keys(ed, where, ("type", "direction", "irradiance"))
+            S.expect_keys(ed, where, ("type", "direction", "irradiance"), ("id",))
             light = DirectionalLight.create(
                 S.rgb(ed["irradiance"], f"{where}.irradiance"),
                 S.vec(ed["direction"], f"{where}.direction"),
             )
         else:
             S.expect_keys(ed, where, ("type", "position", "direction", "intensity"),
-                          ("cutoff_angle", "beam_width"))  # fmt: skip
+                          ("cutoff_angle", "beam_width", "id"))  # fmt: skip
             light = SpotLight.create(
                 S.vec(ed["position"], f"{where}.position"),
                 S.vec(ed["direction"], f"{where}.direction"),
@@ -690,8 +820,20 @@ def _bsdf_desc(m, where) -> dict:
     from jaxgfx.render import bsdf as B
     from jaxgfx.render.bsdf.textured import Textured
 
-    if isinstance(m, Textured):
-        raise NotImplementedError(f"{where}: textured materials are not exported (yet)")
+    if isinstance(m, Textured):  # the plain BSDF's keys, the textured ones as textures
+        from jaxgfx.render.bsdf.textured import Checkerboard
+
+        out = _bsdf_desc(m.bsdf, where)
+        for k, tex in m.textures.items():
+            if isinstance(tex, Checkerboard):
+                out[k] = {"type": "checkerboard", "color0": _list(tex.color0),
+                          "color1": _list(tex.color1), "scale": float(tex.scale)}  # fmt: skip
+            else:
+                out[k] = {"type": "bitmap", "image": np.asarray(tex.image, np.float32),
+                          "wrap": tex.wrap, "filter": tex.filter}  # fmt: skip
+            if k == "alpha":  # the texture sets both alphas
+                out.pop("alpha_v", None)
+        return out
     if isinstance(m, B.Diffuse):
         return {"type": "diffuse", "reflectance": _list(m.reflectance)}
     conductor = {}
@@ -835,38 +977,61 @@ def scene_to_desc(scene) -> dict:
             raise NotImplementedError(f"{where}: {type(shape).__name__} has no Mitsuba 3 mapping")
         return [(d, names[int(k)]) for d, k in out] if keep else [(d, None) for d, _ in out]
 
-    lit = {a.shape_index: a for a in scene.area_lights}
+    # ids (Scene.object_ids): (kind, index, row) -> id
+    ids = {(k, i, r): ident for ident, k, i, r, _ in getattr(scene, "object_ids", ())}
+
+    def named(d, kind, index, row=None):
+        ident = ids.get((kind, index, row))
+        return {**d, "id": ident} if ident is not None else d
+
+    def rows(shape_descs, i):
+        """Each row of a sphere / rectangle batch by its own id; a mesh (one description per
+        material it uses) by the mesh's id when it is one description."""
+        batch = isinstance(scene.shapes[i], (Spheres, Rectangles))
+        if not batch and len(shape_descs) > 1:
+            return shape_descs
+        return [(named(d, "shape", i, j if batch else None), n)
+                for j, (d, n) in enumerate(shape_descs)]  # fmt: skip
+
+    lit = {a.shape_index: (j, a) for j, a in enumerate(scene.area_lights)}
     for i, (shape, mats) in enumerate(zip(scene.shapes, scene.shape_materials, strict=True)):
         if i in lit:
-            for d, name in one(shape, mats, f"emitters.area.{i}", True):
-                e = {"type": "area", "shape": d, "radiance": _list(lit[i].radiance)}
+            j, light = lit[i]
+            for d, name in rows(one(shape, mats, f"emitters.area.{i}", True), i):
+                e = named({"type": "area", "shape": d, "radiance": _list(light.radiance)},
+                          "area", j)  # fmt: skip
                 if name != "jaxgfx_black":
                     e["material"] = name
                 desc["emitters"].append(e)
             continue
-        for d, name in one(shape, mats, f"shapes.{i}", True):
+        for d, name in rows(one(shape, mats, f"shapes.{i}", True), i):
             d["material"] = name
             desc["shapes"].append(d)
     pl = scene.point_lights
     if pl is not None:
-        for p_, q in zip(np.asarray(pl.positions), np.asarray(pl.intensities), strict=True):
-            desc["emitters"].append({"type": "point", "position": _list(p_), "intensity": _list(q)})
+        for j, (p_, q) in enumerate(
+            zip(np.asarray(pl.positions), np.asarray(pl.intensities), strict=True)
+        ):
+            desc["emitters"].append(named({"type": "point", "position": _list(p_),
+                                           "intensity": _list(q)}, "point", 0, j))  # fmt: skip
     env = scene.environment
     if isinstance(env, ConstantEnvironment):
-        desc["emitters"].append({"type": "constant", "radiance": _list(env.radiance)})
+        desc["emitters"].append(named({"type": "constant", "radiance": _list(env.radiance)},
+                                      "environment", 0))  # fmt: skip
     elif env is not None:
-        desc["emitters"].append({"type": "envmap", "image": np.asarray(env.image, np.float32),
-                                 "scale": float(env.scale)})  # fmt: skip
+        desc["emitters"].append(named({"type": "envmap", "image": np.asarray(env.image, np.float32),
+                                       "scale": float(env.scale)}, "environment", 0))  # fmt: skip
+    counts = {"directional": 0, "spot": 0}
     for e in scene.delta_lights:  # directional and spot lights, in their order
         if isinstance(e, DirectionalLight):
-            desc["emitters"].append({"type": "directional", "direction": _list(e.direction),
-                                     "irradiance": _list(e.irradiance)})  # fmt: skip
+            d = {"type": "directional", "direction": _list(e.direction),
+                 "irradiance": _list(e.irradiance)}  # fmt: skip
         else:
-            desc["emitters"].append({"type": "spot", "position": _list(e.position),
-                                     "direction": _list(e.direction),
-                                     "intensity": _list(e.intensity),
-                                     "cutoff_angle": _list(e.cutoff_angle),
-                                     "beam_width": _list(e.beam_width)})  # fmt: skip
+            d = {"type": "spot", "position": _list(e.position), "direction": _list(e.direction),
+                 "intensity": _list(e.intensity), "cutoff_angle": _list(e.cutoff_angle),
+                 "beam_width": _list(e.beam_width)}  # fmt: skip
+        desc["emitters"].append(named(d, d["type"], counts[d["type"]]))
+        counts[d["type"]] += 1
     used = {d.get("material") for d in desc["shapes"] + desc["emitters"]}
     desc["materials"] = {k: v for k, v in desc["materials"].items() if k in used}
     return desc

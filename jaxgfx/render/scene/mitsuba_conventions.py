@@ -376,6 +376,22 @@ def spectrum_to_rgb(wavelengths, values, *, emission: bool) -> np.ndarray:
     return to_srgb @ total
 
 
+def swap_scalar_checkerboard(tex):
+    """A ``checkerboard`` texture description with ``color0`` and ``color1`` exchanged (any
+    other texture unchanged), for a checkerboard that sets a *scalar* parameter (roughness
+    ``alpha``, a ``blendbsdf`` ``weight``, the ``principled`` weights).
+
+    Mitsuba 3 (3.9.1, ``src/textures/checkerboard.cpp``) evaluates one checkerboard two ways:
+    ``eval`` (RGB parameters) gives ``color0`` where ``frac(u) > 1/2`` equals
+    ``frac(v) > 1/2``, ``eval_1`` (scalar parameters) gives ``color0`` where they differ. jaxgfx
+    has the one pattern of ``eval`` for both, so the loader swaps the colours of a scalar
+    parameter's checkerboard and the writer swaps them back: the same scene in both renderers
+    (``tests/render/test_mitsuba_xml_textured_write.py``)."""
+    if isinstance(tex, dict) and tex.get("type") == "checkerboard":
+        return {**tex, "color0": tex["color1"], "color1": tex["color0"]}
+    return tex
+
+
 def look_at_matrix(origin, target, up) -> np.ndarray:
     """Mitsuba's ``Transform4f.look_at``: columns ``(left, up', dir, origin)``; ``ValueError``
     when origin and target coincide or up is parallel to the viewing direction."""

@@ -73,6 +73,7 @@ from jaxgfx.render.scene.mitsuba_conventions import (
     orthographic_view_proj_inverse,
     plugin_status,
     spectrum_to_rgb,
+    swap_scalar_checkerboard,
 )
 
 __all__ = [
@@ -597,8 +598,8 @@ class _Params:
 
     def scalar_or_texture(self, name, default=None):
         p = self.obj.props.get(name)
-        if p is not None and p.kind == "object":
-            return self.color(name, texture=True)
+        if p is not None and p.kind == "object":  # Mitsuba's eval_1: see the swap's docstring
+            return swap_scalar_checkerboard(self.color(name, texture=True))
         return self.float(name, default)
 
     def ior(self, name, default):
@@ -1005,8 +1006,15 @@ def _shape(obj: _Obj, doc, desc, ctx):
     p = _Params(obj, doc)
     m = p.transform("to_world")
     m = np.eye(4) if m is None else m
-    bsdfs = [c for c in obj.children if c.tag == "bsdf"]
-    emitters = [c for c in obj.children if c.tag == "emitter"]
+    # a named nested BSDF / emitter (``<ref name="bsdf" id=...>``, matpreview.xml): Mitsuba
+    # takes a shape's child objects whatever their name
+    named = [q for q in obj.props.values()
+             if q.kind == "object" and q.value.tag in ("bsdf", "emitter")]  # fmt: skip
+    for q in named:
+        q.used = True
+    kids = obj.children + [q.value for q in named]
+    bsdfs = [c for c in kids if c.tag == "bsdf"]
+    emitters = [c for c in kids if c.tag == "emitter"]
     other = [c for c in obj.children if c.tag not in ("bsdf", "emitter")]
     if other:
         c = other[0]
@@ -1122,6 +1130,7 @@ def _shape(obj: _Obj, doc, desc, ctx):
             sd["to_world"] = m.tolist()
         vw = v @ lin.T + m[:3, 3]
         bbox = np.stack([vw.min(0), vw.max(0)])
+        ctx.setdefault("triangles", {})[id(obj)] = vw[np.asarray(f)]  # _check_clip
     else:
         raise ValueError(f"{obj.where}: shape plugin {t!r} is not supported "
                          "(obj, ply, serialized, sphere, rectangle, cube, disk, "
@@ -1135,10 +1144,25 @@ def _shape(obj: _Obj, doc, desc, ctx):
             raise ValueError(f"{e.where}: only 'area' emitters can be attached to a shape")
         rad = ep.color("radiance", [1.0] * 3, emission=True)
         ep.done()
-        desc["emitters"].append({"type": "area", "shape": sd, "radiance": rad, "material": mat})
+        ed = {"type": "area", "shape": sd, "radiance": rad, "material": mat}
+        _name_by_id(ed, e.id or obj.id)  # an unnamed area emitter goes by its shape's id
+        _name_by_id(sd, obj.id)
+        desc["emitters"].append(ed)
     else:
         sd["material"] = mat
+        _name_by_id(sd, obj.id)
         desc["shapes"].append(sd)
+
+
+def _name_by_id(d, ident):
+    """Give description ``d`` the XML ``id`` as its name in parameter paths (``shapes.ID``,
+    ``emitters.ID``) when the id can be one (``id_problem``: no ``.``, not a number or an
+    emitter kind); such an object keeps its index name. Duplicate ids are refused by
+    ``_register`` (file and line)."""
+    from jaxgfx.render.scene.scene import id_problem
+
+    if ident and id_problem(ident) is None:
+        d["id"] = ident
 
 
 # ------------------------------------------------------------------------------------------
@@ -1223,6 +1247,7 @@ def _emitter(obj: _Obj, doc, desc):
         raise ValueError(f"{obj.where}: emitter plugin {t!r} is not supported "
                          "(area, point, constant, envmap, directional, spot)")  # fmt: skip
     p.done()
+    _name_by_id(d, obj.id)
     desc["emitters"].append(d)
 
 
@@ -1442,6 +1467,27 @@ def _integrator(obj: _Obj, doc):
     return "direct", 2, 5
 
 
+def _point_triangles_distance(o, tri) -> float:
+    """Smallest distance from the point ``o`` to the triangles ``tri`` (F, 3, 3)."""
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    n = np.cross(b - a, c - a)
+    nn = np.einsum("ij,ij->i", n, n)
+    ok = nn > 0
+    # the foot of the perpendicular, when inside the triangle (barycentric signs)
+    t = np.where(ok, np.einsum("ij,ij->i", o - a, n) / np.where(ok, nn, 1.0), 0.0)
+    q = o - t[:, None] * n
+    inside = ok.copy()
+    for p0, p1 in ((a, b), (b, c), (c, a)):
+        inside &= np.einsum("ij,ij->i", np.cross(p1 - p0, q - p0), n) >= 0
+    d = np.where(inside, np.abs(t) * np.sqrt(nn), np.inf)
+    for p0, p1 in ((a, b), (b, c), (c, a)):  # else the nearest point of an edge
+        e = p1 - p0
+        ee = np.einsum("ij,ij->i", e, e)
+        s = np.clip(np.einsum("ij,ij->i", o - p0, e) / np.where(ee > 0, ee, 1.0), 0.0, 1.0)
+        d = np.minimum(d, np.linalg.norm(o - (p0 + s[:, None] * e), axis=1))
+    return float(d.min())
+
+
 def _check_clip(ctx):
     if "clip_ortho" in ctx:
         _check_clip_ortho(ctx)
@@ -1452,6 +1498,8 @@ def _check_clip(ctx):
         lo, hi = bbox
         dmin = float(np.linalg.norm(np.maximum(0.0, np.maximum(lo - o, o - hi))))
         dmax = float(np.linalg.norm(np.maximum(np.abs(lo - o), np.abs(hi - o))))
+        if dmin < reach and id(obj) in ctx.get("triangles", {}):  # a mesh: its own distance
+            dmin = _point_triangles_distance(o, ctx["triangles"][id(obj)])
         if dmin < reach:
             raise ValueError(
                 f"{sensor.where}: near_clip={near}: {obj.where} comes closer than "
@@ -1546,13 +1594,14 @@ def _xml_object(tag, d, indent, name=None, ident=None) -> list[str]:
 
     pad = "    " * indent
     attrs = f" type={_xml_attr(d['type'])}"
+    ident = d.get("id", ident)  # a nested object's own id (an area light's <emitter>)
     if ident is not None:
         attrs += f" id={_xml_attr(ident)}"
     if name is not None:
         attrs += f" name={_xml_attr(name)}"
     body = []
     for k, v in d.items():
-        if k == "type":
+        if k in ("type", "id"):
             continue
         q = "    " * (indent + 1)
         if isinstance(v, dict) and v.get("type") == "rgb":
@@ -1573,9 +1622,9 @@ def _xml_object(tag, d, indent, name=None, ident=None) -> list[str]:
             body.append(f'{q}<float name={_xml_attr(k)} value="{_num(v)}"/>')
         elif isinstance(v, str):
             body.append(f"{q}<string name={_xml_attr(k)} value={_xml_attr(v)}/>")
-        elif k == "to_world":
+        elif k in ("to_world", "to_uv"):
             m = np.asarray(v, np.float64).reshape(-1)
-            body.append(f'{q}<transform name="to_world"><matrix value="'
+            body.append(f'{q}<transform name={_xml_attr(k)}><matrix value="'
                         f'{" ".join(map(_num, m))}"/></transform>')  # fmt: skip
         elif np.shape(v) == (3,):
             tag3 = "vector" if k == "direction" else "point"  # a direction is a <vector>
@@ -1587,7 +1636,7 @@ def _xml_object(tag, d, indent, name=None, ident=None) -> list[str]:
     return [f"{pad}<{tag}{attrs}>", *body, f"{pad}</{tag}>"]
 
 
-def to_xml(mitsuba_dict: dict) -> str:
+def to_xml(mitsuba_dict: dict, *, anonymous=()) -> str:
     """Mitsuba 3 XML text of a ``load_dict`` dictionary as :func:`to_mitsuba_dict` builds it
     (transforms as nested lists, ``mi=None``): each top-level entry becomes an object whose
     ``id`` is its key; ``{"type": "rgb"}`` values become ``<rgb>``, ``{"type": "ref"}``
@@ -1605,7 +1654,7 @@ def to_xml(mitsuba_dict: dict) -> str:
         if key == "type":
             continue
         tag = next(t for (t, ty) in PLUGINS if ty == v["type"])
-        lines += _xml_object(tag, v, 1, ident=key)
+        lines += _xml_object(tag, v, 1, ident=None if key in anonymous else key)
     lines.append("</scene>")
     return "\n".join(lines) + "\n"
 
@@ -1649,6 +1698,11 @@ def save_scene(
         integ = M.mitsuba_integrator(integrator, max_depth=max_depth, rr_depth=rr_depth)
     if isinstance(scene, Scene):
         scene = M.scene_to_desc(scene)
+    elif isinstance(scene, (str, os.PathLike)):
+        from jaxgfx.config import read_yaml
+
+        base_dir = base_dir or os.path.dirname(os.path.abspath(os.fspath(scene)))
+        scene = read_yaml(scene)
     path = os.path.abspath(os.fspath(path))
     if not path.lower().endswith(".xml"):
         raise ValueError(f"path: expected a .xml file name, got {path!r}")
@@ -1665,7 +1719,12 @@ def save_scene(
                     for k, v in x.items()}  # fmt: skip
         return x
 
-    text = to_xml(relative(d))
+    # shapes and emitters without an id in the description are written without one (their
+    # dictionary keys are the exporter's own), so that read_xml names them by index again
+    objs = [*scene["shapes"], *(scene.get("emitters") or [])]
+    named = {x.get("id") for x in objs} | {x["shape"].get("id") for x in objs if "shape" in x}
+    anonymous = {k for k in d if re.fullmatch(r"(shape|emitter)_\d+_*", k) and k not in named}
+    text = to_xml(relative(d), anonymous=anonymous)
     os.makedirs(folder, exist_ok=True)
     with open(path, "w") as f:
         f.write(text)

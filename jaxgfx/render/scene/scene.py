@@ -47,9 +47,17 @@ from jaxgfx._checks import is_concrete
 from jaxgfx.render.bsdf.textured import Textured
 from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera, ThinLensCamera
 from jaxgfx.render.emitters import ConstantEnvironment, EnvironmentMap, PointLights
+from jaxgfx.render.geometry import Rectangles, Spheres
 from jaxgfx.render.parameters import get_path, parameter_paths, revalidate
 
-__all__ = ["Scene", "Parameter", "parameter_names", "is_internal_name", "PARAMETER_BOUNDS"]
+__all__ = [
+    "Scene",
+    "Parameter",
+    "parameter_names",
+    "is_internal_name",
+    "id_problem",
+    "PARAMETER_BOUNDS",
+]
 
 PARAMETER_BOUNDS = {
     "fov": (0.0, 180.0),
@@ -161,6 +169,30 @@ def _delta_kind(light) -> str:
     return "spot" if type(light).__name__ == "SpotLight" else "directional"
 
 
+EMITTER_KINDS = ("point", "area", "environment", "directional", "spot")
+"""The words after ``emitters.`` that name emitters by kind (not usable as ids)."""
+
+
+def id_problem(name) -> str | None:
+    """Why ``name`` cannot name a shape or emitter in parameter paths, or ``None`` when it can:
+    a non-empty string without ``.`` (the path separator), not all digits (``shapes.I``
+    indexes), not an emitter kind (``emitters.area.I``) and not of the loader's ``__NAME__``
+    form.
+
+    >>> id_problem("ball") is None, id_problem("Plane.001"), id_problem("7")[:9]
+    (True, "'Plane.001' contains '.', the parameter path separator", "'7' is a ")
+    """
+    if not isinstance(name, str) or not name:
+        return f"expected a non-empty string, got {name!r}"
+    if "." in name:
+        return f"{name!r} contains '.', the parameter path separator"
+    if name.isdigit():
+        return f"{name!r} is a number (numbers index shapes.I / emitters.area.I)"
+    if name in EMITTER_KINDS or is_internal_name(name):
+        return f"{name!r} is reserved (emitters.{name}... / the loader's own names)"
+    return None
+
+
 class Scene(eqx.Module):
     """A renderable scene (pytree). Build with :func:`load_scene`.
 
@@ -187,6 +219,13 @@ class Scene(eqx.Module):
     delta_lights: tuple = ()
     """Directional and spot lights (``DirectionalLight`` / ``SpotLight``), in description order;
     empty for scenes without them (their programs are unchanged)."""
+    object_ids: tuple = eqx.field(static=True, default=())
+    """Named shapes and emitters (the description's / XML's ``id``): ``(id, kind, index, row,
+    material)`` with ``kind`` ``"shape"`` (``index`` into :attr:`shapes`, ``row`` the sphere /
+    rectangle of a batch or ``None``, ``material`` its material's name), ``"area"`` (into
+    :attr:`area_lights`), ``"point"`` (``row`` of :attr:`point_lights`), ``"environment"``,
+    ``"directional"`` / ``"spot"`` (into :attr:`delta_lights`). Paths ``shapes.ID.FIELD`` and
+    ``emitters.ID.FIELD`` name them (:meth:`parameters`)."""
 
     @property
     def width(self) -> int:
@@ -331,20 +370,37 @@ class Scene(eqx.Module):
         >>> s.parameters()[-1]
         Parameter(path='shapes.0.radii', shape=(1,), dtype=dtype('float32'), bounds=(0.0, inf))
         """
+        ids: dict = {}
+        for ident, kind, index, row, _ in self.object_ids:
+            ids.setdefault((kind, index), []).append((ident, row))
+
+        def by_id(kind, index, head, index_prefix, obj, n_rows=None):
+            """``(prefix, obj)`` of one object (or batch): each id, and the index path when
+            the object (or some row of the batch) has none."""
+            got = ids.get((kind, index), [])
+            unnamed = not got if n_rows is None else len(got) < n_rows
+            return [(f"{head}.{i}", obj) for i, _ in got] + (
+                [(index_prefix, obj)] if unnamed else []
+            )
+
         objs = [("camera", self.camera)]
         named = zip(self.material_names, self.materials, strict=True)
         objs += [(f"materials.{n}", m) for n, m in named if not is_internal_name(n)]
         if self.point_lights is not None:
-            objs.append(("emitters.point", self.point_lights))
-        objs += [(f"emitters.area.{i}", a) for i, a in enumerate(self.area_lights)]
+            pl = self.point_lights
+            objs += by_id("point", 0, "emitters", "emitters.point", pl, pl.positions.shape[0])
+        for i, a in enumerate(self.area_lights):
+            objs += by_id("area", i, "emitters", f"emitters.area.{i}", a)
         if self.environment is not None:
-            objs.append(("emitters.environment", self.environment))
+            objs += by_id("environment", 0, "emitters", "emitters.environment", self.environment)
         counts = {"directional": 0, "spot": 0}
         for e in self.delta_lights:
             k = _delta_kind(e)
-            objs.append((f"emitters.{k}.{counts[k]}", e))
+            objs += by_id(k, counts[k], "emitters", f"emitters.{k}.{counts[k]}", e)
             counts[k] += 1
-        objs += [(f"shapes.{i}", s) for i, s in enumerate(self.shapes)]
+        for i, s in enumerate(self.shapes):
+            n = s.centers.shape[0] if isinstance(s, (Spheres, Rectangles)) else None
+            objs += by_id("shape", i, "shapes", f"shapes.{i}", s, n)
         out = []
         for prefix, obj in objs:
             for name in _listed_names(obj):
@@ -359,9 +415,44 @@ class Scene(eqx.Module):
                 out.append(Parameter(path, tuple(v.shape), v.dtype, bounds))
         return out
 
+    def _by_id(self, path):
+        """``(index_path, row)``: a path naming a shape or emitter by its id
+        (``shapes.ball.radii``, ``emitters.lamp.radiance``) as the path by index, with the row
+        of a batch (spheres, rectangles, point lights; else ``None``); ``shapes.ID.bsdf.FIELD``
+        is the shape's material (``materials.NAME.FIELD``). Other paths unchanged."""
+        if not isinstance(path, str):
+            return path, None
+        parts = path.split(".")
+        if len(parts) < 2 or parts[0] not in ("shapes", "emitters"):
+            return path, None
+        key = parts[1]
+        if key.isdigit() or key in EMITTER_KINDS:
+            return path, None
+        kinds = ("shape",) if parts[0] == "shapes" else EMITTER_KINDS
+        hit = [e for e in self.object_ids if e[0] == key and e[1] in kinds]
+        if not hit:
+            have = sorted(e[0] for e in self.object_ids if e[1] in kinds)
+            if not have:  # no ids: the index path's own error
+                return path, None
+            what = "a shape index or id" if parts[0] == "shapes" else "an emitter kind or id"
+            raise ValueError(f"{parts[0]}.{key}: unknown id {key!r}; expected {what} "
+                             f"(ids: {have})")  # fmt: skip
+        _, kind, index, row, material = hit[0]
+        rest = parts[2:]
+        if kind == "shape" and rest[:1] == ["bsdf"]:
+            if material is None or is_internal_name(material):
+                raise ValueError(f"{path}: shape {key!r} has no named material")
+            return ".".join(["materials", material, *rest[1:]]), None
+        head = {"shape": f"shapes.{index}", "point": "emitters.point",
+                "environment": "emitters.environment"}.get(
+                    kind, f"emitters.{kind}.{index}")  # fmt: skip
+        return ".".join([head, *rest]), row
+
     def get(self, path: str):
         """The array at a dotted parameter path (see :meth:`replace`)."""
-        return self._locate(path)[0][0](self)
+        index_path, row = self._by_id(path)
+        v = self._locate(index_path)[0][0](self)
+        return v if row is None else v[row : row + 1]
 
     def replace(self, path: str, value):
         """Copy of the scene with the parameter at ``path`` set to ``value`` (same shape).
@@ -370,11 +461,17 @@ class Scene(eqx.Module):
         concrete value the loader would refuse raises the same ``ValueError`` here (e.g.
         ``materials.metal.alpha`` = 0); traced values (inside ``jit`` / ``grad``) pass.
         """
-        wheres, owner = self._locate(path)
+        index_path, row = self._by_id(path)
+        wheres, owner = self._locate(index_path)
         out = self
         for where in wheres:
             old = where(out)
-            new = jnp.broadcast_to(jnp.asarray(value, old.dtype), old.shape)
+            if row is None:
+                new = jnp.broadcast_to(jnp.asarray(value, old.dtype), old.shape)
+            else:  # one sphere / rectangle / point light of a batch
+                part = old[row : row + 1]
+                new = old.at[row : row + 1].set(jnp.broadcast_to(jnp.asarray(value, old.dtype),
+                                                                 part.shape))  # fmt: skip
             out = eqx.tree_at(where, out, new)
         if is_concrete(value):
             try:

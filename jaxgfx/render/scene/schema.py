@@ -45,7 +45,7 @@ SCENE_KEYS = (("camera", "shapes"), ("materials", "emitters", "film"))
 def envmap_image(ed, where, base_dir=None) -> np.ndarray:
     """The lat-long image of an ``envmap`` emitter description (``file`` relative to
     ``base_dir``, or an inline ``image``), validated to ``(H, W, >=3)``."""
-    expect_keys(ed, where, ("type",), ("file", "image", "scale"))
+    expect_keys(ed, where, ("type",), ("file", "image", "scale", "id"))
     if "file" in ed:
         from jaxgfx import io
 
@@ -314,7 +314,7 @@ def shape_from_desc(d, where, base_dir):
     if not isinstance(d, Mapping) or "type" not in d:
         raise ValueError(f"{where}: expected a mapping with a 'type' key")
     kind = check_choice(d["type"], f"{where}.type", SHAPE_TYPES)
-    common = ("type", "material")
+    common = ("type", "material", "id")  # id: checked by load_scene
     if kind == "sphere":
         expect_keys(d, where, ("type", "center", "radius"), common)
         r = num(d["radius"], f"{where}.radius", positive=True)
