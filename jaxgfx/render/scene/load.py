@@ -206,9 +206,17 @@ def load_scene(
         raise ValueError("shapes: expected a list")
     groups: dict[str, list] = {"sphere": [], "rectangle": []}
     group_mats: dict[str, list] = {"sphere": [], "rectangle": []}
-    meshes = []
+    meshes, instanced = [], []
     for i, sd in enumerate(shapes_desc):
         where = f"shapes[{i}]"
+        if isinstance(sd, Mapping) and sd.get("type") == "instances":  # shapegroup / instance
+            from jaxgfx.render.scene._instances import instances_from_desc
+
+            def build(m):
+                return m if m.faces.shape[0] < BVH_MIN_TRIANGLES else build_traversal(m, accel)
+
+            instanced += instances_from_desc(sd, where, base_dir, material_index, build)
+            continue
         kind, shape = shape_from_desc(sd, where, base_dir)
         mi = material_index(sd, where)
         if kind in ("mesh", "sdf"):
@@ -232,6 +240,9 @@ def load_scene(
         else:
             shapes.append(m)
         shape_mats.append(jnp.full((m.faces.shape[0],), mi, jnp.int32))
+    for inst, table in instanced:
+        shapes.append(inst)
+        shape_mats.append(table)
 
     points_pos, points_int, area_lights, emitter_shapes, delta_lights = [], [], [], [], []
     environment = None

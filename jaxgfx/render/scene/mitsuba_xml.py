@@ -414,7 +414,11 @@ def _object(doc, node) -> _Obj:
             _set(obj, ca["name"], _Prop(kind, v, c))
         elif c.tag == "transform":
             _attrs(c, ca, ("name",))
-            _set(obj, ca["name"], _Prop("transform", _transform(doc, c), c))
+            try:
+                m = _transform(doc, c)
+            except ValueError as e:  # name the object too (e.g. a singular instance)
+                raise ValueError(f"{e} ({obj.label}, parameter {ca['name']!r})") from None
+            _set(obj, ca["name"], _Prop("transform", m, c))
         elif c.tag == "ref":
             _attrs(c, ca, ("id",), ("name",))
             if ca["id"] not in doc.ids:
@@ -1113,6 +1117,59 @@ def _shape(obj: _Obj, doc, desc, ctx):
         desc["shapes"].append(sd)
 
 
+def _shapegroup(obj: _Obj, doc, desc, ctx):
+    """Translate a ``shapegroup``'s shapes (group space); they appear only when instanced.
+    Mitsuba 3 refuses nested groups, nested instances and emitters in a group: so does this."""
+    if not obj.id:
+        raise ValueError(f"{obj.where}: a shapegroup needs an id (instances refer to it)")
+    groups = ctx.setdefault("groups", {})
+    if obj.id in groups:
+        return groups[obj.id]
+    _Params(obj, doc).done(children_ok=len(obj.children))  # a group has no parameters
+    sub = {"materials": desc["materials"], "shapes": [], "emitters": []}
+    sctx: dict = {"bboxes": []}
+    for c in obj.children:
+        if c.tag != "shape":
+            raise ValueError(f"{c.node.at}: <{c.tag}> inside {obj.where}: a shapegroup holds "
+                             "shapes only")  # fmt: skip
+        if c.type in ("shapegroup", "instance"):
+            raise ValueError(f"{c.node.at}: {c.where} inside {obj.where}: nested instancing is "
+                             "not permitted (as in Mitsuba 3)")  # fmt: skip
+        if any(g.tag == "emitter" for g in c.children):
+            raise ValueError(f"{c.node.at}: {c.where} inside {obj.where}: instancing of "
+                             "emitters is not supported (as in Mitsuba 3)")  # fmt: skip
+        _shape(c, doc, sub, sctx)
+    groups[obj.id] = g = {"shapes": sub["shapes"], "bboxes": sctx["bboxes"], "entry": None}
+    return g
+
+
+def _instance(obj: _Obj, doc, desc, ctx):
+    """One ``instance``: its ``to_world`` joins the ``{type: instances}`` entry of its group
+    (one entry per group, at the place of the group's first instance)."""
+    p = _Params(obj, doc)
+    m = p.transform("to_world")
+    m = np.eye(4) if m is None else m
+    refs = [c for c in obj.children if c.tag == "shape" and c.type == "shapegroup"]
+    if len(obj.children) != 1 or len(refs) != 1:
+        raise ValueError(f"{obj.where}: an instance needs exactly one shapegroup (a <ref> to "
+                         f"its id), got {len(obj.children)} nested objects")  # fmt: skip
+    lin = m[:3, :3]
+    if not abs(np.linalg.det(lin)) > 1e-12 * np.linalg.norm(lin) ** 3:
+        raise p.err("to_world", "the transform is singular (det = 0); an instance must be "
+                                "an invertible affine map")  # fmt: skip
+    p.done(children_ok=1)
+    g = _shapegroup(refs[0], doc, desc, ctx)
+    if g["entry"] is None:
+        g["entry"] = {"type": "instances", "shapes": g["shapes"], "to_world": []}
+        desc["shapes"].append(g["entry"])
+    g["entry"]["to_world"].append(m.tolist())
+    for (lo, hi), _ in g["bboxes"]:  # world boxes of the instanced shapes (clip checks)
+        c = np.array([[x[0], y[1], z[2], 1.0] for x in (lo, hi) for y in (lo, hi)
+                      for z in (lo, hi)])  # fmt: skip
+        w = (c @ m.T)[:, :3]
+        ctx["bboxes"].append((np.stack([w.min(0), w.max(0)]), obj))
+
+
 # ------------------------------------------------------------------------------------------
 # emitters, sensor, integrator
 
@@ -1472,7 +1529,11 @@ def read_xml(path, **params) -> XMLScene:
         desc["film"] = film
     integrator, depth, rr = _integrator(integ[0], doc) if integ else ("path", None, 5)
     for o in objs:
-        if o.tag == "shape":
+        if o.tag == "shape" and o.type == "shapegroup":
+            _shapegroup(o, doc, desc, ctx)
+        elif o.tag == "shape" and o.type == "instance":
+            _instance(o, doc, desc, ctx)
+        elif o.tag == "shape":
             _shape(o, doc, desc, ctx)
         elif o.tag == "emitter":
             _emitter(o, doc, desc)

@@ -92,8 +92,13 @@ def build_traversal(mesh, accel: str = "auto"):
 
 
 def accel_of(shape) -> str | None:
-    """Backend name of a traversal object (``None`` for anything else)."""
+    """Backend name of a traversal object, or of the one an
+    :class:`~jaxgfx.render.geometry.instance.Instances` shares (``None`` for anything else)."""
     from jaxgfx.render.geometry.accel.bvh_sah import BVH
+    from jaxgfx.render.geometry.instance import Instances
+
+    if isinstance(shape, Instances):
+        return accel_of(shape.shape)
 
     if isinstance(shape, EmbreeMesh):
         return "embree"
@@ -140,5 +145,10 @@ def scene_with_accel(scene, accel: str = "auto"):
     shapes = []
     for s in scene.shapes:
         cur = accel_of(s)
-        shapes.append(s if cur is None or cur == name else _cached_build(s.mesh, name))
+        if cur is None or cur == name:
+            shapes.append(s)
+        elif hasattr(s, "to_world"):  # Instances: rebuild the one shared structure
+            shapes.append(eqx.tree_at(lambda i: i.shape, s, _cached_build(s.shape.mesh, name)))
+        else:
+            shapes.append(_cached_build(s.mesh, name))
     return eqx.tree_at(lambda sc: sc.shapes, scene, tuple(shapes))

@@ -1,0 +1,206 @@
+# ruff: noqa: F722  (jaxtyping shape strings)
+"""Instancing: one shape (and its acceleration structure) placed ``K`` times by affine maps.
+
+:class:`Instances` holds ONE shape in its own (local) space — :class:`Spheres`,
+:class:`Rectangles`, a :class:`TriangleMesh` or a mesh traversal object (JAX BVH, Embree,
+Warp) — and ``to_world (K, 4, 4)``. It is a custom shape of
+:func:`~jaxgfx.render.geometry.intersect_scene` (``closest_t`` / ``occluded`` / ``hit``):
+
+* search (two-level, non-differentiable): every ray is mapped into each instance's space,
+  ``o' = A⁻¹(o − b)``, ``d' = A⁻¹ d``; the local direction is normalised (spheres need unit
+  directions) and the ray interval scaled by ``s = |d'|``, so a local hit at ``t'`` is the
+  world hit ``t = t'/s``. The ``K`` local queries run as ONE batch through the shared
+  bottom-level structure (JAX BVH, Embree or Warp: one build, one native scene, shared by all
+  instances); the top level is a linear loop (a batch axis) over the instances, whose rays
+  the bottom level's root box rejects at once when they miss the instance.
+* hit record (differentiable): the local record of the found primitive (closed form), mapped
+  back: ``p = A p' + b``, normals by the inverse transpose ``normalize(A⁻ᵀ n')``, ``uv``
+  unchanged, ``t = t'/s``. Differentiable w.r.t. the shape's parameters (vertices, radii...)
+  and ``to_world`` (for the fixed primitive hit).
+
+``prim_id`` of a hit is ``k · n + j`` (instance ``k``, primitive ``j`` of the ``n`` of the
+shape), so a per-primitive material table has ``K · n`` entries.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from jaxgfx._math import safe_normalize, sum_last, take_rows
+from jaxgfx.render.geometry.intersect import closest_t as _closest_t
+from jaxgfx.render.geometry.intersect import primitive_hit
+from jaxgfx.render.geometry.mesh import TriangleMesh
+from jaxgfx.render.geometry.ray import Hit, hit_record, prepare_rays
+from jaxgfx.render.geometry.rectangle import Rectangles
+from jaxgfx.render.geometry.sphere import Spheres
+
+__all__ = ["Instances", "check_instance_transforms"]
+
+
+def check_instance_transforms(to_world, where="to_world"):
+    """``to_world`` as a float ``(K, 4, 4)`` NumPy array of invertible affine maps (one
+    ``(4, 4)`` is promoted); ``ValueError`` naming ``where[k]`` for a bad or singular one.
+
+    Singular: ``|det A| <= 1e-12 · ‖A‖³`` (Frobenius norm), i.e. zero to working precision."""
+    m = np.asarray(to_world, np.float64)
+    if m.ndim == 2:
+        m = m[None]
+    if m.ndim != 3 or m.shape[1:] != (4, 4) or m.shape[0] == 0:
+        raise ValueError(f"{where}: expected one or more 4x4 matrices, got shape {m.shape}")
+    for k in range(m.shape[0]):
+        if not np.all(np.isfinite(m[k])):
+            raise ValueError(f"{where}[{k}]: the matrix has non-finite entries")
+        if not np.allclose(m[k, 3], [0.0, 0.0, 0.0, 1.0]):
+            raise ValueError(f"{where}[{k}]: expected an affine matrix (last row 0 0 0 1)")
+        lin = m[k, :3, :3]
+        if not abs(np.linalg.det(lin)) > 1e-12 * np.linalg.norm(lin) ** 3:
+            raise ValueError(f"{where}[{k}]: the transform is singular (det = 0)")
+    return m
+
+
+def _base(shape):
+    """The primitive shape behind a traversal object (its ``mesh``)."""
+    return shape.mesh if hasattr(shape, "mesh") else shape
+
+
+def _prim_count(shape) -> int:
+    s = _base(shape)
+    if isinstance(s, TriangleMesh):
+        return int(s.faces.shape[0])
+    if isinstance(s, Spheres):
+        return int(jnp.atleast_1d(s.radii).shape[0])
+    if isinstance(s, Rectangles):
+        return int(jnp.atleast_2d(s.centers).shape[0])
+    raise TypeError(
+        "shape: expected Spheres, Rectangles, a TriangleMesh or a mesh traversal object, "
+        f"got {type(shape).__name__}"
+    )
+
+
+def _split(m):
+    return m[..., :3, :3], m[..., :3, 3]
+
+
+def _apply(lin, x):
+    return jnp.einsum("...ij,...j->...i", lin, x)
+
+
+class Instances(eqx.Module):
+    """``K`` instances of one shape: ``shape`` (local space) and ``to_world (K, 4, 4)``
+    (float leaf, column-vector affine maps, each invertible). See the module docstring."""
+
+    shape: object
+    to_world: Float[Array, "K 4 4"]
+    n_prims: int = eqx.field(static=True)
+
+    def __init__(self, shape, to_world):
+        self.n_prims = _prim_count(shape)
+        if isinstance(to_world, jax.core.Tracer):
+            self.to_world = to_world
+        else:
+            m = check_instance_transforms(to_world)
+            dt = jnp.result_type(*[x.dtype for x in jax.tree_util.tree_leaves(_base(shape))
+                                   if jnp.issubdtype(x.dtype, jnp.floating)])  # fmt: skip
+            self.to_world = jnp.asarray(m, dt)
+        self.shape = shape
+
+    @property
+    def count(self) -> int:
+        """Number of instances ``K``."""
+        return self.to_world.shape[0]
+
+    def _local_rays(self, o, d, tmin, tmax):
+        """Rays of batch ``(...)`` in every instance's space: ``(K, ...)`` (no derivatives)."""
+        sg = jax.lax.stop_gradient
+        lin, b = _split(sg(self.to_world).astype(o.dtype))
+        inv = jnp.linalg.inv(lin)  # (K, 3, 3)
+        ex = (slice(None),) + (None,) * (o.ndim - 1)
+        ol = _apply(inv[ex], sg(o)[None] - b[ex])
+        dl = _apply(inv[ex], sg(d)[None])
+        s = jnp.sqrt(sum_last(dl * dl))
+        dl = dl / s[..., None]
+        batch = o.shape[:-1]
+        tmin = jnp.broadcast_to(tmin, batch)[None] * s
+        tmax = jnp.broadcast_to(tmax, batch)[None] * s
+        return ol, dl, s, tmin, tmax
+
+    def closest_t(self, o, d, *, tmin=0.0, tmax=jnp.inf):
+        """Nearest world ``(t, prim_id)`` over all instances (``prim_id = k·n + j``)."""
+        o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
+        ol, dl, s, tmin_l, tmax_l = self._local_rays(o, d, tmin, tmax)
+        t, p = _closest_t(self.shape, ol, dl, tmin_l, tmax_l)
+        t = jnp.where(jnp.isfinite(t), t / s, jnp.inf)
+        best = jnp.min(t, axis=0)
+        k = jnp.argmin(t, axis=0).astype(jnp.int32)
+        pk = jnp.take_along_axis(p, k[None], axis=0)[0]
+        return best, k * self.n_prims + pk
+
+    def occluded(self, o, d, tmax, *, tmin=0.0):
+        """True where any instance has a primitive in ``(tmin, tmax)``."""
+        o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
+        ol, dl, _, tmin_l, tmax_l = self._local_rays(o, d, tmin, tmax)
+        if hasattr(self.shape, "occluded"):
+            hit = self.shape.occluded(ol, dl, tmax_l, tmin=tmin_l)
+        else:
+            hit = jnp.isfinite(_closest_t(self.shape, ol, dl, tmin_l, tmax_l)[0])
+        return jnp.any(hit, axis=0)
+
+    def hit(self, prim_id, o, d, valid, t=None) -> Hit:
+        """Differentiable world-space hit record of primitive ``prim_id = k·n + j``."""
+        o = jnp.asarray(o)
+        d = jnp.asarray(d, o.dtype)
+        pid = jnp.maximum(prim_id, 0)
+        k = jnp.clip(pid // self.n_prims, 0, self.count - 1)
+        j = pid % self.n_prims
+        m = take_rows(self.to_world.astype(o.dtype), k)  # (..., 4, 4)
+        lin, b = _split(m)
+        inv = jnp.linalg.inv(lin)
+        ol = _apply(inv, o - b)
+        dl = _apply(inv, d)
+        s = jnp.sqrt(sum_last(dl * dl))
+        h = primitive_hit(_base(self.shape), j, ol, dl / s[..., None], valid)
+        inv_t = jnp.swapaxes(inv, -1, -2)
+        p = _apply(lin, h.p) + b
+        ng = safe_normalize(_apply(inv_t, h.ng))
+        ns = safe_normalize(_apply(inv_t, h.ns))
+        t = jnp.where(h.valid, h.t, 0.0) / s  # no inf / s: its derivative would be NaN
+        return hit_record(h.valid, t, p, ng, ns, h.uv, prim_id, 0)
+
+    def intersect(self, o, d, *, tmin=0.0, tmax=jnp.inf, shape_id=0) -> Hit:
+        """Closest hit over all instances (search, then :meth:`hit`)."""
+        o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
+        t, pid = self.closest_t(o, d, tmin=tmin, tmax=tmax)
+        h = self.hit(pid, o, d, jnp.isfinite(t))
+        return eqx.tree_at(lambda h: h.shape_id, h, jnp.where(h.valid, shape_id, -1))
+
+    def flatten(self):
+        """The instances as one world-space shape of the same type (for comparisons and for
+        shapes that need it): vertices / centres mapped, normals by the inverse transpose."""
+        base = _base(self.shape)
+        lin, b = _split(self.to_world)
+        if isinstance(base, TriangleMesh):
+            v = _apply(lin[:, None], base.vertices[None]) + b[:, None]
+            nv = base.vertices.shape[0]
+            f = (base.faces[None] + nv * jnp.arange(self.count)[:, None, None]).reshape(-1, 3)
+            n = None
+            if base.normals is not None:
+                it = jnp.swapaxes(jnp.linalg.inv(lin), -1, -2)
+                n = safe_normalize(_apply(it[:, None], base.normals[None])).reshape(-1, 3)
+            uv = None if base.uvs is None else jnp.tile(base.uvs, (self.count, 1))
+            return TriangleMesh(v.reshape(-1, 3), f, n, uv)
+        if isinstance(base, Rectangles):
+            c = (_apply(lin[:, None], base.centers[None]) + b[:, None]).reshape(-1, 3)
+            eu = _apply(lin[:, None], base.edge_u[None]).reshape(-1, 3)
+            ev = _apply(lin[:, None], base.edge_v[None]).reshape(-1, 3)
+            return Rectangles(c, eu, ev)
+        # spheres: only similarity transforms keep them spheres
+        sv = jnp.linalg.svd(lin, compute_uv=False)
+        if not bool(jnp.all(sv[:, 0] - sv[:, 2] <= 1e-6 * sv[:, 0])):
+            raise ValueError("flatten: a non-uniformly scaled sphere is an ellipsoid")
+        c = (_apply(lin[:, None], base.centers[None]) + b[:, None]).reshape(-1, 3)
+        r = (sv[:, 0:1] * base.radii[None]).reshape(-1)
+        return Spheres(c, r)
