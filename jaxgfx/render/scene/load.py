@@ -188,6 +188,11 @@ def load_scene(
         except (ValueError, TypeError) as e:
             raise ValueError(f"materials.{name}: {e}") from None
         names.append(str(name))
+    from jaxgfx.render.scene._mesh_attributes import attach_attributes, attribute_slots, with_slots
+
+    slots = attribute_slots(materials)  # mesh_attribute textures: the attribute layout
+    if slots:
+        materials = list(with_slots(materials, slots))
 
     def material_index(d, where):
         m = d.get("material")
@@ -218,6 +223,8 @@ def load_scene(
             instanced += instances_from_desc(sd, where, base_dir, material_index, build)
             continue
         kind, shape = shape_from_desc(sd, where, base_dir)
+        if slots and kind == "mesh":
+            shape = attach_attributes(shape, sd, where, base_dir, slots)
         mi = material_index(sd, where)
         if kind in ("mesh", "sdf"):
             meshes.append((shape, mi))

@@ -91,7 +91,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     # textures
     ("texture", "bitmap"): S + " (no `to_uv`)",
     ("texture", "checkerboard"): S + " (`to_uv` a uniform scale)",
-    ("texture", "mesh_attribute"): "refused: no mesh attributes in jaxgfx",
+    ("texture", "mesh_attribute"): S + " (vertex_* / face_* of PLY files; not in shapegroups)",
     ("texture", "volume"): "refused: jaxgfx renders surfaces only",
     # emitters
     ("emitter", "area"): S + " (inside a shape)",

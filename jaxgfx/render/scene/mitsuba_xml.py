@@ -677,6 +677,14 @@ def _texture(obj: _Obj, doc) -> dict:
             d["scale"] = s
         p.done()
         return d
+    if obj.type == "mesh_attribute":  # the values are read from the shapes' PLY files
+        name = p.string("name")
+        if name is None or not name.startswith(("vertex_", "face_")):
+            raise ValueError(f"{obj.where}: parameter 'name': expected 'vertex_...' or "
+                             f"'face_...', got {name!r}")  # fmt: skip
+        d = {"type": "mesh_attribute", "name": name, "scale": p.float("scale", 1.0)}
+        p.done()
+        return d
     raise ValueError(f"{obj.where}: texture plugin {obj.type!r} is not supported "
                      "(bitmap, checkerboard)")  # fmt: skip
 
@@ -1028,6 +1036,7 @@ def _shape(obj: _Obj, doc, desc, ctx):
         from jaxgfx.render.geometry import mesh_io
 
         uvs = normals = None
+        attrs: dict = {}
         if t in ("obj", "ply", "serialized"):
             fname = p.string("filename")
             if fname is None:
@@ -1039,8 +1048,10 @@ def _shape(obj: _Obj, doc, desc, ctx):
 
                     # vertex colours are ignored, as Mitsuba does unless a texture reads them
                     mesh = read_serialized(path, p.int("shape_index", 0))
+                elif t == "ply":  # with its vertex_* / face_* attributes (mesh_attribute)
+                    mesh, attrs = mesh_io.load_ply(path, attributes=True)
                 else:
-                    mesh = (mesh_io.load_obj if t == "obj" else mesh_io.load_ply)(path)
+                    mesh = mesh_io.load_obj(path)
             except ValueError as e:
                 raise p.err("filename", str(e)) from None
             v = np.asarray(mesh.vertices, np.float64)
@@ -1094,6 +1105,8 @@ def _shape(obj: _Obj, doc, desc, ctx):
             sd["normals"] = normals.tolist()
         if uvs is not None:
             sd["uvs"] = uvs.tolist()
+        if t == "ply" and attrs:
+            sd["attributes"] = {k: a.tolist() for k, a in attrs.items()}
         if not np.allclose(m, np.eye(4)):
             sd["to_world"] = m.tolist()
         vw = v @ lin.T + m[:3, 3]

@@ -346,6 +346,7 @@ def shape_from_desc(d, where, base_dir):
                 "translate",
                 "scale",
                 "to_world",
+                "attributes",
             ),
         )
         return "mesh", mesh_from_desc(d, where, base_dir)
