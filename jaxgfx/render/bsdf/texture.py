@@ -57,9 +57,8 @@ def lookup(tex, uv):
     Example: a 1×2 texture ``[[0], [1]]`` (W = 2) has ``lookup(tex, (0.5, 0.5)) = 0.5``.
     """
     uv = as_float_array(uv, "uv")
-    if uv.ndim == 0 or uv.shape[-1] < 2:
+    if uv.shape[-1:] != (2,):
         raise ValueError(f"uv: expected shape (..., 2), got {uv.shape}")
-    uv = uv[..., :2]  # hits on meshes with attributes carry them after (u, v)
     if not isinstance(tex, Texture):
         c = as_float_array(tex, "tex")
         return jnp.broadcast_to(c, uv.shape[:-1] + c.shape)

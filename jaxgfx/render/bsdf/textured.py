@@ -74,13 +74,13 @@ class Checkerboard(eqx.Module):
 def texture_eval(tex, uv):
     """Texture value at ``uv (..., 2)`` → ``(..., C)`` (bitmap: bilinear / nearest lookup)."""
     if isinstance(tex, Checkerboard):
-        q = uv * tex.scale
+        q = uv[..., :2] * tex.scale
         m = (q - jnp.floor(q)) > 0.5
         same = (m[..., 0] == m[..., 1])[..., None]
         return jnp.where(same, tex.color0.astype(uv.dtype), tex.color1.astype(uv.dtype))
     if isinstance(tex, MeshAttribute):
         return tex(uv)
-    return lookup(tex, uv).astype(uv.dtype)
+    return lookup(tex, uv[..., :2]).astype(uv.dtype)  # mesh attributes may follow (u, v)
 
 
 def texturable_paths(bsdf, name):

@@ -192,6 +192,9 @@ def load_scene(
 
     slots = attribute_slots(materials)  # mesh_attribute textures: the attribute layout
     if slots:
+        if any(getattr(m, "needs_tangents", False) for m in materials):
+            raise ValueError("materials: normal / bump maps together with mesh_attribute "
+                             "textures in one scene are not supported")  # fmt: skip
         materials = list(with_slots(materials, slots))
 
     def material_index(d, where):
