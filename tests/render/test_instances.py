@@ -340,3 +340,44 @@ def test_instancing_scene_matches_mitsubas_reference(data_dir):  # noqa: F811
     c = compare(img, ref, var, spp)
     assert np.all(np.abs(c["z_mean"]) < 4), c
     assert c["z_rms"] < 1.5 and c["frac_3_5"] > 0.97, c
+
+
+def test_instances_round_trip_through_save_scene_and_to_mitsuba_dict(tmp_path):
+    """scene -> save_scene (Mitsuba XML: a shapegroup and one instance per matrix) -> read back:
+    the same members, matrices and materials; to_mitsuba_dict of the
+    description gives group_0 and instance_0_K referring to it."""
+    from jaxgfx.render.scene.mitsuba import to_mitsuba_dict
+    from jaxgfx.render.scene.mitsuba_xml import save_scene
+
+    desc = _desc(True)
+    md = to_mitsuba_dict(desc)
+    assert md["group_0"]["type"] == "shapegroup" and len(md["group_0"]) == 3
+    for k in range(3):
+        inst = md[f"instance_0_{k}"]
+        assert inst["shapegroup"] == {"type": "ref", "id": "group_0"}
+        np.testing.assert_allclose(inst["to_world"], desc["shapes"][0]["to_world"][k])
+    scene = load_scene(desc)
+    path = tmp_path / "saved.xml"
+    save_scene(scene, str(path), spp=4)
+    text = path.read_text()
+    assert text.count('type="instance"') == 6  # 3 matrices x 2 members (mesh, rectangle)
+    back = read_xml(str(path))
+    ents = [s for s in back.desc["shapes"] if s["type"] == "instances"]
+    assert len(ents) == 2
+    for e in ents:
+        np.testing.assert_allclose(e["to_world"], desc["shapes"][0]["to_world"], atol=1e-6)
+    s2 = load_scene(back.desc)
+    got = [s for s in s2.shapes if isinstance(s, Instances)]
+    want = [s for s in scene.shapes if isinstance(s, Instances)]
+    assert len(got) == len(want) == 2
+    for g, w in zip(got, want, strict=True):  # the same members, matrices and materials
+        np.testing.assert_allclose(g.to_world, w.to_world, atol=1e-6)
+        gb, wb = getattr(g.shape, "mesh", g.shape), getattr(w.shape, "mesh", w.shape)
+        assert type(gb) is type(wb) and g.n_prims == w.n_prims
+        for f in ("vertices", "centers", "edge_u", "edge_v"):
+            if hasattr(wb, f):
+                np.testing.assert_allclose(getattr(gb, f), getattr(wb, f), atol=1e-6)
+    for a, b in zip(s2.shape_materials, scene.shape_materials, strict=True):
+        ma = s2.materials[int(a[0])].reflectance
+        mb = scene.materials[int(b[0])].reflectance
+        np.testing.assert_allclose(ma, mb, atol=1e-6)
