@@ -31,6 +31,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from jaxgfx._math import safe_normalize, sum_last, take_rows
+from jaxgfx.render.geometry.accel._common import safe_inv, slab
 from jaxgfx.render.geometry.intersect import closest_t as _closest_t
 from jaxgfx.render.geometry.intersect import primitive_hit
 from jaxgfx.render.geometry.mesh import TriangleMesh
@@ -81,6 +82,31 @@ def _prim_count(shape) -> int:
     )
 
 
+def _traced(tree):
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
+
+
+def _world_boxes(base, m):
+    """World-space bounding boxes ``(K, 2, 3)`` of ``base`` under the matrices ``m (K, 4, 4)``
+    (the 8 corners of its local box, mapped), widened by a relative 1e-6."""
+    if isinstance(base, TriangleMesh):
+        v = np.asarray(base.vertices, np.float64)
+        lo, hi = v.min(0), v.max(0)
+    elif isinstance(base, Spheres):
+        c, r = np.asarray(base.centers, np.float64), np.asarray(base.radii, np.float64)[:, None]
+        lo, hi = (c - r).min(0), (c + r).max(0)
+    else:
+        c = np.asarray(base.centers, np.float64)
+        eu, ev = np.abs(np.asarray(base.edge_u)) / 2, np.abs(np.asarray(base.edge_v)) / 2
+        lo, hi = (c - eu - ev).min(0), (c + eu + ev).max(0)
+    corners = np.array([[x[0], y[1], z[2], 1.0] for x in (lo, hi) for y in (lo, hi)
+                        for z in (lo, hi)])  # fmt: skip
+    w = np.einsum("kij,cj->kci", m, corners)[..., :3]
+    blo, bhi = w.min(1), w.max(1)
+    pad = 1e-6 * np.maximum(np.abs(blo), np.abs(bhi)).max(1, keepdims=True) + 1e-12
+    return np.stack([blo - pad, bhi + pad], 1)
+
+
 def _split(m):
     return m[..., :3, :3], m[..., :3, 3]
 
@@ -95,10 +121,12 @@ class Instances(eqx.Module):
 
     shape: object
     to_world: Float[Array, "K 4 4"]
+    bounds: Float[Array, "K 2 3"] | None
     n_prims: int = eqx.field(static=True)
 
-    def __init__(self, shape, to_world):
+    def __init__(self, shape, to_world, bounds=None):
         self.n_prims = _prim_count(shape)
+        self.bounds = bounds
         if isinstance(to_world, jax.core.Tracer):
             self.to_world = to_world
         else:
@@ -106,6 +134,8 @@ class Instances(eqx.Module):
             dt = jnp.result_type(*[x.dtype for x in jax.tree_util.tree_leaves(_base(shape))
                                    if jnp.issubdtype(x.dtype, jnp.floating)])  # fmt: skip
             self.to_world = jnp.asarray(m, dt)
+            if bounds is None and not _traced(shape):
+                self.bounds = jnp.asarray(_world_boxes(_base(shape), m), dt)
         self.shape = shape
 
     @property
@@ -124,9 +154,15 @@ class Instances(eqx.Module):
         s = jnp.sqrt(sum_last(dl * dl))
         dl = dl / s[..., None]
         batch = o.shape[:-1]
-        tmin = jnp.broadcast_to(tmin, batch)[None] * s
-        tmax = jnp.broadcast_to(tmax, batch)[None] * s
-        return ol, dl, s, tmin, tmax
+        tmin_w = jnp.broadcast_to(tmin, batch)[None]
+        tmax_w = jnp.broadcast_to(tmax, batch)[None]
+        if self.bounds is not None:  # top level: rays that miss an instance's box get (0, 0)
+            bx = sg(self.bounds).astype(o.dtype)[ex]  # (K, 1.., 2, 3)
+            _, _, inside = slab(bx[..., 0, :], bx[..., 1, :], sg(o)[None], safe_inv(sg(d))[None],
+                                tmin_w, tmax_w)  # fmt: skip
+            tmin_w = jnp.where(inside, tmin_w, 0.0)
+            tmax_w = jnp.where(inside, tmax_w, 0.0)
+        return ol, dl, s, tmin_w * s, tmax_w * s
 
     def closest_t(self, o, d, *, tmin=0.0, tmax=jnp.inf):
         """Nearest world ``(t, prim_id)`` over all instances (``prim_id = k·n + j``)."""
