@@ -107,6 +107,45 @@ def _world_boxes(base, m):
     return np.stack([blo - pad, bhi + pad], 1)
 
 
+def _tlas_query(handle, m, bx, o, d, tmin, tmax, any_hit, n):
+    """Host top level over the instances of one Embree scene: ``(t float32, prim int32)``."""
+    from jaxgfx.render.geometry.accel._host import lookup_native
+
+    host = lookup_native(handle)
+    batch = np.shape(o)[:-1]
+    o = np.asarray(o, np.float64).reshape(-1, 3)
+    d = np.asarray(d, np.float64).reshape(-1, 3)
+    t0 = np.broadcast_to(np.asarray(tmin, np.float64), batch).reshape(-1)
+    best = np.broadcast_to(np.asarray(tmax, np.float64), batch).reshape(-1).copy()
+    prim = np.full(o.shape[0], -1, np.int64)
+    m = np.asarray(m, np.float64).reshape(-1, 4, 4)
+    bx = np.asarray(bx, np.float64).reshape(-1, 2, 3)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_d = 1.0 / np.where(d == 0, 1e-30, d)
+    for k in range(m.shape[0]):
+        ta, tb = (bx[k, 0] - o) * inv_d, (bx[k, 1] - o) * inv_d
+        tn = np.maximum(np.minimum(ta, tb).max(1), t0)
+        tf = np.minimum(np.maximum(ta, tb).min(1) * (1 + 1e-6), best)
+        sel = np.nonzero((tn <= tf) & (prim < 0 if any_hit else True))[0]
+        if sel.size == 0:
+            continue
+        inv = np.linalg.inv(m[k, :3, :3])
+        ol = (o[sel] - m[k, :3, 3]) @ inv.T
+        dl = d[sel] @ inv.T
+        s = np.linalg.norm(dl, axis=1)
+        t, p = host.query(ol, dl / s[:, None], t0[sel] * s, best[sel] * s, any_hit)
+        hit = p >= 0
+        if any_hit:
+            prim[sel[hit]] = k * n + p[hit]
+            continue
+        tw = t.astype(np.float64) / s
+        closer = hit & (tw < best[sel])
+        best[sel[closer]] = tw[closer]
+        prim[sel[closer]] = k * n + p[closer]
+    t = np.where(prim >= 0, best, np.inf).astype(np.float32)
+    return t.reshape(batch), prim.astype(np.int32).reshape(batch)
+
+
 def _split(m):
     return m[..., :3, :3], m[..., :3, 3]
 
@@ -164,9 +203,36 @@ class Instances(eqx.Module):
             tmax_w = jnp.where(inside, tmax_w, 0.0)
         return ol, dl, s, tmin_w * s, tmax_w * s
 
+    def _host_tlas(self, o, d, tmin, tmax, any_hit):
+        """Embree: the instance loop runs on the host in ONE callback (world rays in; per
+        instance only the rays that reach its box before the best hit so far are mapped and
+        queried), instead of ``K`` times the rays through the callback."""
+        sg = jax.lax.stop_gradient
+        batch = o.shape[:-1]
+        out = (jax.ShapeDtypeStruct(batch, jnp.float32), jax.ShapeDtypeStruct(batch, jnp.int32))
+        n = self.n_prims
+
+        def cb(h, m, bx, o, d, t0, t1):
+            return _tlas_query(h, m, bx, o, d, t0, t1, any_hit, n)
+
+        t, p = jax.pure_callback(
+            cb, out, self.shape.handle, sg(self.to_world), sg(self.bounds), sg(o), sg(d),
+            jnp.broadcast_to(sg(tmin), batch), jnp.broadcast_to(sg(tmax), batch),
+            vmap_method="expand_dims",
+        )  # fmt: skip
+        return t.astype(o.dtype), p
+
+    def _host(self):
+        from jaxgfx.render.geometry.accel.embree import EmbreeMesh
+
+        return isinstance(self.shape, EmbreeMesh) and self.bounds is not None
+
     def closest_t(self, o, d, *, tmin=0.0, tmax=jnp.inf):
         """Nearest world ``(t, prim_id)`` over all instances (``prim_id = k·n + j``)."""
         o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
+        if self._host():
+            t, p = self._host_tlas(o, d, tmin, tmax, False)
+            return jnp.where(p >= 0, t, jnp.inf), jnp.maximum(p, 0)
         ol, dl, s, tmin_l, tmax_l = self._local_rays(o, d, tmin, tmax)
         t, p = _closest_t(self.shape, ol, dl, tmin_l, tmax_l)
         t = jnp.where(jnp.isfinite(t), t / s, jnp.inf)
@@ -178,6 +244,8 @@ class Instances(eqx.Module):
     def occluded(self, o, d, tmax, *, tmin=0.0):
         """True where any instance has a primitive in ``(tmin, tmax)``."""
         o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
+        if self._host():
+            return self._host_tlas(o, d, tmin, tmax, True)[1] >= 0
         ol, dl, _, tmin_l, tmax_l = self._local_rays(o, d, tmin, tmax)
         if hasattr(self.shape, "occluded"):
             hit = self.shape.occluded(ol, dl, tmax_l, tmin=tmin_l)
