@@ -387,3 +387,20 @@ def test_instances_round_trip_through_save_scene_and_to_mitsuba_dict(tmp_path):
         ma = s2.materials[int(a[0])].reflectance
         mb = scene.materials[int(b[0])].reflectance
         np.testing.assert_allclose(ma, mb, atol=1e-6)
+
+
+def test_with_accel_rebuilds_the_one_shared_structure():
+    """Scene.accel reports the instanced mesh's backend; with_accel swaps the shared structure
+    (same mesh leaves, same matrices)."""
+    if "embree" not in available_backends():
+        pytest.skip("embreex not installed")
+    d = _desc(True)
+    d["shapes"][0]["shapes"][0] = {"type": "mesh", "generator": {"name": "icosphere", "level": 2},
+                                   "material": "m"}  # fmt: skip
+    scene = load_scene(d, accel="jax")
+    assert scene.accel == "jax"
+    s2 = scene.with_accel("embree")
+    assert s2.accel == "embree"
+    a, b = scene.shapes[0], s2.shapes[0]
+    assert type(b.shape).__name__ == "EmbreeMesh" and b.shape.mesh.vertices is a.shape.mesh.vertices
+    np.testing.assert_array_equal(a.to_world, b.to_world)

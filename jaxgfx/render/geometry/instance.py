@@ -31,7 +31,6 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from jaxgfx._math import safe_normalize, sum_last, take_rows
-from jaxgfx.render.geometry.accel._common import safe_inv, slab
 from jaxgfx.render.geometry.intersect import closest_t as _closest_t
 from jaxgfx.render.geometry.intersect import primitive_hit
 from jaxgfx.render.geometry.mesh import TriangleMesh
@@ -82,6 +81,16 @@ def _prim_count(shape) -> int:
     )
 
 
+def _box_hit(lo, hi, o, d, t0, t1):
+    """Whether rays ``o + t d`` meet the boxes ``[lo, hi]`` for some ``t`` in ``[t0, t1]``
+    (slab test; zero direction components use ``±1e30`` reciprocals; exit widened by 1e-6)."""
+    inv = 1.0 / jnp.where(d == 0, jnp.where(jnp.signbit(d), -1e-30, 1e-30), d)
+    ta, tb = (lo - o) * inv, (hi - o) * inv
+    tn = jnp.maximum(jnp.max(jnp.minimum(ta, tb), axis=-1), t0)
+    tf = jnp.minimum(jnp.min(jnp.maximum(ta, tb), axis=-1) * (1 + 1e-6), t1)
+    return tn <= tf
+
+
 def _traced(tree):
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
 
@@ -109,7 +118,7 @@ def _world_boxes(base, m):
 
 def _tlas_query(handle, m, bx, o, d, tmin, tmax, any_hit, n):
     """Host top level over the instances of one Embree scene: ``(t float32, prim int32)``."""
-    from jaxgfx.render.geometry.accel._host import lookup_native
+    from jaxgfx.render.geometry.accel.backends import lookup_native
 
     host = lookup_native(handle)
     batch = np.shape(o)[:-1]
@@ -197,8 +206,8 @@ class Instances(eqx.Module):
         tmax_w = jnp.broadcast_to(tmax, batch)[None]
         if self.bounds is not None:  # top level: rays that miss an instance's box get (0, 0)
             bx = sg(self.bounds).astype(o.dtype)[ex]  # (K, 1.., 2, 3)
-            _, _, inside = slab(bx[..., 0, :], bx[..., 1, :], sg(o)[None], safe_inv(sg(d))[None],
-                                tmin_w, tmax_w)  # fmt: skip
+            inside = _box_hit(bx[..., 0, :], bx[..., 1, :], sg(o)[None], sg(d)[None],
+                              tmin_w, tmax_w)  # fmt: skip
             tmin_w = jnp.where(inside, tmin_w, 0.0)
             tmax_w = jnp.where(inside, tmax_w, 0.0)
         return ol, dl, s, tmin_w * s, tmax_w * s

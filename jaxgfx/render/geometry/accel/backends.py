@@ -26,6 +26,7 @@ import equinox as eqx
 import jax
 
 from jaxgfx.render.geometry.accel._host import HostTraversal as HostTraversal
+from jaxgfx.render.geometry.accel._host import lookup_native as lookup_native
 from jaxgfx.render.geometry.accel.embree import EmbreeMesh as EmbreeMesh
 from jaxgfx.render.geometry.accel.embree import build_embree as build_embree
 from jaxgfx.render.geometry.accel.embree import embree_available as embree_available
@@ -44,6 +45,7 @@ __all__ = [
     "build_traversal",
     "build_warp",
     "embree_available",
+    "lookup_native",
     "resolve_backend",
     "scene_with_accel",
     "warp_available",
@@ -95,9 +97,8 @@ def accel_of(shape) -> str | None:
     """Backend name of a traversal object, or of the one an
     :class:`~jaxgfx.render.geometry.instance.Instances` shares (``None`` for anything else)."""
     from jaxgfx.render.geometry.accel.bvh_sah import BVH
-    from jaxgfx.render.geometry.instance import Instances
 
-    if isinstance(shape, Instances):
+    if hasattr(shape, "to_world") and hasattr(shape, "n_prims"):  # Instances (no import cycle)
         return accel_of(shape.shape)
 
     if isinstance(shape, EmbreeMesh):
