@@ -64,7 +64,11 @@ def _mesh64():
     return type(m)(np.asarray(m.vertices, np.float64), m.faces)
 
 
-@pytest.mark.parametrize("backend", ["brute", "jax", "embree"])
+@pytest.mark.parametrize(
+    "backend",
+    # slow: ~8.5 s on 2 cores at load 9.5 (compiling the wavefront BVH for K x N rays)
+    ["brute", pytest.param("jax", marks=pytest.mark.slow), "embree"],
+)
 def test_instances_equal_the_flattened_mesh(backend, x64):
     """Rotated, non-uniformly scaled and translated copies of an 80-triangle icosphere: same
     hits, t, p, ng and prim ids (k * 80 + j) as the flattened mesh, any-hit = hit mask."""
@@ -124,6 +128,7 @@ def test_instanced_rectangles_and_non_uniformly_scaled_sphere(x64):
     np.testing.assert_allclose(np.asarray(h.ng)[hit], n[hit], atol=1e-9)
 
 
+@pytest.mark.slow  # slow: ~13 s on 2 cores at load 9.5 (check_grads compiles value, jvp, vjp)
 def test_hit_gradients_match_finite_differences(x64):
     """d(sum of t, p, ng)/d(to_world) and d/d(vertices) through an instance, float64 FD."""
     mesh = _mesh64()
