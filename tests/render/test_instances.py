@@ -339,7 +339,7 @@ def test_instanced_scene_matches_mitsuba(tmp_path):
     assert np.sqrt(np.mean(z**2)) < 1.5, np.sqrt(np.mean(z**2))
 
 
-@pytest.mark.slow  # slow: ~15 s on 2 loaded cores (OBJ sphere of 32 512 triangles; 64², 16 spp)
+@pytest.mark.slow  # slow: 15-28 s on 2 cores at load 10-15 (OBJ sphere, 32 512 triangles; 64²)
 def test_instancing_scene_matches_mitsubas_reference(data_dir):  # noqa: F811
     """mitsuba-data's ``instancing`` scene (a group of an OBJ sphere, a sphere and a rectangle,
     three instances with rotations and scales): channel means |z| < 4, 4x4 blocks' z RMS < 1.5
