@@ -7,7 +7,7 @@ import jax.numpy as jnp
 
 from jaxgfx._checks import as_float_array, check_choice, check_image
 
-__all__ = ["Texture", "lookup", "TEXTURE_WRAP_MODES", "TEXTURE_FILTERS"]
+__all__ = ["Texture", "MeshAttribute", "lookup", "TEXTURE_WRAP_MODES", "TEXTURE_FILTERS"]
 
 TEXTURE_WRAP_MODES = ("repeat", "clamp", "mirror")
 TEXTURE_FILTERS = ("bilinear", "nearest")
@@ -83,3 +83,30 @@ def lookup(tex, uv):
     top = img[i0, j0] * (1.0 - fx) + img[i0, j1] * fx
     bot = img[i1, j0] * (1.0 - fx) + img[i1, j1] * fx
     return top * (1.0 - fy) + bot * fy
+
+
+class MeshAttribute(eqx.Module):
+    """Mitsuba 3's ``mesh_attribute`` texture: the value of a mesh attribute (``vertex_*``:
+    interpolated with the hit's barycentrics; ``face_*``: constant per face) times ``scale``.
+
+    ``name`` (static) is the attribute; ``slot`` (static) its place in the hit's ``uv``
+    columns, assigned by the scene loader: columns ``2 + 3 slot ... 2 + 3 slot + 2`` (one-channel
+    attributes are stored replicated in all three). The values live on the meshes
+    (:class:`~jaxgfx.render.geometry.TriangleMesh` ``vertex_attributes`` /
+    ``face_attributes``), so gradients w.r.t. them flow through the hit record; ``scale`` is a
+    differentiable leaf. A hit on a shape without the attribute reads 0.
+    """
+
+    name: str = eqx.field(static=True)
+    scale: jnp.ndarray
+    slot: int = eqx.field(static=True, default=-1)
+
+    def __call__(self, uv):
+        """Value ``(..., 3)`` at hits whose ``uv`` carries the attribute columns."""
+        if self.slot < 0:
+            raise ValueError(f"mesh_attribute {self.name!r}: no slot assigned (load the scene "
+                             "with load_scene, which lays the attributes out)")  # fmt: skip
+        k = 2 + 3 * self.slot
+        if uv.shape[-1] < k + 3:  # no mesh of the scene has attributes: 0
+            return jnp.zeros(uv.shape[:-1] + (3,), uv.dtype)
+        return uv[..., k : k + 3] * self.scale.astype(uv.dtype)

@@ -34,7 +34,13 @@ from jaxgfx import io
 from jaxgfx._checks import as_float_array, check_choice, check_finite
 from jaxgfx.color import LUMINANCE_WEIGHTS
 from jaxgfx.render.bsdf._base import WrapsBSDF
-from jaxgfx.render.bsdf.texture import TEXTURE_FILTERS, TEXTURE_WRAP_MODES, Texture, lookup
+from jaxgfx.render.bsdf.texture import (
+    TEXTURE_FILTERS,
+    TEXTURE_WRAP_MODES,
+    MeshAttribute,
+    Texture,
+    lookup,
+)
 from jaxgfx.render.parameters import get_path, parameter_paths
 
 __all__ = [
@@ -48,7 +54,7 @@ __all__ = [
     "texturable_paths",
 ]
 
-TEXTURE_TYPES = ("bitmap", "checkerboard")
+TEXTURE_TYPES = ("bitmap", "checkerboard", "mesh_attribute")
 _LUMA = LUMINANCE_WEIGHTS["rec709"]
 
 
@@ -68,11 +74,13 @@ class Checkerboard(eqx.Module):
 def texture_eval(tex, uv):
     """Texture value at ``uv (..., 2)`` → ``(..., C)`` (bitmap: bilinear / nearest lookup)."""
     if isinstance(tex, Checkerboard):
-        q = uv * tex.scale
+        q = uv[..., :2] * tex.scale
         m = (q - jnp.floor(q)) > 0.5
         same = (m[..., 0] == m[..., 1])[..., None]
         return jnp.where(same, tex.color0.astype(uv.dtype), tex.color1.astype(uv.dtype))
-    return lookup(tex, uv).astype(uv.dtype)
+    if isinstance(tex, MeshAttribute):
+        return tex(uv)
+    return lookup(tex, uv[..., :2]).astype(uv.dtype)  # mesh attributes may follow (u, v)
 
 
 def texturable_paths(bsdf, name):
@@ -152,6 +160,15 @@ def texture_from_dict(d, where="texture", *, base_dir=None, channels=3):
     if not is_texture_desc(d):
         raise ValueError(f"{where}: expected a mapping with a 'type' key")
     kind = check_choice(d["type"], f"{where}.type", TEXTURE_TYPES)
+    if kind == "mesh_attribute":  # {type: mesh_attribute, name: vertex_color, scale: 1}
+        _expect(d, where, ("type", "name", "scale"))
+        name = d.get("name")
+        if not isinstance(name, str) or not name.startswith(("vertex_", "face_")):
+            raise ValueError(f"{where}.name: expected 'vertex_...' or 'face_...', got {name!r}")
+        scale = as_float_array(d.get("scale", 1.0), f"{where}.scale")
+        if scale.ndim != 0:
+            raise ValueError(f"{where}.scale: expected a number")
+        return MeshAttribute(name, check_finite(scale, f"{where}.scale"))
     if kind == "checkerboard":
         _expect(d, where, ("type", "color0", "color1", "scale"))
         cols = []
@@ -198,4 +215,6 @@ def texture_min(tex) -> float:
     """Smallest value of a concrete texture (for the loader's range checks)."""
     if isinstance(tex, Checkerboard):
         return float(min(jnp.min(tex.color0), jnp.min(tex.color1)))
+    if isinstance(tex, MeshAttribute):  # values live on the meshes (checked by the loader)
+        return min(0.0, float(tex.scale))
     return float(jnp.min(tex.image))

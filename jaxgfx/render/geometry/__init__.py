@@ -3,10 +3,11 @@
 One file per algorithm: ``ray`` (rays, :class:`Hit` records, robust spawning), ``frame``
 (orthonormal shading frames), ``sphere``, ``rectangle``, ``mesh`` (:class:`TriangleMesh`),
 ``triangle_moller_trumbore`` (Möller & Trumbore 1997), ``triangle_unit`` (affine map to the unit
-triangle), ``intersect`` (closest hit / any hit over shapes and scenes), ``area`` (areas and
-uniform area sampling for area lights), ``sdf`` (signed distance functions),
-``sphere_tracing`` (Hart 1996; :class:`SDFShape`), ``mesh_io`` (OBJ / PLY, procedural meshes)
-and ``accel/`` (``bvh_sah``, ``grid_dda``, ``kdtree_sah``). See docs/render_geometry.md.
+triangle), ``intersect`` (closest hit / any hit over shapes and scenes), ``instance``
+(instancing), ``area`` (areas and uniform area sampling for area lights), ``sdf`` (signed
+distance functions), ``sphere_tracing`` (Hart 1996; :class:`SDFShape`), ``mesh_io`` (OBJ /
+PLY, procedural meshes) and ``accel/`` (``bvh_sah``, ``grid_dda``, ``kdtree_sah``).
+See docs/render_geometry.md.
 """
 
 from jaxgfx._math import take_rows as take_rows
@@ -14,6 +15,7 @@ from jaxgfx.render.geometry import accel as accel
 from jaxgfx.render.geometry.area import area as area
 from jaxgfx.render.geometry.area import primitive_areas as primitive_areas
 from jaxgfx.render.geometry.area import sample_area as sample_area
+from jaxgfx.render.geometry.instance import Instances as Instances
 from jaxgfx.render.geometry.intersect import closest_t as closest_t
 from jaxgfx.render.geometry.intersect import intersect as intersect
 from jaxgfx.render.geometry.intersect import intersect_scene as intersect_scene
@@ -70,6 +72,7 @@ __all__ = [
     "Spheres",
     "Rectangles",
     "TriangleMesh",
+    "Instances",
     "TRIANGLE_INTERSECTORS",
     "sphere_intersect",
     "rectangle_intersect",

@@ -180,6 +180,8 @@ def intersect_scene(shapes, o, d, *, tmin=0.0, tmax=jnp.inf) -> Hit:
             h,
             (jnp.where(h.valid, sid, -1), jnp.where(h.valid, pid, -1)),
         )
+        if out is not None and out.uv.shape[-1] != h.uv.shape[-1]:  # mesh attributes: pad
+            out, h = _pad_uv(out, h)
         out = h if out is None else merge_hits(out, h)
     if out is None:
         return empty_hit(batch, o.dtype)
@@ -189,6 +191,18 @@ def intersect_scene(shapes, o, d, *, tmin=0.0, tmax=jnp.inf) -> Hit:
         (out.t, out.valid, out.p, out.ng, out.ns, out.prim_id, out.shape_id)
     )
     return Hit(t=t, valid=v, p=p, ng=ng, ns=ns, uv=out.uv, prim_id=prim, shape_id=shp)
+
+
+def _pad_uv(a, b):
+    """Two hit records with ``uv`` zero-padded to the same number of columns (meshes with
+    attributes carry them after the two texture coordinates)."""
+    n = max(a.uv.shape[-1], b.uv.shape[-1])
+
+    def pad(h):
+        w = ((0, 0),) * (h.uv.ndim - 1) + ((0, n - h.uv.shape[-1]),)
+        return eqx.tree_at(lambda h: h.uv, h, jnp.pad(h.uv, w))
+
+    return pad(a), pad(b)
 
 
 def occluded_scene(shapes, o, d, tmax, *, tmin=0.0):

@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
+from jaxgfx._checks import as_float_array
 from jaxgfx._math import safe_div, safe_normalize, sum_last, vdot
 from jaxgfx.render.geometry._points import as_points
 from jaxgfx.render.geometry.ray import Hit, hit_record
@@ -25,6 +26,10 @@ class TriangleMesh(eqx.Module):
     Fields: ``vertices (V, 3)`` float, ``faces (F, 3)`` int32 (counter-clockwise as seen from
     the side the geometric normal points to), optional ``normals (V, 3)`` (per-vertex shading
     normals) and ``uvs (V, 2)``. Zero-area faces are allowed: they are never hit.
+    Optional mesh attributes (Mitsuba's ``vertex_*`` / ``face_*``, read by ``mesh_attribute``
+    textures): ``vertex_attributes (V, C)`` (interpolated with the barycentrics) and
+    ``face_attributes (F, C)`` (constant per face), same ``C``; a hit's ``uv`` then carries
+    ``C`` more columns: ``uv[..., 2:]`` = interpolated vertex value + face value.
     Differentiate w.r.t. ``vertices`` with ``eqx.filter_grad`` or by rebuilding the mesh inside
     the differentiated function (``faces`` is an integer leaf).
     """
@@ -33,8 +38,12 @@ class TriangleMesh(eqx.Module):
     faces: Int[Array, "F 3"]
     normals: Float[Array, "V 3"] | None = None
     uvs: Float[Array, "V 2"] | None = None
+    vertex_attributes: Float[Array, "V C"] | None = None
+    face_attributes: Float[Array, "F C"] | None = None
 
-    def __init__(self, vertices, faces, normals=None, uvs=None):
+    def __init__(
+        self, vertices, faces, normals=None, uvs=None, vertex_attributes=None, face_attributes=None
+    ):
         v = as_points(_numeric(vertices, "vertices", "fiu"), "vertices", 3)
         f = _numeric(faces, "faces", "iu")
         if f.ndim != 2 or f.shape[-1] != 3:
@@ -61,6 +70,21 @@ class TriangleMesh(eqx.Module):
             if uvs.shape[0] != v.shape[0]:
                 raise ValueError(f"uvs: expected shape ({v.shape[0]}, 2), got {uvs.shape}")
         self.normals, self.uvs = normals, uvs
+        va, fa = vertex_attributes, face_attributes
+        if (va is None) != (fa is None):
+            raise ValueError("vertex_attributes, face_attributes: give both or neither")
+        if va is not None:
+            va = as_float_array(va, "vertex_attributes").astype(v.dtype)
+            fa = as_float_array(fa, "face_attributes").astype(v.dtype)
+            if va.ndim != 2 or va.shape[0] != v.shape[0]:
+                raise ValueError(
+                    f"vertex_attributes: expected shape ({v.shape[0]}, C), got {va.shape}"
+                )
+            if fa.shape != (f.shape[0], va.shape[1]):
+                raise ValueError(
+                    f"face_attributes: expected shape ({f.shape[0]}, {va.shape[1]}), got {fa.shape}"
+                )
+        self.vertex_attributes, self.face_attributes = va, fa
 
     @property
     def triangles(self) -> Float[Array, "F 3 3"]:
@@ -128,4 +152,13 @@ def mesh_hit(shape: TriangleMesh, pid, o, d, valid, prim_id, sid) -> Hit:
         )
     else:
         uv = jnp.stack([b1, b2], axis=-1)
+    if shape.vertex_attributes is not None:  # mesh_attribute textures read uv[..., 2:]
+        va = shape.vertex_attributes
+        a = (
+            b0[..., None] * va[f[..., 0]]
+            + b1[..., None] * va[f[..., 1]]
+            + b2[..., None] * va[f[..., 2]]
+            + shape.face_attributes[pid]
+        )
+        uv = jnp.concatenate([uv, a.astype(uv.dtype)], axis=-1)
     return hit_record(valid, t, p, ng, ns, uv, prim_id, sid)

@@ -141,12 +141,15 @@ _PLY_TYPES = {
 }  # fmt: skip
 
 
-def load_ply(path) -> TriangleMesh:
+def load_ply(path, *, attributes: bool = False):
     """Read a PLY file (``ascii`` or ``binary_little_endian`` 1.0).
 
     Uses the ``vertex`` element (``x y z``, optional ``nx ny nz`` and ``u v`` / ``s t``) and the
     ``face`` element's ``vertex_indices`` (or ``vertex_index``) list, fan-triangulating
-    polygons. Other elements and properties are skipped.
+    polygons. Other elements are skipped; other vertex / face properties too, unless
+    ``attributes``: then returns ``(mesh, attrs)`` with ``attrs`` the mesh attributes as
+    Mitsuba 3 names them (:func:`ply_attributes`): ``{"vertex_color": (V, 3), "face_weight":
+    (F, 1), ...}`` (face values repeated for each triangle of a polygon).
     """
     path = os.fspath(path)
     with open(path, "rb") as fh:
@@ -245,12 +248,13 @@ def load_ply(path) -> TriangleMesh:
     if key not in face:
         raise ValueError(f"{path}: PLY face element has no vertex_indices list")
     V = np.stack([np.asarray(vert[c], np.float64) for c in "xyz"], -1)
-    faces = []
-    for poly in face[key]:
+    faces, src = [], []
+    for j, poly in enumerate(face[key]):
         if len(poly) < 3:
             raise ValueError(f"{path}: PLY face with {len(poly)} < 3 vertices")
         for k in range(1, len(poly) - 1):
             faces.append([poly[0], poly[k], poly[k + 1]])
+            src.append(j)
     faces = np.asarray(faces, np.int64)
     _check_finite_vertices(path, np.asarray(V, np.float64))
     if faces.min() < 0 or faces.max() >= len(V):
@@ -260,7 +264,52 @@ def load_ply(path) -> TriangleMesh:
         (k for k in (("u", "v"), ("s", "t"), ("texture_u", "texture_v")) if k[0] in vert), None
     )
     uv = np.stack([np.asarray(vert[c]) for c in uvk], -1) if uvk else None
-    return _mesh(V, faces, nn, uv)
+    mesh = _mesh(V, faces, nn, uv)
+    if not attributes:
+        return mesh
+    skip_v = {"x", "y", "z", "nx", "ny", "nz", *(uvk or ())}
+    attrs = ply_attributes("vertex_", {k: v for k, v in vert.items() if k not in skip_v})
+    fa = ply_attributes("face_", {k: v for k, v in face.items() if k != key})
+    idx = np.asarray(src, np.int64)
+    attrs.update({k: v[idx] for k, v in fa.items()})
+    return mesh, attrs
+
+
+_PLY_SCHEMES = (("x", "y", "z", "w"), ("r", "g", "b", "a"), ("0", "1", "2", "3"),
+                ("1", "2", "3", "4"))  # fmt: skip
+
+
+def ply_attributes(prefix, props) -> dict:
+    """Group PLY properties (``name -> values``, in file order) into attributes as Mitsuba 3's
+    PLY reader does: consecutive ``{p}_x, {p}_y, ...`` (or ``_r _g _b _a``, ``_0 _1 ...``,
+    ``_1 _2 ...``) form one attribute ``{prefix}{p}`` with one channel per property;
+    ``r g b [a]`` / ``red green blue [alpha]`` form ``{prefix}color``; any other property is a
+    one-channel attribute ``{prefix}{name}``. Values are float64 ``(N, C)``."""
+    names = list(props)
+    out, i = {}, 0
+    while i < len(names):
+        n = names[i]
+        group, base = [n], n
+        for full in (("r", "g", "b", "a"), ("red", "green", "blue", "alpha")):
+            if n == full[0]:
+                k = 1
+                while i + k < len(names) and k < 4 and names[i + k] == full[k]:
+                    group.append(names[i + k])
+                    k += 1
+                base = "color"
+        if len(group) == 1 and "_" in n:
+            head, tail = n.rsplit("_", 1)
+            for sch in _PLY_SCHEMES:
+                if tail == sch[0]:
+                    k = 1
+                    while i + k < len(names) and k < 4 and names[i + k] == f"{head}_{sch[k]}":
+                        group.append(names[i + k])
+                        k += 1
+                    base = head
+                    break
+        out[prefix + base] = np.stack([np.asarray(props[g], np.float64) for g in group], -1)
+        i += len(group)
+    return out
 
 
 def save_obj(path, mesh: TriangleMesh) -> None:

@@ -188,6 +188,14 @@ def load_scene(
         except (ValueError, TypeError) as e:
             raise ValueError(f"materials.{name}: {e}") from None
         names.append(str(name))
+    from jaxgfx.render.scene._mesh_attributes import attach_attributes, attribute_slots, with_slots
+
+    slots = attribute_slots(materials)  # mesh_attribute textures: the attribute layout
+    if slots:
+        if any(getattr(m, "needs_tangents", False) for m in materials):
+            raise ValueError("materials: normal / bump maps together with mesh_attribute "
+                             "textures in one scene are not supported")  # fmt: skip
+        materials = list(with_slots(materials, slots))
 
     def material_index(d, where):
         m = d.get("material")
@@ -206,12 +214,22 @@ def load_scene(
         raise ValueError("shapes: expected a list")
     groups: dict[str, list] = {"sphere": [], "rectangle": []}
     group_mats: dict[str, list] = {"sphere": [], "rectangle": []}
-    meshes = []
+    meshes, instanced = [], []
     seen_ids: dict = {}  # (namespace, id) -> where first given
     shape_ids = []  # (id, "sphere" / "rectangle" / "mesh", position in its list, material)
     for i, sd in enumerate(shapes_desc):
         where = f"shapes[{i}]"
+        if isinstance(sd, Mapping) and sd.get("type") == "instances":  # shapegroup / instance
+            from jaxgfx.render.scene._instances import instances_from_desc
+
+            def build(m):
+                return m if m.faces.shape[0] < BVH_MIN_TRIANGLES else build_traversal(m, accel)
+
+            instanced += instances_from_desc(sd, where, base_dir, material_index, build)
+            continue
         kind, shape = shape_from_desc(sd, where, base_dir)
+        if slots and kind == "mesh":
+            shape = attach_attributes(shape, sd, where, base_dir, slots)
         mi = material_index(sd, where)
         ident = _object_id(sd, where, "shapes", seen_ids)
         if ident is not None:
@@ -244,6 +262,9 @@ def load_scene(
         else:
             shapes.append(m)
         shape_mats.append(jnp.full((m.faces.shape[0],), mi, jnp.int32))
+    for inst, table in instanced:
+        shapes.append(inst)
+        shape_mats.append(table)
 
     points_pos, points_int, area_lights, emitter_shapes, delta_lights = [], [], [], [], []
     environment = None

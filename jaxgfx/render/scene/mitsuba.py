@@ -517,6 +517,34 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
     return out
 
 
+def _instances(d, where, i, base_dir, work_dir, mi, material_of, default) -> dict:
+    """``{type: instances}`` -> a ``shapegroup`` ``group_I`` of the member shapes and one
+    ``instance`` ``instance_I_K`` per matrix referring to it (nothing for an empty group)."""
+    from jaxgfx.render.geometry.instance import check_instance_transforms
+    from jaxgfx.render.scene import schema as S
+
+    S.expect_keys(d, where, ("type", "shapes", "to_world"))
+    if not isinstance(d["shapes"], (list, tuple)):
+        raise ValueError(f"{where}.shapes: expected a list of shape descriptions")
+    if not d["shapes"] or (isinstance(d["to_world"], (list, tuple)) and not d["to_world"]):
+        return {}
+    mats = check_instance_transforms(d["to_world"], f"{where}.to_world")
+    group = {"type": "shapegroup"}
+    for j, sd in enumerate(d["shapes"]):
+        w = f"{where}.shapes[{j}]"
+        if isinstance(sd, Mapping) and sd.get("type") == "instances":
+            raise ValueError(f"{w}: nested instancing is not supported (as in Mitsuba 3)")
+        sh = _shape(sd, w, base_dir, work_dir, mi)
+        sh["bsdf"] = material_of(sd, w, default, sd["type"])
+        group[f"shape_{j}"] = sh
+    out = {f"group_{i}": group}
+    for k, m in enumerate(mats):
+        out[f"instance_{i}_{k}"] = {"type": "instance",
+                                    "shapegroup": {"type": "ref", "id": f"group_{i}"},
+                                    "to_world": _transform(m, mi)}  # fmt: skip
+    return out
+
+
 class _WorkDir:
     """The folder for generated files, created on first use (a temp folder when None)."""
 
@@ -699,6 +727,9 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
 
     for i, sd in enumerate(shapes):
         where = f"shapes[{i}]"
+        if isinstance(sd, Mapping) and sd.get("type") == "instances":  # shapegroup + instances
+            out.update(_instances(sd, where, i, base_dir, work_dir, mi, material_of, default))
+            continue
         sh = _shape(sd, where, base_dir, work_dir, mi)
         sh["bsdf"] = material_of(sd, where, default, sd["type"])
         out[key(sd, where, f"shape_{i}")] = sh
@@ -915,7 +946,7 @@ def scene_to_desc(scene) -> dict:
     from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera, ThinLensCamera
     from jaxgfx.render.emitters import ConstantEnvironment, DirectionalLight
     from jaxgfx.render.film import GaussianFilter, TentFilter
-    from jaxgfx.render.geometry import Rectangles, Spheres, TriangleMesh
+    from jaxgfx.render.geometry import Instances, Rectangles, Spheres, TriangleMesh
 
     cam = scene.camera
     if isinstance(cam, MatrixCamera):
@@ -963,6 +994,11 @@ def scene_to_desc(scene) -> dict:
                 out.append(({"type": "rectangle", "center": _list(shape.centers[j]),
                              "edge_u": _list(shape.edge_u[j]),
                              "edge_v": _list(shape.edge_v[j])}, mats[j]))  # fmt: skip
+        elif isinstance(shape, Instances):  # the group's member, then its matrices
+            n = shape.n_prims
+            members = one(shape.shape, mats[:n], where, keep)
+            return [({"type": "instances", "shapes": [{**d, "material": k} if keep else d],
+                      "to_world": _list(shape.to_world)}, None) for d, k in members]  # fmt: skip
         elif isinstance(mesh, TriangleMesh):
             faces = np.asarray(mesh.faces)
             for mi_ in dict.fromkeys(mats.tolist()):
@@ -1005,7 +1041,8 @@ def scene_to_desc(scene) -> dict:
                 desc["emitters"].append(e)
             continue
         for d, name in rows(one(shape, mats, f"shapes.{i}", True), i):
-            d["material"] = name
+            if d["type"] != "instances":
+                d["material"] = name
             desc["shapes"].append(d)
     pl = scene.point_lights
     if pl is not None:
@@ -1033,6 +1070,7 @@ def scene_to_desc(scene) -> dict:
         desc["emitters"].append(named(d, d["type"], counts[d["type"]]))
         counts[d["type"]] += 1
     used = {d.get("material") for d in desc["shapes"] + desc["emitters"]}
+    used |= {m.get("material") for d in desc["shapes"] for m in d.get("shapes", ())}
     desc["materials"] = {k: v for k, v in desc["materials"].items() if k in used}
     return desc
 

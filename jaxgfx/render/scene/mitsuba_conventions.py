@@ -60,8 +60,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("shape", "cube"): S + " (untextured)",
     ("shape", "disk"): S + " (untextured; 256-triangle fan)",
     ("shape", "cylinder"): S + " (untextured; 512-triangle tube, no caps)",
-    ("shape", "shapegroup"): "refused: no instancing in jaxgfx",
-    ("shape", "instance"): "refused: no instancing in jaxgfx",
+    ("shape", "shapegroup"): S + " (meshes and analytic shapes; no emitters, no nesting)",
+    ("shape", "instance"): S + " (any invertible affine to_world)",
     ("shape", "sdfgrid"): "refused: no SDF grids in jaxgfx",
     ("shape", "bsplinecurve"): "refused: no curves in jaxgfx",
     ("shape", "linearcurve"): "refused: no curves in jaxgfx",
@@ -91,7 +91,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     # textures
     ("texture", "bitmap"): S + " (no `to_uv`)",
     ("texture", "checkerboard"): S + " (`to_uv` a uniform scale)",
-    ("texture", "mesh_attribute"): "refused: no mesh attributes in jaxgfx",
+    ("texture", "mesh_attribute"): S + " (vertex_* / face_* of PLY files; not in shapegroups)",
     ("texture", "volume"): "refused: jaxgfx renders surfaces only",
     # emitters
     ("emitter", "area"): S + " (inside a shape)",

@@ -415,7 +415,11 @@ def _object(doc, node) -> _Obj:
             _set(obj, ca["name"], _Prop(kind, v, c))
         elif c.tag == "transform":
             _attrs(c, ca, ("name",))
-            _set(obj, ca["name"], _Prop("transform", _transform(doc, c), c))
+            try:
+                m = _transform(doc, c)
+            except ValueError as e:  # name the object too (e.g. a singular instance)
+                raise ValueError(f"{e} ({obj.label}, parameter {ca['name']!r})") from None
+            _set(obj, ca["name"], _Prop("transform", m, c))
         elif c.tag == "ref":
             _attrs(c, ca, ("id",), ("name",))
             if ca["id"] not in doc.ids:
@@ -672,6 +676,14 @@ def _texture(obj: _Obj, doc) -> dict:
             if not s > 0:
                 raise p.err("to_uv", "expected a positive scale")
             d["scale"] = s
+        p.done()
+        return d
+    if obj.type == "mesh_attribute":  # the values are read from the shapes' PLY files
+        name = p.string("name")
+        if name is None or not name.startswith(("vertex_", "face_")):
+            raise ValueError(f"{obj.where}: parameter 'name': expected 'vertex_...' or "
+                             f"'face_...', got {name!r}")  # fmt: skip
+        d = {"type": "mesh_attribute", "name": name, "scale": p.float("scale", 1.0)}
         p.done()
         return d
     raise ValueError(f"{obj.where}: texture plugin {obj.type!r} is not supported "
@@ -1060,6 +1072,7 @@ def _shape(obj: _Obj, doc, desc, ctx):
         from jaxgfx.render.geometry import mesh_io
 
         uvs = normals = None
+        attrs: dict = {}
         if t in ("obj", "ply", "serialized"):
             fname = p.string("filename")
             if fname is None:
@@ -1071,8 +1084,10 @@ def _shape(obj: _Obj, doc, desc, ctx):
 
                     # vertex colours are ignored, as Mitsuba does unless a texture reads them
                     mesh = read_serialized(path, p.int("shape_index", 0))
+                elif t == "ply":  # with its vertex_* / face_* attributes (mesh_attribute)
+                    mesh, attrs = mesh_io.load_ply(path, attributes=True)
                 else:
-                    mesh = (mesh_io.load_obj if t == "obj" else mesh_io.load_ply)(path)
+                    mesh = mesh_io.load_obj(path)
             except ValueError as e:
                 raise p.err("filename", str(e)) from None
             v = np.asarray(mesh.vertices, np.float64)
@@ -1126,6 +1141,8 @@ def _shape(obj: _Obj, doc, desc, ctx):
             sd["normals"] = normals.tolist()
         if uvs is not None:
             sd["uvs"] = uvs.tolist()
+        if t == "ply" and attrs:
+            sd["attributes"] = {k: a.tolist() for k, a in attrs.items()}
         if not np.allclose(m, np.eye(4)):
             sd["to_world"] = m.tolist()
         vw = v @ lin.T + m[:3, 3]
@@ -1163,6 +1180,59 @@ def _name_by_id(d, ident):
 
     if ident and id_problem(ident) is None:
         d["id"] = ident
+
+
+def _shapegroup(obj: _Obj, doc, desc, ctx):
+    """Translate a ``shapegroup``'s shapes (group space); they appear only when instanced.
+    Mitsuba 3 refuses nested groups, nested instances and emitters in a group: so does this."""
+    if not obj.id:
+        raise ValueError(f"{obj.where}: a shapegroup needs an id (instances refer to it)")
+    groups = ctx.setdefault("groups", {})
+    if obj.id in groups:
+        return groups[obj.id]
+    _Params(obj, doc).done(children_ok=len(obj.children))  # a group has no parameters
+    sub = {"materials": desc["materials"], "shapes": [], "emitters": []}
+    sctx: dict = {"bboxes": []}
+    for c in obj.children:
+        if c.tag != "shape":
+            raise ValueError(f"{c.node.at}: <{c.tag}> inside {obj.where}: a shapegroup holds "
+                             "shapes only")  # fmt: skip
+        if c.type in ("shapegroup", "instance"):
+            raise ValueError(f"{c.node.at}: {c.where} inside {obj.where}: nested instancing is "
+                             "not permitted (as in Mitsuba 3)")  # fmt: skip
+        if any(g.tag == "emitter" for g in c.children):
+            raise ValueError(f"{c.node.at}: {c.where} inside {obj.where}: instancing of "
+                             "emitters is not supported (as in Mitsuba 3)")  # fmt: skip
+        _shape(c, doc, sub, sctx)
+    groups[obj.id] = g = {"shapes": sub["shapes"], "bboxes": sctx["bboxes"], "entry": None}
+    return g
+
+
+def _instance(obj: _Obj, doc, desc, ctx):
+    """One ``instance``: its ``to_world`` joins the ``{type: instances}`` entry of its group
+    (one entry per group, at the place of the group's first instance)."""
+    p = _Params(obj, doc)
+    m = p.transform("to_world")
+    m = np.eye(4) if m is None else m
+    refs = [c for c in obj.children if c.tag == "shape" and c.type == "shapegroup"]
+    if len(obj.children) != 1 or len(refs) != 1:
+        raise ValueError(f"{obj.where}: an instance needs exactly one shapegroup (a <ref> to "
+                         f"its id), got {len(obj.children)} nested objects")  # fmt: skip
+    lin = m[:3, :3]
+    if not abs(np.linalg.det(lin)) > 1e-12 * np.linalg.norm(lin) ** 3:
+        raise p.err("to_world", "the transform is singular (det = 0); an instance must be "
+                                "an invertible affine map")  # fmt: skip
+    p.done(children_ok=1)
+    g = _shapegroup(refs[0], doc, desc, ctx)
+    if g["entry"] is None:
+        g["entry"] = {"type": "instances", "shapes": g["shapes"], "to_world": []}
+        desc["shapes"].append(g["entry"])
+    g["entry"]["to_world"].append(m.tolist())
+    for (lo, hi), _ in g["bboxes"]:  # world boxes of the instanced shapes (clip checks)
+        c = np.array([[x[0], y[1], z[2], 1.0] for x in (lo, hi) for y in (lo, hi)
+                      for z in (lo, hi)])  # fmt: skip
+        w = (c @ m.T)[:, :3]
+        ctx["bboxes"].append((np.stack([w.min(0), w.max(0)]), obj))
 
 
 # ------------------------------------------------------------------------------------------
@@ -1548,7 +1618,11 @@ def read_xml(path, **params) -> XMLScene:
         desc["film"] = film
     integrator, depth, rr = _integrator(integ[0], doc) if integ else ("path", None, 5)
     for o in objs:
-        if o.tag == "shape":
+        if o.tag == "shape" and o.type == "shapegroup":
+            _shapegroup(o, doc, desc, ctx)
+        elif o.tag == "shape" and o.type == "instance":
+            _instance(o, doc, desc, ctx)
+        elif o.tag == "shape":
             _shape(o, doc, desc, ctx)
         elif o.tag == "emitter":
             _emitter(o, doc, desc)

@@ -313,6 +313,11 @@ def mesh_from_desc(d, where, base_dir):
 def shape_from_desc(d, where, base_dir):
     if not isinstance(d, Mapping) or "type" not in d:
         raise ValueError(f"{where}: expected a mapping with a 'type' key")
+    if d["type"] == "instances":  # handled by load_scene at the top level of ``shapes``
+        raise ValueError(
+            f"{where}: 'instances' may appear only in the scene's shapes list "
+            "(no nested instancing, no instanced emitters, as in Mitsuba 3)"
+        )
     kind = check_choice(d["type"], f"{where}.type", SHAPE_TYPES)
     common = ("type", "material", "id")  # id: checked by load_scene
     if kind == "sphere":
@@ -341,6 +346,7 @@ def shape_from_desc(d, where, base_dir):
                 "translate",
                 "scale",
                 "to_world",
+                "attributes",
             ),
         )
         return "mesh", mesh_from_desc(d, where, base_dir)

@@ -26,6 +26,7 @@ import equinox as eqx
 import jax
 
 from jaxgfx.render.geometry.accel._host import HostTraversal as HostTraversal
+from jaxgfx.render.geometry.accel._host import lookup_native as lookup_native
 from jaxgfx.render.geometry.accel.embree import EmbreeMesh as EmbreeMesh
 from jaxgfx.render.geometry.accel.embree import build_embree as build_embree
 from jaxgfx.render.geometry.accel.embree import embree_available as embree_available
@@ -44,6 +45,7 @@ __all__ = [
     "build_traversal",
     "build_warp",
     "embree_available",
+    "lookup_native",
     "resolve_backend",
     "scene_with_accel",
     "warp_available",
@@ -92,8 +94,12 @@ def build_traversal(mesh, accel: str = "auto"):
 
 
 def accel_of(shape) -> str | None:
-    """Backend name of a traversal object (``None`` for anything else)."""
+    """Backend name of a traversal object, or of the one an
+    :class:`~jaxgfx.render.geometry.instance.Instances` shares (``None`` for anything else)."""
     from jaxgfx.render.geometry.accel.bvh_sah import BVH
+
+    if hasattr(shape, "to_world") and hasattr(shape, "n_prims"):  # Instances (no import cycle)
+        return accel_of(shape.shape)
 
     if isinstance(shape, EmbreeMesh):
         return "embree"
@@ -140,5 +146,10 @@ def scene_with_accel(scene, accel: str = "auto"):
     shapes = []
     for s in scene.shapes:
         cur = accel_of(s)
-        shapes.append(s if cur is None or cur == name else _cached_build(s.mesh, name))
+        if cur is None or cur == name:
+            shapes.append(s)
+        elif hasattr(s, "to_world"):  # Instances: rebuild the one shared structure
+            shapes.append(eqx.tree_at(lambda i: i.shape, s, _cached_build(s.shape.mesh, name)))
+        else:
+            shapes.append(_cached_build(s.mesh, name))
     return eqx.tree_at(lambda sc: sc.shapes, scene, tuple(shapes))

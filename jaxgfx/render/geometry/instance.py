@@ -1,0 +1,319 @@
+# ruff: noqa: F722  (jaxtyping shape strings)
+"""Instancing: one shape (and its acceleration structure) placed ``K`` times by affine maps.
+
+:class:`Instances` holds ONE shape in its own (local) space — :class:`Spheres`,
+:class:`Rectangles`, a :class:`TriangleMesh` or a mesh traversal object (JAX BVH, Embree,
+Warp) — and ``to_world (K, 4, 4)``. It is a custom shape of
+:func:`~jaxgfx.render.geometry.intersect_scene` (``closest_t`` / ``occluded`` / ``hit``):
+
+* search (two-level, non-differentiable): every ray is mapped into each instance's space,
+  ``o' = A⁻¹(o − b)``, ``d' = A⁻¹ d``; the local direction is normalised (spheres need unit
+  directions) and the ray interval scaled by ``s = |d'|``, so a local hit at ``t'`` is the
+  world hit ``t = t'/s``. The ``K`` local queries run as ONE batch through the shared
+  bottom-level structure (JAX BVH, Embree or Warp: one build, one native scene, shared by all
+  instances); the top level is a linear loop (a batch axis) over the instances, whose rays
+  the bottom level's root box rejects at once when they miss the instance.
+* hit record (differentiable): the local record of the found primitive (closed form), mapped
+  back: ``p = A p' + b``, normals by the inverse transpose ``normalize(A⁻ᵀ n')``, ``uv``
+  unchanged, ``t = t'/s``. Differentiable w.r.t. the shape's parameters (vertices, radii...)
+  and ``to_world`` (for the fixed primitive hit).
+
+``prim_id`` of a hit is ``k · n + j`` (instance ``k``, primitive ``j`` of the ``n`` of the
+shape), so a per-primitive material table has ``K · n`` entries.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from jaxgfx._math import safe_normalize, sum_last, take_rows
+from jaxgfx.render.geometry.intersect import closest_t as _closest_t
+from jaxgfx.render.geometry.intersect import primitive_hit
+from jaxgfx.render.geometry.mesh import TriangleMesh
+from jaxgfx.render.geometry.ray import Hit, hit_record, prepare_rays
+from jaxgfx.render.geometry.rectangle import Rectangles
+from jaxgfx.render.geometry.sphere import Spheres
+
+__all__ = ["Instances", "check_instance_transforms"]
+
+
+def check_instance_transforms(to_world, where="to_world"):
+    """``to_world`` as a float ``(K, 4, 4)`` NumPy array of invertible affine maps (one
+    ``(4, 4)`` is promoted); ``ValueError`` naming ``where[k]`` for a bad or singular one.
+
+    Singular: ``|det A| <= 1e-12 · ‖A‖³`` (Frobenius norm), i.e. zero to working precision."""
+    m = np.asarray(to_world, np.float64)
+    if m.ndim == 2:
+        m = m[None]
+    if m.ndim != 3 or m.shape[1:] != (4, 4) or m.shape[0] == 0:
+        raise ValueError(f"{where}: expected one or more 4x4 matrices, got shape {m.shape}")
+    for k in range(m.shape[0]):
+        if not np.all(np.isfinite(m[k])):
+            raise ValueError(f"{where}[{k}]: the matrix has non-finite entries")
+        if not np.allclose(m[k, 3], [0.0, 0.0, 0.0, 1.0]):
+            raise ValueError(f"{where}[{k}]: expected an affine matrix (last row 0 0 0 1)")
+        lin = m[k, :3, :3]
+        if not abs(np.linalg.det(lin)) > 1e-12 * np.linalg.norm(lin) ** 3:
+            raise ValueError(f"{where}[{k}]: the transform is singular (det = 0)")
+    return m
+
+
+def _base(shape):
+    """The primitive shape behind a traversal object (its ``mesh``)."""
+    return shape.mesh if hasattr(shape, "mesh") else shape
+
+
+def _prim_count(shape) -> int:
+    s = _base(shape)
+    if isinstance(s, TriangleMesh):
+        return int(s.faces.shape[0])
+    if isinstance(s, Spheres):
+        return int(jnp.atleast_1d(s.radii).shape[0])
+    if isinstance(s, Rectangles):
+        return int(jnp.atleast_2d(s.centers).shape[0])
+    raise TypeError(
+        "shape: expected Spheres, Rectangles, a TriangleMesh or a mesh traversal object, "
+        f"got {type(shape).__name__}"
+    )
+
+
+def _box_hit(lo, hi, o, d, t0, t1):
+    """Whether rays ``o + t d`` meet the boxes ``[lo, hi]`` for some ``t`` in ``[t0, t1]``
+    (slab test; zero direction components use ``±1e30`` reciprocals; exit widened by 1e-6)."""
+    inv = 1.0 / jnp.where(d == 0, jnp.where(jnp.signbit(d), -1e-30, 1e-30), d)
+    ta, tb = (lo - o) * inv, (hi - o) * inv
+    tn = jnp.maximum(jnp.max(jnp.minimum(ta, tb), axis=-1), t0)
+    tf = jnp.minimum(jnp.min(jnp.maximum(ta, tb), axis=-1) * (1 + 1e-6), t1)
+    return tn <= tf
+
+
+def _traced(tree):
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
+
+
+def _world_boxes(base, m):
+    """World-space bounding boxes ``(K, 2, 3)`` of ``base`` under the matrices ``m (K, 4, 4)``
+    (the 8 corners of its local box, mapped), widened by a relative 1e-6."""
+    if isinstance(base, TriangleMesh):
+        v = np.asarray(base.vertices, np.float64)
+        lo, hi = v.min(0), v.max(0)
+    elif isinstance(base, Spheres):
+        c, r = np.asarray(base.centers, np.float64), np.asarray(base.radii, np.float64)[:, None]
+        lo, hi = (c - r).min(0), (c + r).max(0)
+    else:
+        c = np.asarray(base.centers, np.float64)
+        eu, ev = np.abs(np.asarray(base.edge_u)) / 2, np.abs(np.asarray(base.edge_v)) / 2
+        lo, hi = (c - eu - ev).min(0), (c + eu + ev).max(0)
+    corners = np.array([[x[0], y[1], z[2], 1.0] for x in (lo, hi) for y in (lo, hi)
+                        for z in (lo, hi)])  # fmt: skip
+    w = np.einsum("kij,cj->kci", m, corners)[..., :3]
+    blo, bhi = w.min(1), w.max(1)
+    pad = 1e-6 * np.maximum(np.abs(blo), np.abs(bhi)).max(1, keepdims=True) + 1e-12
+    return np.stack([blo - pad, bhi + pad], 1)
+
+
+def _tlas_query(handle, m, bx, o, d, tmin, tmax, any_hit, n):
+    """Host top level over the instances of one Embree scene: ``(t float32, prim int32)``."""
+    from jaxgfx.render.geometry.accel.backends import lookup_native
+
+    host = lookup_native(handle)
+    batch = np.shape(o)[:-1]
+    o = np.asarray(o, np.float64).reshape(-1, 3)
+    d = np.asarray(d, np.float64).reshape(-1, 3)
+    t0 = np.broadcast_to(np.asarray(tmin, np.float64), batch).reshape(-1)
+    best = np.broadcast_to(np.asarray(tmax, np.float64), batch).reshape(-1).copy()
+    prim = np.full(o.shape[0], -1, np.int64)
+    m = np.asarray(m, np.float64).reshape(-1, 4, 4)
+    bx = np.asarray(bx, np.float64).reshape(-1, 2, 3)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_d = 1.0 / np.where(d == 0, 1e-30, d)
+    for k in range(m.shape[0]):
+        ta, tb = (bx[k, 0] - o) * inv_d, (bx[k, 1] - o) * inv_d
+        tn = np.maximum(np.minimum(ta, tb).max(1), t0)
+        tf = np.minimum(np.maximum(ta, tb).min(1) * (1 + 1e-6), best)
+        sel = np.nonzero((tn <= tf) & (prim < 0 if any_hit else True))[0]
+        if sel.size == 0:
+            continue
+        inv = np.linalg.inv(m[k, :3, :3])
+        ol = (o[sel] - m[k, :3, 3]) @ inv.T
+        dl = d[sel] @ inv.T
+        s = np.linalg.norm(dl, axis=1)
+        t, p = host.query(ol, dl / s[:, None], t0[sel] * s, best[sel] * s, any_hit)
+        hit = p >= 0
+        if any_hit:
+            prim[sel[hit]] = k * n + p[hit]
+            continue
+        tw = t.astype(np.float64) / s
+        closer = hit & (tw < best[sel])
+        best[sel[closer]] = tw[closer]
+        prim[sel[closer]] = k * n + p[closer]
+    t = np.where(prim >= 0, best, np.inf).astype(np.float32)
+    return t.reshape(batch), prim.astype(np.int32).reshape(batch)
+
+
+def _split(m):
+    return m[..., :3, :3], m[..., :3, 3]
+
+
+def _apply(lin, x):
+    return jnp.einsum("...ij,...j->...i", lin, x)
+
+
+class Instances(eqx.Module):
+    """``K`` instances of one shape: ``shape`` (local space) and ``to_world (K, 4, 4)``
+    (float leaf, column-vector affine maps, each invertible). See the module docstring."""
+
+    shape: object
+    to_world: Float[Array, "K 4 4"]
+    bounds: Float[Array, "K 2 3"] | None
+    n_prims: int = eqx.field(static=True)
+
+    def __init__(self, shape, to_world, bounds=None):
+        self.n_prims = _prim_count(shape)
+        self.bounds = bounds
+        if isinstance(to_world, jax.core.Tracer):
+            self.to_world = to_world
+        else:
+            m = check_instance_transforms(to_world)
+            dt = jnp.result_type(*[x.dtype for x in jax.tree_util.tree_leaves(_base(shape))
+                                   if jnp.issubdtype(x.dtype, jnp.floating)])  # fmt: skip
+            self.to_world = jnp.asarray(m, dt)
+            if bounds is None and not _traced(shape):
+                self.bounds = jnp.asarray(_world_boxes(_base(shape), m), dt)
+        self.shape = shape
+
+    @property
+    def count(self) -> int:
+        """Number of instances ``K``."""
+        return self.to_world.shape[0]
+
+    def _local_rays(self, o, d, tmin, tmax):
+        """Rays of batch ``(...)`` in every instance's space: ``(K, ...)`` (no derivatives)."""
+        sg = jax.lax.stop_gradient
+        lin, b = _split(sg(self.to_world).astype(o.dtype))
+        inv = jnp.linalg.inv(lin)  # (K, 3, 3)
+        ex = (slice(None),) + (None,) * (o.ndim - 1)
+        ol = _apply(inv[ex], sg(o)[None] - b[ex])
+        dl = _apply(inv[ex], sg(d)[None])
+        s = jnp.sqrt(sum_last(dl * dl))
+        dl = dl / s[..., None]
+        batch = o.shape[:-1]
+        tmin_w = jnp.broadcast_to(tmin, batch)[None]
+        tmax_w = jnp.broadcast_to(tmax, batch)[None]
+        if self.bounds is not None:  # top level: rays that miss an instance's box get (0, 0)
+            bx = sg(self.bounds).astype(o.dtype)[ex]  # (K, 1.., 2, 3)
+            inside = _box_hit(bx[..., 0, :], bx[..., 1, :], sg(o)[None], sg(d)[None],
+                              tmin_w, tmax_w)  # fmt: skip
+            tmin_w = jnp.where(inside, tmin_w, 0.0)
+            tmax_w = jnp.where(inside, tmax_w, 0.0)
+        return ol, dl, s, tmin_w * s, tmax_w * s
+
+    def _host_tlas(self, o, d, tmin, tmax, any_hit):
+        """Embree: the instance loop runs on the host in ONE callback (world rays in; per
+        instance only the rays that reach its box before the best hit so far are mapped and
+        queried), instead of ``K`` times the rays through the callback."""
+        sg = jax.lax.stop_gradient
+        batch = o.shape[:-1]
+        out = (jax.ShapeDtypeStruct(batch, jnp.float32), jax.ShapeDtypeStruct(batch, jnp.int32))
+        n = self.n_prims
+
+        def cb(h, m, bx, o, d, t0, t1):
+            return _tlas_query(h, m, bx, o, d, t0, t1, any_hit, n)
+
+        t, p = jax.pure_callback(
+            cb, out, self.shape.handle, sg(self.to_world), sg(self.bounds), sg(o), sg(d),
+            jnp.broadcast_to(sg(tmin), batch), jnp.broadcast_to(sg(tmax), batch),
+            vmap_method="expand_dims",
+        )  # fmt: skip
+        return t.astype(o.dtype), p
+
+    def _host(self):
+        from jaxgfx.render.geometry.accel.embree import EmbreeMesh
+
+        return isinstance(self.shape, EmbreeMesh) and self.bounds is not None
+
+    def closest_t(self, o, d, *, tmin=0.0, tmax=jnp.inf):
+        """Nearest world ``(t, prim_id)`` over all instances (``prim_id = k·n + j``)."""
+        o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
+        if self._host():
+            t, p = self._host_tlas(o, d, tmin, tmax, False)
+            return jnp.where(p >= 0, t, jnp.inf), jnp.maximum(p, 0)
+        ol, dl, s, tmin_l, tmax_l = self._local_rays(o, d, tmin, tmax)
+        t, p = _closest_t(self.shape, ol, dl, tmin_l, tmax_l)
+        t = jnp.where(jnp.isfinite(t), t / s, jnp.inf)
+        best = jnp.min(t, axis=0)
+        k = jnp.argmin(t, axis=0).astype(jnp.int32)
+        pk = jnp.take_along_axis(p, k[None], axis=0)[0]
+        return best, k * self.n_prims + pk
+
+    def occluded(self, o, d, tmax, *, tmin=0.0):
+        """True where any instance has a primitive in ``(tmin, tmax)``."""
+        o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
+        if self._host():
+            return self._host_tlas(o, d, tmin, tmax, True)[1] >= 0
+        ol, dl, _, tmin_l, tmax_l = self._local_rays(o, d, tmin, tmax)
+        if hasattr(self.shape, "occluded"):
+            hit = self.shape.occluded(ol, dl, tmax_l, tmin=tmin_l)
+        else:
+            hit = jnp.isfinite(_closest_t(self.shape, ol, dl, tmin_l, tmax_l)[0])
+        return jnp.any(hit, axis=0)
+
+    def hit(self, prim_id, o, d, valid, t=None) -> Hit:
+        """Differentiable world-space hit record of primitive ``prim_id = k·n + j``."""
+        o = jnp.asarray(o)
+        d = jnp.asarray(d, o.dtype)
+        pid = jnp.maximum(prim_id, 0)
+        k = jnp.clip(pid // self.n_prims, 0, self.count - 1)
+        j = pid % self.n_prims
+        m = take_rows(self.to_world.astype(o.dtype), k)  # (..., 4, 4)
+        lin, b = _split(m)
+        inv = jnp.linalg.inv(lin)
+        ol = _apply(inv, o - b)
+        dl = _apply(inv, d)
+        s = jnp.sqrt(sum_last(dl * dl))
+        h = primitive_hit(_base(self.shape), j, ol, dl / s[..., None], valid)
+        inv_t = jnp.swapaxes(inv, -1, -2)
+        p = _apply(lin, h.p) + b
+        ng = safe_normalize(_apply(inv_t, h.ng))
+        ns = safe_normalize(_apply(inv_t, h.ns))
+        t = jnp.where(h.valid, h.t, 0.0) / s  # no inf / s: its derivative would be NaN
+        return hit_record(h.valid, t, p, ng, ns, h.uv, prim_id, 0)
+
+    def intersect(self, o, d, *, tmin=0.0, tmax=jnp.inf, shape_id=0) -> Hit:
+        """Closest hit over all instances (search, then :meth:`hit`)."""
+        o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
+        t, pid = self.closest_t(o, d, tmin=tmin, tmax=tmax)
+        h = self.hit(pid, o, d, jnp.isfinite(t))
+        return eqx.tree_at(lambda h: h.shape_id, h, jnp.where(h.valid, shape_id, -1))
+
+    def flatten(self):
+        """The instances as one world-space shape of the same type (for comparisons and for
+        shapes that need it): vertices / centres mapped, normals by the inverse transpose."""
+        base = _base(self.shape)
+        lin, b = _split(self.to_world)
+        if isinstance(base, TriangleMesh):
+            v = _apply(lin[:, None], base.vertices[None]) + b[:, None]
+            nv = base.vertices.shape[0]
+            f = (base.faces[None] + nv * jnp.arange(self.count)[:, None, None]).reshape(-1, 3)
+            n = None
+            if base.normals is not None:
+                it = jnp.swapaxes(jnp.linalg.inv(lin), -1, -2)
+                n = safe_normalize(_apply(it[:, None], base.normals[None])).reshape(-1, 3)
+            uv = None if base.uvs is None else jnp.tile(base.uvs, (self.count, 1))
+            return TriangleMesh(v.reshape(-1, 3), f, n, uv)
+        if isinstance(base, Rectangles):
+            c = (_apply(lin[:, None], base.centers[None]) + b[:, None]).reshape(-1, 3)
+            eu = _apply(lin[:, None], base.edge_u[None]).reshape(-1, 3)
+            ev = _apply(lin[:, None], base.edge_v[None]).reshape(-1, 3)
+            return Rectangles(c, eu, ev)
+        # spheres: only similarity transforms keep them spheres
+        sv = jnp.linalg.svd(lin, compute_uv=False)
+        if not bool(jnp.all(sv[:, 0] - sv[:, 2] <= 1e-6 * sv[:, 0])):
+            raise ValueError("flatten: a non-uniformly scaled sphere is an ellipsoid")
+        c = (_apply(lin[:, None], base.centers[None]) + b[:, None]).reshape(-1, 3)
+        r = (sv[:, 0:1] * base.radii[None]).reshape(-1)
+        return Spheres(c, r)

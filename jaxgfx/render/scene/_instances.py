@@ -1,0 +1,50 @@
+"""``{type: instances}`` shape descriptions (Mitsuba's ``shapegroup`` / ``instance``).
+
+``{type: instances, shapes: [shape descriptions in group space], to_world: [4x4, ...]}``:
+every member shape is placed once per matrix. Each member becomes ONE
+:class:`~jaxgfx.render.geometry.instance.Instances` whose shape (for meshes of at least
+``BVH_MIN_TRIANGLES`` triangles: its traversal structure) is built once and shared by all
+instances. As in Mitsuba 3, groups do not nest and hold no emitters; an empty group or an
+empty matrix list adds nothing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import jax.numpy as jnp
+
+from jaxgfx.render.geometry import SDFShape
+from jaxgfx.render.geometry.instance import Instances, check_instance_transforms
+from jaxgfx.render.scene.schema import expect_keys, shape_from_desc
+
+__all__ = ["instances_from_desc"]
+
+
+def instances_from_desc(d, where, base_dir, material_index, build_mesh):
+    """``[(Instances, material table (K·n,) int32), ...]`` for one ``instances`` entry.
+
+    ``material_index(desc, where)`` resolves a member's ``material``; ``build_mesh(mesh)``
+    returns the mesh itself or its traversal structure."""
+    expect_keys(d, where, ("type", "shapes", "to_world"))
+    members = d["shapes"]
+    if not isinstance(members, (list, tuple)):
+        raise ValueError(f"{where}.shapes: expected a list of shape descriptions")
+    mats = d["to_world"]
+    if isinstance(mats, (list, tuple)) and len(mats) == 0:
+        return []
+    to_world = check_instance_transforms(mats, f"{where}.to_world")
+    out = []
+    for j, sd in enumerate(members):
+        w = f"{where}.shapes[{j}]"
+        if isinstance(sd, Mapping) and sd.get("type") == "instances":
+            raise ValueError(f"{w}: nested instancing is not supported (as in Mitsuba 3)")
+        kind, shape = shape_from_desc(sd, w, base_dir)
+        if isinstance(shape, SDFShape):
+            raise ValueError(f"{w}: SDF shapes cannot be instanced")
+        mi = material_index(sd, w)
+        if kind == "mesh":
+            shape = build_mesh(shape)
+        inst = Instances(shape, to_world)
+        out.append((inst, jnp.full((inst.count * inst.n_prims,), mi, jnp.int32)))
+    return out
