@@ -9,14 +9,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxgfx._checks import check_choice
-from jaxgfx.render.bsdf import BSDF_TYPES, make_bsdf
-from jaxgfx.render.bsdf.textured import (
-    Textured,
-    is_texture_desc,
-    texturable_paths,
-    texture_from_dict,
-    texture_min,
-)
+from jaxgfx.render.bsdf import make_bsdf
 from jaxgfx.render.emitters import (
     AreaLight,
     ConstantEnvironment,
@@ -27,7 +20,7 @@ from jaxgfx.render.emitters import (
 )
 from jaxgfx.render.film import make_filter
 from jaxgfx.render.geometry import Rectangles, SDFShape, Spheres, area
-from jaxgfx.render.parameters import get_path
+from jaxgfx.render.scene._materials import material_from_desc
 from jaxgfx.render.scene.scene import Scene, id_problem, is_internal_name
 from jaxgfx.render.scene.schema import (
     EMITTER_TYPES,
@@ -44,80 +37,6 @@ from jaxgfx.render.scene.schema import (
 __all__ = ["load_scene", "material_from_desc", "BVH_MIN_TRIANGLES"]
 
 BVH_MIN_TRIANGLES = 64
-
-
-def material_from_desc(desc, *, where="material", base_dir=None):
-    """A BSDF from a material description whose parameters may be textures.
-
-    Texture-valued keys are replaced by a neutral constant for :func:`make_bsdf` (which
-    validates everything else), then wrapped in :class:`Textured` (the keys resolve to BSDF
-    fields through the class's ``PARAMETER_ALIASES``). Without texture keys the plain BSDF is
-    returned (no wrapper, no cost). Roughness / exponent / eta textures must be positive,
-    colour textures non-negative.
-    """
-    desc = dict(desc)
-    pre = f"{where}." if where else ""
-    if isinstance(desc.get("type"), str) and desc["type"] in _MAP_TEXTURE:
-        return _map_material(desc, pre, base_dir)
-    # nested BSDF descriptions (blendbsdf's bsdf0 / bsdf1) are not textures
-    tex_keys = [
-        k for k, v in desc.items() if k != "type" and is_texture_desc(v) and not _is_bsdf_desc(v)
-    ]
-    if not tex_keys:
-        return make_bsdf(desc)
-    plain = dict(desc)
-    for k in tex_keys:
-        plain[k] = 0.5
-    bsdf = make_bsdf(plain)
-    textures = {}
-    for k in tex_keys:
-        try:
-            paths = texturable_paths(bsdf, k)
-        except ValueError as e:
-            raise ValueError(f"{pre}{k}: {e}") from None
-        old = get_path(bsdf, paths[0])
-        rgb = old.ndim >= 1 and old.shape[-1] == 3
-        tex = texture_from_dict(desc[k], f"{pre}{k}", base_dir=base_dir, channels=3 if rgb else 1)
-        lo = texture_min(tex)
-        positive = k.startswith("alpha") or k in ("exponent", "eta")
-        if (positive and not lo > 0) or lo < 0:
-            need = "positive" if positive else "non-negative"
-            raise ValueError(f"{pre}{k}: texture values must be {need}, got min {lo}")
-        textures[k] = tex
-    return Textured(bsdf, textures)
-
-
-_MAP_TEXTURE = {"normalmap": ("normalmap", 3), "bumpmap": ("height", 1)}
-
-
-def _map_material(desc, pre, base_dir):
-    """``normalmap`` / ``bumpmap``: ``{type, bsdf: {...}, normalmap | height: texture,
-    scale, flip_invalid_normals, use_shadowing_function}`` (the nested material may itself be
-    textured)."""
-    kind = desc["type"]
-    key, channels = _MAP_TEXTURE[kind]
-    flags = ("flip_invalid_normals", "use_shadowing_function")
-    allowed = ("type", "bsdf", key) + (("scale",) if kind == "bumpmap" else ()) + flags
-    unknown = sorted(set(desc) - set(allowed))
-    if unknown:
-        raise ValueError(f"{pre}{unknown[0]}: unknown key for {kind!r}; expected {list(allowed)}")
-    if not isinstance(desc.get("bsdf"), Mapping):
-        raise ValueError(f"{pre}bsdf: {kind!r} needs a nested material description")
-    nested = material_from_desc(desc["bsdf"], where=f"{pre}bsdf", base_dir=base_dir)
-    if key not in desc:
-        raise ValueError(f"{pre}{key}: {kind!r} needs a texture")
-    tex = desc[key]
-    if is_texture_desc(tex):
-        tex = texture_from_dict(tex, f"{pre}{key}", base_dir=base_dir, channels=channels)
-    kw = {k: desc[k] for k in ("scale", *flags) if k in desc}
-    try:
-        return make_bsdf({"type": kind, "bsdf": nested, key: tex, **kw})
-    except (ValueError, TypeError) as e:
-        raise type(e)(f"{pre}{e}") from None
-
-
-def _is_bsdf_desc(v):
-    return isinstance(v, Mapping) and v.get("type") in BSDF_TYPES
 
 
 def _concat(shapes):

@@ -228,7 +228,7 @@ def _textured_bsdf(md, where, base_dir, work_dir) -> dict:
     (``material_from_desc``); each textured key becomes a nested ``bitmap`` / ``checkerboard``
     texture under Mitsuba's name of the parameter (:func:`_texture_dict`)."""
     from jaxgfx.render.bsdf.textured import Textured, is_texture_desc, texturable_paths
-    from jaxgfx.render.scene.load import material_from_desc
+    from jaxgfx.render.scene._materials import material_from_desc
 
     try:
         m = material_from_desc(dict(md), where="", base_dir=base_dir)
@@ -371,7 +371,7 @@ def _map_material(md, where, base_dir, work_dir) -> dict:
     ``twosided`` when the nested BSDF is one-sided in Mitsuba (jaxgfx shades both sides)."""
     from jaxgfx.render import bsdf as B
     from jaxgfx.render.bsdf.textured import is_texture_desc, texture_from_dict
-    from jaxgfx.render.scene.load import material_from_desc
+    from jaxgfx.render.scene._materials import material_from_desc
 
     kind, key = md["type"], _MAP_KEYS[md["type"]]
     nested = md.get("bsdf")
