@@ -10,8 +10,10 @@ radiance map is in the repository). Brackets: a camera's 3-frame AEB (±3 EV) an
 2 EV apart, the longest exposure 20 (so the darkest radiance reaches the toe), 8-bit, shot
 gain 1e-5 and read σ 2e-4 (about 0.6 code of noise in the mid-tones). Prints, per curve and
 bracket, the median |Δ ln E| (``radiance_error(..., per_channel=True)``) of jaxgfx's
-defaults, Debevec without the end weight, ``spline``, OpenCV ``CalibrateDebevec +
-MergeDebevec`` and the true curve through ``merge_radiance``, as JSON.
+defaults (and which of its two Debevec fits the self-check chose), the end-weighted fit alone
+(``reweight_passes=0``, the default before issue 26), Debevec without the end weight,
+``spline``, OpenCV ``CalibrateDebevec + MergeDebevec`` and the true curve through
+``merge_radiance``, as JSON.
 """
 
 from __future__ import annotations
@@ -71,7 +73,10 @@ def measure(with_spline=True):
         r = {"curve": cname, "bracket": bname}
         d = hdr.recover_response(st.images, st.exposure_times)
         r["jaxgfx default"] = err(hdr.merge_radiance(st.images, st.exposure_times, d))
-        d0 = hdr.recover_response(st.images, st.exposure_times, end_weight=0.0)
+        r["inverse-slope fit chosen"] = bool(d.diagnostics["inverse_slope_chosen"])
+        d1 = hdr.recover_response(st.images, st.exposure_times, reweight_passes=0)
+        r["end-weighted only"] = err(hdr.merge_radiance(st.images, st.exposure_times, d1))
+        d0 = hdr.recover_response(st.images, st.exposure_times, end_weight=0.0, reweight_passes=0)
         r["debevec end_weight=0"] = err(hdr.merge_radiance(st.images, st.exposure_times, d0))
         if with_spline:
             s = hdr.recover_response(st.images, st.exposure_times, method="spline")
@@ -89,7 +94,7 @@ def figure(rows, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    keys = [k for k in rows[0] if k not in ("curve", "bracket")]
+    keys = [k for k in rows[0] if k not in ("curve", "bracket", "inverse-slope fit chosen")]
     fig, ax = plt.subplots(figsize=(9, 3.6))
     x = np.arange(len(rows))
     w = 0.8 / len(keys)
