@@ -170,3 +170,12 @@ def test_defaults_beat_opencv_on_measured_curves_five_frames(curve):
 def test_defaults_beat_opencv_on_measured_curves_open_rows(curve, times):
     ours, cv, _ = _ours_and_opencv(curve, times)
     assert ours < cv, (curve, times, ours, cv)
+
+
+@pytest.mark.parametrize("bad", [-1, 11, 1.5, True])
+def test_reweight_passes_bad_input(bad):
+    z = np.tile(np.linspace(0, 255, 64, dtype=np.uint8)[None, :, None], (2, 1, 1))[..., None]
+    z = np.repeat(np.repeat(z, 8, axis=1), 3, axis=3)
+    z[1] = np.minimum(z[1].astype(int) * 2, 255)
+    with pytest.raises(ValueError, match="reweight_passes"):
+        hdr.recover_response(z, [1.0, 2.0], reweight_passes=bad)
