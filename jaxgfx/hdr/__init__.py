@@ -25,6 +25,8 @@ from .synthetic import colorchecker_scene as colorchecker_scene
 from .synthetic import jpeg_roundtrip as jpeg_roundtrip
 from .synthetic import make_bracketed_stack as make_bracketed_stack
 from .synthetic import make_jpeg_stack as make_jpeg_stack
+from .synthetic import read_dorf_curves as read_dorf_curves
+from .synthetic import response_from_curve as response_from_curve
 from .synthetic import synthetic_radiance as synthetic_radiance
 from .synthetic import synthetic_response as synthetic_response
 from .synthetic import write_dng_bracket as write_dng_bracket
@@ -59,6 +61,8 @@ __all__ = [
     "synthetic_response",
     "make_bracketed_stack",
     "make_jpeg_stack",
+    "read_dorf_curves",
+    "response_from_curve",
     "jpeg_roundtrip",
     "weight_hat",
     "weight_gaussian",

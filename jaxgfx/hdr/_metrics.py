@@ -40,10 +40,18 @@ def _curve_err(resp, true_resp, lo, hi):
     return jnp.sqrt(jnp.mean(d * d))
 
 
-def radiance_error(E, E_true):
+def radiance_error(E, E_true, *, per_channel: bool = False):
     """Median over pixels of ``|ln E − ln E_true − s|`` with ``s`` the best global log scale
     (the median log ratio, optimal for this criterion). Scalar, ln units. Non-positive values
     are floored at the dtype's tiny (so they count as large errors, not NaN).
+
+    ``per_channel=True`` takes ``s`` per channel (last axis): a bracket fixes each channel's
+    response only up to its own scale (the anchor ``to_linear(mid) = 1`` is per channel), so
+    when the channels' true curves differ — measured RGB curves do, the analytic ones of
+    :func:`synthetic_response` do not — the recovered radiance's white balance is a gauge
+    that no method can recover, and a global ``s`` would count it as error (measured: the
+    *true* Ektachrome 320T curves give 0.11 with a global scale on a noise-free float
+    stack, 0.0000 per channel).
 
     Example: ``radiance_error(2 * E, E) → 0.0``.
     """
@@ -51,6 +59,10 @@ def radiance_error(E, E_true):
     E_true = jnp.asarray(E_true)
     if E.shape != E_true.shape:
         raise ValueError(f"E, E_true: shapes must match, got {E.shape} and {E_true.shape}")
+    if per_channel:
+        if E.ndim < 2:
+            raise ValueError(f"E: per_channel needs a channel axis, got shape {E.shape}")
+        return _rad_err_pc(E, E_true)
     return _rad_err(E, E_true)
 
 
@@ -58,4 +70,11 @@ def radiance_error(E, E_true):
 def _rad_err(E, E_true):
     d = safe_log(E) - safe_log(E_true)
     d = d - jnp.median(d)
+    return jnp.median(jnp.abs(d))
+
+
+@jax.jit
+def _rad_err_pc(E, E_true):
+    d = (safe_log(E) - safe_log(E_true)).reshape(-1, E.shape[-1])
+    d = d - jnp.median(d, axis=0)
     return jnp.median(jnp.abs(d))

@@ -37,6 +37,8 @@ __all__ = [
     "write_dng_bracket",
     "MovingStack",
     "make_moving_object_stack",
+    "response_from_curve",
+    "read_dorf_curves",
 ]
 
 SYNTHETIC_RESPONSES = ("gamma2.2", *(k for k in ANALYTIC_KINDS if k != "linear"))
@@ -133,6 +135,92 @@ def synthetic_response(name: str, *, channels: int = 3) -> CameraResponse:
         return CameraResponse.gamma(2.2, channels=channels)
     assert name in ANALYTIC_KINDS
     return CameraResponse.analytic(name, channels=channels)
+
+
+def response_from_curve(
+    irradiance, brightness, *, n_levels: int = 1024, anchor="mid", floor: float = 1e-7
+) -> CameraResponse:
+    """A tabulated ground-truth response from a measured curve ``brightness = f(irradiance)``.
+
+    ``irradiance``, ``brightness``: ``(K,)`` (one curve, one channel) or ``(K, C)`` samples,
+    both normalised to ``[0, 1]`` with ``f(1) = 1`` (1 = the clipping level), ``irradiance``
+    strictly increasing and ``brightness`` non-decreasing — the form of the DoRF database
+    (Grossberg & Nayar 2003, :func:`read_dorf_curves`). The curve is inverted by linear
+    interpolation onto ``n_levels`` uniform levels and stored as a ``"table"``
+    :class:`CameraResponse` of ``ln x`` (``x`` floored at ``floor`` so level 0 stays finite),
+    so :func:`make_bracketed_stack` / :func:`make_jpeg_stack` can expose through it. Data
+    preparation (NumPy, not traced); the result's ``params`` are differentiable leaves.
+
+    Example: a linear curve, anchored at mid grey (``to_linear`` of level 0.5 is 1):
+    ``response_from_curve([0, .5, 1], [0, .5, 1]).from_linear_normalized(0.5)`` → ``0.25``.
+    """
+    irr = np.asarray(irradiance, np.float64)
+    bri = np.asarray(brightness, np.float64)
+    if irr.ndim == 1:
+        irr = irr[:, None]
+    if bri.ndim == 1:
+        bri = bri[:, None]
+    if irr.ndim != 2 or irr.shape[0] < 2:
+        raise ValueError(f"irradiance: expected shape (K,) or (K, C), K >= 2, got {irr.shape}")
+    if bri.ndim != 2 or bri.shape[0] != irr.shape[0] or irr.shape[1] not in (1, bri.shape[1]):
+        raise ValueError(
+            f"brightness: expected {irr.shape[0]} samples like irradiance "
+            f"({np.asarray(irradiance).shape}), got {np.asarray(brightness).shape}"
+        )
+    for a, nm in ((irr, "irradiance"), (bri, "brightness")):
+        if not np.all(np.isfinite(a)) or a.min() < 0.0 or a.max() > 1.0:
+            raise ValueError(f"{nm}: expected finite values in [0, 1]")
+    if np.any(np.diff(irr, axis=0) <= 0):
+        raise ValueError("irradiance: expected strictly increasing samples")
+    if np.any(np.diff(bri, axis=0) < 0):
+        raise ValueError("brightness: expected a non-decreasing (monotone) curve")
+    if isinstance(n_levels, bool) or not isinstance(n_levels, int) or n_levels < 8:
+        raise ValueError(f"n_levels: expected an integer >= 8, got {n_levels!r}")
+    check_positive(floor, "floor")
+    irr = np.broadcast_to(irr, bri.shape)
+    z = np.linspace(0.0, 1.0, n_levels)
+    cols = []
+    for c in range(bri.shape[1]):
+        # flat runs of brightness: interpolate over their midpoints (np.interp needs
+        # increasing abscissae); the clipping level maps to irradiance 1
+        b, keep = np.unique(bri[:, c], return_index=True)
+        x = np.interp(z, b, irr[keep, c])
+        cols.append(np.log(np.maximum(x, floor)))
+    table = np.stack(cols, axis=1)
+    from ._model import resolve_anchor
+
+    return CameraResponse(
+        jnp.asarray(table, jnp.float32), "table", "measured", 1.0, resolve_anchor(anchor)
+    )
+
+
+def read_dorf_curves(path) -> dict:
+    """Read a DoRF-format curve file (Grossberg & Nayar's "Database of Response Functions":
+    blocks of 6 lines ``name``, a graph label, ``I =``, the irradiance samples, ``B =``, the
+    brightness samples). Returns ``{name: (irradiance, brightness)}`` as NumPy arrays; feed a
+    curve to :func:`response_from_curve`. ``ValueError`` naming the file and line for a
+    malformed block."""
+    with open(path) as f:
+        lines = [ln.rstrip("\n") for ln in f]
+    while lines and not lines[-1].strip():
+        lines.pop()
+    if not lines or len(lines) % 6:
+        raise ValueError(
+            f"{path}: expected blocks of 6 lines (DoRF format), got {len(lines)} lines"
+        )
+    out = {}
+    for i in range(0, len(lines), 6):
+        if lines[i + 2].strip() != "I =" or lines[i + 4].strip() != "B =":
+            raise ValueError(f"{path}:{i + 3}: expected 'I =' and 'B =' lines in a DoRF block")
+        try:
+            irr = np.asarray(lines[i + 3].split(), np.float64)
+            bri = np.asarray(lines[i + 5].split(), np.float64)
+        except ValueError:
+            raise ValueError(f"{path}:{i + 4}: non-numeric curve samples") from None
+        if irr.shape != bri.shape or irr.size < 2:
+            raise ValueError(f"{path}:{i + 4}: I and B must have the same number (>= 2) of samples")
+        out[lines[i].strip()] = (irr, bri)
+    return out
 
 
 def make_bracketed_stack(
@@ -629,7 +717,12 @@ def make_moving_object_stack(
     keys = jax.random.split(key, n)
     imgs = [
         make_bracketed_stack(
-            keys[j], frames_radiance[j], t[j : j + 1], response, bits=bits, gain=gain,
+            keys[j],
+            frames_radiance[j],
+            t[j : j + 1],
+            response,
+            bits=bits,
+            gain=gain,
             read_sigma=read_sigma,
         )
         for j in range(n)

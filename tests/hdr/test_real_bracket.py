@@ -1,0 +1,53 @@
+"""Leave-one-out on a real JPEG bracket (issue 26): jaxgfx vs OpenCV Debevec in the same run.
+
+Data: tests/data/real_bracket (crops of Merianos & Mitianoudis' HDR fusion dataset; no EXIF,
+exposure ratios estimated by ``method="polynomial"`` in ``experiments/real_bracket.py``)."""
+
+import numpy as np
+import pytest
+
+from jaxgfx import hdr
+
+pytest.importorskip("cv2")
+
+# the polynomial (Mitsunaga-Nayar) ratios of experiments/real_bracket.py, relative to frame 2
+RATIOS = {"oldhouse": (0.299, 1.0, 4.259), "flowers": (0.30, 1.0, 3.83)}
+
+
+def _loo(name, **merge_options):
+    from experiments.real_bracket import load, opencv_loo
+
+    ims = load(name)
+    t = np.asarray(RATIOS[name])
+    r = hdr.recover_response(ims, t)
+    ours = np.asarray(hdr.leave_one_out(ims, t, r, **merge_options).per_frame)
+    cv = np.asarray(opencv_loo(ims, t).per_frame)
+    return ours, cv
+
+
+# slow: ~20 s on 2 cores (fit + LOO compile on 256x256, OpenCV)
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["oldhouse", "flowers"])
+def test_real_bracket_long_frame_beats_opencv(name):
+    """Measured: long frame 12.10 / 11.61 levels vs OpenCV 13.29 / 12.14."""
+    ours, cv = _loo(name)
+    assert ours[2] < cv[2], (ours, cv)
+
+
+# slow: ~20 s on 2 cores. Issue 26's target (every held frame below OpenCV) is not met by the
+# defaults: the merge's t^2 weight lets the long frame's compressed shoulder dominate the
+# prediction of the short and middle frames (oldhouse 7.33 / 10.61 vs OpenCV 6.16 / 8.72)
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="issue 26: short/middle held frames lose to OpenCV")
+def test_real_bracket_every_frame_beats_opencv():
+    ours, cv = _loo("oldhouse")
+    assert np.all(ours < cv), (ours, cv)
+
+
+# slow: ~20 s on 2 cores
+@pytest.mark.slow
+def test_real_bracket_merge_without_time_weight_beats_opencv_on_every_frame():
+    """The lead: the same curve merged with ``time_power=0`` predicts every held frame of
+    oldhouse better than OpenCV (measured 4.90 / 5.57 / 12.69 vs 6.16 / 8.72 / 13.29)."""
+    ours, cv = _loo("oldhouse", time_power=0.0)
+    assert np.all(ours < cv), (ours, cv)
