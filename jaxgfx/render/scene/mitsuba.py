@@ -192,7 +192,7 @@ def _material(md, where, base_dir=None, work_dir=None) -> dict:
         raise NotImplementedError(f"{where}.type: 'phong' has no Mitsuba 3 counterpart")
     from jaxgfx.render.bsdf.textured import is_texture_desc
 
-    nested = ("bsdf0", "bsdf1") if md.get("type") == "blendbsdf" else ()
+    nested = {"blendbsdf": ("bsdf0", "bsdf1"), "mask": ("bsdf",)}.get(md.get("type"), ())
     for k, v in md.items():
         if k not in nested and is_texture_desc(v):
             raise NotImplementedError(
@@ -250,6 +250,10 @@ def _mitsuba_bsdf(m, where) -> dict:
             "bsdf_0": _twosided(_mitsuba_bsdf(m.bsdf0, f"{where}.bsdf0")),
             "bsdf_1": _twosided(_mitsuba_bsdf(m.bsdf1, f"{where}.bsdf1")),
         }
+    elif kind == "mask":
+        # jaxgfx shades a reflection-only nested BSDF on both sides: twosided in Mitsuba
+        out = {"type": kind, "opacity": _float(m.opacity),
+               "bsdf": _twosided(_mitsuba_bsdf(m.bsdf, f"{where}.bsdf"))}  # fmt: skip
     elif kind == "principled":
         out = _principled_keys(m, where)
     else:
@@ -704,6 +708,9 @@ def _bsdf_desc(m, where) -> dict:
         return {"type": "blendbsdf", "weight": _list(m.weight),
                 "bsdf0": _bsdf_desc(m.bsdf0, f"{where}.bsdf0"),
                 "bsdf1": _bsdf_desc(m.bsdf1, f"{where}.bsdf1")}  # fmt: skip
+    if isinstance(m, B.Mask):
+        return {"type": "mask", "opacity": _list(m.opacity),
+                "bsdf": _bsdf_desc(m.bsdf, f"{where}.bsdf")}  # fmt: skip
     if isinstance(m, (B.NormalMap, B.BumpMap)):
         kind = "normalmap" if isinstance(m, B.NormalMap) else "bumpmap"
         key = _MAP_KEYS[kind]
