@@ -279,15 +279,17 @@ def test_blendbsdf_named_children_are_ordered_by_name_and_weight_can_be_a_textur
     p = write(tmp_path, scene_xml(body))
     m = read_xml(p).desc["materials"]["mix"]
     assert m["bsdf0"]["type"] == "conductor" and m["bsdf1"]["type"] == "diffuse"
-    assert m["weight"] == {"type": "checkerboard", "color0": [0.4] * 3, "color1": [0.2] * 3}
+    # a scalar parameter: Mitsuba's checkerboard eval_1 puts color0 (0.4) where its eval puts
+    # color1 (0.2), so the loader swaps them (test_checkerboard_eval_1_pattern_matches_mitsuba)
+    assert m["weight"] == {"type": "checkerboard", "color0": [0.2] * 3, "color1": [0.4] * 3}
     from jaxgfx.render.bsdf.textured import Textured
 
     scene = load_scene(p)
     mix = scene.materials[scene.material_names.index("mix")]
     assert isinstance(mix, Textured) and isinstance(mix.bsdf, B.BlendBSDF)
-    # checkerboard colour0 (0.4) at uv (0.75, 0.75), colour1 (0.2) at (0.25, 0.75)
-    assert float(mix.at(jnp.asarray([0.75, 0.75])).weight) == pytest.approx(0.4)
-    assert float(mix.at(jnp.asarray([0.25, 0.75])).weight) == pytest.approx(0.2)
+    # Mitsuba's eval_1: color0 (0.4) at uv (0.25, 0.75), color1 (0.2) at (0.75, 0.75)
+    assert float(mix.at(jnp.asarray([0.75, 0.75])).weight) == pytest.approx(0.2)
+    assert float(mix.at(jnp.asarray([0.25, 0.75])).weight) == pytest.approx(0.4)
 
 
 # ------------------------------------------------------------------------------ round trips

@@ -598,7 +598,12 @@ class _Params:
     def scalar_or_texture(self, name, default=None):
         p = self.obj.props.get(name)
         if p is not None and p.kind == "object":
-            return self.color(name, texture=True)
+            t = self.color(name, texture=True)
+            if isinstance(t, dict) and t.get("type") == "checkerboard":
+                # Mitsuba 3.9's checkerboard puts color0 on the other squares for a scalar
+                # parameter (eval_1) than for a colour (eval): swapped into jaxgfx's one pattern
+                t = {**t, "color0": t["color1"], "color1": t["color0"]}
+            return t
         return self.float(name, default)
 
     def ior(self, name, default):
@@ -1028,10 +1033,17 @@ def _frame_to_world(n):
 
 
 def _is_textured(desc, name):
+    """Whether material ``name`` reads the hit's uv: a texture parameter or a normal / bump map,
+    also inside nested BSDFs (``bsdf``, ``bsdf0``, ``bsdf1``: descriptions, not textures)."""
     from jaxgfx.render.bsdf.textured import is_texture_desc
 
-    m = desc["materials"].get(name, {})
-    return any(is_texture_desc(v) for v in m.values())
+    def reads_uv(m):
+        if m.get("type") in ("normalmap", "bumpmap"):
+            return True
+        return any(reads_uv(v) if k in ("bsdf", "bsdf0", "bsdf1") else is_texture_desc(v)
+                   for k, v in m.items())  # fmt: skip
+
+    return reads_uv(desc["materials"].get(name, {}))
 
 
 def _shape(obj: _Obj, doc, desc, ctx):
