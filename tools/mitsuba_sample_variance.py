@@ -7,7 +7,7 @@ else ``scalar_rgb``).
 mitsuba-data's ``*_ref_rgb_var.exr`` images (``moment`` integrator) are negative in up to 13 %
 of the pixels of some scenes and near zero in many 4×4 blocks, so a block z computed from them
 is meaningless there: Mitsuba's own 16-spp renders of ``bsdf_spheres/test_envmap`` give a block
-z RMS of 7-88 (median 31) against the reference with those variances
+z RMS of 6-85 (median 29) against the reference with those variances
 (docs/render_scenes.md). This tool renders the scene ``N`` times with seeds ``0 .. N-1`` at
 ``S`` spp (the ``moment`` wrapper's first three channels: the RGB estimate) and writes
 ``S * var_n(image_n)`` (float64 sample variance over the renders, ``ddof = 1``): the variance of
