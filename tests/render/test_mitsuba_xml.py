@@ -425,10 +425,10 @@ def test_disk_is_a_fan_of_256_triangles(tmp_path):
             "<shape type='sdfgrid'>: shape plugin 'sdfgrid' is not supported",
         ),  # fmt: skip
         (
-            '<bsdf type="mask" id="p"/>',
+            '<bsdf type="principledthin" id="p"/>',
             10,
-            "<bsdf type='mask' id='p'>: bsdf plugin "
-            "'mask' is not supported (no opacity masks in jaxgfx)",
+            "<bsdf type='principledthin' id='p'>: bsdf plugin "
+            "'principledthin' is not supported (no thin principled BSDF in jaxgfx)",
         ),  # fmt: skip
         (
             '<emitter type="projector"/>',
@@ -453,7 +453,7 @@ def test_disk_is_a_fan_of_256_triangles(tmp_path):
             "<shape type='obj'> filename 'no.obj': no such file",
         ),  # fmt: skip
         (
-            '<shape type="sphere"><bsdf type="roughconductor"><float name="alpha_u" value="0.1"/>'
+            '<shape type="sphere"><bsdf type="roughdielectric"><float name="alpha_u" value="0.1"/>'
             '<float name="alpha_v" value="0.2"/></bsdf></shape>',
             10,
             "parameter 'alpha_u': anisotropic roughness is not supported",

@@ -18,6 +18,7 @@ from jaxgfx.render.bsdf._blend import BlendBSDF as BlendBSDF
 from jaxgfx.render.bsdf._conductor import Mirror as Mirror
 from jaxgfx.render.bsdf._dielectric import SmoothDielectric as SmoothDielectric
 from jaxgfx.render.bsdf._diffuse import Diffuse as Diffuse
+from jaxgfx.render.bsdf._mask import Mask as Mask
 from jaxgfx.render.bsdf._normalmap import BumpMap as BumpMap
 from jaxgfx.render.bsdf._normalmap import NormalMap as NormalMap
 from jaxgfx.render.bsdf._normalmap import TangentSpace as TangentSpace
@@ -45,6 +46,7 @@ __all__ = [
     "RoughPlastic",
     "ThinDielectric",
     "BlendBSDF",
+    "Mask",
     "NormalMap",
     "BumpMap",
     "TangentSpace",
@@ -65,6 +67,7 @@ BSDF_TYPES = {
     "phong": Phong,
     "thindielectric": ThinDielectric,
     "blendbsdf": BlendBSDF,
+    "mask": Mask,
     "principled": Principled,
     "principledthin": PrincipledThin,
     "normalmap": NormalMap,
@@ -100,7 +103,7 @@ def make_bsdf(desc: dict) -> BSDF:
     missing = [k for k in required if k not in params]
     if missing:
         raise ValueError(f"desc: {kind!r} needs {', '.join(repr(k) for k in missing)}")
-    if kind in ("blendbsdf", "normalmap", "bumpmap"):  # nested descriptions
+    if kind in ("blendbsdf", "mask", "normalmap", "bumpmap"):  # nested descriptions
         for k in ("bsdf0", "bsdf1", "bsdf"):
             if isinstance(params.get(k), dict):
                 try:

@@ -4,10 +4,18 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgfx._checks import as_float_array, check_choice, check_image
 
-__all__ = ["Texture", "MeshAttribute", "lookup", "TEXTURE_WRAP_MODES", "TEXTURE_FILTERS"]
+__all__ = [
+    "Texture",
+    "MeshAttribute",
+    "lookup",
+    "check_uv_transform",
+    "TEXTURE_WRAP_MODES",
+    "TEXTURE_FILTERS",
+]
 
 TEXTURE_WRAP_MODES = ("repeat", "clamp", "mirror")
 TEXTURE_FILTERS = ("bilinear", "nearest")
@@ -20,13 +28,17 @@ class Texture(eqx.Module):
     ``"bilinear"`` | ``"nearest"``. Texture coordinates follow Mitsuba 3's bitmap texture:
     ``u`` runs along the width (columns), ``v`` along the height with ``v = 0`` at the first
     row; texel ``(i, j)`` has its centre at ``((j + 0.5)/W, (i + 0.5)/H)``.
+    ``to_uv`` (static, optional): a 2-D affine map ``((a, b, c), (d, e, f))`` applied to the
+    hit's ``uv`` first, ``u' = a u + b v + c``, ``v' = d u + e v + f`` (Mitsuba's bitmap
+    ``to_uv``: the 2 x 2 part and the translation of its transform); not differentiable.
     """
 
     image: jnp.ndarray
     wrap: str = eqx.field(static=True, default="repeat")
     filter: str = eqx.field(static=True, default="bilinear")
+    to_uv: tuple | None = eqx.field(static=True, default=None)
 
-    def __init__(self, image, *, wrap="repeat", filter="bilinear"):
+    def __init__(self, image, *, wrap="repeat", filter="bilinear", to_uv=None):
         img = check_image(image, "image")
         if img.ndim == 2:
             img = img[..., None]
@@ -35,6 +47,21 @@ class Texture(eqx.Module):
         self.image = img
         self.wrap = check_choice(wrap, "wrap", TEXTURE_WRAP_MODES)
         self.filter = check_choice(filter, "filter", TEXTURE_FILTERS)
+        self.to_uv = None if to_uv is None else check_uv_transform(to_uv, "to_uv")
+
+
+def check_uv_transform(m, name):
+    """A 2-D affine uv map as a hashable ``((a, b, c), (d, e, f))`` of finite floats (a 3 x 3
+    homogeneous matrix is accepted when its last row is ``(0, 0, 1)``); ``ValueError`` naming
+    ``name`` otherwise."""
+    a = np.asarray(m, np.float64)
+    if a.shape == (3, 3):
+        if not np.allclose(a[2], [0.0, 0.0, 1.0]):
+            raise ValueError(f"{name}: expected an affine map (last row 0, 0, 1), got {a[2]}")
+        a = a[:2]
+    if a.shape != (2, 3) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: expected a finite 2 x 3 (or 3 x 3 affine) matrix, got {m!r}")
+    return tuple(tuple(float(x) for x in row) for row in a)
 
 
 def _wrap_index(i, n, mode):
@@ -62,6 +89,9 @@ def lookup(tex, uv):
     if not isinstance(tex, Texture):
         c = as_float_array(tex, "tex")
         return jnp.broadcast_to(c, uv.shape[:-1] + c.shape)
+    if tex.to_uv is not None:
+        m = jnp.asarray(tex.to_uv, uv.dtype)
+        uv = uv @ m[:, :2].T + m[:, 2]
     img = tex.image
     h, w = img.shape[0], img.shape[1]
     x = uv[..., 0] * w - 0.5

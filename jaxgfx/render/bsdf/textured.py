@@ -9,7 +9,9 @@ materials without textures are never wrapped, so untextured scenes compile to th
 Scene-description keys (Mitsuba 3 conventions):
 
 * ``{type: bitmap, file: tex.png, wrap: repeat|clamp|mirror, filter: bilinear|nearest,
-  raw: false}``: 8-bit/16-bit LDR files are decoded from sRGB to linear unless ``raw: true``;
+  raw: false, to_uv: [[a, b, c], [d, e, f]]}`` (``to_uv`` optional: ``uv' = (a u + b v + c,
+  d u + e v + f)`` before the lookup, Mitsuba's bitmap ``to_uv``): 8-bit/16-bit LDR files
+  are decoded from sRGB to linear unless ``raw: true``;
   EXR / HDR files are linear. ``{type: bitmap, image: [[...]]}`` gives texels inline
   (linear, ``(H, W)`` or ``(H, W, C)``).
 * ``{type: checkerboard, color0: 0.4, color1: 0.2, scale: 1}``: Mitsuba's ``checkerboard``
@@ -39,6 +41,7 @@ from jaxgfx.render.bsdf.texture import (
     TEXTURE_WRAP_MODES,
     MeshAttribute,
     Texture,
+    check_uv_transform,
     lookup,
 )
 from jaxgfx.render.parameters import get_path, parameter_paths
@@ -111,7 +114,11 @@ class Textured(WrapsBSDF):
         if uv is None:
             raise ValueError("uv: a textured material needs the hit uv (dispatch(..., uv=hit.uv))")
         out = self.bsdf
-        for name, tex in self.textures.items():
+        # a key setting several fields first (``alpha`` sets alpha_u and alpha_v): the
+        # per-axis keys (``alpha_v``) then override it whatever the dict's order
+        items = sorted(self.textures.items(),
+                       key=lambda kv: -len(texturable_paths(self.bsdf, kv[0])))  # fmt: skip
+        for name, tex in items:
             val = texture_eval(tex, uv)
             for path in texturable_paths(self.bsdf, name):
                 old = get_path(self.bsdf, path)
@@ -188,7 +195,7 @@ def texture_from_dict(d, where="texture", *, base_dir=None, channels=3):
             cols = [jnp.broadcast_to(c, (n,)) for c in cols]
         return Checkerboard(cols[0], cols[1], float(scale))
     # "bitmap"
-    _expect(d, where, ("type", "file", "image", "wrap", "filter", "raw"))
+    _expect(d, where, ("type", "file", "image", "wrap", "filter", "raw", "to_uv"))
     wrap = d.get("wrap", "repeat")
     filt = d.get("filter", "bilinear")
     check_choice(wrap, f"{where}.wrap", TEXTURE_WRAP_MODES)
@@ -208,7 +215,10 @@ def texture_from_dict(d, where="texture", *, base_dir=None, channels=3):
         raise ValueError(f"{where}: expected an (H, W), (H, W, 1|3|4) image, got {img.shape}")
     img = img[..., :3]
     check_finite(img, f"{where}.image")
-    return Texture(jnp.asarray(img), wrap=wrap, filter=filt)
+    to_uv = d.get("to_uv")
+    if to_uv is not None:
+        to_uv = check_uv_transform(to_uv, f"{where}.to_uv")
+    return Texture(jnp.asarray(img), wrap=wrap, filter=filt, to_uv=to_uv)
 
 
 def texture_min(tex) -> float:

@@ -352,6 +352,10 @@ def _mitsuba_bsdf(m, where) -> dict:
             "bsdf_0": _twosided(_mitsuba_bsdf(m.bsdf0, f"{where}.bsdf0")),
             "bsdf_1": _twosided(_mitsuba_bsdf(m.bsdf1, f"{where}.bsdf1")),
         }
+    elif kind == "mask":
+        # jaxgfx shades a reflection-only nested BSDF on both sides: twosided in Mitsuba
+        out = {"type": kind, "opacity": _float(m.opacity),
+               "bsdf": _twosided(_mitsuba_bsdf(m.bsdf, f"{where}.bsdf"))}  # fmt: skip
     elif kind in ("principled", "principledthin"):
         out = _principled_keys(m, where)
     else:
@@ -906,6 +910,9 @@ def _bsdf_desc(m, where) -> dict:
         return {"type": "blendbsdf", "weight": _list(m.weight),
                 "bsdf0": _bsdf_desc(m.bsdf0, f"{where}.bsdf0"),
                 "bsdf1": _bsdf_desc(m.bsdf1, f"{where}.bsdf1")}  # fmt: skip
+    if isinstance(m, B.Mask):
+        return {"type": "mask", "opacity": _list(m.opacity),
+                "bsdf": _bsdf_desc(m.bsdf, f"{where}.bsdf")}  # fmt: skip
     if isinstance(m, (B.NormalMap, B.BumpMap)):
         kind = "normalmap" if isinstance(m, B.NormalMap) else "bumpmap"
         key = _MAP_KEYS[kind]

@@ -70,7 +70,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("bsdf", "diffuse"): S,
     ("bsdf", "twosided"): S + " (one nested BSDF)",
     ("bsdf", "conductor"): S,
-    ("bsdf", "roughconductor"): S + " (isotropic)",
+    ("bsdf", "roughconductor"): S + " (anisotropic in the dp/du frame, not nested)",
     ("bsdf", "dielectric"): S,
     ("bsdf", "roughplastic"): S,
     ("bsdf", "plastic"): S,
@@ -78,7 +78,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("bsdf", "thindielectric"): S,
     ("bsdf", "principled"): S + " (`anisotropic` refused)",
     ("bsdf", "principledthin"): S + " (`anisotropic` refused)",
-    ("bsdf", "mask"): "refused: no opacity masks in jaxgfx",
+    ("bsdf", "mask"): S + " (`opacity` a number or texture, one untextured nested BSDF)",
     ("bsdf", "bumpmap"): S + " (one nested bitmap texture, `scale`; not inside a blendbsdf)",
     ("bsdf", "normalmap"): S + " (texture `normalmap`, one nested BSDF; not inside a blendbsdf)",
     ("bsdf", "blendbsdf"): S + " (two nested BSDFs; a texture weight at the top level only)",
@@ -89,8 +89,9 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("bsdf", "null"): "refused: no null BSDF in jaxgfx",
     ("bsdf", "hair"): "refused: no hair BSDF in jaxgfx",
     # textures
-    ("texture", "bitmap"): S + " (no `to_uv`)",
+    ("texture", "bitmap"): S + " (`to_uv` an affine uv map)",
     ("texture", "checkerboard"): S + " (`to_uv` a uniform scale)",
+    ("texture", "rawconstant"): S + " (`value` a float or a vector)",
     ("texture", "mesh_attribute"): S + " (vertex_* / face_* of PLY files; not in shapegroups)",
     ("texture", "volume"): "refused: jaxgfx renders surfaces only",
     # emitters
@@ -163,6 +164,7 @@ BSDF_TO_MITSUBA = {
     "RoughPlastic": "roughplastic",
     "ThinDielectric": "thindielectric",
     "BlendBSDF": "blendbsdf",
+    "Mask": "mask",
     "Principled": "principled",
     "PrincipledThin": "principledthin",
 }
@@ -177,6 +179,7 @@ jaxgfx shades them on both sides, so the writer wraps them in ``twosided`` and t
 
 DEFAULTS = {
     "diffuse.reflectance": 0.5,
+    "mask.opacity": 0.5,
     "distribution": "beckmann",
     "alpha": 0.1,
     "sample_visible": True,

@@ -663,9 +663,14 @@ def _texture(obj: _Obj, doc) -> dict:
         d["filter"] = p.string("filter_type", "bilinear", ("bilinear", "nearest"))
         d["wrap"] = p.string("wrap_mode", "repeat", ("repeat", "mirror", "clamp"))
         d["raw"] = p.bool("raw", False)
-        s = _uv_scale(p)
-        if s is not None and s != 1.0:
-            raise p.err("to_uv", "bitmap textures with a uv transform are not supported")
+        p.string("format", "variant", ("variant", "uint8"))  # storage precision only
+        m = p.transform("to_uv")
+        if m is not None and not np.allclose(m, np.eye(4)):
+            if not np.allclose(m[3], [0, 0, 0, 1]):
+                raise p.err("to_uv", "expected an affine transform")
+            # Mitsuba's 2-D uv map: the upper-left 2 x 2 block and the translation's x, y
+            d["to_uv"] = [[float(m[0, 0]), float(m[0, 1]), float(m[0, 3])],
+                          [float(m[1, 0]), float(m[1, 1]), float(m[1, 3])]]  # fmt: skip
         p.done()
         return d
     if obj.type == "checkerboard":
@@ -686,24 +691,55 @@ def _texture(obj: _Obj, doc) -> dict:
         d = {"type": "mesh_attribute", "name": name, "scale": p.float("scale", 1.0)}
         p.done()
         return d
+    if obj.type == "rawconstant":  # a constant read as written (no colour conversion)
+        q = obj.props.get("value")
+        if q is None:
+            raise ValueError(f"{obj.where}: missing parameter 'value'")
+        if q.kind in ("float", "integer"):
+            v = p.float("value")
+        else:
+            v = p.color("value") if q.kind == "rgb" else p.vec("value")
+        p.done()
+        return v
     raise ValueError(f"{obj.where}: texture plugin {obj.type!r} is not supported "
-                     "(bitmap, checkerboard)")  # fmt: skip
+                     "(bitmap, checkerboard, rawconstant)")  # fmt: skip
 
 
-def _distribution(p: _Params):
+def _distribution(p: _Params, aniso=False):
+    """Distribution keys; ``aniso`` (roughconductor): ``alpha_u`` / ``alpha_v`` may differ
+    (numbers or textures) -> ``alpha`` (= alpha_u) and ``alpha_v``."""
     dist = p.string("distribution", DEFAULTS["distribution"], ("beckmann", "ggx"))
     alpha = p.scalar_or_texture("alpha", None)
-    au, av = p.float("alpha_u"), p.float("alpha_v")
+    au, av = p.scalar_or_texture("alpha_u"), p.scalar_or_texture("alpha_v")
+    alpha_v = None
     if au is not None or av is not None:
         if alpha is not None:
             raise p.err("alpha", "give either alpha or alpha_u / alpha_v")
-        if au is None or av is None or au != av:
+        if not aniso and (au is None or av is None or au != av or isinstance(au, dict)):
             raise p.err("alpha_u", "anisotropic roughness is not supported (the tangent "
                                    "frames of jaxgfx and Mitsuba differ)")  # fmt: skip
-        alpha = au
+        if au is None or av is None:
+            raise p.err("alpha_u" if au is None else "alpha_v", "give both alpha_u and alpha_v")
+        alpha, alpha_v = au, (None if au == av and not isinstance(au, dict) else av)
     out = {"distribution": dist, "alpha": DEFAULTS["alpha"] if alpha is None else alpha,
            "sample_visible": p.bool("sample_visible", DEFAULTS["sample_visible"])}  # fmt: skip
+    if alpha_v is not None:
+        out["alpha_v"] = alpha_v
     return out
+
+
+def _dpdu_frame(m: dict, obj: _Obj, nested, in_map) -> dict:
+    """An anisotropic ``roughconductor`` outside a normal map: wrapped in the identity normal
+    map ``(0.5, 0.5, 1)`` (no flip, no shadowing factor), whose perturbed frame is the
+    unperturbed one with the tangent ``dp/du``: Mitsuba's shading frame (jaxgfx's own plain
+    frame has another tangent). Inside a normal map the nested BSDF already has that frame."""
+    if "alpha_v" not in m or in_map:
+        return m
+    if nested:
+        raise ValueError(f"{obj.where}: an anisotropic roughconductor inside a blendbsdf or "
+                         "mask is not supported (its dp/du tangent frame)")  # fmt: skip
+    return {"type": "normalmap", "normalmap": [0.5, 0.5, 1.0], "bsdf": m,
+            "flip_invalid_normals": False, "use_shadowing_function": False}  # fmt: skip
 
 
 def _conductor(p: _Params) -> dict:
@@ -819,12 +855,12 @@ def _blend_children(obj: _Obj, p: _Params) -> list:
     return kids
 
 
-def _bsdf_dict(obj: _Obj, doc, *, nested=False) -> dict:
+def _bsdf_dict(obj: _Obj, doc, *, nested=False, in_map=False) -> dict:
     """The jaxgfx description of a BSDF object (``twosided`` unwrapped). ``nested``: a BSDF
     inside a ``blendbsdf``, whose parameters jaxgfx cannot texture."""
     while obj.type == "twosided":
         obj = _twosided_child(obj, doc)
-    why = "textures are not supported in a BSDF nested in a blendbsdf" if nested else None
+    why = "textures are not supported in a BSDF nested in a blendbsdf or mask" if nested else None
     p = _Params(obj, doc, no_textures=why)
     t = obj.type
     children_ok = 0
@@ -834,7 +870,8 @@ def _bsdf_dict(obj: _Obj, doc, *, nested=False) -> dict:
     elif t == "conductor":
         m = {"type": "conductor", **_conductor(p)}
     elif t == "roughconductor":
-        m = {"type": "roughconductor", **_distribution(p), **_conductor(p)}
+        m = _dpdu_frame({"type": "roughconductor", **_distribution(p, aniso=True),
+                         **_conductor(p)}, obj, nested, in_map)  # fmt: skip
     elif t in ("dielectric", "roughdielectric", "thindielectric"):
         eta = _ior_ratio(p, DEFAULTS["dielectric.int_ior"], DEFAULTS["dielectric.ext_ior"])
         m = {"type": t, **(_distribution(p) if t == "roughdielectric" else {}), "eta": eta,
@@ -865,6 +902,11 @@ def _bsdf_dict(obj: _Obj, doc, *, nested=False) -> dict:
         m = _principled(p)
     elif t == "principledthin":
         m = _principledthin(p)
+    elif t == "mask":
+        if nested:
+            raise ValueError(f"{obj.where}: a mask nested in a blendbsdf or mask is not supported")
+        m = _mask_dict(obj, p, doc)
+        children_ok = len(obj.children)
     elif t in ("normalmap", "bumpmap"):
         if nested:
             raise ValueError(f"{obj.where}: a {t} nested in a blendbsdf is not supported")
@@ -894,7 +936,7 @@ def _map_dict(obj: _Obj, p: _Params, doc) -> dict:
     if len(kids["bsdf"]) != 1:
         raise ValueError(f"{obj.where}: expected exactly one nested <bsdf>, got "
                          f"{len(kids['bsdf'])}")  # fmt: skip
-    m = {"type": t, "bsdf": _bsdf_dict(kids["bsdf"][0], doc)}
+    m = {"type": t, "bsdf": _bsdf_dict(kids["bsdf"][0], doc, in_map=True)}
     if t == "normalmap":
         tex = p.color("normalmap", texture=True)
         if tex is None:
@@ -912,6 +954,26 @@ def _map_dict(obj: _Obj, p: _Params, doc) -> dict:
 
 
 _MAP_FLAGS = ("flip_invalid_normals", "use_shadowing_function")
+
+
+def _mask_dict(obj: _Obj, p: _Params, doc) -> dict:
+    """``mask``: one nested BSDF (untextured) and ``opacity`` (a number or a texture; Mitsuba's
+    default 0.5) -> ``{type: mask, opacity, bsdf}``."""
+    kids = []
+    for c in obj.children:
+        if c.tag != "bsdf":
+            hint = 'an opacity texture needs name="opacity"'
+            raise ValueError(f"{c.node.at}: {obj.where}: nested <{c.tag} type={c.type!r}> is "
+                             f"not supported here ({hint})")  # fmt: skip
+        kids.append(c)
+    for q in obj.props.values():
+        if q.kind == "object" and q.value.tag == "bsdf":
+            q.used = True
+            kids.append(q.value)
+    if len(kids) != 1:
+        raise ValueError(f"{obj.where}: expected exactly one nested <bsdf>, got {len(kids)}")
+    opacity = p.scalar_or_texture("opacity", DEFAULTS["mask.opacity"])
+    return {"type": "mask", "opacity": opacity, "bsdf": _bsdf_dict(kids[0], doc, nested=True)}
 
 
 def _bsdf(obj: _Obj, doc, desc, *, name=None) -> str:
@@ -1007,10 +1069,17 @@ def _frame_to_world(n):
 
 
 def _is_textured(desc, name):
+    """Whether material ``name`` reads the hit's uv: a texture parameter or a normal / bump map,
+    also inside nested BSDFs (``bsdf``, ``bsdf0``, ``bsdf1``: descriptions, not textures)."""
     from jaxgfx.render.bsdf.textured import is_texture_desc
 
-    m = desc["materials"].get(name, {})
-    return any(is_texture_desc(v) for v in m.values())
+    def reads_uv(m):
+        if m.get("type") in ("normalmap", "bumpmap"):
+            return True
+        return any(reads_uv(v) if k in ("bsdf", "bsdf0", "bsdf1") else is_texture_desc(v)
+                   for k, v in m.items())  # fmt: skip
+
+    return reads_uv(desc["materials"].get(name, {}))
 
 
 def _shape(obj: _Obj, doc, desc, ctx):
