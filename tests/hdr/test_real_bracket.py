@@ -3,6 +3,8 @@
 Data: tests/data/real_bracket (crops of Merianos & Mitianoudis' HDR fusion dataset; no EXIF,
 exposure ratios estimated by ``method="polynomial"`` in ``experiments/real_bracket.py``)."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -14,14 +16,24 @@ pytest.importorskip("cv2")
 RATIOS = {"oldhouse": (0.299, 1.0, 4.259), "flowers": (0.30, 1.0, 3.83)}
 
 
-def _loo(name, **merge_options):
-    from experiments.real_bracket import load, opencv_loo
+DATA = os.path.join(os.path.dirname(__file__), "..", "data", "real_bracket")
 
-    ims = load(name)
+
+def _load(name):
+    from PIL import Image
+
+    frames = [Image.open(os.path.join(DATA, f"{name}_{i}.png")) for i in (1, 2, 3)]
+    return np.stack([np.asarray(f) for f in frames])
+
+
+def _loo(name, **merge_options):
+    from tests.hdr._stacks import opencv_loo
+
+    ims = _load(name)
     t = np.asarray(RATIOS[name])
     r = hdr.recover_response(ims, t)
     ours = np.asarray(hdr.leave_one_out(ims, t, r, **merge_options).per_frame)
-    cv = np.asarray(opencv_loo(ims, t).per_frame)
+    cv = np.asarray(opencv_loo(ims, t)[1].per_frame)
     return ours, cv
 
 

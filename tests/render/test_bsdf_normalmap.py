@@ -530,10 +530,16 @@ def test_mapped_materials_survive_save_and_load(tmp_path, via):
         _same_materials(m, names[name])
     assert isinstance(names["m"], NormalMap) and isinstance(names["b"], BumpMap)
     assert not names["b"].use_shadowing_function and names["m"].use_shadowing_function
-    if via == "description":  # a textured nested BSDF is not exported (yet): a clear error
-        desc["materials"]["m"]["bsdf"]["reflectance"] = {"type": "bitmap", "image": [[0.5]]}
-        with pytest.raises(NotImplementedError, match=r"materials\.m\.bsdf: textured"):
-            save_scene(desc, tmp_path / "t.xml", base_dir=str(tmp_path))
+    if via == "description":  # a textured nested BSDF is exported too: its texels come back
+        desc["materials"]["m"]["bsdf"]["reflectance"] = {
+            "type": "bitmap",
+            "image": [[[0.25, 0.5, 0.75], [0.1, 0.2, 0.3]]],
+        }
+        built = load_scene(desc, base_dir=str(tmp_path))
+        back = load_scene(save_scene(desc, tmp_path / "t" / "t.xml", base_dir=str(tmp_path)))
+        m0 = dict(zip(built.material_names, built.materials, strict=True))["m"]
+        m1 = dict(zip(back.material_names, back.materials, strict=True))["m"]
+        _same_materials(m0, m1)
 
 
 def test_parameters_of_a_mapped_material_with_a_textured_nested_bsdf(x64):

@@ -425,10 +425,10 @@ def test_disk_is_a_fan_of_256_triangles(tmp_path):
             "<shape type='sdfgrid'>: shape plugin 'sdfgrid' is not supported",
         ),  # fmt: skip
         (
-            '<bsdf type="principledthin" id="p"/>',
+            '<bsdf type="hair" id="p"/>',
             10,
-            "<bsdf type='principledthin' id='p'>: bsdf plugin "
-            "'principledthin' is not supported (no thin principled BSDF in jaxgfx)",
+            "<bsdf type='hair' id='p'>: bsdf plugin 'hair' is not supported (no hair BSDF in "
+            "jaxgfx)",
         ),  # fmt: skip
         (
             '<emitter type="projector"/>',
@@ -542,7 +542,12 @@ def test_every_refused_plugin_is_refused_with_its_reason(tmp_path, tag, plugin, 
 
 def test_unknown_plugin_names_the_supported_ones(tmp_path):
     p = write(tmp_path, scene_xml('<shape type="teapot"/>'))
-    with pytest.raises(ValueError, match=rx("shape plugin 'teapot' is not supported (unknown "
-                                            "plugin; supported: obj, ply, serialized, sphere, "
-                                            "rectangle")):
+    with pytest.raises(
+        ValueError,
+        match=rx(
+            "shape plugin 'teapot' is not supported (unknown "
+            "plugin; supported: obj, ply, serialized, sphere, "
+            "rectangle"
+        ),
+    ):
         read_xml(p)
