@@ -18,9 +18,22 @@ from jaxgfx.render.integrators import _common as C
 from jaxgfx.render.integrators import _wavefront
 from jaxgfx.render.integrators.base import N_RANDOM, Integrator, check_depth
 
-__all__ = ["PathIntegrator", "DirectIntegrator", "path_radiance", "N_RANDOM", "STRATEGIES"]
+__all__ = [
+    "PathIntegrator",
+    "DirectIntegrator",
+    "path_radiance",
+    "N_RANDOM",
+    "STRATEGIES",
+    "ADJOINTS",
+]
 
 STRATEGIES = ("mis", "light", "bsdf")
+
+ADJOINTS = ("ad", "replay")
+"""How reverse mode differentiates the path integrator (docs/render_gradients.md): ``"ad"``
+(JAX's reverse mode through the checkpointed bounce loop; every parameter) or ``"replay"``
+(path replay backpropagation, :mod:`~jaxgfx.render.integrators._replay`: material, emitter,
+texture and environment parameters only, memory flat in depth)."""
 
 CHECKPOINT_ONE_BOUNCE = False  # True: checkpoint a bounce loop of one bounce too (A/B switch)
 
@@ -45,60 +58,56 @@ def _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy, detach
     return le * w[..., None]
 
 
-def path_radiance(
-    scene,
-    o,
-    d,
-    u,
-    *,
-    max_depth: int,
-    rr_depth: int = 5,
-    strategy: str = "mis",
-    sampling: str = "detached",
-    chunk: int | None = None,
-):
-    """Radiance along rays ``o, d (..., 3)`` with uniform numbers ``u (..., max_depth, 7)``.
-
-    ``strategy`` selects how direct light is estimated at each vertex: ``"mis"`` (light
-    sampling and BSDF sampling combined with the power heuristic, Veach 1997), ``"light"``
-    (light sampling only; emitters hit by BSDF-sampled rays count only after specular
-    bounces) or ``"bsdf"`` (BSDF sampling only, no shadow rays; point lights are then never
-    found). All three are unbiased for area and environment lights; they differ in variance.
-
-    ``sampling="detached"`` (default) makes derivatives unbiased (docs/render_gradients.md):
-    BSDF-sampled directions, the environment's light samples, both MIS weights and the
-    Russian-roulette survival probability carry no derivative, and the BSDF sample's weight
-    has the derivative of ``f(wo, wi; θ) |cos| / stop_gradient(pdf)``
-    (:func:`~jaxgfx.render.integrators._common.detach_bsdf_sample`). ``"attached"``
-    differentiates through the samplers (pathwise): unbiased only where no sampled ray crosses
-    a discontinuity of the integrand as the parameter moves and no sampling decision depends
-    on the parameter. The image is identical in both modes.
-
-    ``chunk``: ``None`` (every ray shaded with every material) or the number of rays per chunk
-    of wavefront shading (:func:`~jaxgfx.render.integrators._wavefront.shade_sorted`), used
-    when a pass holds at least two chunks (whole rows of the batch's last axis).
-    """
-    check_choice(strategy, "strategy", STRATEGIES)
-    C.check_sampling(sampling)
-    detached = sampling == "detached"
-    detach = jax.lax.stop_gradient if detached else _identity
-    dtype = o.dtype
+def _use_chunk(chunk, o):
+    """``chunk``, or ``None`` where a pass holds fewer than two chunks (sorting is then pure
+    overhead)."""
     batch = o.shape[:-1]
-    has_lights = scene.n_lights > 0 and strategy != "bsdf"
-
-    n_mat = len(scene.materials)
-    # wavefront shading only where a pass has two chunks or more (else it is pure overhead)
     if (
         chunk is not None
         and batch
         and o.size // 3 < 2 * _wavefront.chunk_rows(chunk, batch[-1]) * batch[-1]
     ):
-        chunk = None
+        return None
+    return chunk
+
+
+def initial_carry(o, d):
+    """The bounce loop's carry for camera rays ``o, d``: ``(o, d, beta, L, alive, prev_pdf,
+    prev_delta, p_prev)``."""
+    dtype = o.dtype
+    batch = o.shape[:-1]
+    return (
+        o,
+        d,
+        jnp.ones(batch + (3,), dtype),
+        jnp.zeros(batch + (3,), dtype),
+        jnp.ones(batch, bool),
+        jnp.ones(batch, dtype),
+        jnp.ones(batch, bool),
+        o,
+    )
+
+
+def make_bounce(*, rr_depth, strategy, sampling, chunk):
+    """``bounce(scene, carry, ub, depth) -> (carry_next, contrib, weight)``: one path vertex.
+
+    ``contrib`` is the radiance this vertex adds (emission with its MIS weight and the
+    next-event term, both times the throughput ``beta``); ``weight`` the BSDF sample's weight
+    (per channel, before Russian roulette), so that ``carry_next``'s throughput is
+    ``beta * weight`` (divided by the detached survival probability under Russian roulette;
+    0 for dead paths) and its radiance ``L + contrib``. The path integrator scans it
+    (:func:`path_radiance`); path replay (:mod:`._replay`) takes the VJP of ``contrib`` and
+    ``weight`` w.r.t. the scene at a detached carry. ``chunk``: as :func:`path_radiance`,
+    already resolved by :func:`_use_chunk`.
+    """
+    detached = sampling == "detached"
+    detach = jax.lax.stop_gradient if detached else _identity
     lazy = chunk is not None
 
-    def shade(args, mat):
+    def shade(scene, args, mat):
         """Light sampling, shadow ray, BSDF sampling at live hits -> the next segment."""
         hit, d, beta, ub, alive = args
+        has_lights = scene.n_lights > 0 and strategy != "bsdf"
         frame, ng, wo = fusion_barrier(C.shading_frame(scene, hit, d, mat))
         tg = C.tangent_space(scene, hit, frame)  # None without normal / bump maps
         dL = jnp.zeros_like(beta)
@@ -109,7 +118,10 @@ def path_radiance(
             so, sd = C.spawn_ray(hit.p, ng, wi)
             shadow_tmax = jnp.where(jnp.isfinite(dist), dist * (1 - 1e-4), jnp.inf)
             # materialised: XLA fused the shadow-ray tests into the three channels of the
-            # radiance update and ran them three times (9.7 % of a depth-4 path render)
+            # radiance update and ran them three times (9.7 % of a depth-4 path render).
+            # The ray is detached: visibility is boolean (no derivative), and a host traversal
+            # (Embree's pure_callback) has no JVP rule
+            so, sd, shadow_tmax = jax.lax.stop_gradient((so, sd, shadow_tmax))
             vis = fusion_barrier(~C.occluded(scene, so, sd, shadow_tmax))
             wi_local = C.to_local(frame, wi)
             f, bpdf = fusion_barrier(
@@ -151,13 +163,13 @@ def path_radiance(
             wi_world, weight = C.to_world(frame, s.wi), s.weight
             alive = alive & (s.pdf > 0) & (max_last(s.weight) > 0)
         o_next, d_next = C.spawn_ray(hit.p, ng, wi_world)
-        return dL, beta * weight, alive, o_next, d_next, s.pdf, s.is_delta
+        return dL, weight, alive, o_next, d_next, s.pdf, s.is_delta
 
-    def bounce(carry, xs):
+    def bounce(scene, carry, ub, depth):
         o, d, beta, L, alive, prev_pdf, prev_delta, p_prev = carry
-        ub, depth = xs
+        n_mat = len(scene.materials)
         hit = C.intersect(scene, o, d)
-        L = L + jnp.where(
+        em = jnp.where(
             alive[..., None],
             beta * _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy, detach),
             0,
@@ -166,19 +178,22 @@ def path_radiance(
         mat = C.hit_material(scene, hit)
         args = (hit, d, beta, ub, alive)
         if chunk is None:
-            dL, beta, alive, o_next, d_next, pdf, delta = shade(args, mat)
+            dL, weight, alive, o_next, d_next, pdf, delta = shade(scene, args, mat)
         else:
             key = jnp.where(alive, mat, n_mat)
-            outs = _wavefront.shade_sorted(shade, args, key, n_mat, chunk)
+            outs = _wavefront.shade_sorted(lambda a, m: shade(scene, a, m), args, key, n_mat, chunk)
             # rays that were not shaded: no light, dead, and a finite ray for the next bounce
-            dL, beta, alive_s, o_next, d_next, pdf, delta = outs
+            dL, weight, alive_s, o_next, d_next, pdf, delta = outs
             dL = jnp.where(alive[..., None], dL, 0.0)
+            weight = jnp.where(alive[..., None], weight, 0.0)
             o_next = jnp.where(alive[..., None], o_next, o)
             d_next = jnp.where(alive[..., None], d_next, d)
             pdf = jnp.where(alive, pdf, 1.0)
             delta = jnp.where(alive, delta, True)
             alive = alive & alive_s
-        L = L + dL
+        contrib = em + dL
+        L = (L + em) + dL
+        beta = beta * weight
         # Russian roulette (Mitsuba: after rr_depth bounces, survival = min(max(beta), 0.95))
         q = detach(jnp.clip(max_last(beta), 0.0, 0.95))
         rr = depth >= rr_depth - 1
@@ -187,18 +202,63 @@ def path_radiance(
         alive = alive & survive
         beta = jnp.where(alive[..., None], beta, 0.0)
         carry = (o_next, d_next, beta, L, alive, pdf, delta, hit.p)
-        return carry, None
+        return carry, contrib, weight
 
-    carry = (
-        o,
-        d,
-        jnp.ones(batch + (3,), dtype),
-        jnp.zeros(batch + (3,), dtype),
-        jnp.ones(batch, bool),
-        jnp.ones(batch, dtype),
-        jnp.ones(batch, bool),
-        o,
-    )
+    return bounce
+
+
+def last_vertex(scene, carry, *, strategy, sampling):
+    """Radiance the last vertex adds: its emission (MIS-weighted) times the throughput."""
+    detach = jax.lax.stop_gradient if sampling == "detached" else _identity
+    o, d, beta, L, alive, prev_pdf, prev_delta, p_prev = carry
+    hit = C.intersect(scene, o, d)
+    term = _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy, detach)
+    return jnp.where(alive[..., None], beta * term, 0.0)
+
+
+def path_radiance(
+    scene,
+    o,
+    d,
+    u,
+    *,
+    max_depth: int,
+    rr_depth: int = 5,
+    strategy: str = "mis",
+    sampling: str = "detached",
+    chunk: int | None = None,
+):
+    """Radiance along rays ``o, d (..., 3)`` with uniform numbers ``u (..., max_depth, 7)``.
+
+    ``strategy`` selects how direct light is estimated at each vertex: ``"mis"`` (light
+    sampling and BSDF sampling combined with the power heuristic, Veach 1997), ``"light"``
+    (light sampling only; emitters hit by BSDF-sampled rays count only after specular
+    bounces) or ``"bsdf"`` (BSDF sampling only, no shadow rays; point lights are then never
+    found). All three are unbiased for area and environment lights; they differ in variance.
+
+    ``sampling="detached"`` (default) makes derivatives unbiased (docs/render_gradients.md):
+    BSDF-sampled directions, the environment's light samples, both MIS weights and the
+    Russian-roulette survival probability carry no derivative, and the BSDF sample's weight
+    has the derivative of ``f(wo, wi; θ) |cos| / stop_gradient(pdf)``
+    (:func:`~jaxgfx.render.integrators._common.detach_bsdf_sample`). ``"attached"``
+    differentiates through the samplers (pathwise): unbiased only where no sampled ray crosses
+    a discontinuity of the integrand as the parameter moves and no sampling decision depends
+    on the parameter. The image is identical in both modes.
+
+    ``chunk``: ``None`` (every ray shaded with every material) or the number of rays per chunk
+    of wavefront shading (:func:`~jaxgfx.render.integrators._wavefront.shade_sorted`), used
+    when a pass holds at least two chunks (whole rows of the batch's last axis).
+    """
+    check_choice(strategy, "strategy", STRATEGIES)
+    C.check_sampling(sampling)
+    chunk = _use_chunk(chunk, o)
+    bounce = make_bounce(rr_depth=rr_depth, strategy=strategy, sampling=sampling, chunk=chunk)
+
+    def body(carry, xs):
+        ub, depth = xs
+        return bounce(scene, carry, ub, depth)[0], None
+
+    carry = initial_carry(o, d)
     if max_depth > 1:
         us = jnp.moveaxis(u[..., : max_depth - 1, :], -2, 0)
         # each bounce is checkpointed: reverse mode stores only the carry per bounce (~100
@@ -207,13 +267,10 @@ def path_radiance(
         # docs/render_gradients.md: same gradient, same time per gradient, faster compile)
         # (one bounce, e.g. direct light: the checkpoint would keep the same intermediates and
         # only add a recomputation to compile; issue 22)
-        body = bounce if max_depth == 2 and not CHECKPOINT_ONE_BOUNCE else jax.checkpoint(bounce)
+        body = body if max_depth == 2 and not CHECKPOINT_ONE_BOUNCE else jax.checkpoint(body)
         carry, _ = jax.lax.scan(body, carry, (us, jnp.arange(max_depth - 1)))
     # last vertex: emission only
-    o, d, beta, L, alive, prev_pdf, prev_delta, p_prev = carry
-    hit = C.intersect(scene, o, d)
-    term = _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy, detach)
-    return L + jnp.where(alive[..., None], beta * term, 0.0)
+    return carry[3] + last_vertex(scene, carry, strategy=strategy, sampling=sampling)
 
 
 def _check_chunk(chunk):
@@ -223,6 +280,42 @@ def _check_chunk(chunk):
 
 def _check_strategy(strategy):
     check_choice(strategy, "strategy", STRATEGIES)
+
+
+def _check_adjoint(adjoint, sampling):
+    check_choice(adjoint, "adjoint", ADJOINTS)
+    if adjoint == "replay" and sampling != "detached":
+        raise ValueError(
+            "adjoint: 'replay' replays the detached estimator and needs sampling='detached', "
+            f"got sampling={sampling!r}"
+        )
+
+
+def _radiance(integ, scene, o, d, u, max_depth):
+    if integ.adjoint == "replay":
+        from jaxgfx.render.integrators._replay import path_radiance_replay  # noqa: PLC0415
+
+        return path_radiance_replay(
+            scene,
+            o,
+            d,
+            u,
+            max_depth=max_depth,
+            rr_depth=integ.rr_depth,
+            strategy=integ.strategy,
+            chunk=integ.chunk,
+        )
+    return path_radiance(
+        scene,
+        o,
+        d,
+        u,
+        max_depth=max_depth,
+        rr_depth=integ.rr_depth,
+        strategy=integ.strategy,
+        sampling=integ.sampling,
+        chunk=integ.chunk,
+    )
 
 
 class PathIntegrator(Integrator):
@@ -244,6 +337,7 @@ class PathIntegrator(Integrator):
     strategy: str = eqx.field(static=True, default="mis")
     sampling: str = eqx.field(static=True, default="detached")
     chunk: int | None = eqx.field(static=True, default=4096)
+    adjoint: str = eqx.field(static=True, default="ad")
 
     def __check_init__(self):
         check_depth("max_depth", self.max_depth)
@@ -251,23 +345,14 @@ class PathIntegrator(Integrator):
         _check_chunk(self.chunk)
         _check_strategy(self.strategy)
         C.check_sampling(self.sampling)
+        _check_adjoint(self.adjoint, self.sampling)
 
     @property
     def random_shape(self):
         return (self.max_depth, N_RANDOM)
 
     def __call__(self, scene, o, d, u):
-        return path_radiance(
-            scene,
-            o,
-            d,
-            u,
-            max_depth=self.max_depth,
-            rr_depth=self.rr_depth,
-            strategy=self.strategy,
-            sampling=self.sampling,
-            chunk=self.chunk,
-        )
+        return _radiance(self, scene, o, d, u, self.max_depth)
 
 
 class DirectIntegrator(Integrator):
@@ -283,12 +368,14 @@ class DirectIntegrator(Integrator):
     strategy: str = eqx.field(static=True, default="mis")
     sampling: str = eqx.field(static=True, default="detached")
     chunk: int | None = eqx.field(static=True, default=None)
+    adjoint: str = eqx.field(static=True, default="ad")
 
     def __check_init__(self):
         check_depth("rr_depth", self.rr_depth)
         _check_chunk(self.chunk)
         _check_strategy(self.strategy)
         C.check_sampling(self.sampling)
+        _check_adjoint(self.adjoint, self.sampling)
 
     @property
     def max_depth(self) -> int:
@@ -299,14 +386,4 @@ class DirectIntegrator(Integrator):
         return (self.max_depth, N_RANDOM)
 
     def __call__(self, scene, o, d, u):
-        return path_radiance(
-            scene,
-            o,
-            d,
-            u,
-            max_depth=2,
-            rr_depth=self.rr_depth,
-            strategy=self.strategy,
-            sampling=self.sampling,
-            chunk=self.chunk,
-        )
+        return _radiance(self, scene, o, d, u, 2)
