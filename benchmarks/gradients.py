@@ -325,6 +325,12 @@ def main(argv=None):
         default="speed,glossy,memory,stats,visibility",
         help="comma-separated subset of speed,glossy,memory,stats,visibility,replay",
     )
+    ap.add_argument(
+        "--replay-mem-spps",
+        default="",
+        help="replay section: also XLA's temporary buffer of jit(grad) at depth 4 for these "
+        "comma-separated spp (AD, replay, replay recomputing the forward; compile only)",
+    )
     a = ap.parse_args(argv)
     sections = set(a.sections.split(","))
     q = a.quick
@@ -365,7 +371,7 @@ def main(argv=None):
             spp=16 if q else 64,
             depths=[2, 4] if q else [2, 4, 8],
             repeat=3 if q else 5,
-            mem_spps=() if q else (4, 16, 64),
+            mem_spps=tuple(int(x) for x in a.replay_mem_spps.split(",") if x),
         )
     emit(result, a.out)
 

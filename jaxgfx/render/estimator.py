@@ -45,10 +45,10 @@ it runs the step as plain code, see there)."""
 
 REPLAY_KEEPS_RADIANCE = True
 """With a path-replay integrator (``adjoint="replay"``), :func:`render_partial`'s checkpointed
-pass steps keep the forward radiance of each ray (12 bytes per sample in float32) so that the
-backward sweep does not trace every path a second time before replaying it; ``False``: keep
-nothing per step (memory flat in spp too) and recompute the forward (docs/performance.md,
-"Renderer gradients", has both)."""
+pass steps keep what its forward pass stores per ray (6 numbers: 24 bytes per sample in
+float32) so that the backward sweep does not trace every path a second time before replaying
+it; ``False``: keep nothing per step (memory flat in spp too) and recompute the forward
+(docs/performance.md, "Renderer gradients", has both)."""
 
 
 def passes_per_step(rays_per_pass: int, n_passes: int, target: int | None = RAYS_PER_STEP) -> int:

@@ -149,6 +149,21 @@ def test_geometry_and_camera_parameters_are_refused(path, match):
         jax.grad(loss)(x0)
 
 
+def test_edge_sampling_of_a_shape_parameter_is_refused():
+    """``visibility="edge"`` adds boundary terms for shape parameters, whose interior part
+    replay does not compute: the combination is refused, not half-differentiated."""
+    scene = load_scene(_occluder_scene(w=2))
+    integ = DirectIntegrator(adjoint="replay")
+    c0 = scene.get("shapes.0.centers")
+
+    def loss(c):
+        s = scene.replace("shapes.0.centers", c)
+        return jnp.mean(render(s, KEY, spp=1, integrator=integ, visibility="edge"))
+
+    with pytest.raises(ValueError, match=r"shapes.*visibility='edge'"):
+        jax.grad(loss)(c0)
+
+
 def test_dielectric_eta_is_refused():
     desc = G.glass_scene(2)
     scene = load_scene(desc)
@@ -168,7 +183,7 @@ def test_dielectric_eta_is_refused():
 
 
 @pytest.mark.slow  # slow: ~25 s on the loaded 2-core machine (one program, AD + replay)
-def test_same_key_diffuse_area_environment_rr():
+def test_same_key_diffuse_area_environment_rr(x64):
     """Depth 4 with Russian roulette from the second bounce: albedo, area-light and
     environment radiance."""
     scene = load_scene(_occluder_scene())
@@ -179,7 +194,7 @@ def test_same_key_diffuse_area_environment_rr():
 
 @pytest.mark.slow  # slow: ~70 s on the loaded 2-core machine
 @pytest.mark.parametrize("chunk", [None, 16])
-def test_same_key_glossy_textured(chunk):
+def test_same_key_glossy_textured(x64, chunk):
     """GGX α and reflectance, floor texels, area and environment radiance (the glossy scene of
     issue 10), depth 5, Russian roulette on; ``chunk=16``: wavefront shading inside the
     replay."""
@@ -190,7 +205,7 @@ def test_same_key_glossy_textured(chunk):
 
 
 @pytest.mark.slow  # slow: ~60 s on the loaded 2-core machine
-def test_same_key_materials_point_light_beckmann():
+def test_same_key_materials_point_light_beckmann(x64):
     """Rough plastic, Phong and an anisotropic complex-IOR conductor, area + point +
     environment light, depth 3; plus a Beckmann sphere's α in the interreflection scene."""
     desc = G.materials_scene(4)
@@ -202,7 +217,7 @@ def test_same_key_materials_point_light_beckmann():
 
 
 @pytest.mark.slow  # slow: ~50 s on the loaded 2-core machine
-def test_same_key_glossy_interreflections_depth6_mirror():
+def test_same_key_glossy_interreflections_depth6_mirror(x64):
     """Two spheres (GGX metal and diffuse clay, configs/scenes/inverse.yaml) at depth 6 with a
     complex-IOR mirror (delta lobe) floor: light bounces between the spheres and the mirror."""
     from jaxgfx.config import read_yaml  # noqa: PLC0415
@@ -237,7 +252,7 @@ def _fd_loss(x, k, scene, integ):
 
 
 @pytest.mark.slow  # slow: ~90 s on the loaded 2-core machine (value-grad + 6 perturbed renders)
-def test_replay_matches_finite_differences_glossy_area_occluder():
+def test_replay_matches_finite_differences_glossy_area_occluder(x64):
     """GGX sphere over a diffuse floor it shadows, area light, environment; depth 3. The
     paired (replay − FD) difference over 16 keys must be within 4 standard errors (plus 1 % of
     |FD| for the parameters no sampling decision depends on, where FD is exact to O(h²))."""
@@ -258,24 +273,46 @@ def test_replay_matches_finite_differences_glossy_area_occluder():
 # hard cases
 
 
-@pytest.mark.slow  # slow: ~30 s on the loaded 2-core machine
-def test_tiny_roughness_and_black_albedo_are_finite():
-    """α → 0 (clamped at 1e-4: derivative 0, as FD) and a black albedo (the image stays as
-    without the floor's bounce light, the gradient finite and positive)."""
+@pytest.mark.slow  # slow: ~40 s on the loaded 2-core machine
+def test_tiny_roughness_black_albedo_and_zero_channel(x64):
+    """α → 0 (clamped at 1e-4: derivative 0, as FD), a black floor and a sphere albedo with a
+    zero channel: exactly-zero BSDF weights, where ``(L − L_≤j) / w_j`` is 0/0 and the light
+    after the vertex comes from the forward pass's ``Z``. Same gradient as AD (which keeps such
+    paths alive), finite, and positive for the black albedo (brightening it brightens the
+    image)."""
     desc = G.glossy_scene(1e-6, 4)
+    desc["shapes"].append(
+        {"type": "sphere", "center": [1.2, 0.4, 0.5], "radius": 0.4, "material": "clay"}
+    )
     desc["materials"]["floor"] = {"type": "diffuse", "reflectance": [0.0, 0.0, 0.0]}
+    desc["materials"]["clay"] = {"type": "diffuse", "reflectance": [0.7, 0.0, 0.3]}
     scene = load_scene(desc)
-    integ = PathIntegrator(max_depth=3, adjoint="replay")
+    paths = ["materials.metal.alpha", "materials.floor.reflectance", "materials.clay.reflectance"]
+    ad, rp = _both_grads(scene, paths, dict(max_depth=4, rr_depth=3), spp=4)
+    assert rp["materials.metal.alpha"] == 0.0 == ad["materials.metal.alpha"]
+    del ad["materials.metal.alpha"]
+    _assert_same(ad, {k: rp[k] for k in ad})
+    assert np.all(rp["materials.floor.reflectance"] > 0)
+    assert rp["materials.clay.reflectance"][1] > 0  # the zero channel's derivative
 
-    def loss(ps):
-        return jnp.mean(render(_set(scene, ps), KEY, spp=4, integrator=integ))
 
-    ps = {
-        "materials.metal.alpha": jnp.asarray(1e-6),
-        "materials.floor.reflectance": jnp.zeros(3),
+@pytest.mark.slow  # slow: ~40 s on the loaded 2-core machine
+def test_same_key_embree_mesh(x64):
+    """A triangle mesh traced by Embree (``pure_callback``, which has no derivative rule):
+    replay never differentiates through a traversal; same gradient as AD."""
+    pytest.importorskip("embreex")
+    from jaxgfx.render.geometry.mesh_io import make_uv_sphere  # noqa: PLC0415
+
+    desc = _occluder_scene()
+    m = make_uv_sphere(6, radius=0.5, center=(0.0, 0.5, 0.0))
+    desc["shapes"][0] = {
+        "type": "mesh",
+        "vertices": np.asarray(m.vertices).tolist(),
+        "faces": np.asarray(m.faces).tolist(),
+        "material": "m",
     }
-    v, g = jax.jit(jax.value_and_grad(loss))(ps)
-    assert np.isfinite(float(v))
-    ga, gr = float(g["materials.metal.alpha"]), np.asarray(g["materials.floor.reflectance"])
-    assert ga == 0.0
-    assert np.all(np.isfinite(gr)) and np.all(gr > 0)
+    scene = load_scene(desc, accel="embree")
+    assert scene.accel == "embree"
+    paths = ["materials.m.reflectance", "emitters.area.0.radiance"]
+    ad, rp = _both_grads(scene, paths, dict(max_depth=3))
+    _assert_same(ad, rp)

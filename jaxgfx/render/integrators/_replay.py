@@ -18,7 +18,11 @@ the stored ``L`` and the radiance summed so far in the replay; 0 once the path e
 stop-gradient. The sum over ``j`` of ``∂g_j`` is the derivative of ``L = Σ_k β_k e_k`` with
 ``β_{k+1} = β_k w_k`` by the product rule, i.e. the detached AD gradient of the same path
 (Algorithm 2 of the paper, with the detached-sampling conventions of
-docs/render_gradients.md). The backward pass is one ``lax.scan`` over bounces whose carry is
+docs/render_gradients.md). Where a weight is exactly 0 in a channel (a black albedo or texel, a
+zero colour channel), ``L − L_≤j`` is 0 but the derivative is not: the forward pass also sums,
+per channel, the light gathered after the path's first zero weight with that factor replaced
+by 1 (``Z``), and the replay adds ``w_j(θ) · Z`` at that vertex (Mitsuba 3's ``prb`` drops this
+term; detached AD keeps such paths alive and has it). The backward pass is one ``lax.scan`` over bounces whose carry is
 the path state and the accumulated scene cotangent: memory does not grow with depth, and its
 cost is one forward replay plus the local VJPs.
 
@@ -45,8 +49,9 @@ __all__ = ["path_radiance_replay"]
 _GEOMETRY = ("camera", "shapes", "emitter_shapes")
 
 RADIANCE_NAME = "path_replay_radiance"
-"""``jax.ad_checkpoint.checkpoint_name`` of the forward radiance stored for the backward
-pass (so that a checkpoint policy may keep it instead of recomputing the forward)."""
+"""``jax.ad_checkpoint.checkpoint_name`` of what the forward pass stores for the backward pass
+(``L`` and ``Z``, 6 numbers per ray), so that a checkpoint policy may keep them instead of
+recomputing the forward."""
 
 
 def _geometry(tree):
@@ -114,17 +119,48 @@ def _replay(vjp_arg, u, max_depth, rr_depth, strategy, chunk):
     return _forward(scene, o, d, u, max_depth, rr_depth, strategy, chunk)
 
 
+def _forward_with_zero_weights(scene, o, d, u, max_depth, rr_depth, strategy, chunk):
+    """``(L, Z)``: the radiance of :func:`_forward` (the same operations) and, per channel, the
+    radiance gathered after the path's first exactly-zero BSDF weight with that factor
+    replaced by 1 (0 where no weight was 0): the derivative of ``L`` w.r.t. that weight, which
+    ``(L − L_≤j) / w_j`` cannot recover (a black albedo or texel, a zero colour channel)."""
+    chunk = P._use_chunk(chunk, o)
+    bounce = P.make_bounce(rr_depth=rr_depth, strategy=strategy, sampling="detached", chunk=chunk)
+
+    def body(state, xs):
+        carry, bt, seen, Z = state
+        ub, depth = xs
+        nxt, _, weight, (unit, inv_q, shaded) = bounce(scene, carry, ub, depth)
+        Z = Z + jnp.where(seen, bt * unit, 0.0)
+        first = (weight == 0) & ~seen & shaded[..., None]
+        bt = bt * jnp.where(first, 1.0, weight) * inv_q[..., None]
+        bt = jnp.where(nxt[4][..., None], bt, 0.0)
+        return (nxt, bt, seen | first, Z), None
+
+    carry = P.initial_carry(o, d)
+    bt = jnp.ones_like(carry[2])
+    seen = jnp.zeros(bt.shape, bool)
+    Z = jnp.zeros_like(bt)
+    if max_depth > 1:
+        us = jnp.moveaxis(u[..., : max_depth - 1, :], -2, 0)
+        state = (carry, bt, seen, Z)
+        (carry, bt, seen, Z), _ = jax.lax.scan(body, state, (us, jnp.arange(max_depth - 1)))
+    unit = P.last_emission(scene, carry, strategy=strategy, sampling="detached")
+    Z = Z + jnp.where(seen, bt * unit, 0.0)
+    return carry[3] + carry[2] * unit, Z
+
+
 @_replay.def_fwd
 def _replay_fwd(perturbed, vjp_arg, u, max_depth, rr_depth, strategy, chunk):
     scene, o, d = vjp_arg
     _check_perturbed(perturbed, scene)
-    L = _forward(scene, o, d, u, max_depth, rr_depth, strategy, chunk)
-    L = checkpoint_name(L, RADIANCE_NAME)
-    return L, L
+    L, Z = _forward_with_zero_weights(scene, o, d, u, max_depth, rr_depth, strategy, chunk)
+    L, Z = checkpoint_name((L, Z), RADIANCE_NAME)
+    return L, (L, Z)
 
 
 @_replay.def_bwd
-def _replay_bwd(L, dL, perturbed, vjp_arg, u, max_depth, rr_depth, strategy, chunk):
+def _replay_bwd(res, dL, perturbed, vjp_arg, u, max_depth, rr_depth, strategy, chunk):
     scene, o, d = vjp_arg
     spec = _spec(scene, perturbed[0])
     theta, rest = eqx.partition(scene, spec)
@@ -134,35 +170,43 @@ def _replay_bwd(L, dL, perturbed, vjp_arg, u, max_depth, rr_depth, strategy, chu
     sg = jax.lax.stop_gradient
     chunk = P._use_chunk(chunk, o)
     bounce = P.make_bounce(rr_depth=rr_depth, strategy=strategy, sampling="detached", chunk=chunk)
-    L = sg(L)
+    L, Z = sg(res)
     dL = dL.astype(L.dtype)
 
-    def local(th, carry, ub, depth):
+    def local(th, carry, seen, ub, depth):
         s = eqx.combine(th, rest)
-        nxt, contrib, weight = bounce(s, carry, ub, depth)
+        nxt, contrib, weight, (_, _, shaded) = bounce(s, carry, ub, depth)
         nxt = sg(nxt)
         alive_next = nxt[4][..., None]
         # radiance still to come after this vertex (0 once the path ended: no rounding noise
         # divided by a small weight); per unit of this vertex's detached weight
         rest_per_w = jnp.where(alive_next, safe_div(L - nxt[3], sg(weight)), 0.0)
         term = contrib + jnp.where(alive_next, weight * sg(rest_per_w), 0.0)
-        return term, nxt
+        # the path's first zero weight (per channel): its derivative times the light after it
+        first = sg((weight == 0) & ~seen & shaded[..., None])
+        term = term + jnp.where(first, weight * Z, 0.0)
+        return term, (nxt, seen | first)
 
     def step(state, xs):
-        carry, acc = state
+        carry, seen, acc = state
         ub, depth = xs
-        _, vjp_fn, nxt = jax.vjp(lambda th: local(th, carry, ub, depth), theta, has_aux=True)
+        _, vjp_fn, (nxt, seen) = jax.vjp(
+            lambda th: local(th, carry, seen, ub, depth), theta, has_aux=True
+        )
         (g,) = vjp_fn(dL)
-        return (nxt, jtu.tree_map(jnp.add, acc, g)), None
+        return (nxt, seen, jtu.tree_map(jnp.add, acc, g)), None
 
     carry = P.initial_carry(sg(o), sg(d))
+    seen = jnp.zeros(carry[2].shape, bool)
     acc = jtu.tree_map(jnp.zeros_like, theta)
     if max_depth > 1:
         us = jnp.moveaxis(u[..., : max_depth - 1, :], -2, 0)
-        (carry, acc), _ = jax.lax.scan(step, (carry, acc), (us, jnp.arange(max_depth - 1)))
+        state = (carry, seen, acc)
+        (carry, seen, acc), _ = jax.lax.scan(step, state, (us, jnp.arange(max_depth - 1)))
 
     def last(th):
-        return P.last_vertex(eqx.combine(th, rest), carry, strategy=strategy, sampling="detached")
+        s = eqx.combine(th, rest)
+        return carry[2] * P.last_emission(s, carry, strategy=strategy, sampling="detached")
 
     _, vjp_fn = jax.vjp(last, theta)
     (g,) = vjp_fn(dL)
@@ -184,9 +228,7 @@ def path_radiance_replay(
     """:func:`~jaxgfx.render.integrators.path.path_radiance` with ``sampling="detached"``
     whose reverse-mode derivative is computed by path replay (module docstring). Same values
     (the same program); the gradient w.r.t. material, emitter, texture and environment leaves
-    equals the detached AD gradient on the same random numbers up to float rounding, except
-    where a BSDF weight is exactly 0 (e.g. reflectance 0: the derivative of the light gathered
-    after such a vertex is not recovered from ``L``; Mitsuba 3's ``prb`` drops it too).
+    equals the detached AD gradient on the same random numbers up to float rounding.
     """
     P._check_strategy(strategy)
     return _replay((scene, o, d), u, max_depth, rr_depth, strategy, chunk)

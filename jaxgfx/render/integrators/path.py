@@ -89,13 +89,15 @@ def initial_carry(o, d):
 
 
 def make_bounce(*, rr_depth, strategy, sampling, chunk):
-    """``bounce(scene, carry, ub, depth) -> (carry_next, contrib, weight)``: one path vertex.
+    """``bounce(scene, carry, ub, depth) -> (carry_next, contrib, weight, aux)``: one vertex.
 
     ``contrib`` is the radiance this vertex adds (emission with its MIS weight and the
     next-event term, both times the throughput ``beta``); ``weight`` the BSDF sample's weight
     (per channel, before Russian roulette), so that ``carry_next``'s throughput is
     ``beta * weight`` (divided by the detached survival probability under Russian roulette;
-    0 for dead paths) and its radiance ``L + contrib``. The path integrator scans it
+    0 for dead paths) and its radiance ``L + contrib``; ``aux = (unit, inv_q, shaded)``:
+    ``contrib`` per unit of throughput, the Russian-roulette factor (1 or ``1 / q``) and
+    whether the vertex was shaded (a live hit). The path integrator scans it
     (:func:`path_radiance`); path replay (:mod:`._replay`) takes the VJP of ``contrib`` and
     ``weight`` w.r.t. the scene at a detached carry. ``chunk``: as :func:`path_radiance`,
     already resolved by :func:`_use_chunk`.
@@ -140,7 +142,7 @@ def make_bounce(*, rr_depth, strategy, sampling, chunk):
                 w = jnp.ones_like(lpdf)
             contrib = f * li * safe_div(w, lpdf)[..., None]
             ok = alive & vis & (lpdf > 0)
-            dL = jnp.where(ok[..., None], beta * contrib, 0.0)
+            dL = jnp.where(ok[..., None], contrib, 0.0)  # per unit of throughput
 
         s = fusion_barrier(
             C.dispatch(
@@ -171,10 +173,11 @@ def make_bounce(*, rr_depth, strategy, sampling, chunk):
         hit = C.intersect(scene, o, d)
         em = jnp.where(
             alive[..., None],
-            beta * _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy, detach),
+            _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy, detach),
             0,
         )
         alive = alive & hit.valid
+        shaded = alive
         mat = C.hit_material(scene, hit)
         args = (hit, d, beta, ub, alive)
         if chunk is None:
@@ -191,6 +194,8 @@ def make_bounce(*, rr_depth, strategy, sampling, chunk):
             pdf = jnp.where(alive, pdf, 1.0)
             delta = jnp.where(alive, delta, True)
             alive = alive & alive_s
+        unit = em + dL  # the vertex's radiance per unit of throughput
+        em, dL = beta * em, beta * dL
         contrib = em + dL
         L = (L + em) + dL
         beta = beta * weight
@@ -199,21 +204,23 @@ def make_bounce(*, rr_depth, strategy, sampling, chunk):
         rr = depth >= rr_depth - 1
         survive = jnp.where(rr, ub[..., 6] < q, True)
         beta = jnp.where(rr, safe_div(beta, q[..., None]), beta)
+        inv_q = jnp.where(rr, safe_div(jnp.ones_like(q), q), 1.0)
         alive = alive & survive
         beta = jnp.where(alive[..., None], beta, 0.0)
         carry = (o_next, d_next, beta, L, alive, pdf, delta, hit.p)
-        return carry, contrib, weight
+        return carry, contrib, weight, (unit, inv_q, shaded)
 
     return bounce
 
 
-def last_vertex(scene, carry, *, strategy, sampling):
-    """Radiance the last vertex adds: its emission (MIS-weighted) times the throughput."""
+def last_emission(scene, carry, *, strategy, sampling):
+    """What the last vertex adds per unit of throughput: its emission (MIS-weighted), 0 on
+    paths that ended; :func:`path_radiance` adds ``beta *`` this."""
     detach = jax.lax.stop_gradient if sampling == "detached" else _identity
     o, d, beta, L, alive, prev_pdf, prev_delta, p_prev = carry
     hit = C.intersect(scene, o, d)
     term = _emission_term(scene, hit, d, p_prev, prev_pdf, prev_delta, strategy, detach)
-    return jnp.where(alive[..., None], beta * term, 0.0)
+    return jnp.where(alive[..., None], term, 0.0)
 
 
 def path_radiance(
@@ -270,7 +277,7 @@ def path_radiance(
         body = body if max_depth == 2 and not CHECKPOINT_ONE_BOUNCE else jax.checkpoint(body)
         carry, _ = jax.lax.scan(body, carry, (us, jnp.arange(max_depth - 1)))
     # last vertex: emission only
-    return carry[3] + last_vertex(scene, carry, strategy=strategy, sampling=sampling)
+    return carry[3] + carry[2] * last_emission(scene, carry, strategy=strategy, sampling=sampling)
 
 
 def _check_chunk(chunk):
