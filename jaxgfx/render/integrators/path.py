@@ -333,7 +333,10 @@ class PathIntegrator(Integrator):
     ``"light"`` or ``"bsdf"``. ``chunk`` (default 4096): wavefront shading, the rays of a
     pass sorted by material and shaded ``chunk`` at a time, skipping chunks without a live ray
     and materials a chunk does not hold; ``None``: every ray with every material (same values
-    to float rounding; docs/render.md). All static.
+    to float rounding; docs/render.md). ``adjoint``: how reverse mode differentiates it,
+    ``"ad"`` (default; every parameter, forward mode too) or ``"replay"`` (path replay
+    backpropagation: material, emitter, texture and environment parameters only, memory flat
+    in depth; needs ``sampling="detached"``; docs/render_gradients.md). All static.
 
     >>> PathIntegrator(max_depth=3).random_shape
     (3, 7)
@@ -364,8 +367,8 @@ class PathIntegrator(Integrator):
 
 class DirectIntegrator(Integrator):
     """Emitted plus direct light (a path of depth 2: :class:`PathIntegrator` with
-    ``max_depth = 2``); ``strategy`` as there; ``chunk`` as there, default ``None`` (most
-    camera rays are live, so sorting them does not pay: measured 5–10 % slower).
+    ``max_depth = 2``); ``strategy`` and ``adjoint`` as there; ``chunk`` as there, default
+    ``None`` (most camera rays are live, so sorting them does not pay: measured 5–10 % slower).
 
     >>> DirectIntegrator().max_depth
     2
