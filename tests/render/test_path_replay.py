@@ -10,8 +10,9 @@ replay does not cover, and the hard cases.
 
 Costs: path-tracer gradient programs take 30-500 s of XLA compilation on the shared 2-core
 machine at load ~10, so every test that compiles one is ``slow`` (measured cost in its
-comment; ~20 min in all at that load, far above the ~2 min budget: trimming them is left to
-do); the default suite runs the option and refusal checks, which only trace (< 4 s).
+comment; ~10 min in all at load ~5, ~20 min at load ~10, far above the ~2 min budget:
+trimming them is left to do); the default suite runs the option and refusal checks, which
+only trace (< 4 s).
 """
 
 from __future__ import annotations
@@ -194,7 +195,7 @@ def test_same_key_diffuse_area_environment_rr(x64):
     _assert_same(ad, rp)
 
 
-# slow: 317 s measured at load ~10 (chunk=None, 163 s, passed too at commit 97a2386 and was
+# slow: 52 s at load ~5, 317 s at load ~10 (chunk=None, 163 s, passed too at commit 97a2386 and was
 # dropped: wavefront chunks are the case replay adds; tests/render/test_wavefront.py covers
 # chunked = unchunked)
 @pytest.mark.slow
@@ -209,7 +210,7 @@ def test_same_key_glossy_textured(x64, chunk):
     _assert_same(ad, rp)
 
 
-# slow: 560 s measured at load ~12 with a benchmark running alongside (three materials'
+# slow: 144 s at load ~5, 560 s at load ~12 with a benchmark alongside (three materials'
 # value-and-gradient programs, AD + replay, compile)
 @pytest.mark.slow
 def test_same_key_materials_point_light_beckmann(x64):
@@ -223,7 +224,7 @@ def test_same_key_materials_point_light_beckmann(x64):
     _assert_same(ad, rp)
 
 
-# slow: 94 s measured at load ~10
+# slow: 39 s at load ~5, 94 s at load ~10
 @pytest.mark.slow
 def test_same_key_glossy_interreflections_depth6_mirror(x64):
     """Two spheres (GGX metal and diffuse clay, configs/scenes/inverse.yaml) at depth 6 with a
