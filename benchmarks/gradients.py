@@ -21,6 +21,15 @@
 5. Visibility: d(image mean)/d(x of an occluder sphere between a diffuse floor and an area
    light) by AD and by central FD of the same key: plain AD misses the moving shadow boundary;
    ``visibility="edge"`` adds it (edge sampling).
+6. Path replay (``--sections replay``): on ``configs/scenes/inverse.yaml`` (two spheres, GGX
+   metal + diffuse clay, area light + constant environment; 64², 64 spp), ``jit(grad)`` of the
+   image mean w.r.t. the metal's α with ``PathIntegrator(adjoint="ad")`` and
+   ``adjoint="replay"`` (path replay backpropagation; also with the forward radiance recomputed
+   instead of kept, ``estimator.REPLAY_KEEPS_RADIANCE = False``) against the forward render,
+   at path depths 2, 4 and 8: seconds per call (medians of interleaved rounds, a new key per
+   call, ``block_until_ready``), lower + compile seconds of each program and XLA's temporary
+   buffer (``memory_analysis().temp_size_in_bytes``) of the same compiled programs. The load
+   average before and after is recorded (``_render_harness.load_gate``, not refused).
 
 Prints one JSON document (progress to stderr).
 """
@@ -232,6 +241,81 @@ def visibility(*, spp, n):
     return out
 
 
+INVERSE = os.path.join(ROOT, "configs", "scenes", "inverse.yaml")
+
+
+def replay(*, res, spp, depths, repeat, recompute_depths=(4,), mem_spps=()):
+    """Forward vs ``jit(grad)`` by AD and by path replay (section 6 of the module docstring)."""
+    import time
+
+    import jaxgfx.render.estimator as E
+    from benchmarks._render_harness import load_gate
+    from jaxgfx.render.integrators import PathIntegrator
+
+    out = {"scene": "configs/scenes/inverse.yaml", "res": res, "spp": spp}
+    out["load_before"] = load_gate(None)
+    scene = load_scene(_with_res(read_yaml(INVERSE), res))
+    dyn, static = eqx.partition(scene, eqx.is_array)
+    alpha = scene.get("materials.metal.alpha")
+    path = "materials.metal.alpha"
+
+    def program(kind, depth, spp_=spp):
+        adjoint = "ad" if kind in ("forward", "grad_ad") else "replay"
+        integ = PathIntegrator(max_depth=depth, adjoint=adjoint)
+
+        def image(a, dyn, k):
+            s = eqx.combine(dyn, static).replace(path, a)
+            return render(s, k, spp=spp_, integrator=integ)
+
+        f = image if kind == "forward" else jax.grad(lambda a, dyn, k: jnp.mean(image(a, dyn, k)))
+        keep = E.REPLAY_KEEPS_RADIANCE
+        E.REPLAY_KEEPS_RADIANCE = kind != "grad_replay_recompute"
+        try:
+            t0 = time.perf_counter()
+            c = jax.jit(f).lower(alpha, dyn, jax.random.key(0)).compile()
+            compile_s = time.perf_counter() - t0
+        finally:
+            E.REPLAY_KEEPS_RADIANCE = keep
+        temp = c.memory_analysis().temp_size_in_bytes
+        return c, compile_s, temp
+
+    counter = [0]
+
+    def call(c):
+        counter[0] += 1
+        return c(alpha, dyn, jax.random.key(counter[0]))
+
+    for depth in depths:
+        kinds = ["forward", "grad_ad", "grad_replay"]
+        if depth in recompute_depths:
+            kinds.append("grad_replay_recompute")
+        row, compiled = {}, {}
+        for kind in kinds:
+            c, cs, temp = program(kind, depth)
+            compiled[kind] = c
+            row[kind] = {"compile_s": round(cs, 2), "temp_MB": round(temp / 2**20, 3)}
+            _log("replay depth", depth, kind, row[kind])
+        times = interleaved_times({k: (lambda c=c: call(c)) for k, c in compiled.items()}, repeat)
+        for kind, (_, med) in times.items():
+            row[kind]["time_s"] = round(med, 4)
+        fwd = row["forward"]
+        for kind in kinds[1:]:
+            row[kind]["over_forward"] = round(row[kind]["time_s"] / fwd["time_s"], 2)
+            row[kind]["compile_over_forward"] = round(row[kind]["compile_s"] / fwd["compile_s"], 2)
+        _log("replay depth", depth, row)
+        out[f"depth_{depth}"] = row
+    if mem_spps:
+        mem = {}
+        for spp_ in mem_spps:
+            for kind in ("grad_ad", "grad_replay", "grad_replay_recompute"):
+                _, _, temp = program(kind, 4, spp_)
+                mem.setdefault(kind, {})[spp_] = round(temp / 2**20, 3)
+        out["temp_MB_vs_spp_depth4"] = mem
+        _log("replay memory vs spp", mem)
+    out["load_after"] = load_gate(None)
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
@@ -239,7 +323,13 @@ def main(argv=None):
     ap.add_argument(
         "--sections",
         default="speed,glossy,memory,stats,visibility",
-        help="comma-separated subset of speed,glossy,memory,stats,visibility",
+        help="comma-separated subset of speed,glossy,memory,stats,visibility,replay",
+    )
+    ap.add_argument(
+        "--replay-mem-spps",
+        default="",
+        help="replay section: also XLA's temporary buffer of jit(grad) at depth 4 for these "
+        "comma-separated spp (AD, replay, replay recomputing the forward; compile only)",
     )
     a = ap.parse_args(argv)
     sections = set(a.sections.split(","))
@@ -275,6 +365,14 @@ def main(argv=None):
         result["grad_stats_alpha"] = statistics_alpha(spp=32 if q else 128, n=4 if q else 16)
     if "visibility" in sections:
         result["visibility"] = visibility(spp=32 if q else 128, n=4 if q else 16)
+    if "replay" in sections:
+        result["replay"] = replay(
+            res=32 if q else 64,
+            spp=16 if q else 64,
+            depths=[2, 4] if q else [2, 4, 8],
+            repeat=3 if q else 5,
+            mem_spps=tuple(int(x) for x in a.replay_mem_spps.split(",") if x),
+        )
     emit(result, a.out)
 
 

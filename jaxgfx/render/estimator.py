@@ -43,6 +43,14 @@ CHECKPOINT_ONE_STEP = False
 it runs the step as plain code, see there)."""
 
 
+REPLAY_KEEPS_RADIANCE = True
+"""With a path-replay integrator (``adjoint="replay"``), :func:`render_partial`'s checkpointed
+pass steps keep what its forward pass stores per ray (6 numbers: 24 bytes per sample in
+float32) so that the backward sweep does not trace every path a second time before replaying
+it; ``False``: keep nothing per step (memory flat in spp too) and recompute the forward
+(docs/performance.md, "Renderer gradients", has both)."""
+
+
 def passes_per_step(rays_per_pass: int, n_passes: int, target: int | None = RAYS_PER_STEP) -> int:
     """How many sample passes of ``rays_per_pass`` rays one scan step traces: about
     ``target / rays_per_pass`` (at least 1, at most ``n_passes``), evened out so that the
@@ -59,7 +67,7 @@ def passes_per_step(rays_per_pass: int, n_passes: int, target: int | None = RAYS
     return -(-n_passes // steps)
 
 
-def pass_scan(one_pass, passes, acc0, weights=None, *, per_step: int = 1):
+def pass_scan(one_pass, passes, acc0, weights=None, *, per_step: int = 1, policy=None):
     """``acc0 + Σ_s weights[s] · one_pass(s)`` over the pass indices ``passes`` ``(P,)``, one
     ``lax.scan`` step per ``per_step`` passes, each step checkpointed: the reverse sweep
     recomputes a step from its pass indices, so the memory of ``jax.grad`` does not grow with
@@ -73,12 +81,13 @@ def pass_scan(one_pass, passes, acc0, weights=None, *, per_step: int = 1):
     multiple of ``k`` with weight-0 repeats of its last index; when that makes a single step it
     runs without scan and checkpoint (the recomputation would hold the same intermediates).
     The sum is taken in the same order, pass by pass, as with ``per_step = 1``, so the result
-    is the same up to the rounding of the differently compiled passes."""
+    is the same up to the rounding of the differently compiled passes. ``policy``: the
+    checkpoints' ``jax.checkpoint`` policy (``None``: save nothing)."""
     if weights is None:
         weights = jnp.ones(passes.shape, acc0.dtype)
     k = int(per_step)
     if k == 1:
-        one = jax.checkpoint(one_pass, prevent_cse=False)
+        one = jax.checkpoint(one_pass, prevent_cse=False, policy=policy)
 
         def body(acc, sw):
             s, wt = sw
@@ -99,7 +108,7 @@ def pass_scan(one_pass, passes, acc0, weights=None, *, per_step: int = 1):
     group = (
         one_pass
         if steps == 1 and not CHECKPOINT_ONE_STEP
-        else jax.checkpoint(one_pass, prevent_cse=False)
+        else jax.checkpoint(one_pass, prevent_cse=False, policy=policy)
     )
 
     def body_k(acc, sw):
@@ -117,7 +126,7 @@ def pass_scan(one_pass, passes, acc0, weights=None, *, per_step: int = 1):
 
 
 def resolve_integrator(
-    integrator: str | Integrator,
+    integrator: str | Integrator | dict,
     *,
     max_depth: int | None = None,
     rr_depth: int | None = None,
@@ -134,7 +143,31 @@ def resolve_integrator(
     integrator does not have is a ``TypeError`` naming it (``"aov"`` with ``max_depth``; the
     depth of ``"direct"`` is 2). Bad names and values raise ``ValueError`` naming the option.
     Runs on the host, before tracing.
+
+    A mapping is the scene-file / config form ``{type: NAME, OPTION: VALUE, ...}`` (e.g.
+    ``{type: path, max_depth: 4, adjoint: replay}``): ``NAME`` with those options, to which the
+    keyword options are added (one given both ways: ``TypeError``).
     """
+    if isinstance(integrator, dict):
+        opts = dict(integrator)
+        name = opts.pop("type", None)
+        if not isinstance(name, str):
+            raise ValueError(f"integrator.type: expected an integrator name, got {name!r}")
+        check_choice(name, "integrator.type", tuple(INTEGRATORS))
+        kw = {
+            k: v
+            for k, v in (
+                ("max_depth", max_depth),
+                ("rr_depth", rr_depth),
+                ("strategy", strategy),
+                ("sampling", sampling),
+            )
+            if v is not None
+        }
+        both = sorted(set(kw) & set(opts))
+        if both:
+            raise TypeError(f"{', '.join(both)}: given in the integrator mapping and to {caller}()")
+        return make_integrator(name, **{**opts, **kw})
     given = {
         k: v
         for k, v in (
@@ -250,4 +283,10 @@ def render_partial(
         passes = jnp.arange(spp)
     k = passes_per_step(r * w, passes.shape[0], rays_per_step)
     acc0 = jnp.zeros((r, w, integrator.n_channels), dtype)
-    return pass_scan(k_passes if k > 1 else one_pass, passes, acc0, weights, per_step=k)
+    policy = None
+    if getattr(integrator, "adjoint", "ad") == "replay" and REPLAY_KEEPS_RADIANCE:
+        from jaxgfx.render.integrators._replay import RADIANCE_NAME  # noqa: PLC0415
+
+        policy = jax.checkpoint_policies.save_only_these_names(RADIANCE_NAME)
+    fn = k_passes if k > 1 else one_pass
+    return pass_scan(fn, passes, acc0, weights, per_step=k, policy=policy)
