@@ -9,7 +9,7 @@ import jax.numpy as jnp
 
 from jaxgfx.color import LUMINANCE_WEIGHTS
 
-from .camera import fit_level_table, freeze
+from .camera import fit_level_table, freeze, photo_matrix
 from .config import FitConfig
 from .targets import build_scene
 
@@ -141,12 +141,15 @@ def code_space_loss(img, codes, table, gain, code_max, mask=None, *, per_photo: 
     return terms if per_photo else jnp.sum(terms)
 
 
-def photo_gains(cam_p, cam_args, nch: int):
+def photo_gains(cam_p, cam_args, nch: int, white_balance: bool = True):
     """``(N, C)`` gain of each photo: exposure × its relative exposure × white balance (the
-    frozen entries without gradient)."""
+    frozen entries without gradient; ``white_balance`` False: without it — a colour matrix
+    carries it, :func:`~jaxgfx.pipelines.fit.camera.photo_matrix`)."""
     free = cam_args["free"]
     e = freeze(cam_p["exposure"], free["exposure"])
     r = freeze(cam_p["photo_exposure"], free["photo_exposure"])
+    if not white_balance:
+        return e * r[:, None] * jnp.ones((1, nch), r.dtype)
     wb = freeze(cam_p["white_balance"], free["white_balance"])
     wb = wb[:nch] if nch == 3 else jnp.ones((1,), wb.dtype)
     return e * r[:, None] * wb[None, :]
@@ -228,7 +231,11 @@ def photo_losses(cfg: FitConfig, ldr: bool, img, target, p_camera, cam_args, tab
         ])
     bits = cfg.camera.bits
     code_max = float(2**bits - 1)
-    gain = photo_gains(p_camera, cam_args, img.shape[-1])
+    if cfg.camera.has_matrix:
+        img = img @ photo_matrix(p_camera, cam_args).T.astype(img.dtype)
+        gain = photo_gains(p_camera, cam_args, img.shape[-1], white_balance=False)
+    else:
+        gain = photo_gains(p_camera, cam_args, img.shape[-1])
     if cfg.camera.space == "code":
         return code_space_loss(img, pixels, table, gain, code_max, mask, per_photo=True)
     return censored_linear_loss(img, pixels, table, gain, code_max, mask,
@@ -264,6 +271,7 @@ def make_loss(
 
     r = cfg.render
     bits = cfg.camera.bits if cfg.camera else 8
+    tone_op = cfg.camera.tone_op if cfg.camera else None
     paths = tuple(paths)
     scaled = dict(scaled)
     batching = VIEW_BATCH if batching is None else batching
@@ -295,7 +303,7 @@ def make_loss(
 
     def loss(p, key, args):
         scene, target, cam_args = args
-        table = fit_level_table(p["camera"], cam_args, bits) if ldr else None
+        table = fit_level_table(p["camera"], cam_args, bits, tone_op) if ldr else None
         if r.estimator == "correlated":
             value = per_image_loss(image(scene, p, key, r.spp, cam_args), target, p, cam_args,
                                    table)
@@ -325,7 +333,8 @@ def cached_loss(
     """One loss object (hence one compiled fit step) per render / loss configuration and
     parameter set; camera choices and prior weights are arguments, not part of the
     program."""
-    cam = (cfg.camera.bits, cfg.camera.space) if cfg.camera else None
+    cam = ((cfg.camera.bits, cfg.camera.space, cfg.camera.has_matrix, cfg.camera.tone_op)
+           if cfg.camera else None)
     batching = VIEW_BATCH if batching is None else batching
     key = (cfg.render, cfg.loss, cam, tuple(paths), ldr, grey, masked, tuple(priors),
            tuple(scaled), views, batching if views else None)
