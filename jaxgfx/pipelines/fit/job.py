@@ -244,8 +244,7 @@ def _initial(cfg: FitConfig, prep: Prepared):
     for p in prep.paths:
         x0 = jnp.asarray(prep.init[p])
         if p in scales:  # its own learning rate: fitted as v, x = bounds.forward(k v)
-            iv = Interval(*[None if b is None else np.asarray(b, np.float64).tolist()
-                            for b in prep.bounds[p]])
+            iv = Interval(*[_static_bound(b) for b in prep.bounds[p]])
             params["scene"][p] = jnp.asarray(iv.inverse(x0) / scales[p], jnp.float32)
             bounds["scene"][p] = None
         else:
@@ -344,6 +343,20 @@ def _initial(cfg: FitConfig, prep: Prepared):
     return params, bounds, cam_args
 
 
+def _static_bound(b):
+    """A bound as an :class:`~jaxgfx.optim.Interval` field: None, a float when every element
+    is equal (a texel grid's ``min: 0``), else nested tuples (hashable: the loss cache's key
+    holds the intervals; lists are not)."""
+    if b is None:
+        return None
+    a = np.asarray(b, np.float64)
+    if a.size and np.all(a == a.flat[0]):
+        return float(a.flat[0])
+    from jaxgfx.optim._transforms import _nested_tuple
+
+    return _nested_tuple(a) if a.ndim else float(a)
+
+
 def _scaled_intervals(cfg: FitConfig, prep: Prepared):
     """``((path, (k, Interval)), ...)`` of the parameters with their own learning rate."""
     from jaxgfx.optim import Interval
@@ -353,8 +366,7 @@ def _scaled_intervals(cfg: FitConfig, prep: Prepared):
     for p in prep.paths:
         if p in scales:
             lo, hi = prep.bounds[p]
-            iv = Interval(None if lo is None else np.asarray(lo, np.float64).tolist(),
-                          None if hi is None else np.asarray(hi, np.float64).tolist())
+            iv = Interval(_static_bound(lo), _static_bound(hi))
             out.append((p, (scales[p], iv)))
     return tuple(out)
 
