@@ -29,3 +29,17 @@ def test_an_environment_map_is_recovered_from_three_views():
     r = run(config, os.path.join(ROOT, "configs"), truth, 150, None)
     assert r["sh2_rel"] < 0.6 * start["sh2_rel"]
     assert r["texel_rel"] < 0.85 * start["texel_rel"]
+
+
+def test_own_lr_bounds_of_a_texel_grid_are_hashable():
+    """A texel grid with its own learning rate and a broadcast bound (``min: 0`` over
+    (16, 32, 3)): the loss cache keys on the intervals, so they must hash (a list did not)."""
+    from jaxgfx.optim import Interval
+    from jaxgfx.pipelines.fit.job import _static_bound
+
+    assert _static_bound(np.zeros((16, 32, 3))) == 0.0
+    ramp = _static_bound(np.arange(6.0).reshape(2, 3))
+    assert ramp == ((0.0, 1.0, 2.0), (3.0, 4.0, 5.0))
+    assert _static_bound(None) is None
+    hash(Interval(_static_bound(np.zeros((4, 4, 3))), None))
+    hash(Interval(ramp, None))
