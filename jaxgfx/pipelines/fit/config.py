@@ -17,6 +17,9 @@ from jaxgfx.render.integrators import INTEGRATORS
 
 from .camera import RESPONSE_MODELS
 
+JPEG_CHROMA = {"none": None, "4:2:0": (2, 2), "4:2:2": (1, 2)}
+"""``loss.jpeg_chroma``: the codec's chroma block (rows, columns) of each subsampling."""
+
 __all__ = [
     "FitParam",
     "ResponseSpec",
@@ -431,10 +434,16 @@ class RenderConfig:
 class LossConfig:
     kind: str = "l2"  # l2 | relative_l2 | l1 (linear targets); LDR targets use censored L2
     space: str = "linear"  # linear | log | lab
+    # LDR colour photos that went through a JPEG codec's chroma subsampling: the residual's
+    # chroma (the part outside the Rec. 601 luma axis) is averaged over the codec's chroma
+    # blocks before it is squared (jaxgfx.pipelines.fit.loss.chroma_subsampled); "none": per
+    # pixel (a config without it compiles to the program of before)
+    jpeg_chroma: str = "none"  # none | 4:2:0 | 4:2:2
 
     def __post_init__(self):
         check_choice(self.kind, "loss.kind", tuple(LOSSES))
         check_choice(self.space, "loss.space", LOSS_SPACES)
+        check_choice(self.jpeg_chroma, "loss.jpeg_chroma", tuple(JPEG_CHROMA))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -619,6 +619,16 @@ def prepare_fit(cfg: FitConfig, *, base_dir: str | None = None) -> Prepared:
         fixed = fixed_response_of(cfg, base_dir, channels)
         if cfg.camera.white_balance.fit and channels == 1:
             raise ValueError("camera.white_balance.fit: a grey target has no colour balance")
+    if cfg.loss.jpeg_chroma != "none":
+        if not ldr:
+            raise ValueError(
+                "loss.jpeg_chroma: models a JPEG codec's chroma subsampling of 8-bit photos; "
+                "the target is radiance"
+            )
+        if channels == 1:
+            raise ValueError("loss.jpeg_chroma: a grey target has no chroma")
+        if cfg.camera.space != "linear":
+            raise ValueError("loss.jpeg_chroma: only with camera.space: linear")
     matrix = None
     if ldr and cfg.camera.color_matrix is not None:
         if channels == 1:
