@@ -4,9 +4,10 @@ ignoring it costs, and what the stages cost to compile.
     python -m experiments.picture_style --config configs/picture_style.yaml --out out/picture_style
     python -m experiments.picture_style --timing --out out/picture_style_timing
 
-The target (configs/picture_style.yaml) is a bracket of three 8-bit photos through exposure,
-a colour matrix, an ACES filmic tone curve and sRGB. The same material fit (GGX roughness +
-diffuse albedo, exposure fitted) runs under four cameras:
+The target (configs/picture_style.yaml) is a bracket of three 8-bit photos (exposures 0.2,
+0.8, 3.2: the darkest measures the whole highlight) through exposure, a colour matrix, an ACES
+filmic tone curve and sRGB. The same material fit (GGX roughness + diffuse albedo, exposure
+fitted from the auto start, ``clipped: unmeasured``) runs under these cameras:
 
 * ``ignore``: sRGB only (no matrix, no tone curve): the picture style ignored;
 * ``profile``: the true matrix and tone curve, fixed (as a calibrated profile gives them);
@@ -15,6 +16,9 @@ diffuse albedo, exposure fitted) runs under four cameras:
 * ``code``: as ``profile`` but ``camera.space: code`` (display values, censored L2);
 * ``no_style``: the control — photos made *without* the picture style (sRGB only), fitted
   with sRGB: the material fit's own floor on this bracket.
+
+``--bracket 0.8,1.6,3.2`` (the photos' exposures), ``--clipped bound``, ``--seed``, ``--spp``:
+the ablations of docs/inverse.md 2c.
 
 ``--timing``: compile seconds of one fit step in fresh interpreters without the compilation
 cache: today's single-photo gamma fit (configs/inverse_camera.yaml) and this config with the
@@ -33,11 +37,17 @@ import numpy as np
 
 from jaxgfx.config import read_yaml
 
-VARIANTS = ("ignore", "profile", "tone_fit", "code")
+VARIANTS = ("ignore", "profile", "tone_fit", "code", "no_style")
 
 
 def camera_for(variant: str, truth: dict) -> dict:
-    cam = {"response": {"model": "srgb"}, "exposure": {"init": 1.0, "fit": True}}
+    # auto: the exposure starts from the photos / initial render ratio (from a start several
+    # times off the fit falls into a rough, dark basin: docs/inverse.md section 2b)
+    cam = {
+        "response": {"model": "srgb"},
+        "exposure": {"init": 1.0, "fit": True, "auto": True},
+        "clipped": "unmeasured",
+    }
     if variant in ("ignore", "no_style"):
         return cam
     cam["color_matrix"] = truth["color_matrix"]
@@ -96,6 +106,13 @@ def main(argv=None) -> int:
     p.add_argument("--variants", default=",".join(VARIANTS))
     p.add_argument("--clipped", default=None, help="camera.clipped of every fit")
     p.add_argument("--clip-code", type=int, default=None, help="camera.clip_code of every fit")
+    p.add_argument(
+        "--bracket",
+        default=None,
+        help="the target photos' exposures, e.g. 0.2,0.8,3.2 (target.camera)",
+    )
+    p.add_argument("--seed", type=int, default=None, help="the fits' seed")
+    p.add_argument("--spp", type=int, default=None, help="render.spp of every fit")
     p.add_argument("--timing", action="store_true")
     p.add_argument("--repeats", type=int, default=2)
     a = p.parse_args(argv)
@@ -111,6 +128,20 @@ def main(argv=None) -> int:
     enable_compilation_cache()
     base = read_yaml(a.config)
     base_dir = os.path.dirname(os.path.abspath(a.config))
+    if a.bracket:
+        ex = [float(x) for x in a.bracket.split(",")]
+        base["target"] = {
+            **base["target"],
+            "camera": {
+                **base["target"]["camera"],
+                "exposure": ex[0],
+                "exposures": [x / ex[0] for x in ex],
+            },
+        }
+    if a.seed is not None:
+        base["seed"] = a.seed
+    if a.spp:
+        base["render"] = {**base["render"], "spp": a.spp}
     truth_cam = base["target"]["camera"]
     summary = {"truth_camera": truth_cam, "truth": base["target"]["synthetic"], "variants": {}}
     for v in a.variants.split(","):
@@ -133,6 +164,8 @@ def main(argv=None) -> int:
             "camera": out["camera"],
             "errors": out["errors"],
             "alpha_rel_error": abs(alpha - 0.15) / 0.15,
+            "alpha_every_50_steps": out["history"]["materials.metal.alpha"][::50],
+            "loss_every_50_steps": out["loss"][::50],
             "seconds": out["seconds"],
             "compile_seconds": out["compile_seconds"],
         }

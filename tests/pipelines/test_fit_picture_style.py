@@ -360,3 +360,25 @@ def test_matrix_from_a_camera_profile(tmp_path):
             _cfg(camera={"response": "srgb", "color_matrix": {"from": "nope.json"}}),
             base_dir=str(tmp_path),
         )
+
+
+# slow: ~110 s at load ~12 on 2 cores (compiles the three-photo fit step, 300 steps at 32x32)
+@pytest.mark.slow
+def test_picture_style_bracket_recovers_roughness_within_five_percent():
+    """configs/picture_style.yaml as it is (matrix + filmic tone curve fixed, exposure auto,
+    clipped: unmeasured; a bracket 0.2, 0.8, 3.2 whose darkest photo measures the highlight):
+    issue 25's target, alpha within 5 %. Measured (docs/inverse.md 2c): alpha 0.1441 (seed
+    0) and 0.1440 (seed 1), i.e. 3.9-4.0 % low — the 8-spp fit's own noise ball (the
+    camera-less linear target ends at 0.145); clay albedo max error 0.0021."""
+    import os
+
+    from jaxgfx.config import read_yaml
+    from jaxgfx.pipelines.fit import FitJob, run_fit
+
+    path = os.path.join(os.path.dirname(__file__), "..", "..", "configs", "picture_style.yaml")
+    cfg = read_yaml(path)
+    cfg["progress"] = False
+    out = run_fit(FitJob.load(cfg, None, base_dir=os.path.dirname(path)))
+    alpha = out["params"]["materials.metal.alpha"]
+    assert abs(alpha - 0.15) < 0.05 * 0.15, alpha
+    assert out["errors"]["materials.clay.reflectance"] < 0.01
