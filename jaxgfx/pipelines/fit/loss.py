@@ -165,8 +165,9 @@ def censored_linear_loss(
     if chroma_block is not None and nch == 3:  # the render as the codec returns it
         full = ~jnp.any((q >= c) | (q <= 0), axis=-1, keepdims=True)
         weight = full.astype(img.dtype) * (1.0 if mask is None else mask)
-        im = jnp.broadcast_to(img, e.shape)
-        e = jnp.where(full, e + chroma_subsampled(im, weight, chroma_block) - im, e)
+        g = gain[:, None, None, :]  # the codec sees the exposed (white-balanced) values
+        im = jnp.broadcast_to(img, e.shape) * g
+        e = jnp.where(full, e + (chroma_subsampled(im, weight, chroma_block) - im) / g, e)
     axes = (1, 2, 3)
     scale = jax.lax.stop_gradient(_masked_mean(t, mask, axes)) + 1e-6
     terms = _masked_mean(e * e, mask, axes) / (scale * scale)
