@@ -165,47 +165,12 @@ def test_the_codec_sees_the_white_balanced_values(x64):
     assert aware < 1e-8 < 1e-3 < plain, (aware, plain)
 
 
-def _recover(photo, table, block, steps=400):
-    """Fit a 24x24 "render" that is its own parameter (a texture seen at one pixel per
-    texel) to an 8-bit photo: Adam 0.02, tv prior 1e-3, values kept in [0, 1]."""
-    import optax
-
-    from jaxgfx.pipelines.fit.loss import texture_prior
-
-    def f(x):
-        return censored_linear_loss(
-            x, photo, table, 1.0, 255.0, chroma_block=block
-        ) + 1e-3 * texture_prior(x[0], "tv")
-
-    opt = optax.adam(0.02)
-
-    @jax.jit
-    def run(x):
-        def step(carry, _):
-            x, st = carry
-            u, st = opt.update(jax.grad(f)(x), st)
-            return (jnp.clip(optax.apply_updates(x, u), 0.0, 1.0), st), None
-
-        return jax.lax.scan(step, (x, opt.init(x)), None, length=steps)[0][0]
-
-    return np.asarray(run(jnp.full(photo.shape, 0.4)))
-
-
-def test_a_texture_is_recovered_from_a_4_2_0_jpeg_only_with_the_chroma_model(x64):
+def test_a_texture_is_recovered_from_a_4_2_0_jpeg_only_with_the_chroma_model():
     """2x2-texel colour blocks (aligned with the codec's chroma blocks) through sRGB and a
-    quality-90 4:2:0 JPEG (Pillow): fitted per pixel, the plain loss follows the codec's
-    bled chroma, the chroma-aware one does not. Measured: 19.6 dB -> 25.5 dB (the rest is
-    the DCT quantisation); with 3x3-texel blocks, which straddle the chroma blocks, the
-    colour inside a block is not in the photo: 19.4 -> 20.6 dB (other blocks; docs/inverse.md)."""
-    resp = hdr.CameraResponse.analytic("srgb", anchor="unit")
-    table = level_table(resp, 8)
-    rng = np.random.default_rng(3)
-    lin = np.repeat(np.repeat(rng.uniform(0.05, 0.8, size=(1, 12, 12, 3)), 2, 1), 2, 2)
-    codes = np.round(np.clip(np.asarray(resp.from_linear_normalized(lin)), 0, 1) * 255)
-    photo = hdr.jpeg_roundtrip(codes.astype(np.uint8), quality=90).astype(np.float64)
+    quality-90 4:2:0 JPEG (Pillow), fitted per pixel (experiments/jpeg_chroma.py): the plain
+    loss follows the codec's bled chroma, the chroma-aware one does not. Measured: 19.6 dB ->
+    25.5 dB (the rest is the DCT quantisation; docs/inverse.md, "A JPEG-aware loss")."""
+    from experiments.jpeg_chroma import fit_psnr
 
-    def psnr(x):
-        return 10 * np.log10(1.0 / np.mean((x - lin) ** 2))
-
-    plain, aware = psnr(_recover(photo, table, None)), psnr(_recover(photo, table, (2, 2)))
+    plain, aware = fit_psnr(2, False), fit_psnr(2, True)
     assert aware > plain + 4.0 and aware > 24.0, (plain, aware)
