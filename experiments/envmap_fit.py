@@ -233,6 +233,7 @@ def main(argv=None) -> int:
         default=None,
         help="Laplacian prior weights to sweep, e.g. 0.001,0.01,0.1 (one program)",
     )
+    p.add_argument("--map-lr", type=float, default=None, help="the map's own learning rate")
     p.add_argument("--views", type=int, default=None, help="fit the config's first N views")
     p.add_argument(
         "--mitsuba", action="store_true", help="targets rendered by Mitsuba 3 (written as PNG)"
@@ -251,6 +252,8 @@ def main(argv=None) -> int:
     enable_compilation_cache()
     config = read_yaml(a.config)
     config["progress"] = False
+    if a.map_lr is not None:
+        config["params"]["emitters.environment.image"]["lr"] = a.map_lr
     if a.views is not None:
         views = list(config["target"]["views"])[: a.views]
         config["target"] = dict(config["target"], views=views)
