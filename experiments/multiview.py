@@ -203,12 +203,15 @@ def run_mesh(
     size: int | None = None,
     drop=(),
     bracket: bool = False,
+    jpeg_chroma: str | None = None,
+    fits_wanted=("four_views", "view0"),
 ) -> dict:
     """The hostile case (module doc): PSNR over the visible texels against seconds for each
     step budget, four views against view 0 alone. Ablations: ``size`` the views' pixels
     (``render.width`` and ``height``; None: the config's); ``drop`` keys of
     ``target.camera`` to remove (``jpeg``, ``noise``); ``bracket``: fit the synthetic target
-    as it is (every view at every exposure) instead of one photo per view."""
+    as it is (every view at every exposure) instead of one photo per view; ``jpeg_chroma``
+    the fits' ``loss.jpeg_chroma`` (None: the config's); ``fits_wanted`` which fits run."""
     import tempfile
 
     from jaxgfx.config import config_to_dict, load_config, read_yaml
@@ -220,6 +223,8 @@ def run_mesh(
     if size is not None:
         raw["render"] = dict(raw.get("render", {}), width=size, height=size)
     raw["target"]["camera"] = {k: v for k, v in raw["target"]["camera"].items() if k not in drop}
+    if jpeg_chroma is not None:
+        raw["loss"] = dict(raw.get("loss", {}), jpeg_chroma=jpeg_chroma)
     cfg = load_config(FitConfig, raw)
     desc = config_to_dict(cfg)
     prep = prepare_fit(cfg, base_dir=base)
@@ -266,6 +271,8 @@ def run_mesh(
     else:
         fits_of = (("four_views", photos), ("view0", photos[:1]))
     for name, sel in fits_of:
+        if name not in fits_wanted:
+            continue
         for steps in budgets:
             d = copy.deepcopy(desc)
             d["target"] = sel
@@ -291,6 +298,7 @@ def run_mesh(
             }
             log(json.dumps(row))
             runs.append(row)
+    fits.setdefault("view0", np.asarray(prep.init[MESH_TEXTURE], np.float64) + 0 * truth)
     err = np.abs(fits["four_views"] - truth).max(-1)
     block = truth.shape[0] // 8  # the texture's uniform blocks (albedo_texture)
     d = np.minimum(np.arange(truth.shape[0]) % block, block - 1 - np.arange(truth.shape[0]) % block)
@@ -300,7 +308,8 @@ def run_mesh(
         "texture": list(truth.shape),
         "view_pixels": [int(prep.scene.width), int(prep.scene.height)],
         "views": len(photos),
-        "ablation": {"size": size, "drop": list(drop), "bracket": bracket},
+        "ablation": {"size": size, "drop": list(drop), "bracket": bracket,
+                     "jpeg_chroma": cfg.loss.jpeg_chroma},
         "exposures": [p["exposure"] for p in photos],
         "share_clipped_per_view": clipped,
         "visible": float(visible.mean()),
@@ -522,6 +531,8 @@ def main(argv=None) -> int:
     p.add_argument("--size", type=int, default=None, help="--mesh: the views' pixels (N x N)")
     p.add_argument("--drop", default="", help="--mesh: target.camera keys to remove (jpeg,noise)")
     p.add_argument("--bracket", action="store_true", help="--mesh: every view at every exposure")
+    p.add_argument("--jpeg-chroma", default=None, help="--mesh: the fits' loss.jpeg_chroma")
+    p.add_argument("--four-views-only", action="store_true", help="--mesh: skip view 1 alone")
     p.add_argument("--write-texture", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--write-mesh", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--time-one", choices=("single", "vmap", "loop"), help=argparse.SUPPRESS)
@@ -536,7 +547,8 @@ def main(argv=None) -> int:
             config = os.path.join(CONFIGS, "multiview_mesh.yaml")
         drop = tuple(k for k in a.drop.split(",") if k)
         budgets = tuple(int(b) for b in a.budgets.split(","))
-        run_mesh(config, a.out, budgets, a.size, drop, a.bracket)
+        fits_wanted = ("four_views",) if a.four_views_only else ("four_views", "view0")
+        run_mesh(config, a.out, budgets, a.size, drop, a.bracket, a.jpeg_chroma, fits_wanted)
     elif a.write_texture:
         from jaxgfx.io import write_png
 

@@ -9,7 +9,9 @@ from ._metrics import response_curve_error as response_curve_error
 from ._model import RESPONSE_KINDS as RESPONSE_KINDS
 from ._model import CameraResponse as CameraResponse
 from .camera import CAMERA_BITS as CAMERA_BITS
+from .camera import TONE_CURVES as TONE_CURVES
 from .camera import Camera as Camera
+from .camera import ToneCurve as ToneCurve
 from .merge import merge_radiance as merge_radiance
 from .response import MIN_USABLE_PIXELS as MIN_USABLE_PIXELS
 from .response import RESPONSE_METHODS as RESPONSE_METHODS
@@ -47,6 +49,8 @@ __all__ = [
     "colorchecker_scene",
     "BracketedStack",
     "Camera",
+    "ToneCurve",
+    "TONE_CURVES",
     "CAMERA_BITS",
     "recover_response",
     "save_response",

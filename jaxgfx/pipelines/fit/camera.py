@@ -9,7 +9,15 @@ response once per step on the ``2^bits`` levels — a *level table* ``G`` of ``l
 and linearises every pixel with one gather (:func:`fit_level_table`). The three curve kinds
 are blended by a one-hot weight vector and the fixed curve's table is an argument, so gamma,
 analytic, loaded and free-form cameras share one compiled program, and no pixel pays for a
-curve the fit does not use."""
+curve the fit does not use.
+
+A picture style (``camera.color_matrix``, ``camera.tonemap``) joins the chain as
+``codes = f(T̃(M · gains · radiance))``. The tone curve is per channel and monotone, so it
+folds into the level table (``G' = ln T̃⁻¹(e^G)``, :func:`tone_level_table`: 256 values per
+step, not per pixel) and a clipped code still bounds one channel; the matrix mixes channels,
+so it is applied to the *render* (:func:`photo_matrix`) and the loss compares after it, in
+the camera's output-linear space (a linear map of the Monte Carlo image: the loss stays
+quadratic in it, hence unbiased)."""
 
 from __future__ import annotations
 
@@ -18,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgfx._checks import check_choice
-from jaxgfx.hdr import ANALYTIC_RESPONSES, Camera, CameraResponse
+from jaxgfx.hdr import ANALYTIC_RESPONSES, Camera, CameraResponse, ToneCurve
 
 __all__ = [
     "RESPONSE_MODELS",
@@ -35,6 +43,10 @@ __all__ = [
     "fit_level_table",
     "response_of",
     "with_channels",
+    "tone_level_table",
+    "tone_curve",
+    "white_preserving",
+    "photo_matrix",
 ]
 
 RESPONSE_MODELS = ("gamma", "table", *ANALYTIC_RESPONSES)
@@ -127,18 +139,55 @@ def free_init(start: CameraResponse, knots: int, channels: int) -> np.ndarray:
     return np.log(np.expm1(d)).astype(np.float32)  # softplus⁻¹
 
 
-def fit_level_table(cam_p, cam_args, bits: int):
+def tone_curve(op: str, tone_p, free=None) -> ToneCurve:
+    """The :class:`~jaxgfx.hdr.ToneCurve` ``op`` with parameters ``tone_p`` (``{name:
+    scalar}``; ``free`` ``{name: 0/1}`` masks: frozen ones without gradient)."""
+    if free is not None:
+        tone_p = {k: freeze(v, free[k]) for k, v in tone_p.items()}
+    return ToneCurve(op, dict(tone_p))
+
+
+def tone_level_table(table, curve: ToneCurve):
+    """The level table of the response after the tone curve ``curve``: ``ln T̃⁻¹(e^G)``
+    (the output-linear signal that records each level)."""
+    return jnp.log(jnp.maximum(curve.inverse(jnp.exp(table)), jnp.finfo(table.dtype).tiny))
+
+
+def white_preserving(m, weight):
+    """``M = P + weight · diag(1 − P·1)``: with ``weight`` 1 each row sums to 1 (a fitted
+    matrix keeps white; the diagonal of ``P`` has no effect), with 0 ``P`` itself (a fixed
+    matrix) — one program for both."""
+    return m + weight * jnp.diag(1.0 - jnp.sum(m, axis=1))
+
+
+def photo_matrix(cam_p, cam_args):
+    """The camera → output matrix of the fit, white balance included: ``M · diag(wb)``
+    ``(3, 3)`` (the frozen entries without gradient)."""
+    free = cam_args["free"]
+    m = white_preserving(freeze(cam_p["color_matrix"], free["color_matrix"]),
+                         cam_args["white_preserving"])
+    wb = freeze(cam_p["white_balance"], free["white_balance"])
+    return m * wb[None, :]
+
+
+def fit_level_table(cam_p, cam_args, bits: int, tone: str | None = None):
     """The fit's level table ``(2^bits, C)`` for camera parameters ``cam_p`` (``gamma``,
     ``curve``) and arguments ``cam_args`` (``weights`` one-hot over :data:`CURVE_KINDS`,
     ``fixed`` the fixed curve's :func:`level_table`, ``free`` masks): ``Σ weights[k] · G_k``.
-    A slot of weight 0 still runs on the ``2^bits`` levels only (not per pixel)."""
+    A slot of weight 0 still runs on the ``2^bits`` levels only (not per pixel). ``tone``
+    (static): the tone curve's operator, its parameters ``cam_p["tone"]``
+    (:func:`tone_level_table`); None: no tone curve."""
     w = cam_args["weights"]
     fixed = cam_args["fixed"]
     g = freeze(cam_p["gamma"], cam_args["free"]["gamma"])
     g_gamma = level_table(CameraResponse.gamma(jnp.reshape(g, (1,)), anchor="unit"), bits)
     u = freeze(cam_p["curve"], cam_args["free"]["curve"])
     g_free = level_table(free_response(u), bits)
-    return w[0] * g_gamma + w[1] * fixed + w[2] * g_free
+    table = w[0] * g_gamma + w[1] * fixed + w[2] * g_free
+    if tone is not None:
+        table = tone_level_table(table, tone_curve(tone, cam_p["tone"],
+                                                   cam_args["free"]["tone"]))
+    return table
 
 
 def with_channels(resp: CameraResponse, channels: int) -> CameraResponse:

@@ -17,11 +17,16 @@ from jaxgfx.render.integrators import INTEGRATORS
 
 from .camera import RESPONSE_MODELS
 
+JPEG_CHROMA = {"none": None, "4:2:0": (2, 2), "4:2:2": (1, 2)}
+"""``loss.jpeg_chroma``: the codec's chroma block (rows, columns) of each subsampling."""
+
 __all__ = [
     "FitParam",
     "ResponseSpec",
     "ExposureSpec",
     "WhiteBalanceSpec",
+    "ColorMatrixSpec",
+    "ToneSpec",
     "PRIOR_KINDS",
     "CameraConfig",
     "OptimizerConfig",
@@ -176,6 +181,116 @@ class WhiteBalanceSpec:
             )
 
 
+def _matrix3(v, where):
+    import numpy as np
+
+    try:
+        m = np.asarray(v, np.float64)
+    except (TypeError, ValueError):
+        m = None
+    if m is None or m.shape != (3, 3) or not np.all(np.isfinite(m)):
+        raise ValueError(f"{where}: expected a 3x3 matrix of numbers (rows: output R, G, B), "
+                         f"got {v!r}")
+    if abs(np.linalg.det(m)) < 1e-9:
+        raise ValueError(f"{where}: the matrix is singular (det {np.linalg.det(m):.3g})")
+    return tuple(tuple(float(x) for x in row) for row in m)
+
+
+@dataclasses.dataclass(frozen=True)
+class ColorMatrixSpec:
+    """The camera → output colour matrix ``y = M · (white balance · exposure · radiance)``:
+    ``init`` a 3×3 matrix (rows: output R, G, B; default identity) or ``source`` (YAML
+    ``from``: a ``camera.json`` profile of ``jaxgfx calibrate``, its ``matrix``); ``fit``:
+    fitted with each row summing to 1 (white preserved: the neutral axis stays the white
+    balance's and exposure's), as ``M = P + diag(1 − P·1)`` — the six off-diagonal entries
+    are free, the diagonal follows."""
+
+    init: Any = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    source: str | None = None
+    fit: bool = False
+
+    def __post_init__(self):
+        import numpy as np
+
+        if not isinstance(self.fit, bool):
+            raise ValueError(f"camera.color_matrix.fit: expected true or false, got {self.fit!r}")
+        if self.source is not None:
+            if not isinstance(self.source, str) or not self.source:
+                raise ValueError(f"camera.color_matrix.from: expected a camera profile path, "
+                                 f"got {self.source!r}")
+            if self.fit:
+                raise ValueError(
+                    "camera.color_matrix: a profile's matrix includes its white-balance gains "
+                    "(rows need not sum to 1), so it is used fixed; to fit a matrix give "
+                    "init: [[...]] with rows summing to 1"
+                )
+        m = _matrix3(self.init, "camera.color_matrix.init")
+        object.__setattr__(self, "init", m)
+        rows = np.sum(np.asarray(m), axis=1)
+        if self.fit and not np.allclose(rows, 1.0, atol=1e-6):
+            raise ValueError(
+                "camera.color_matrix.init: a fitted matrix keeps white (each row sums to 1); "
+                f"the rows sum to {[round(float(r), 6) for r in rows]}"
+            )
+
+
+def _tone_params(op):
+    from jaxgfx.tonemap import TONEMAP_PARAMETERS
+
+    return {k: v for k, v in TONEMAP_PARAMETERS[op].items() if k != "saturation"}
+
+
+@dataclasses.dataclass(frozen=True)
+class ToneSpec:
+    """A global tone curve in the camera (:class:`jaxgfx.hdr.ToneCurve`): ``op`` one of
+    :data:`jaxgfx.hdr.TONE_CURVES`, its curve parameters (``reinhard``: ``key``, ``white``;
+    ``filmic``: ``exposure``; defaults: the operator's, :data:`jaxgfx.tonemap.
+    TONEMAP_PARAMETERS`), and ``fit``: true (all), false, or a list of parameter names."""
+
+    op: str = "filmic"
+    params: Any = None
+    fit: Any = False
+
+    def __post_init__(self):
+        from jaxgfx.hdr import TONE_CURVES
+
+        check_choice(self.op, "camera.tonemap.op", TONE_CURVES)
+        specs = _tone_params(self.op)
+        given = dict(self.params or {})
+        bad = set(given) - set(specs)
+        if bad:
+            raise ValueError(
+                f"camera.tonemap: unknown parameter(s) {sorted(bad)} of {self.op!r}; expected "
+                f"some of {sorted(specs)}"
+            )
+        vals = {}
+        for k, spec in specs.items():
+            v = given.get(k, spec.initial)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or v != v or (
+                spec.constraint == "positive" and not v > 0
+            ):
+                what = "a number > 0" if spec.constraint == "positive" else "a number"
+                raise ValueError(f"camera.tonemap.{k}: expected {what}, got {v!r}")
+            vals[k] = float(v)
+        object.__setattr__(self, "params", vals)
+        fit = self.fit
+        if isinstance(fit, bool):
+            fit = tuple(specs) if fit else ()
+        elif isinstance(fit, (list, tuple)) and all(isinstance(n, str) for n in fit):
+            for n in fit:
+                check_choice(n, "camera.tonemap.fit", tuple(specs))
+            fit = tuple(fit)
+        else:
+            raise ValueError(
+                f"camera.tonemap.fit: expected true, false or a list of {sorted(specs)}, got "
+                f"{fit!r}"
+            )
+        object.__setattr__(self, "fit", fit)
+
+    def constraint(self, name: str) -> str:
+        return _tone_params(self.op)[name].constraint
+
+
 @dataclasses.dataclass(frozen=True)
 class CameraConfig:
     """The camera between the rendered radiance and LDR targets (``response`` a mapping with
@@ -194,8 +309,35 @@ class CameraConfig:
     # other photo of the bracket measures the pixel (the hinge of a bound is biased by the
     # render's Monte Carlo noise; a measured pixel does not need it)
     clipped: str = "bound"
+    # the picture style between the sensor and the response (None: none; a config without
+    # them compiles to the program it compiled to before they existed)
+    color_matrix: Any = None
+    tonemap: Any = None
 
     def __post_init__(self):
+        cm = self.color_matrix
+        if cm is not None and not isinstance(cm, ColorMatrixSpec):
+            if isinstance(cm, dict):
+                cm = dict(cm)
+                if "from" in cm:
+                    cm["source"] = cm.pop("from")
+                cm = load_config(ColorMatrixSpec, cm, where="camera.color_matrix")
+            else:  # a bare matrix: fixed
+                cm = ColorMatrixSpec(init=cm)
+            object.__setattr__(self, "color_matrix", cm)
+        tm = self.tonemap
+        if tm is not None and not isinstance(tm, ToneSpec):
+            if isinstance(tm, str):
+                tm = {"op": tm}
+            if not isinstance(tm, dict) or "op" not in tm:
+                raise ValueError(
+                    f"camera.tonemap: expected {{op: reinhard | filmic, <parameter>: value, fit: "
+                    f"...}}, got {tm!r}"
+                )
+            tm = dict(tm)
+            op, fit = tm.pop("op"), tm.pop("fit", False)
+            tm = ToneSpec(op, tm, fit)
+            object.__setattr__(self, "tonemap", tm)
         r = self.response
         if isinstance(r, str):
             r = {"model": r}
@@ -220,6 +362,16 @@ class CameraConfig:
             )
         check_choice(self.space, "camera.space", LOSS_COMPARE_SPACES)
         check_choice(self.clipped, "camera.clipped", ("bound", "unmeasured"))
+
+    @property
+    def tone_op(self) -> str | None:
+        """The tone curve's operator (None: no tone curve): static, part of the program."""
+        return None if self.tonemap is None else self.tonemap.op
+
+    @property
+    def has_matrix(self) -> bool:
+        """A colour matrix in the chain (static, part of the program)."""
+        return self.color_matrix is not None
 
 
 # first-order optimisers only: a fit renders with a fresh key per step, which least-squares
@@ -282,10 +434,16 @@ class RenderConfig:
 class LossConfig:
     kind: str = "l2"  # l2 | relative_l2 | l1 (linear targets); LDR targets use censored L2
     space: str = "linear"  # linear | log | lab
+    # LDR colour photos that went through a JPEG codec's chroma subsampling: the residual's
+    # chroma (the part outside the Rec. 601 luma axis) is averaged over the codec's chroma
+    # blocks before it is squared (jaxgfx.pipelines.fit.loss.chroma_subsampled); "none": per
+    # pixel (a config without it compiles to the program of before)
+    jpeg_chroma: str = "none"  # none | 4:2:0 | 4:2:2
 
     def __post_init__(self):
         check_choice(self.kind, "loss.kind", tuple(LOSSES))
         check_choice(self.space, "loss.space", LOSS_SPACES)
+        check_choice(self.jpeg_chroma, "loss.jpeg_chroma", tuple(JPEG_CHROMA))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -104,7 +104,7 @@ def _target_camera(tc: dict, exposure: float, channels: int):
     """The :class:`~jaxgfx.hdr.Camera` that takes a synthetic target's photo."""
     import jax.numpy as jnp
 
-    from jaxgfx.hdr import Camera, CameraResponse, NoiseModel
+    from jaxgfx.hdr import Camera, CameraResponse, NoiseModel, ToneCurve
 
     model = tc.get("response", "gamma")
     if model == "gamma":
@@ -119,6 +119,15 @@ def _target_camera(tc: dict, exposure: float, channels: int):
             jnp.full((channels,), float(n.get("read_sigma", 0.0)) ** 2),
         )
     wb = tc.get("white_balance")
+    tone = None
+    if tc.get("tonemap") is not None:
+        from .config import ToneSpec
+
+        t = dict(tc["tonemap"])
+        spec = ToneSpec(t.pop("op"), t)
+        tone = ToneCurve(spec.op, {k: jnp.asarray(v, jnp.float32)
+                                   for k, v in spec.params.items()})
+    m = tc.get("color_matrix")
     return Camera(
         resp,
         jnp.asarray(exposure, jnp.float32),
@@ -126,6 +135,8 @@ def _target_camera(tc: dict, exposure: float, channels: int):
         noise=noise,
         bits=int(tc.get("bits", 8)),
         clip=True,
+        color_matrix=None if m is None else jnp.asarray(m, jnp.float32),
+        tone=tone,
     )
 
 
@@ -233,8 +244,7 @@ def _initial(cfg: FitConfig, prep: Prepared):
     for p in prep.paths:
         x0 = jnp.asarray(prep.init[p])
         if p in scales:  # its own learning rate: fitted as v, x = bounds.forward(k v)
-            iv = Interval(*[None if b is None else np.asarray(b, np.float64).tolist()
-                            for b in prep.bounds[p]])
+            iv = Interval(*[_static_bound(b) for b in prep.bounds[p]])
             params["scene"][p] = jnp.asarray(iv.inverse(x0) / scales[p], jnp.float32)
             bounds["scene"][p] = None
         else:
@@ -307,12 +317,44 @@ def _initial(cfg: FitConfig, prep: Prepared):
             ),
             "unmeasured": jnp.asarray(float(cam.clipped == "unmeasured"), jnp.float32),
         }
+        # the picture style: present only when configured (a config without it keeps the
+        # parameter tree, hence the program, it had before)
+        if cam.has_matrix:
+            params["camera"]["color_matrix"] = jnp.asarray(prep.color_matrix, jnp.float32)
+            bounds["camera"]["color_matrix"] = None
+            cam_args["free"]["color_matrix"] = jnp.asarray(float(cam.color_matrix.fit),
+                                                           jnp.float32)
+            cam_args["white_preserving"] = jnp.asarray(float(cam.color_matrix.fit),
+                                                       jnp.float32)
+        if cam.tonemap is not None:
+            tm = cam.tonemap
+            params["camera"]["tone"] = {k: jnp.asarray(v, jnp.float32)
+                                        for k, v in tm.params.items()}
+            bounds["camera"]["tone"] = {
+                k: (1e-3, None) if tm.constraint(k) == "positive" else None for k in tm.params
+            }
+            cam_args["free"]["tone"] = {k: jnp.asarray(float(k in tm.fit), jnp.float32)
+                                        for k in tm.params}
     if prep.views is not None:
         from .loss import stack_cameras
 
         cam_args = {**(cam_args or {}), "views": stack_cameras(prep.views),
                     "view_of": jnp.asarray(prep.view_of, jnp.int32)}
     return params, bounds, cam_args
+
+
+def _static_bound(b):
+    """A bound as an :class:`~jaxgfx.optim.Interval` field: None, a float when every element
+    is equal (a texel grid's ``min: 0``), else nested tuples (hashable: the loss cache's key
+    holds the intervals; lists are not)."""
+    if b is None:
+        return None
+    a = np.asarray(b, np.float64)
+    if a.size and np.all(a == a.flat[0]):
+        return float(a.flat[0])
+    from jaxgfx.optim._transforms import _nested_tuple
+
+    return _nested_tuple(a) if a.ndim else float(a)
 
 
 def _scaled_intervals(cfg: FitConfig, prep: Prepared):
@@ -324,8 +366,7 @@ def _scaled_intervals(cfg: FitConfig, prep: Prepared):
     for p in prep.paths:
         if p in scales:
             lo, hi = prep.bounds[p]
-            iv = Interval(None if lo is None else np.asarray(lo, np.float64).tolist(),
-                          None if hi is None else np.asarray(hi, np.float64).tolist())
+            iv = Interval(_static_bound(lo), _static_bound(hi))
             out.append((p, (scales[p], iv)))
     return tuple(out)
 
@@ -382,6 +423,17 @@ def _result(cfg: FitConfig, prep: Prepared, res, target_seconds, scene_params) -
             "gamma": plain(cp["gamma"]) if kind == "gamma" else None,
             "fitted": _fitted_camera_names(cam) + (["curve"] if kind == "free" else []),
         }
+        if cam.has_matrix:
+            from .camera import white_preserving
+
+            camera_out["color_matrix"] = plain(white_preserving(
+                np.asarray(cp["color_matrix"], np.float64), float(cam.color_matrix.fit)))
+            if cam.color_matrix.fit:
+                camera_out["fitted"].append("color_matrix")
+        if cam.tonemap is not None:
+            camera_out["tonemap"] = {"op": cam.tonemap.op,
+                                     **{k: plain(v) for k, v in cp["tone"].items()}}
+            camera_out["fitted"] += [f"tonemap.{k}" for k in cam.tonemap.fit]
     out = {
         "params": fitted,
         "init": {p: plain(prep.init[p]) for p in prep.paths},
@@ -435,7 +487,18 @@ def fitted_camera(cfg: FitConfig, prep: Prepared, cam_p, photo: int = 0, bits: i
     resp = with_channels(response_of(cam.response.curve_kind, cam_p, prep.fixed_response), nch)
     e = float(np.asarray(cam_p["exposure"])) * float(np.asarray(cam_p["photo_exposure"])[photo])
     wb = jnp.asarray(cam_p["white_balance"], jnp.float32)[:nch] if nch == 3 else None
-    return Camera(resp, jnp.asarray(e, jnp.float32), white_balance=wb, bits=bits, clip=True)
+    m = tone = None
+    if cam.has_matrix:
+        from .camera import white_preserving
+
+        m = white_preserving(jnp.asarray(cam_p["color_matrix"], jnp.float32),
+                             float(cam.color_matrix.fit))
+    if cam.tonemap is not None:
+        from .camera import tone_curve
+
+        tone = tone_curve(cam.tonemap.op, cam_p["tone"])
+    return Camera(resp, jnp.asarray(e, jnp.float32), white_balance=wb, bits=bits, clip=True,
+                  color_matrix=m, tone=tone)
 
 
 def _shown_photos(prep: Prepared) -> list:
@@ -509,7 +572,8 @@ def view_losses(cfg: FitConfig, prep: Prepared, target: Target, renders, cam_p, 
         imgs = imgs[jnp.asarray(view_of)]
     else:
         imgs = imgs[0]
-    table = fit_level_table(cam_p, cam_args, cfg.camera.bits) if prep.ldr else None
+    table = (fit_level_table(cam_p, cam_args, cfg.camera.bits, cfg.camera.tone_op)
+             if prep.ldr else None)
     pixels = jnp.asarray(target.pixels)
     masked = target.mask is not None
     t = (pixels, jnp.asarray(target.mask)) if masked else pixels
@@ -543,7 +607,11 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
             from .loss import to_target_channels
 
             img = np.asarray(to_target_channels(jnp.asarray(img), True))
-        table = fit_level_table(params["camera"], cam_args, bits)
+        table = fit_level_table(params["camera"], cam_args, bits, cfg.camera.tone_op)
+        if cfg.camera.has_matrix:  # compare in the camera's output space
+            from .camera import photo_matrix
+
+            img = img @ np.asarray(photo_matrix(params["camera"], cam_args)).T
         e0 = auto_exposure(img, target.pixels, table, prep.exposures, float(2**bits - 1))
         lo = cfg.camera.exposure.min
         params["camera"]["exposure"] = jnp.asarray(max(e0, 1.01 * lo), jnp.float32)

@@ -9,7 +9,7 @@ import jax.numpy as jnp
 
 from jaxgfx.color import LUMINANCE_WEIGHTS
 
-from .camera import fit_level_table, freeze
+from .camera import fit_level_table, freeze, photo_matrix
 from .config import FitConfig
 from .targets import build_scene
 
@@ -21,6 +21,7 @@ __all__ = [
     "VIEW_BATCHING",
     "cached_loss",
     "censored_linear_loss",
+    "chroma_subsampled",
     "code_space_loss",
     "to_target_channels",
     "photo_gains",
@@ -45,9 +46,62 @@ def _masked_mean(v, mask, axes):
     return jnp.sum(v * m, axis=axes) / jnp.sum(m, axis=axes)
 
 
+REC601 = (0.299, 0.587, 0.114)
+"""The JPEG codec's luma weights (JFIF: ITU-R BT.601)."""
+
+
+def _triangle_upsample(s, axis: int):
+    """×2 along ``axis`` as a JPEG decoder's "fancy" chroma upsampling does (libjpeg's
+    ``h2v1`` / ``h2v2_fancy_upsample``): output sample ``2i`` is ``¾ s[i] + ¼ s[i−1]``,
+    ``2i+1`` is ``¾ s[i] + ¼ s[i+1]``, the edge samples repeated."""
+    s = jnp.moveaxis(s, axis, 0)
+    prev = jnp.concatenate([s[:1], s[:-1]])
+    nxt = jnp.concatenate([s[1:], s[-1:]])
+    out = jnp.stack([0.75 * s + 0.25 * prev, 0.75 * s + 0.25 * nxt], axis=1)
+    return jnp.moveaxis(out.reshape((2 * s.shape[0],) + s.shape[1:]), 0, axis)
+
+
+def chroma_subsampled(img, weight, block):
+    """``img`` ``(N, H, W, 3)`` (code or linear values) as a JPEG codec with chroma
+    subsampling returns it: the luma ``wᵀx`` (``w`` :data:`REC601`) per pixel, the chroma
+    ``x − 1·wᵀx`` (what Cb, Cr carry: a linear map of them) averaged over the codec's chroma
+    blocks ``block = (rows, columns)`` (``(2, 2)``: 4:2:0, ``(1, 2)``: 4:2:2; the encoder's
+    box downsampling) and brought back to the pixels by the decoder's triangle ("fancy")
+    upsampling. ``weight`` ``(N, H, W, 1)`` ≥ 0: the pixels that take part in a block's mean
+    (a block without any takes its neighbours' chroma: the upsampling is normalised by the
+    blocks that have pixels; a pixel whose blocks all have none gets chroma 0); sizes not a
+    multiple of the block are padded with weight 0. Linear in ``img``: a loss on it stays
+    quadratic in the Monte Carlo image. The 8×8 DCT quantisation is not modelled."""
+    w = jnp.asarray(REC601, img.dtype)
+    luma = img @ w
+    chroma = img - luma[..., None]
+    bh, bw = block
+    n, h, wd, c = img.shape
+    pad = ((0, 0), (0, (-h) % bh), (0, (-wd) % bw), (0, 0))
+    weight = jnp.broadcast_to(weight, (n, h, wd, 1)).astype(img.dtype)
+
+    def block_sum(a):
+        a = jnp.pad(a, pad)
+        return a.reshape(n, a.shape[1] // bh, bh, a.shape[2] // bw, bw, a.shape[3]).sum((2, 4))
+
+    sw = block_sum(weight)
+    has = (sw > 0).astype(img.dtype)
+    mean = block_sum(chroma * weight) / jnp.maximum(sw, 1e-12)
+
+    def up(a):
+        if bh == 2:
+            a = _triangle_upsample(a, 1)
+        if bw == 2:
+            a = _triangle_upsample(a, 2)
+        return a[:, :h, :wd]
+
+    up_chroma = up(mean * has) / jnp.maximum(up(has), 1e-12)
+    return luma[..., None] + up_chroma
+
+
 def censored_linear_loss(
     img, codes, table, gain, code_max, mask=None, clip_code=None, unmeasured_only=None, *,
-    per_photo: bool = False, view_of=None,
+    per_photo: bool = False, view_of=None, chroma_block=None,
 ):
     """Censored L2 in linear radiance, summed over photos (``per_photo``: each photo's term,
     ``(N,)``).
@@ -75,7 +129,12 @@ def censored_linear_loss(
     (``E max(t − Î, 0) > max(t − E Î, 0)``: a noisy render is pushed above the bound), and a
     pixel that a darker (brighter) photo of the bracket measures needs no bound. ``view_of``
     ``(N,)`` (several views): the view of each photo; a pixel is then "measured" only by the
-    photos of its own view (pixel ``(i, j)`` of another view is another point of the scene)."""
+    photos of its own view (pixel ``(i, j)`` of another view is another point of the scene).
+    ``chroma_block`` (``(rows, columns)``, None: off; ``loss.jpeg_chroma``): JPEG photos whose
+    chroma the codec subsampled — at each pixel whose channels are all measured the render
+    is compared as the codec would return it (:func:`chroma_subsampled`: luma per pixel,
+    chroma averaged over the block's measured pixels and upsampled as the decoder does, in
+    linear values); censored channels keep their hinge."""
     single = codes.ndim == 3
     if single:
         codes = codes[None]
@@ -103,6 +162,12 @@ def censored_linear_loss(
             measured = jnp.einsum("jk,khwc->jhwc", same, (~censored).astype(img.dtype)) > 0
         drop = censored & measured & (jnp.asarray(unmeasured_only) > 0)
         e = jnp.where(drop, 0.0, e)
+    if chroma_block is not None and nch == 3:  # the render as the codec returns it
+        full = ~jnp.any((q >= c) | (q <= 0), axis=-1, keepdims=True)
+        weight = full.astype(img.dtype) * (1.0 if mask is None else mask)
+        g = gain[:, None, None, :]  # the codec sees the exposed (white-balanced) values
+        im = jnp.broadcast_to(img, e.shape) * g
+        e = jnp.where(full, e + (chroma_subsampled(im, weight, chroma_block) - im) / g, e)
     axes = (1, 2, 3)
     scale = jax.lax.stop_gradient(_masked_mean(t, mask, axes)) + 1e-6
     terms = _masked_mean(e * e, mask, axes) / (scale * scale)
@@ -141,12 +206,15 @@ def code_space_loss(img, codes, table, gain, code_max, mask=None, *, per_photo: 
     return terms if per_photo else jnp.sum(terms)
 
 
-def photo_gains(cam_p, cam_args, nch: int):
+def photo_gains(cam_p, cam_args, nch: int, white_balance: bool = True):
     """``(N, C)`` gain of each photo: exposure × its relative exposure × white balance (the
-    frozen entries without gradient)."""
+    frozen entries without gradient; ``white_balance`` False: without it — a colour matrix
+    carries it, :func:`~jaxgfx.pipelines.fit.camera.photo_matrix`)."""
     free = cam_args["free"]
     e = freeze(cam_p["exposure"], free["exposure"])
     r = freeze(cam_p["photo_exposure"], free["photo_exposure"])
+    if not white_balance:
+        return e * r[:, None] * jnp.ones((1, nch), r.dtype)
     wb = freeze(cam_p["white_balance"], free["white_balance"])
     wb = wb[:nch] if nch == 3 else jnp.ones((1,), wb.dtype)
     return e * r[:, None] * wb[None, :]
@@ -228,12 +296,19 @@ def photo_losses(cfg: FitConfig, ldr: bool, img, target, p_camera, cam_args, tab
         ])
     bits = cfg.camera.bits
     code_max = float(2**bits - 1)
-    gain = photo_gains(p_camera, cam_args, img.shape[-1])
+    if cfg.camera.has_matrix:
+        img = img @ photo_matrix(p_camera, cam_args).T.astype(img.dtype)
+        gain = photo_gains(p_camera, cam_args, img.shape[-1], white_balance=False)
+    else:
+        gain = photo_gains(p_camera, cam_args, img.shape[-1])
     if cfg.camera.space == "code":
         return code_space_loss(img, pixels, table, gain, code_max, mask, per_photo=True)
+    from .config import JPEG_CHROMA
+
     return censored_linear_loss(img, pixels, table, gain, code_max, mask,
                                 cam_args.get("clip_code"), cam_args.get("unmeasured"),
-                                per_photo=True, view_of=cam_args.get("view_of"))
+                                per_photo=True, view_of=cam_args.get("view_of"),
+                                chroma_block=JPEG_CHROMA[cfg.loss.jpeg_chroma])
 
 
 def make_loss(
@@ -264,6 +339,7 @@ def make_loss(
 
     r = cfg.render
     bits = cfg.camera.bits if cfg.camera else 8
+    tone_op = cfg.camera.tone_op if cfg.camera else None
     paths = tuple(paths)
     scaled = dict(scaled)
     batching = VIEW_BATCH if batching is None else batching
@@ -295,7 +371,7 @@ def make_loss(
 
     def loss(p, key, args):
         scene, target, cam_args = args
-        table = fit_level_table(p["camera"], cam_args, bits) if ldr else None
+        table = fit_level_table(p["camera"], cam_args, bits, tone_op) if ldr else None
         if r.estimator == "correlated":
             value = per_image_loss(image(scene, p, key, r.spp, cam_args), target, p, cam_args,
                                    table)
@@ -325,7 +401,8 @@ def cached_loss(
     """One loss object (hence one compiled fit step) per render / loss configuration and
     parameter set; camera choices and prior weights are arguments, not part of the
     program."""
-    cam = (cfg.camera.bits, cfg.camera.space) if cfg.camera else None
+    cam = ((cfg.camera.bits, cfg.camera.space, cfg.camera.has_matrix, cfg.camera.tone_op)
+           if cfg.camera else None)
     batching = VIEW_BATCH if batching is None else batching
     key = (cfg.render, cfg.loss, cam, tuple(paths), ldr, grey, masked, tuple(priors),
            tuple(scaled), views, batching if views else None)

@@ -31,12 +31,14 @@ __all__ = [
     "is_texel_grid",
     "check_synthetic_camera",
     "fixed_response_of",
+    "color_matrix_of",
     "scene_camera_desc",
     "build_view",
 ]
 
 TARGET_CAMERA_KEYS = (
     "response", "gamma", "exposure", "exposures", "bits", "white_balance", "noise", "jpeg",
+    "color_matrix", "tonemap",
 )
 SYNTHETIC_TARGET_KEYS = ("synthetic", "spp", "seed", "camera", "views")
 PHOTO_KEYS = ("file", "exposure", "view")
@@ -76,6 +78,7 @@ class Prepared:
     views: tuple | None = None
     view_of: np.ndarray | None = None
     view_poses: list | None = None
+    color_matrix: np.ndarray | None = None  # (3, 3) the camera's matrix (init or profile's)
 
     @property
     def n_targets(self) -> int:
@@ -353,7 +356,9 @@ def check_synthetic_camera(cam) -> None:
     """Check ``target.camera`` of a synthetic target: the camera that takes the photos
     (``response`` a gamma / analytic name, ``gamma``, ``exposure``, ``exposures`` — a bracket
     of several photos, relative to ``exposure`` —, ``bits``, ``white_balance``, ``noise``
-    ``{gain, read_sigma}`` in normalised units, ``jpeg`` quality)."""
+    ``{gain, read_sigma}`` in normalised units, ``jpeg`` quality, the picture style
+    ``color_matrix`` (3×3) and ``tonemap`` ``{op, <parameter>: value}``, checked as the fit
+    camera's ``camera.color_matrix`` / ``camera.tonemap``)."""
     if not isinstance(cam, dict):
         raise ValueError(f"target.camera: expected a mapping, got {cam!r}")
     bad = set(cam) - set(TARGET_CAMERA_KEYS)
@@ -397,6 +402,19 @@ def check_synthetic_camera(cam) -> None:
             raise ValueError(f"target.camera.jpeg: expected a quality 1..100, got {q!r}")
         if cam.get("bits", 8) != 8:
             raise ValueError("target.camera.jpeg: JPEG photos are 8-bit (set bits: 8)")
+    from .config import ToneSpec, _matrix3
+
+    if cam.get("color_matrix") is not None:
+        _matrix3(cam["color_matrix"], "target.camera.color_matrix")
+    tm = cam.get("tonemap")
+    if tm is not None:
+        if not isinstance(tm, dict) or "op" not in tm or "fit" in tm:
+            raise ValueError(f"target.camera.tonemap: expected {{op, <parameter>: value}}, got "
+                             f"{tm!r}")
+        try:
+            ToneSpec(tm["op"], {k: v for k, v in tm.items() if k != "op"})
+        except ValueError as e:
+            raise ValueError(f"target.{e}") from None
 
 
 def _photo_entries(target) -> list:
@@ -601,8 +619,38 @@ def prepare_fit(cfg: FitConfig, *, base_dir: str | None = None) -> Prepared:
         fixed = fixed_response_of(cfg, base_dir, channels)
         if cfg.camera.white_balance.fit and channels == 1:
             raise ValueError("camera.white_balance.fit: a grey target has no colour balance")
+    if cfg.loss.jpeg_chroma != "none":
+        if not ldr:
+            raise ValueError(
+                "loss.jpeg_chroma: models a JPEG codec's chroma subsampling of 8-bit photos; "
+                "the target is radiance"
+            )
+        if channels == 1:
+            raise ValueError("loss.jpeg_chroma: a grey target has no chroma")
+        if cfg.camera.space != "linear":
+            raise ValueError("loss.jpeg_chroma: only with camera.space: linear")
+    matrix = None
+    if ldr and cfg.camera.color_matrix is not None:
+        if channels == 1:
+            raise ValueError("camera.color_matrix: a grey target has no colour to mix")
+        matrix = color_matrix_of(cfg.camera.color_matrix, base_dir)
     return Prepared(
         scene, paths, init, bounds, truth, target_spec, ldr,
         targets[0] if targets else None, targets, exposures, fixed, tuple(textures),
-        views, view_of, view_poses,
+        views, view_of, view_poses, matrix,
     )
+
+
+def color_matrix_of(spec, base: str | None) -> np.ndarray:
+    """The camera's colour matrix ``(3, 3)``: ``spec.init``, or the ``matrix`` of the camera
+    profile ``spec.source`` (``camera.color_matrix.from``; errors name the file)."""
+    if spec.source is None:
+        return np.asarray(spec.init, np.float64)
+    from jaxgfx import hdr
+
+    path = resolve_path(spec.source, base, "camera.color_matrix.from")
+    prof = hdr.load_camera_profile(path)
+    if prof.matrix is None:
+        raise ValueError(f"camera.color_matrix.from: {path}: the camera profile has no colour "
+                         "matrix (a RAW calibration writes one)")
+    return np.asarray(prof.matrix, np.float64)
