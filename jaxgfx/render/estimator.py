@@ -148,26 +148,6 @@ def resolve_integrator(
     ``{type: path, max_depth: 4, adjoint: replay}``): ``NAME`` with those options, to which the
     keyword options are added (one given both ways: ``TypeError``).
     """
-    if isinstance(integrator, dict):
-        opts = dict(integrator)
-        name = opts.pop("type", None)
-        if not isinstance(name, str):
-            raise ValueError(f"integrator.type: expected an integrator name, got {name!r}")
-        check_choice(name, "integrator.type", tuple(INTEGRATORS))
-        kw = {
-            k: v
-            for k, v in (
-                ("max_depth", max_depth),
-                ("rr_depth", rr_depth),
-                ("strategy", strategy),
-                ("sampling", sampling),
-            )
-            if v is not None
-        }
-        both = sorted(set(kw) & set(opts))
-        if both:
-            raise TypeError(f"{', '.join(both)}: given in the integrator mapping and to {caller}()")
-        return make_integrator(name, **{**opts, **kw})
     given = {
         k: v
         for k, v in (
@@ -178,6 +158,16 @@ def resolve_integrator(
         )
         if v is not None
     }
+    if isinstance(integrator, dict):
+        opts = dict(integrator)
+        name = opts.pop("type", None)
+        if not isinstance(name, str):
+            raise ValueError(f"integrator.type: expected an integrator name, got {name!r}")
+        check_choice(name, "integrator.type", tuple(INTEGRATORS))
+        both = sorted(set(given) & set(opts))
+        if both:
+            raise TypeError(f"{', '.join(both)}: given in the integrator mapping and to {caller}()")
+        return make_integrator(name, **{**opts, **given})
     if isinstance(integrator, Integrator):
         if given:
             raise TypeError(

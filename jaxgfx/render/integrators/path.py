@@ -299,30 +299,13 @@ def _check_adjoint(adjoint, sampling):
 
 
 def _radiance(integ, scene, o, d, u, max_depth):
+    kw = dict(max_depth=max_depth, rr_depth=integ.rr_depth, strategy=integ.strategy,
+              chunk=integ.chunk)  # fmt: skip
     if integ.adjoint == "replay":
         from jaxgfx.render.integrators._replay import path_radiance_replay  # noqa: PLC0415
 
-        return path_radiance_replay(
-            scene,
-            o,
-            d,
-            u,
-            max_depth=max_depth,
-            rr_depth=integ.rr_depth,
-            strategy=integ.strategy,
-            chunk=integ.chunk,
-        )
-    return path_radiance(
-        scene,
-        o,
-        d,
-        u,
-        max_depth=max_depth,
-        rr_depth=integ.rr_depth,
-        strategy=integ.strategy,
-        sampling=integ.sampling,
-        chunk=integ.chunk,
-    )
+        return path_radiance_replay(scene, o, d, u, **kw)
+    return path_radiance(scene, o, d, u, sampling=integ.sampling, **kw)
 
 
 class PathIntegrator(Integrator):
