@@ -14,6 +14,7 @@ from jaxgfx.config import load_config
 from jaxgfx.hdr import ANALYTIC_RESPONSES
 from jaxgfx.optim import LOSS_SPACES, LOSSES, OPTIMIZERS
 from jaxgfx.render.integrators import INTEGRATORS
+from jaxgfx.render.integrators.path import ADJOINTS
 
 from .camera import RESPONSE_MODELS
 
@@ -416,10 +417,20 @@ class RenderConfig:
     width: int | None = None  # overrides the scene camera's resolution
     height: int | None = None
     estimator: str = "independent"  # independent | correlated (see module doc)
+    # how reverse mode differentiates the path / direct integrator: "ad" (JAX's reverse mode
+    # of the bounce loop) or "replay" (path replay backpropagation: material, texture and
+    # emitter parameters only; docs/render_gradients.md)
+    adjoint: str = "ad"
 
     def __post_init__(self):
         check_choice(self.estimator, "render.estimator", ESTIMATORS)
         check_choice(self.integrator, "render.integrator", tuple(INTEGRATORS))
+        check_choice(self.adjoint, "render.adjoint", ADJOINTS)
+        if self.adjoint != "ad" and self.integrator not in ("path", "direct"):
+            raise ValueError(
+                f"render.adjoint: {self.adjoint!r} needs integrator path or direct, got "
+                f"{self.integrator!r}"
+            )
         _positive_int(self.spp, "render.spp")
         if self.estimator == "independent" and self.spp < 2:
             raise ValueError(f"render.spp: expected >= 2 (two half-spp images), got {self.spp}")
@@ -428,6 +439,13 @@ class RenderConfig:
             v = getattr(self, name)
             if v is not None:
                 _positive_int(v, f"render.{name}")
+
+    @property
+    def integrator_spec(self):
+        """What ``render(..., integrator=...)`` takes: the name, or ``{type, adjoint}``."""
+        if self.adjoint == "ad":
+            return self.integrator
+        return {"type": self.integrator, "adjoint": self.adjoint}
 
 
 @dataclasses.dataclass(frozen=True)

@@ -82,7 +82,8 @@ def _render(cfg: FitConfig, scene, key, spp):
     from jaxgfx.render import render
 
     r = cfg.render
-    return np.asarray(render(scene, key, spp=spp, integrator=r.integrator, max_depth=r.max_depth))
+    img = render(scene, key, spp=spp, integrator=r.integrator_spec, max_depth=r.max_depth)
+    return np.asarray(img)
 
 
 def _render_views(cfg: FitConfig, prep: Prepared, scene, key, spp) -> np.ndarray:

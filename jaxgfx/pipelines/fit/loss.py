@@ -357,7 +357,7 @@ def make_loss(
         s = build_scene(scene, paths, scene_values(p))
 
         def one(sc, k):
-            img = render(sc, k, spp=spp, integrator=r.integrator, max_depth=r.max_depth)
+            img = render(sc, k, spp=spp, integrator=r.integrator_spec, max_depth=r.max_depth)
             return to_target_channels(img, grey)
 
         if not views:
