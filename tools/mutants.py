@@ -142,8 +142,8 @@ MUTANTS = [
     {
         "name": "render.path.throughput_x1.05",
         "file": "jaxgfx/render/integrators/path.py",
-        "old": "return dL, beta * weight, alive",
-        "new": "return dL, beta * weight * 1.05, alive",
+        "old": "beta = beta * weight\n",
+        "new": "beta = beta * weight * 1.05\n",
         "tests": [
             "tests/render/test_integrator_references.py::"
             "test_path_integrating_sphere_three_bounces_value_and_gradient"
