@@ -73,9 +73,12 @@ def test_no_dark_sun_and_no_nan():
     # the sun (radiance 1) is clipped in every frame, even the shortest (t = 1): it gets the
     # shortest frame's lower bound to_linear(255) / 1, and stays the brightest thing
     bound = np.asarray(resp.to_linear(jnp.full((3,), 255.0)))
-    # (a few read 254 in the shortest frame, from noise: x(254), within 2 % of the bound with
-    # the data-driven shoulder of the recovered curve)
-    np.testing.assert_allclose(e[sun], np.broadcast_to(bound, e[sun].shape), rtol=2e-2)
+    # (some read 252-254 in the shortest frame, from noise: they get x(z) of the recovered
+    # curve, down to 2.0 % below the bound with the inverse-slope refit's shoulder; measured:
+    # 69 % of the sun pixels at the bound, the lowest at 0.980 of it)
+    floor = np.asarray(resp.to_linear(jnp.full((3,), 250.0)))
+    assert np.all(e[sun] <= bound * (1 + 1e-5)) and np.all(e[sun] >= floor * (1 - 1e-5))
+    assert np.mean(np.isclose(e[sun], bound, rtol=1e-5)) > 0.5
     assert e[sun].min() >= e[~sun].max()
 
 

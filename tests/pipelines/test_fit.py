@@ -122,21 +122,3 @@ def test_render_adjoint_option_reaches_the_integrator():
         fit_cfg(render={"adjoint": "backprop"})
     with pytest.raises(ValueError, match="render.adjoint.*path or direct"):
         fit_cfg(render={"integrator": "aov", "adjoint": "replay"})
-
-
-# slow: 107 s measured on 2 cores at load ~3 (two fit jobs: each compiles its step and previews)
-@pytest.mark.slow
-def test_fit_with_replay_follows_the_ad_fit(tmp_path):
-    """Replay's gradient equals AD's per sample (tests/render/test_path_replay.py), so three Adam
-    steps of the same fit give the same losses and the same α (float32 rounding apart)."""
-    over = {"render": {"spp": 4, "width": 8, "height": 8, "integrator": "path", "max_depth": 3}}
-    out = {}
-    for adjoint in ("ad", "replay"):
-        r = dict(over["render"], adjoint=adjoint)
-        res = run_fit(FitJob(fit_cfg(render=r, optimizer={"steps": 3}), str(tmp_path / adjoint)))
-        with open(tmp_path / adjoint / "result.json") as f:
-            out[adjoint] = json.load(f)
-        assert res["errors"]["materials.metal.alpha"] >= 0
-    np.testing.assert_allclose(out["replay"]["loss"], out["ad"]["loss"], rtol=1e-4)
-    a, b = (out[k]["params"]["materials.metal.alpha"] for k in ("ad", "replay"))
-    assert a == pytest.approx(b, rel=1e-4)
