@@ -15,7 +15,7 @@ child before tracing):
 
 * ``default``: the code as it is.
 * ``checkpointed``: a pass scan of one step and a bounce loop of one bounce checkpointed
-  anyway (``estimator.CHECKPOINT_ONE_STEP``, ``path.CHECKPOINT_ONE_BOUNCE``; before issue 22).
+  anyway (``estimator.CHECKPOINT_ONE_STEP``, ``_bounce.CHECKPOINT_ONE_BOUNCE``; before issue 22).
 * ``one_pass_per_step``: ``render_partial`` with one sample pass per scan step (the layout
   before issue 22).
 * ``one_render_for_both_keys``: the decorrelated loss's two images (``optim._estimators``)
@@ -95,7 +95,7 @@ def _child(config: str, variant: str) -> dict:
             k: (None if k == "rays_per_step" else v) for k, v in defaults
         }
     elif variant == "checkpointed":
-        import jaxgfx.render.integrators.path as PI
+        import jaxgfx.render.integrators._bounce as PI
 
         E.CHECKPOINT_ONE_STEP = True
         PI.CHECKPOINT_ONE_BOUNCE = True

@@ -35,58 +35,10 @@ import sys
 import numpy as np
 
 from jaxgfx.config import read_yaml
-
-H, W = 16, 32
-
-
-def directions(h: int = H, w: int = W):
-    """Texel-centre directions (y up, θ from +y) and solid angles of a lat-long map."""
-    th = np.pi * (np.arange(h) + 0.5) / h
-    ph = 2 * np.pi * (np.arange(w) + 0.5) / w
-    T, P = np.meshgrid(th, ph, indexing="ij")
-    d = np.stack([np.sin(T) * np.cos(P), np.cos(T), np.sin(T) * np.sin(P)], -1)
-    return d, np.sin(T) * (np.pi / h) * (2 * np.pi / w)
-
-
-def sky(h: int = H, w: int = W) -> np.ndarray:
-    """The true environment: sky gradient, warm horizon, dark ground, soft sun."""
-    d, _ = directions(h, w)
-    y = d[..., 1]
-    up = np.clip(y, 0, 1)[..., None]
-    img = (0.25 + 0.6 * up) * np.asarray([0.45, 0.6, 1.0]) * (y >= 0)[..., None]
-    img = img + np.exp(-((y / 0.15) ** 2))[..., None] * np.asarray([0.6, 0.4, 0.2])
-    img = img + (y < 0)[..., None] * np.asarray([0.12, 0.1, 0.08])
-    sun = np.asarray([0.5, 0.55, 0.67])
-    sun = sun / np.linalg.norm(sun)
-    img = img + 4.0 * np.exp((d @ sun - 1) / 0.02)[..., None] * np.asarray([1.0, 0.9, 0.7])
-    return img.astype(np.float32)
-
-
-def sh9(d):
-    """Real spherical harmonics of order <= 2 at unit directions ``d`` (..., 9)."""
-    x, y, z = d[..., 0], d[..., 1], d[..., 2]
-    return np.stack([
-        0.282095 * np.ones_like(x), 0.488603 * y, 0.488603 * z, 0.488603 * x,
-        1.092548 * x * y, 1.092548 * y * z, 0.315392 * (3 * z * z - 1), 1.092548 * x * z,
-        0.546274 * (x * x - y * y)], -1)  # fmt: skip
-
-
-def errors(fit: np.ndarray, truth: np.ndarray) -> dict:
-    d, dw = directions(*truth.shape[:2])
-    wgt = dw[..., None]
-    rms = lambda a: float(np.sqrt(np.sum(wgt * a * a) / np.sum(wgt * np.ones_like(a))))  # noqa
-    basis = sh9(d)
-    c_fit = np.einsum("hwk,hwc,hw->kc", basis, fit, dw)
-    c_true = np.einsum("hwk,hwc,hw->kc", basis, truth, dw)
-    upper = d[..., 1] >= 0
-    return {
-        "texel_rel": rms(fit - truth) / rms(truth),
-        "texel_rel_upper": float(
-            np.sqrt(np.sum((wgt * (fit - truth) ** 2)[upper]) / np.sum((wgt * truth**2)[upper]))
-        ),
-        "sh2_rel": float(np.linalg.norm(c_fit - c_true) / np.linalg.norm(c_true)),
-        "sh_dc_rel": float(np.linalg.norm(c_fit[0] - c_true[0]) / np.linalg.norm(c_true[0])),
-    }
+from jaxgfx.testing.problems import ENVMAP_H as H
+from jaxgfx.testing.problems import ENVMAP_W as W
+from jaxgfx.testing.problems import envmap_errors as errors
+from jaxgfx.testing.problems import envmap_sky as sky
 
 
 def plot(path, rows):

@@ -141,7 +141,7 @@ MUTANTS = [
     # ------------------------------------------------------------------ render: integrators
     {
         "name": "render.path.throughput_x1.05",
-        "file": "jaxgfx/render/integrators/path.py",
+        "file": "jaxgfx/render/integrators/_bounce.py",
         "old": "beta = beta * weight\n",
         "new": "beta = beta * weight * 1.05\n",
         "tests": [
@@ -152,7 +152,7 @@ MUTANTS = [
     },
     {
         "name": "render.path.mis_weights_swapped",
-        "file": "jaxgfx/render/integrators/path.py",
+        "file": "jaxgfx/render/integrators/_bounce.py",
         "old": "w = jnp.where(l_delta, 1.0, C.mis_power(detach(lpdf), detach(bpdf)))",
         "new": "w = jnp.where(l_delta, 1.0, C.mis_power(detach(bpdf), detach(lpdf)))",
         "tests": ["tests/render/test_integrators.py::test_rectangular_area_light_irradiance"],

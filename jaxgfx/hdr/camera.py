@@ -25,6 +25,7 @@ import jax.numpy as jnp
 from jaxtyping import Array
 
 from .._checks import check_choice, is_concrete
+from ..color.transfer import aces_narkowicz2015
 from ._model import CameraResponse
 from .noise import NoiseModel
 
@@ -65,7 +66,7 @@ class ToneCurve(eqx.Module):
     (``reinhard``: ``key``, ``white``; ``filmic``: ``exposure`` in stops), scalar arrays
     (differentiable leaves). ``T`` is the operator's luminance curve of
     :mod:`jaxgfx.tonemap` with the adaptation luminance fixed at 1 (a camera does not adapt to
-    the image): ``jaxgfx.tonemap._global.reinhard_curve`` / ``aces_curve``. Per channel (as a
+    the image): the tone mappers' ``reinhard`` / ``filmic`` curves. Per channel (as a
     camera's RGB tone curve; not the operators' luminance + recolouring), so a clipped
     channel bounds that channel only, and :meth:`inverse` is exact.
 
@@ -89,13 +90,13 @@ class ToneCurve(eqx.Module):
                 raise ValueError(f"params.{k}: expected a value > 0, got {v}")
 
     def _raw(self, u, dtype):
-        from ..tonemap._global import aces_curve, reinhard_curve
-
-        one = jnp.ones((), dtype)
+        # the tone mappers' curves at adaptation 1 (jaxgfx.tonemap's reinhard_curve with
+        # key 1, L_avg 1; aces_curve at exposure 0 on u / 0.18), written here because hdr sits
+        # below tonemap: Reinhard et al. (2002) eq. 4 and Narkowicz's ACES fit
         if self.op == "reinhard":
             w = jnp.asarray(self.params["white"], dtype)
-            return reinhard_curve(u, one, one, key=one, white=w)
-        return aces_curve(u / 0.18, one, one, exposure=0.0 * one)
+            return u * (1.0 + u / (w * w)) / (1.0 + u)
+        return aces_narkowicz2015(u)
 
     def __call__(self, y):
         """``T̃(y)`` for ``y >= 0`` (any shape)."""

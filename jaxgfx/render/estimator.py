@@ -20,7 +20,7 @@ from jaxgfx._checks import check_choice, check_positive_int
 from jaxgfx._math import fusion_barrier
 from jaxgfx.render.film import pixel_samples
 from jaxgfx.render.integrators import INTEGRATORS, SAMPLING, Integrator, make_integrator
-from jaxgfx.render.integrators.path import STRATEGIES, PathIntegrator
+from jaxgfx.render.integrators.path import REPLAY_RADIANCE_NAME, STRATEGIES, PathIntegrator
 from jaxgfx.render.sampler import uniform
 
 __all__ = ["render_partial", "resolve_integrator", "pass_scan", "passes_per_step"]
@@ -275,8 +275,6 @@ def render_partial(
     acc0 = jnp.zeros((r, w, integrator.n_channels), dtype)
     policy = None
     if getattr(integrator, "adjoint", "ad") == "replay" and REPLAY_KEEPS_RADIANCE:
-        from jaxgfx.render.integrators._replay import RADIANCE_NAME  # noqa: PLC0415
-
-        policy = jax.checkpoint_policies.save_only_these_names(RADIANCE_NAME)
+        policy = jax.checkpoint_policies.save_only_these_names(REPLAY_RADIANCE_NAME)
     fn = k_passes if k > 1 else one_pass
     return pass_scan(fn, passes, acc0, weights, per_step=k, policy=policy)

@@ -17,8 +17,9 @@ def test_an_environment_map_is_recovered_from_three_views():
     map's order-2 spherical-harmonic content (what the diffuse sphere and floor constrain) and
     the per-texel error drop from the constant grey start. Measured (deterministic seeds): SH
     0.714 -> 0.351, texels 0.799 -> 0.654 (relative, docs/inverse.md section 2d)."""
-    from experiments.envmap_fit import errors, run, sky
     from jaxgfx.config import read_yaml
+    from jaxgfx.pipelines.fit import FitJob, run_fit
+    from jaxgfx.testing.problems import envmap_errors, envmap_sky
 
     config = read_yaml(os.path.join(ROOT, "configs", "envmap_fit.yaml"))
     config["render"] = {**config["render"], "width": 16, "height": 16}
@@ -26,9 +27,13 @@ def test_an_environment_map_is_recovered_from_three_views():
     config["target"] = {**config["target"], "spp": 128, "views": config["target"]["views"][:3]}
     config["params"]["emitters.environment.image"]["prior"] = {"laplacian": 0.001}
     config["progress"] = False
-    truth = sky()
-    start = errors(np.full(truth.shape, 0.5), truth.astype(np.float64))
-    r = run(config, os.path.join(ROOT, "configs"), truth, 150, None)
+    truth = envmap_sky()
+    start = envmap_errors(np.full(truth.shape, 0.5), truth.astype(np.float64))
+    config["optimizer"] = {**config["optimizer"], "steps": 150}
+    config["target"]["synthetic"] = {"emitters.environment.image": truth.tolist()}
+    job = FitJob.load(config, None, base_dir=os.path.join(ROOT, "configs"), overwrite=True)
+    fit = np.asarray(run_fit(job)["params"]["emitters.environment.image"], np.float64)
+    r = envmap_errors(fit, truth.astype(np.float64))
     assert r["sh2_rel"] < 0.6 * start["sh2_rel"]
     assert r["texel_rel"] < 0.85 * start["texel_rel"]
 

@@ -353,9 +353,12 @@ def _static_bound(b):
     a = np.asarray(b, np.float64)
     if a.size and np.all(a == a.flat[0]):
         return float(a.flat[0])
-    from jaxgfx.optim._transforms import _nested_tuple
-
     return _nested_tuple(a) if a.ndim else float(a)
+
+
+def _nested_tuple(a: np.ndarray):
+    """Nested tuples of floats of an array (hashable, for the loss cache's static key)."""
+    return tuple(_nested_tuple(r) for r in a) if a.ndim > 1 else tuple(float(v) for v in a)
 
 
 def _scaled_intervals(cfg: FitConfig, prep: Prepared):

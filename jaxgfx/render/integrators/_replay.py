@@ -42,7 +42,7 @@ import jax.tree_util as jtu
 from jax.ad_checkpoint import checkpoint_name
 
 from jaxgfx._math import safe_div
-from jaxgfx.render.integrators import path as P
+from jaxgfx.render.integrators import _bounce as P
 
 __all__ = ["path_radiance_replay"]
 
