@@ -49,6 +49,7 @@ SLOW = {
     ("docs/render_backends.md", "build_traversal"): "64 s: mesh scene, three backends",
     ("docs/render_gradients.md", "grad_stats"): "104 s: 8 gradient estimates + FD",
     ("docs/render_gradients.md", 'visibility="edge"'): "182 s: edge-sampled gradient",
+    ("docs/render_gradients.md", 'adjoint="replay")   #'): "25 s: a 64-spp path gradient by replay",
     ("docs/inverse.md", "fit(loss"): "106 s: 100 Adam steps through the renderer",
     ("docs/inverse.md", "fit_least_squares(residuals"): "260 s: LM through a 512-spp render",
 }
