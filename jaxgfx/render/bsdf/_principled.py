@@ -123,6 +123,13 @@ def _luminance(rgb):
     return rgb[..., 0] * _LUM[0] + rgb[..., 1] * _LUM[1] + rgb[..., 2] * _LUM[2]
 
 
+def sampling_rate(v, name) -> float:
+    """A lobe's sampling rate: a plain number >= 0 (static), as a float."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0:
+        raise ValueError(f"{name}: expected a number >= 0, got {v!r}")
+    return float(v)
+
+
 def optional_weight(x, name):
     """A lobe weight that Mitsuba switches off when it is absent or a plain number equal to 0
     (its ``get_flag``): ``None`` then (the lobe is not traced at all), else a float array
@@ -263,15 +270,12 @@ class Principled(BSDF):
             "main_specular_sampling_rate": main_specular_sampling_rate,
             "clearcoat_sampling_rate": clearcoat_sampling_rate,
         }
-        for k, v in rates.items():
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0:
-                raise ValueError(f"{k}: expected a number >= 0, got {v!r}")
-        if main_specular_sampling_rate <= 0:
+        rates = {k: sampling_rate(v, k) for k, v in rates.items()}
+        if rates["main_specular_sampling_rate"] <= 0:
             raise ValueError("main_specular_sampling_rate: expected > 0 (the specular lobe is "
                              "always present)")  # fmt: skip
-        self.diffuse_reflectance_sampling_rate = float(diffuse_reflectance_sampling_rate)
-        self.main_specular_sampling_rate = float(main_specular_sampling_rate)
-        self.clearcoat_sampling_rate = float(clearcoat_sampling_rate)
+        for k, v in rates.items():
+            setattr(self, k, v)
 
     def __check_init__(self):
         check_rgb(self.base_color, "base_color")

@@ -27,6 +27,7 @@ from jaxgfx.render.bsdf._principled import (
     _sign,
     optional_weight,
     principled_alphas,
+    sampling_rate,
     schlick_weight,
 )
 from jaxgfx.render.bsdf.fresnel import fresnel_dielectric
@@ -134,9 +135,7 @@ class PrincipledThin(BSDF):
             diffuse_transmittance_sampling_rate,
         )
         for k, v in zip(_RATES, vals, strict=True):
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0:
-                raise ValueError(f"{k}: expected a number >= 0, got {v!r}")
-            setattr(self, k, float(v))
+            setattr(self, k, sampling_rate(v, k))
 
     def __check_init__(self):
         check_rgb(self.base_color, "base_color")
