@@ -510,8 +510,7 @@ def test_principled_loads_and_round_trips(tmp_path):
 
 @pytest.mark.parametrize(
     "params,msg",
-    [('<float name="anisotropic" value="0.5"/>', "'anisotropic': anisotropy is not supported"),
-     ('<float name="eta" value="1.5"/><float name="specular" value="0.5"/>',
+    [('<float name="eta" value="1.5"/><float name="specular" value="0.5"/>',
       "'eta': give either eta or specular"),
      ('<float name="subsurface" value="0.5"/>', "'subsurface' is not supported")],
 )  # fmt: skip

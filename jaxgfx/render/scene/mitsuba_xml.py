@@ -729,14 +729,15 @@ def _distribution(p: _Params, aniso=False):
 
 
 def _dpdu_frame(m: dict, obj: _Obj, nested, in_map) -> dict:
-    """An anisotropic ``roughconductor`` outside a normal map: wrapped in the identity normal
-    map ``(0.5, 0.5, 1)`` (no flip, no shadowing factor), whose perturbed frame is the
-    unperturbed one with the tangent ``dp/du``: Mitsuba's shading frame (jaxgfx's own plain
-    frame has another tangent). Inside a normal map the nested BSDF already has that frame."""
-    if "alpha_v" not in m or in_map:
+    """An anisotropic ``roughconductor`` (``alpha_v``) or ``principled`` / ``principledthin``
+    (``anisotropic``) outside a normal map: wrapped in the identity normal map
+    ``(0.5, 0.5, 1)`` (no flip, no shadowing factor), whose perturbed frame is the unperturbed
+    one with the tangent ``dp/du``: Mitsuba's shading frame (jaxgfx's own plain frame has
+    another tangent). Inside a normal map the nested BSDF already has that frame."""
+    if ("alpha_v" not in m and "anisotropic" not in m) or in_map:
         return m
     if nested:
-        raise ValueError(f"{obj.where}: an anisotropic roughconductor inside a blendbsdf or "
+        raise ValueError(f"{obj.where}: an anisotropic {obj.type} inside a blendbsdf or "
                          "mask is not supported (its dp/du tangent frame)")  # fmt: skip
     return {"type": "normalmap", "normalmap": [0.5, 0.5, 1.0], "bsdf": m,
             "flip_invalid_normals": False, "use_shadowing_function": False}  # fmt: skip
@@ -764,8 +765,8 @@ def _conductor(p: _Params) -> dict:
 def _principled(p: _Params) -> dict:
     """``principled``: Mitsuba's parameter names and defaults (jaxgfx's are the same); every
     weight may be a texture; ``spec_trans`` 0 (or absent) is omitted (no transmission lobe, as
-    Mitsuba). ``anisotropic`` != 0 (the tangent frames of jaxgfx and Mitsuba differ) is refused,
-    as both ``specular`` and ``eta``."""
+    Mitsuba), as ``anisotropic`` 0 (or absent; else the caller puts the BSDF in the dp/du
+    frame, :func:`_dpdu_frame`). Both ``specular`` and ``eta`` are refused."""
     d = DEFAULTS
     m = {"type": "principled",
          "base_color": p.color("base_color", [d["principled.base_color"]] * 3, texture=True),
@@ -773,7 +774,7 @@ def _principled(p: _Params) -> dict:
     for k in ("metallic", "spec_tint", "sheen", "sheen_tint", "flatness", "clearcoat",
               "clearcoat_gloss"):  # fmt: skip
         m[k] = p.scalar_or_texture(k, 0.0)
-    _no_anisotropy(p)
+    _anisotropy(p, m)
     st = p.scalar_or_texture("spec_trans", 0.0)
     if st != 0.0:
         m["spec_trans"] = st
@@ -790,16 +791,18 @@ def _principled(p: _Params) -> dict:
     return m
 
 
-def _no_anisotropy(p: _Params) -> None:
-    if p.scalar_or_texture("anisotropic", 0.0) != 0.0:
-        raise p.err("anisotropic", "anisotropy is not supported (the tangent frames of jaxgfx "
-                                   "and Mitsuba differ); expected 0")  # fmt: skip
+def _anisotropy(p: _Params, m: dict) -> None:
+    """``anisotropic`` (a number or a texture) into ``m`` unless absent or 0 (Mitsuba's
+    ``get_flag``: the isotropic program)."""
+    a = p.scalar_or_texture("anisotropic", 0.0)
+    if a != 0.0:
+        m["anisotropic"] = a
 
 
 def _principledthin(p: _Params) -> dict:
     """``principledthin``: Mitsuba's names and defaults (jaxgfx's are the same); weights and
-    ``eta`` may be textures; ``spec_trans`` / ``diff_trans`` 0 (or absent) are omitted;
-    ``anisotropic`` != 0 refused as for ``principled``."""
+    ``eta`` may be textures; ``spec_trans`` / ``diff_trans`` / ``anisotropic`` 0 (or absent)
+    are omitted (``anisotropic`` as for ``principled``)."""
     d = DEFAULTS
     m = {"type": "principledthin",
          "base_color": p.color("base_color", [d["principled.base_color"]] * 3, texture=True),
@@ -807,7 +810,7 @@ def _principledthin(p: _Params) -> dict:
          "eta": p.scalar_or_texture("eta", d["principledthin.eta"])}  # fmt: skip
     for k in ("spec_tint", "sheen", "sheen_tint", "flatness"):
         m[k] = p.scalar_or_texture(k, 0.0)
-    _no_anisotropy(p)
+    _anisotropy(p, m)
     for k in ("spec_trans", "diff_trans"):
         v = p.scalar_or_texture(k, 0.0)
         if v != 0.0:
@@ -899,9 +902,9 @@ def _bsdf_dict(obj: _Obj, doc, *, nested=False, in_map=False) -> dict:
              "bsdf0": _bsdf_dict(kids[0], doc, nested=True),
              "bsdf1": _bsdf_dict(kids[1], doc, nested=True)}  # fmt: skip
     elif t == "principled":
-        m = _principled(p)
+        m = _dpdu_frame(_principled(p), obj, nested, in_map)
     elif t == "principledthin":
-        m = _principledthin(p)
+        m = _dpdu_frame(_principledthin(p), obj, nested, in_map)
     elif t == "mask":
         if nested:
             raise ValueError(f"{obj.where}: a mask nested in a blendbsdf or mask is not supported")
