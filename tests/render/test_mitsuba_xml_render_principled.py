@@ -39,7 +39,7 @@ def _run(data_dir, name):  # noqa: F811
     return c
 
 
-@pytest.mark.slow  # slow: 80 s measured here (1 OBJ sphere of 32 512 triangles; 48², 16 spp)
+@pytest.mark.slow  # slow: 68-80 s measured here (1 OBJ sphere of 32 512 triangles; 48², 16 spp)
 def test_textured_anisotropic_principled_sphere_matches_mitsubas_reference(data_dir):  # noqa: F811
     c = _run(data_dir, "texturedprincipled1")
     # measured: z_mean (-0.63, -0.81, -0.59), z RMS 0.76, all blocks |z| < 3.5, rel. RMSE 31.5 %
@@ -48,7 +48,7 @@ def test_textured_anisotropic_principled_sphere_matches_mitsubas_reference(data_
     assert c["z_rms"] < 1.5 and c["frac_3_5"] >= 0.97, c
 
 
-@pytest.mark.slow  # slow: 108 s measured here (the same sphere, spec_trans: refraction inside)
+@pytest.mark.slow  # slow: 77-108 s measured here (the same sphere, spec_trans: refraction inside)
 def test_textured_anisotropic_transmissive_principled_sphere_matches_mitsubas_reference(
     data_dir,  # noqa: F811
 ):
@@ -59,7 +59,7 @@ def test_textured_anisotropic_transmissive_principled_sphere_matches_mitsubas_re
     assert c["z_rms"] < 1.5 and c["frac_3_5"] >= 0.97, c
 
 
-@pytest.mark.slow  # slow: 122 s measured here (one rectangle; 48², 16 spp; loaded box)
+@pytest.mark.slow  # slow: 73-122 s measured here (one rectangle; 48², 16 spp; loaded box)
 def test_textured_anisotropic_principledthin_rectangle_matches_mitsubas_reference(data_dir):  # noqa: F811
     c = _run(data_dir, "texturedprincipledthin")
     # measured: z_mean (-0.04, 0.62, 1.29), z RMS 0.57, all blocks |z| < 3.5, rel. RMSE 2.9 %
