@@ -325,6 +325,18 @@ def test_xml_anisotropic_in_a_blend_is_refused_with_its_place(tmp_path):
         read_xml(str(p))
 
 
+@pytest.mark.parametrize("kind", ["principled", "principledthin"])
+def test_xml_anisotropic_out_of_range_is_refused_with_its_place(tmp_path, kind):
+    p = tmp_path / "c.xml"
+    p.write_text(f'<scene version="3.0.0"><sensor type="perspective"/><shape type="sphere">\n'
+                 f'<bsdf type="{kind}" id="q"><float name="anisotropic" value="1.5"/></bsdf>'
+                 '</shape></scene>')  # fmt: skip
+    with pytest.raises(ValueError, match=rf"c.xml:2: <bsdf type='{kind}' id='q'>: parameter "
+                                         r"'anisotropic': expected a value in \[0, 1\], got "
+                                         r"1.5"):  # fmt: skip
+        read_xml(str(p))
+
+
 def test_xml_writer_round_trips_anisotropic(tmp_path):
     """save_scene writes ``anisotropic`` back inside the normal map (a 1×1 raw EXR of
     (0.5, 0.5, 1)); reading it gives the same nested materials and the same texel."""

@@ -792,9 +792,11 @@ def _principled(p: _Params) -> dict:
 
 
 def _anisotropy(p: _Params, m: dict) -> None:
-    """``anisotropic`` (a number or a texture) into ``m`` unless absent or 0 (Mitsuba's
-    ``get_flag``: the isotropic program)."""
+    """``anisotropic`` (a number in [0, 1] or a texture) into ``m`` unless absent or 0
+    (Mitsuba's ``get_flag``: the isotropic program)."""
     a = p.scalar_or_texture("anisotropic", 0.0)
+    if not isinstance(a, dict) and not 0.0 <= a <= 1.0:
+        raise p.err("anisotropic", f"expected a value in [0, 1], got {a}")
     if a != 0.0:
         m["anisotropic"] = a
 
