@@ -377,7 +377,8 @@ class ProjectorLight(eqx.Module):
         uv, inside = self.uv(loc)
         e = lookup(self.irradiance, jnp.clip(uv, 0.0, 1.0)).astype(p.dtype)
         z = jnp.where(inside, loc[..., 2], 1.0)
-        k = math.pi * self.scale.astype(p.dtype) * dist / (z * z * z)
+        cos = jnp.where(inside, safe_div(z, dist), 1.0)  # cosine to the axis, in (0, 1]
+        k = math.pi * self.scale.astype(p.dtype) / (z * z * cos)
         li = jnp.where(inside[..., None], e * k[..., None], 0.0)
         return wi, dist, li
 
