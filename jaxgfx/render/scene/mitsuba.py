@@ -831,7 +831,7 @@ def _delta_light(ed, where, mi, base_dir=None, work_dir=None) -> dict:
         raise ValueError(msg if msg.startswith(where) else f"{where}.{msg}") from None
     # the description's direction normalised in float64 (the light object holds float32)
     out = _delta_light_dict(light, mi, direction=np.asarray(ed["direction"], np.float64))
-    if light.texture is not None:
+    if getattr(light, "texture", None) is not None:
         out["texture"] = _texture_dict(light.texture, f"{where}.texture", work_dir,
                                        desc=ed["texture"], base_dir=base_dir)  # fmt: skip
     return out
