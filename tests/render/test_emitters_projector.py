@@ -330,9 +330,7 @@ def test_parameters_and_ids():
 
 def test_scenes_without_projector_or_texture_trace_none_of_it(monkeypatch):
     """Model only what a scene needs: an untextured spot's program never traces a texture
-    lookup (its sample is the one before textures existed; the HLO text of such a render was
-    compared with main's: identical, see docs/render.md), and only a projector scene traces the
-    projector."""
+    lookup, and only a projector scene traces the projector."""
     from jaxgfx.render.emitters import SpotLight as S
 
     calls = []
