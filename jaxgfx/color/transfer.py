@@ -298,3 +298,4 @@ def aces_narkowicz2015(x):
     """
     a, b, c, d, e = ACES_NARKOWICZ2015
     return x * (a * x + b) / (x * (c * x + d) + e)
+

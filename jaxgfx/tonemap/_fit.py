@@ -128,7 +128,9 @@ def fit_tonemap(
         if n not in specs:
             raise ValueError(f"fit: {n!r} is not a parameter of {op_name!r} ({sorted(specs)})")
     init = dict(init or {})
-    params0 = {n: jnp.asarray(init.get(n, specs[n].initial), jnp.result_type(float)) for n in names}
+    params0 = {
+        n: jnp.asarray(init.get(n, specs[n].initial), jnp.result_type(float)) for n in names
+    }
     bounds = {n: _CONSTRAINT_BOUNDS.get(specs[n].constraint) for n in names}
     static = {**_static_options(op_name, x, names), **(fixed or {})}
     residual = _residual_fn(op_name, tuple(sorted(static.items())), loss, encode)

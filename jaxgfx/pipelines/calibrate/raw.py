@@ -46,9 +46,8 @@ class ChartResult(NamedTuple):
             "corners_xy_px": f(self.corners),
             "corner_order": list(CORNER_ORDER),
             "patch_names": list(colorchecker_reference().patch_names),
-            "camera_rgb": [
-                [None if not np.isfinite(v) else v for v in row] for row in f(self.camera_rgb)
-            ],  # fmt: skip
+            "camera_rgb": [[None if not np.isfinite(v) else v for v in row]
+                           for row in f(self.camera_rgb)],  # fmt: skip
             **self.calibration.to_dict(),
         }
 
@@ -113,7 +112,6 @@ def fit_chart_step(cfg: CalibrateConfig, camera_rgb, ct, raw) -> tuple[ChartResu
         cfg.colorspace, src, "chart", "the chart's fitted white-balance gains",
     )  # fmt: skip
     return result, ct_chart
-
 
 __all__: list[str] = []  # the job's stages (tests patch _fit_raw / merge_mosaics here)
 

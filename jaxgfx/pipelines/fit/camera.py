@@ -129,9 +129,8 @@ def free_init(start: CameraResponse, knots: int, channels: int) -> np.ndarray:
     z = np.linspace(0.0, 1.0, knots)
     z[0] = 0.25 / 255.0
     cam = Camera(start, jnp.ones(()), clip=False)
-    x = np.asarray(
-        cam.linearize(jnp.broadcast_to(jnp.asarray(z)[:, None], (knots, start.channels)))
-    )
+    x = np.asarray(cam.linearize(jnp.broadcast_to(jnp.asarray(z)[:, None], (knots,
+                                                                            start.channels))))
     g = np.log(np.maximum(x, 1e-30))
     g = g - g[-1:]
     if g.shape[1] != channels:
@@ -165,9 +164,8 @@ def photo_matrix(cam_p, cam_args):
     """The camera → output matrix of the fit, white balance included: ``M · diag(wb)``
     ``(3, 3)`` (the frozen entries without gradient)."""
     free = cam_args["free"]
-    m = white_preserving(
-        freeze(cam_p["color_matrix"], free["color_matrix"]), cam_args["white_preserving"]
-    )
+    m = white_preserving(freeze(cam_p["color_matrix"], free["color_matrix"]),
+                         cam_args["white_preserving"])
     wb = freeze(cam_p["white_balance"], free["white_balance"])
     return m * wb[None, :]
 
@@ -187,7 +185,8 @@ def fit_level_table(cam_p, cam_args, bits: int, tone: str | None = None):
     g_free = level_table(free_response(u), bits)
     table = w[0] * g_gamma + w[1] * fixed + w[2] * g_free
     if tone is not None:
-        table = tone_level_table(table, tone_curve(tone, cam_p["tone"], cam_args["free"]["tone"]))
+        table = tone_level_table(table, tone_curve(tone, cam_p["tone"],
+                                                   cam_args["free"]["tone"]))
     return table
 
 
@@ -197,15 +196,8 @@ def with_channels(resp: CameraResponse, channels: int) -> CameraResponse:
     if resp.channels == channels or resp.channels != 1:
         return resp
     params = jnp.broadcast_to(resp.params, resp.params.shape[:-1] + (channels,))
-    return CameraResponse(
-        params,
-        resp.kind,
-        resp.method,
-        resp.code_max,
-        resp.anchor,
-        resp.exposure_ratios,
-        resp.diagnostics,
-    )
+    return CameraResponse(params, resp.kind, resp.method, resp.code_max, resp.anchor,
+                          resp.exposure_ratios, resp.diagnostics)
 
 
 def response_of(kind: str, cam_p, fixed_response: CameraResponse | None):
@@ -213,7 +205,8 @@ def response_of(kind: str, cam_p, fixed_response: CameraResponse | None):
     ``kind`` in :data:`CURVE_KINDS`."""
     check_choice(kind, "kind", CURVE_KINDS)
     if kind == "gamma":
-        return CameraResponse.gamma(jnp.reshape(jnp.asarray(cam_p["gamma"]), (1,)), anchor="unit")
+        return CameraResponse.gamma(jnp.reshape(jnp.asarray(cam_p["gamma"]), (1,)),
+                                    anchor="unit")
     if kind == "free":
         return free_response(jnp.asarray(cam_p["curve"]))
     return fixed_response

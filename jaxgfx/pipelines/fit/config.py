@@ -103,7 +103,8 @@ class ResponseSpec:
         check_choice(self.model, "camera.response.model", RESPONSE_MODELS)
         if self.source is not None:
             if not isinstance(self.source, str) or not self.source:
-                raise ValueError(f"camera.response.from: expected a file path, got {self.source!r}")
+                raise ValueError(f"camera.response.from: expected a file path, got "
+                                 f"{self.source!r}")
             if self.fit:  # a loaded curve that is refined: the free-form table starts from it
                 object.__setattr__(self, "model", "table")
         if self.fit and self.model not in ("gamma", "table"):
@@ -189,9 +190,8 @@ def _matrix3(v, where):
     except (TypeError, ValueError):
         m = None
     if m is None or m.shape != (3, 3) or not np.all(np.isfinite(m)):
-        raise ValueError(
-            f"{where}: expected a 3x3 matrix of numbers (rows: output R, G, B), got {v!r}"
-        )
+        raise ValueError(f"{where}: expected a 3x3 matrix of numbers (rows: output R, G, B), "
+                         f"got {v!r}")
     if abs(np.linalg.det(m)) < 1e-9:
         raise ValueError(f"{where}: the matrix is singular (det {np.linalg.det(m):.3g})")
     return tuple(tuple(float(x) for x in row) for row in m)
@@ -217,9 +217,8 @@ class ColorMatrixSpec:
             raise ValueError(f"camera.color_matrix.fit: expected true or false, got {self.fit!r}")
         if self.source is not None:
             if not isinstance(self.source, str) or not self.source:
-                raise ValueError(
-                    f"camera.color_matrix.from: expected a camera profile path, got {self.source!r}"
-                )
+                raise ValueError(f"camera.color_matrix.from: expected a camera profile path, "
+                                 f"got {self.source!r}")
             if self.fit:
                 raise ValueError(
                     "camera.color_matrix: a profile's matrix includes its white-balance gains "
@@ -268,11 +267,8 @@ class ToneSpec:
         vals = {}
         for k, spec in specs.items():
             v = given.get(k, spec.initial)
-            if (
-                isinstance(v, bool)
-                or not isinstance(v, (int, float))
-                or v != v
-                or (spec.constraint == "positive" and not v > 0)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or v != v or (
+                spec.constraint == "positive" and not v > 0
             ):
                 what = "a number > 0" if spec.constraint == "positive" else "a number"
                 raise ValueError(f"camera.tonemap.{k}: expected {what}, got {v!r}")

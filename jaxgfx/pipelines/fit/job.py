@@ -94,14 +94,11 @@ def _render_views(cfg: FitConfig, prep: Prepared, scene, key, spp) -> np.ndarray
 
     if prep.views is None:
         return _render(cfg, scene, key, spp)[None]
-    return np.stack(
-        [
-            _render(
-                cfg, eqx.tree_at(lambda s: s.camera, scene, cam), jax.random.fold_in(key, v), spp
-            )
-            for v, cam in enumerate(prep.views)
-        ]
-    )
+    return np.stack([
+        _render(cfg, eqx.tree_at(lambda s: s.camera, scene, cam), jax.random.fold_in(key, v),
+                spp)
+        for v, cam in enumerate(prep.views)
+    ])
 
 
 def _target_camera(tc: dict, exposure: float, channels: int):
@@ -129,7 +126,8 @@ def _target_camera(tc: dict, exposure: float, channels: int):
 
         t = dict(tc["tonemap"])
         spec = ToneSpec(t.pop("op"), t)
-        tone = ToneCurve(spec.op, {k: jnp.asarray(v, jnp.float32) for k, v in spec.params.items()})
+        tone = ToneCurve(spec.op, {k: jnp.asarray(v, jnp.float32)
+                                   for k, v in spec.params.items()})
     m = tc.get("color_matrix")
     return Camera(
         resp,
@@ -155,12 +153,10 @@ def _target(cfg: FitConfig, prep: Prepared, key=None) -> tuple[Target, np.ndarra
         pixels = np.stack([t.pixels for t in ts])
         mask = None
         if any(t.mask is not None for t in ts):
-            mask = np.stack(
-                [
-                    np.ones(t.pixels.shape[:2] + (1,), np.float32) if t.mask is None else t.mask
-                    for t in ts
-                ]
-            )
+            mask = np.stack([
+                np.ones(t.pixels.shape[:2] + (1,), np.float32) if t.mask is None else t.mask
+                for t in ts
+            ])
         return Target(pixels, grey=ts[0].grey, mask=mask, bits=ts[0].bits), None
     t = prep.target_spec
     tscene = build_scene(prep.scene, list(prep.truth), prep.truth)
@@ -257,9 +253,8 @@ def _initial(cfg: FitConfig, prep: Prepared):
             bounds["scene"][p] = prep.bounds[p]
     cam_args = None
     if weights:
-        cam_args = {
-            "priors": {p: {k: jnp.asarray(w) for k, w in d.items()} for p, d in weights.items()}
-        }
+        cam_args = {"priors": {p: {k: jnp.asarray(w) for k, w in d.items()}
+                               for p, d in weights.items()}}
     if cam is not None:
         spec = cam.response
         kind = spec.curve_kind
@@ -275,7 +270,8 @@ def _initial(cfg: FitConfig, prep: Prepared):
                 start = CameraResponse.gamma(float(spec.init), anchor="unit")
             curve0 = free_init(start, spec.knots, spec.channels)
         else:  # unused: a small placeholder of the default shape
-            curve0 = free_init(CameraResponse.gamma(2.2, anchor="unit"), spec.knots, spec.channels)
+            curve0 = free_init(CameraResponse.gamma(2.2, anchor="unit"), spec.knots,
+                               spec.channels)
         gamma0 = float(spec.init) if kind == "gamma" else 2.2
         gb = (spec.min, spec.max) if kind == "gamma" else (0.2, 6.0)
         params["camera"] = {
@@ -327,27 +323,24 @@ def _initial(cfg: FitConfig, prep: Prepared):
         if cam.has_matrix:
             params["camera"]["color_matrix"] = jnp.asarray(prep.color_matrix, jnp.float32)
             bounds["camera"]["color_matrix"] = None
-            cam_args["free"]["color_matrix"] = jnp.asarray(float(cam.color_matrix.fit), jnp.float32)
-            cam_args["white_preserving"] = jnp.asarray(float(cam.color_matrix.fit), jnp.float32)
+            cam_args["free"]["color_matrix"] = jnp.asarray(float(cam.color_matrix.fit),
+                                                           jnp.float32)
+            cam_args["white_preserving"] = jnp.asarray(float(cam.color_matrix.fit),
+                                                       jnp.float32)
         if cam.tonemap is not None:
             tm = cam.tonemap
-            params["camera"]["tone"] = {
-                k: jnp.asarray(v, jnp.float32) for k, v in tm.params.items()
-            }
+            params["camera"]["tone"] = {k: jnp.asarray(v, jnp.float32)
+                                        for k, v in tm.params.items()}
             bounds["camera"]["tone"] = {
                 k: (1e-3, None) if tm.constraint(k) == "positive" else None for k in tm.params
             }
-            cam_args["free"]["tone"] = {
-                k: jnp.asarray(float(k in tm.fit), jnp.float32) for k in tm.params
-            }
+            cam_args["free"]["tone"] = {k: jnp.asarray(float(k in tm.fit), jnp.float32)
+                                        for k in tm.params}
     if prep.views is not None:
         from .loss import stack_cameras
 
-        cam_args = {
-            **(cam_args or {}),
-            "views": stack_cameras(prep.views),
-            "view_of": jnp.asarray(prep.view_of, jnp.int32),
-        }
+        cam_args = {**(cam_args or {}), "views": stack_cameras(prep.views),
+                    "view_of": jnp.asarray(prep.view_of, jnp.int32)}
     return params, bounds, cam_args
 
 
@@ -393,12 +386,10 @@ def _unscale(tree: dict, scaled) -> dict:
 def _fitted_camera_names(cam) -> list:
     if cam is None:
         return []
-    names = [
-        ("exposure", cam.exposure.fit),
-        ("gamma", cam.response.fit and cam.response.curve_kind == "gamma"),
-        ("photo_exposure", cam.exposure.per_photo),
-        ("white_balance", cam.white_balance.fit),
-    ]
+    names = [("exposure", cam.exposure.fit), ("gamma", cam.response.fit and
+                                              cam.response.curve_kind == "gamma"),
+             ("photo_exposure", cam.exposure.per_photo), ("white_balance",
+                                                          cam.white_balance.fit)]
     return [n for n, f in names if f]
 
 
@@ -439,18 +430,13 @@ def _result(cfg: FitConfig, prep: Prepared, res, target_seconds, scene_params) -
         if cam.has_matrix:
             from .camera import white_preserving
 
-            camera_out["color_matrix"] = plain(
-                white_preserving(
-                    np.asarray(cp["color_matrix"], np.float64), float(cam.color_matrix.fit)
-                )
-            )
+            camera_out["color_matrix"] = plain(white_preserving(
+                np.asarray(cp["color_matrix"], np.float64), float(cam.color_matrix.fit)))
             if cam.color_matrix.fit:
                 camera_out["fitted"].append("color_matrix")
         if cam.tonemap is not None:
-            camera_out["tonemap"] = {
-                "op": cam.tonemap.op,
-                **{k: plain(v) for k, v in cp["tone"].items()},
-            }
+            camera_out["tonemap"] = {"op": cam.tonemap.op,
+                                     **{k: plain(v) for k, v in cp["tone"].items()}}
             camera_out["fitted"] += [f"tonemap.{k}" for k in cam.tonemap.fit]
     out = {
         "params": fitted,
@@ -509,22 +495,14 @@ def fitted_camera(cfg: FitConfig, prep: Prepared, cam_p, photo: int = 0, bits: i
     if cam.has_matrix:
         from .camera import white_preserving
 
-        m = white_preserving(
-            jnp.asarray(cam_p["color_matrix"], jnp.float32), float(cam.color_matrix.fit)
-        )
+        m = white_preserving(jnp.asarray(cam_p["color_matrix"], jnp.float32),
+                             float(cam.color_matrix.fit))
     if cam.tonemap is not None:
         from .camera import tone_curve
 
         tone = tone_curve(cam.tonemap.op, cam_p["tone"])
-    return Camera(
-        resp,
-        jnp.asarray(e, jnp.float32),
-        white_balance=wb,
-        bits=bits,
-        clip=True,
-        color_matrix=m,
-        tone=tone,
-    )
+    return Camera(resp, jnp.asarray(e, jnp.float32), white_balance=wb, bits=bits, clip=True,
+                  color_matrix=m, tone=tone)
 
 
 def _shown_photos(prep: Prepared) -> list:
@@ -550,9 +528,8 @@ def tile_views(images, gap: int = 2):
     return np.concatenate(cols, axis=1)
 
 
-def _previews(
-    cfg: FitConfig, prep: Prepared, target: Target, params, res, key, scene_after, renders=None
-):
+def _previews(cfg: FitConfig, prep: Prepared, target: Target, params, res, key, scene_after,
+              renders=None):
     """(before, after, target) preview images, every view side by side: linear fits as sRGB
     scaled to the target's 99.5th percentile, LDR fits through the initial / fitted camera at
     8 bits (the middle photo of each view's bracket). ``renders``: the ``(V, H, W, 3)``
@@ -568,12 +545,10 @@ def _previews(
             imgs = _render_views(cfg, prep, scene, key, show_spp)
         if cam is None:
             return imgs
-        return np.stack(
-            [
-                np.asarray(fitted_camera(cfg, prep, cam_params, photo=j).capture(imgs[v])) / 255.0
-                for v, j in enumerate(shown)
-            ]
-        )
+        return np.stack([
+            np.asarray(fitted_camera(cfg, prep, cam_params, photo=j).capture(imgs[v])) / 255.0
+            for v, j in enumerate(shown)
+        ])
 
     before = show(prep.init, params["camera"], renders.get("before"))
     after = show(scene_after, res.params["camera"], renders.get("after"))
@@ -581,11 +556,8 @@ def _previews(
     pixels = pixels[shown]
     if cam is None:
         scale = 1.0 / max(float(np.percentile(pixels, 99.5)), 1e-6)
-        return (
-            tile_views(srgb8(before, scale)),
-            tile_views(srgb8(after, scale)),
-            tile_views(srgb8(pixels, scale)),
-        )
+        return (tile_views(srgb8(before, scale)), tile_views(srgb8(after, scale)),
+                tile_views(srgb8(pixels, scale)))
     return tile_views(before), tile_views(after), tile_views(pixels / (2**target.bits - 1))
 
 
@@ -604,15 +576,13 @@ def view_losses(cfg: FitConfig, prep: Prepared, target: Target, renders, cam_p, 
         imgs = imgs[jnp.asarray(view_of)]
     else:
         imgs = imgs[0]
-    table = (
-        fit_level_table(cam_p, cam_args, cfg.camera.bits, cfg.camera.tone_op) if prep.ldr else None
-    )
+    table = (fit_level_table(cam_p, cam_args, cfg.camera.bits, cfg.camera.tone_op)
+             if prep.ldr else None)
     pixels = jnp.asarray(target.pixels)
     masked = target.mask is not None
     t = (pixels, jnp.asarray(target.mask)) if masked else pixels
-    terms = np.asarray(
-        photo_losses(cfg, prep.ldr, imgs, t, cam_p, cam_args, table, masked), np.float64
-    )
+    terms = np.asarray(photo_losses(cfg, prep.ldr, imgs, t, cam_p, cam_args, table, masked),
+                       np.float64)
     return np.bincount(view_of[: terms.size], weights=terms, minlength=prep.n_views)
 
 
@@ -634,13 +604,8 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
         from .camera import fit_level_table
 
         bits = cfg.camera.bits
-        img = _render_views(
-            cfg,
-            prep,
-            build_scene(prep.scene, prep.paths, prep.init),
-            k_show,
-            max(cfg.render.spp, 16),
-        )
+        img = _render_views(cfg, prep, build_scene(prep.scene, prep.paths, prep.init), k_show,
+                            max(cfg.render.spp, 16))
         img = img[prep.view_of] if prep.views is not None else img[0]
         if target.grey:
             from .loss import to_target_channels
@@ -657,9 +622,8 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
     priors, _, _ = _prior_specs(cfg, prep)
     scaled = _scaled_intervals(cfg, prep)
     masked = target.mask is not None
-    loss = cached_loss(
-        cfg, prep.paths, prep.ldr, target.grey, masked, priors, scaled, views=prep.views is not None
-    )
+    loss = cached_loss(cfg, prep.paths, prep.ldr, target.grey, masked, priors, scaled,
+                       views=prep.views is not None)
     pixels = jnp.asarray(target.pixels)
     target_arg = (pixels, jnp.asarray(target.mask)) if masked else pixels
     o = cfg.optimizer
@@ -684,44 +648,32 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
     if prep.views is not None:  # each view's loss before and after (one render per view)
         spp = max(cfg.render.spp, 64)
         renders = {
-            "before": _render_views(
-                cfg, prep, build_scene(prep.scene, prep.paths, prep.init), k_show, spp
-            ),
-            "after": _render_views(
-                cfg, prep, build_scene(prep.scene, prep.paths, scene_after), k_show, spp
-            ),
+            "before": _render_views(cfg, prep, build_scene(prep.scene, prep.paths, prep.init),
+                                    k_show, spp),
+            "after": _render_views(cfg, prep, build_scene(prep.scene, prep.paths, scene_after),
+                                   k_show, spp),
         }
         out["views"] = {
             "poses": prep.view_poses,
             "photo_view": [int(v) for v in prep.view_of],
-            "loss_before": view_losses(
-                cfg, prep, target, renders["before"], params["camera"], cam_args
-            ).tolist(),
-            "loss_after": view_losses(
-                cfg, prep, target, renders["after"], res.params["camera"], cam_args
-            ).tolist(),
+            "loss_before": view_losses(cfg, prep, target, renders["before"],
+                                       params["camera"], cam_args).tolist(),
+            "loss_after": view_losses(cfg, prep, target, renders["after"],
+                                      res.params["camera"], cam_args).tolist(),
             "loss_spp": spp,
         }
 
     if out_dir is not None:
-        before, after, tgt = _previews(cfg, prep, target, params, res, k_show, scene_after, renders)
+        before, after, tgt = _previews(cfg, prep, target, params, res, k_show, scene_after,
+                                       renders)
         names = [("scene", p) for p in prep.paths]
-        names += [
-            ("camera", c)
-            for c in _fitted_camera_names(cfg.camera)
-            if np.size(res.params["camera"][c]) <= 16
-        ]
+        names += [("camera", c) for c in _fitted_camera_names(cfg.camera)
+                  if np.size(res.params["camera"][c]) <= 16]
         truth_named = dict(prep.truth or {})
         if prep.ldr and prep.truth is not None:
             truth_named.update({k: out["truth_camera"][k] for k in ("exposure", "gamma")})
         write_outputs(
-            out_dir,
-            out,
-            res,
-            before=before,
-            after=after,
-            target=tgt,
-            names=names,
+            out_dir, out, res, before=before, after=after, target=tgt, names=names,
             truth=truth_named,
         )
         if cfg.camera is not None:
@@ -731,8 +683,7 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
 
             save_response(
                 os.path.join(out_dir, "response.json"),
-                response_of(
-                    cfg.camera.response.curve_kind, res.params["camera"], prep.fixed_response
-                ),
+                response_of(cfg.camera.response.curve_kind, res.params["camera"],
+                            prep.fixed_response),
             )
     return out

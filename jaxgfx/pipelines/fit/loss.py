@@ -100,18 +100,8 @@ def chroma_subsampled(img, weight, block):
 
 
 def censored_linear_loss(
-    img,
-    codes,
-    table,
-    gain,
-    code_max,
-    mask=None,
-    clip_code=None,
-    unmeasured_only=None,
-    *,
-    per_photo: bool = False,
-    view_of=None,
-    chroma_block=None,
+    img, codes, table, gain, code_max, mask=None, clip_code=None, unmeasured_only=None, *,
+    per_photo: bool = False, view_of=None, chroma_block=None,
 ):
     """Censored L2 in linear radiance, summed over photos (``per_photo``: each photo's term,
     ``(N,)``).
@@ -160,9 +150,8 @@ def censored_linear_loss(
         table = table.at[c].set(g_k)
         q = jnp.where(q >= k, c, q)
     t = jnp.exp(table[q, jnp.arange(nch)]) / gain[:, None, None, :]
-    e = jnp.where(
-        q >= c, jnp.maximum(t - img, 0.0), jnp.where(q <= 0, jnp.maximum(img - t, 0.0), img - t)
-    )
+    e = jnp.where(q >= c, jnp.maximum(t - img, 0.0),
+                  jnp.where(q <= 0, jnp.maximum(img - t, 0.0), img - t))
     if unmeasured_only is not None:
         censored = (q >= c) | (q <= 0)
         if view_of is None:
@@ -207,10 +196,12 @@ def code_space_loss(img, codes, table, gain, code_max, mask=None, *, per_photo: 
     terms = []
     for j in range(codes.shape[0]):
         lx = jnp.log(jnp.maximum(gain[j] * (img[j] if img.ndim == 4 else img), 1e-30))
-        v = jnp.stack([jnp.interp(lx[..., k], table[:, k], zl) for k in range(nch)], axis=-1)
-        terms.append(
-            censored_l2_loss(v, codes[j], code_max=code_max, mask=None if mask is None else mask[j])
+        v = jnp.stack(
+            [jnp.interp(lx[..., k], table[:, k], zl) for k in range(nch)], axis=-1
         )
+        terms.append(censored_l2_loss(
+            v, codes[j], code_max=code_max, mask=None if mask is None else mask[j]
+        ))
     terms = jnp.stack(terms)
     return terms if per_photo else jnp.sum(terms)
 
@@ -274,7 +265,9 @@ def render_views(scene, cameras, key, render_fn, batching: str = VIEW_BATCH):
 
     if batching == "vmap":
         return jax.vmap(one)(cameras, keys)
-    return jnp.stack([one(jax.tree.map(lambda x, v=v: x[v], cameras), keys[v]) for v in range(n)])
+    return jnp.stack([
+        one(jax.tree.map(lambda x, v=v: x[v], cameras), keys[v]) for v in range(n)
+    ])
 
 
 def stack_cameras(cameras):
@@ -283,9 +276,8 @@ def stack_cameras(cameras):
     return jax.tree.map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *cameras)
 
 
-def photo_losses(
-    cfg: FitConfig, ldr: bool, img, target, p_camera, cam_args, table, masked: bool = False
-):
+def photo_losses(cfg: FitConfig, ldr: bool, img, target, p_camera, cam_args, table,
+                 masked: bool = False):
     """Each photo's loss term ``(N,)``: ``img`` the render ``(H, W, C)`` (one view) or each
     photo's render ``(N, H, W, C)``, ``target`` the pixels ``(N, H, W, C)`` (or ``(pixels,
     mask)`` when ``masked``); LDR photos through the camera (``p_camera``, ``cam_args``, level
@@ -295,21 +287,13 @@ def photo_losses(
     pixels, mask = target if masked else (target, None)
     if not ldr:
         if pixels.ndim == 3:
-            return image_loss(img, pixels, kind=cfg.loss.kind, space=cfg.loss.space, mask=mask)[
-                None
-            ]
-        return jnp.stack(
-            [
-                image_loss(
-                    img[j] if img.ndim == 4 else img,
-                    pixels[j],
-                    kind=cfg.loss.kind,
-                    space=cfg.loss.space,
-                    mask=None if mask is None else mask[j],
-                )
-                for j in range(pixels.shape[0])
-            ]
-        )
+            return image_loss(img, pixels, kind=cfg.loss.kind, space=cfg.loss.space,
+                              mask=mask)[None]
+        return jnp.stack([
+            image_loss(img[j] if img.ndim == 4 else img, pixels[j], kind=cfg.loss.kind,
+                       space=cfg.loss.space, mask=None if mask is None else mask[j])
+            for j in range(pixels.shape[0])
+        ])
     bits = cfg.camera.bits
     code_max = float(2**bits - 1)
     if cfg.camera.has_matrix:
@@ -321,31 +305,15 @@ def photo_losses(
         return code_space_loss(img, pixels, table, gain, code_max, mask, per_photo=True)
     from .config import JPEG_CHROMA
 
-    return censored_linear_loss(
-        img,
-        pixels,
-        table,
-        gain,
-        code_max,
-        mask,
-        cam_args.get("clip_code"),
-        cam_args.get("unmeasured"),
-        per_photo=True,
-        view_of=cam_args.get("view_of"),
-        chroma_block=JPEG_CHROMA[cfg.loss.jpeg_chroma],
-    )
+    return censored_linear_loss(img, pixels, table, gain, code_max, mask,
+                                cam_args.get("clip_code"), cam_args.get("unmeasured"),
+                                per_photo=True, view_of=cam_args.get("view_of"),
+                                chroma_block=JPEG_CHROMA[cfg.loss.jpeg_chroma])
 
 
 def make_loss(
-    cfg: FitConfig,
-    paths,
-    ldr: bool,
-    grey: bool = False,
-    masked: bool = False,
-    priors=(),
-    scaled=(),
-    views: bool = False,
-    batching: str | None = None,
+    cfg: FitConfig, paths, ldr: bool, grey: bool = False, masked: bool = False, priors=(),
+    scaled=(), views: bool = False, batching: str | None = None,
 ):
     """The fit's loss ``loss(params, key, (scene, target, camera_args))`` for
     :func:`jaxgfx.optim.fit`.
@@ -398,15 +366,15 @@ def make_loss(
         return imgs[cam_args["view_of"]]  # each photo's view
 
     def per_image_loss(img, target, p, cam_args, table):
-        return jnp.sum(photo_losses(cfg, ldr, img, target, p["camera"], cam_args, table, masked))
+        return jnp.sum(photo_losses(cfg, ldr, img, target, p["camera"], cam_args, table,
+                                    masked))
 
     def loss(p, key, args):
         scene, target, cam_args = args
         table = fit_level_table(p["camera"], cam_args, bits, tone_op) if ldr else None
         if r.estimator == "correlated":
-            value = per_image_loss(
-                image(scene, p, key, r.spp, cam_args), target, p, cam_args, table
-            )
+            value = per_image_loss(image(scene, p, key, r.spp, cam_args), target, p, cam_args,
+                                   table)
         else:
             value = decorrelated_loss(
                 lambda k: image(scene, p, k, r.spp // 2, cam_args),
@@ -427,38 +395,18 @@ _LOSS_CACHE: dict = {}
 
 
 def cached_loss(
-    cfg: FitConfig,
-    paths,
-    ldr: bool,
-    grey: bool = False,
-    masked: bool = False,
-    priors=(),
-    scaled=(),
-    views: bool = False,
-    batching: str | None = None,
+    cfg: FitConfig, paths, ldr: bool, grey: bool = False, masked: bool = False, priors=(),
+    scaled=(), views: bool = False, batching: str | None = None,
 ):
     """One loss object (hence one compiled fit step) per render / loss configuration and
     parameter set; camera choices and prior weights are arguments, not part of the
     program."""
-    cam = (
-        (cfg.camera.bits, cfg.camera.space, cfg.camera.has_matrix, cfg.camera.tone_op)
-        if cfg.camera
-        else None
-    )
+    cam = ((cfg.camera.bits, cfg.camera.space, cfg.camera.has_matrix, cfg.camera.tone_op)
+           if cfg.camera else None)
     batching = VIEW_BATCH if batching is None else batching
-    key = (
-        cfg.render,
-        cfg.loss,
-        cam,
-        tuple(paths),
-        ldr,
-        grey,
-        masked,
-        tuple(priors),
-        tuple(scaled),
-        views,
-        batching if views else None,
-    )
+    key = (cfg.render, cfg.loss, cam, tuple(paths), ldr, grey, masked, tuple(priors),
+           tuple(scaled), views, batching if views else None)
     if key not in _LOSS_CACHE:
-        _LOSS_CACHE[key] = make_loss(cfg, paths, ldr, grey, masked, priors, scaled, views, batching)
+        _LOSS_CACHE[key] = make_loss(cfg, paths, ldr, grey, masked, priors, scaled, views,
+                                     batching)
     return _LOSS_CACHE[key]

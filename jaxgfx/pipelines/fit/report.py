@@ -11,12 +11,7 @@ import numpy as np
 __all__ = ["OUTPUT_NAMES", "plain", "srgb8", "plot_curves", "write_outputs"]
 
 OUTPUT_NAMES = (
-    "result.json",
-    "curves.png",
-    "before.png",
-    "after.png",
-    "target.png",
-    "response.json",
+    "result.json", "curves.png", "before.png", "after.png", "target.png", "response.json",
 )
 """Every file a fit may write (``response.json``: the fitted camera response of an LDR fit,
 :func:`jaxgfx.hdr.save_response`)."""

@@ -37,16 +37,8 @@ __all__ = [
 ]
 
 TARGET_CAMERA_KEYS = (
-    "response",
-    "gamma",
-    "exposure",
-    "exposures",
-    "bits",
-    "white_balance",
-    "noise",
-    "jpeg",
-    "color_matrix",
-    "tonemap",
+    "response", "gamma", "exposure", "exposures", "bits", "white_balance", "noise", "jpeg",
+    "color_matrix", "tonemap",
 )
 SYNTHETIC_TARGET_KEYS = ("synthetic", "spp", "seed", "camera", "views")
 PHOTO_KEYS = ("file", "exposure", "view")
@@ -113,7 +105,8 @@ def resolve_path(path: str, base: str | None, what: str) -> str:
         if os.path.exists(c):
             return c
     raise FileNotFoundError(
-        f"{what}: file not found: {path} (looked in {os.path.abspath(base)} and {os.getcwd()})"
+        f"{what}: file not found: {path} (looked in {os.path.abspath(base)} and "
+        f"{os.getcwd()})"
     )
 
 
@@ -192,7 +185,8 @@ def build_view(scene, pose, where: str):
 def _view_key(cam) -> tuple:
     import jax
 
-    return tuple(tuple(np.asarray(x, np.float64).ravel().tolist()) for x in jax.tree.leaves(cam))
+    return tuple(tuple(np.asarray(x, np.float64).ravel().tolist())
+                 for x in jax.tree.leaves(cam))
 
 
 def _views(scene, poses):
@@ -318,7 +312,8 @@ def _synthetic_spec(t: dict, scene):
     if unknown or "synthetic" not in t:
         raise ValueError(
             "target: expected a file path or {synthetic: {path: value}, spp, seed, camera, "
-            "views}" + (f"; unknown keys {sorted(unknown)}" if unknown else "")
+            "views}"
+            + (f"; unknown keys {sorted(unknown)}" if unknown else "")
         )
     for key in ("spp", "seed"):
         if key in t:
@@ -350,11 +345,8 @@ def _synthetic_spec(t: dict, scene):
 
 
 def _number(v, where, *, positive=True):
-    if (
-        isinstance(v, bool)
-        or not isinstance(v, (int, float))
-        or not np.isfinite(v)
-        or (positive and not v > 0)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or (
+        positive and not v > 0
     ):
         raise ValueError(f"{where}: expected a positive number, got {v!r}")
     return float(v)
@@ -376,11 +368,8 @@ def check_synthetic_camera(cam) -> None:
         )
     from jaxgfx._checks import check_choice
 
-    check_choice(
-        cam.get("response", "gamma"),
-        "target.camera.response",
-        tuple(m for m in RESPONSE_MODELS if m != "table"),
-    )
+    check_choice(cam.get("response", "gamma"), "target.camera.response",
+                 tuple(m for m in RESPONSE_MODELS if m != "table"))
     if cam.get("bits", 8) not in (8, 16):
         raise ValueError(f"target.camera.bits: expected 8 or 16, got {cam.get('bits')!r}")
     for key in ("gamma", "exposure"):
@@ -400,7 +389,9 @@ def check_synthetic_camera(cam) -> None:
     noise = cam.get("noise")
     if noise is not None:
         if not isinstance(noise, dict) or set(noise) - {"gain", "read_sigma"}:
-            raise ValueError(f"target.camera.noise: expected {{gain, read_sigma}}, got {noise!r}")
+            raise ValueError(
+                f"target.camera.noise: expected {{gain, read_sigma}}, got {noise!r}"
+            )
         for k, v in noise.items():
             _number(v, f"target.camera.noise.{k}", positive=False)
             if v < 0:
@@ -418,9 +409,8 @@ def check_synthetic_camera(cam) -> None:
     tm = cam.get("tonemap")
     if tm is not None:
         if not isinstance(tm, dict) or "op" not in tm or "fit" in tm:
-            raise ValueError(
-                f"target.camera.tonemap: expected {{op, <parameter>: value}}, got {tm!r}"
-            )
+            raise ValueError(f"target.camera.tonemap: expected {{op, <parameter>: value}}, got "
+                             f"{tm!r}")
         try:
             ToneSpec(tm["op"], {k: v for k, v in tm.items() if k != "op"})
         except ValueError as e:
@@ -454,11 +444,8 @@ def _photo_entries(target) -> list:
             raise ValueError(
                 f"{where}: expected a photo path or {{file: PATH, exposure: SECONDS | exif, "
                 "view: {origin, target, up, fov}}"
-                + (
-                    " (a synthetic target cannot be one of a list)"
-                    if isinstance(item, dict) and "synthetic" in item
-                    else ""
-                )
+                + (" (a synthetic target cannot be one of a list)"
+                   if isinstance(item, dict) and "synthetic" in item else "")
             )
         if not isinstance(out[-1][1], str) or not out[-1][1]:
             raise ValueError(f"{where}.file: expected a file path, got {out[-1][1]!r}")
@@ -575,7 +562,8 @@ def prepare_fit(cfg: FitConfig, *, base_dir: str | None = None) -> Prepared:
     else:
         entries = _photo_entries(cfg.target)
         if any(e[3] is not None for e in entries):
-            views, view_of, view_poses = _views(scene, [(e[0] + ".view", e[3]) for e in entries])
+            views, view_of, view_poses = _views(scene, [(e[0] + ".view", e[3])
+                                                        for e in entries])
         per_view = np.bincount(view_of) if views is not None else [len(entries)]
         targets, seconds = [], []
         for i, (where, given_path, given_exposure, _) in enumerate(entries):
@@ -647,22 +635,9 @@ def prepare_fit(cfg: FitConfig, *, base_dir: str | None = None) -> Prepared:
             raise ValueError("camera.color_matrix: a grey target has no colour to mix")
         matrix = color_matrix_of(cfg.camera.color_matrix, base_dir)
     return Prepared(
-        scene,
-        paths,
-        init,
-        bounds,
-        truth,
-        target_spec,
-        ldr,
-        targets[0] if targets else None,
-        targets,
-        exposures,
-        fixed,
-        tuple(textures),
-        views,
-        view_of,
-        view_poses,
-        matrix,
+        scene, paths, init, bounds, truth, target_spec, ldr,
+        targets[0] if targets else None, targets, exposures, fixed, tuple(textures),
+        views, view_of, view_poses, matrix,
     )
 
 
@@ -676,8 +651,6 @@ def color_matrix_of(spec, base: str | None) -> np.ndarray:
     path = resolve_path(spec.source, base, "camera.color_matrix.from")
     prof = hdr.load_camera_profile(path)
     if prof.matrix is None:
-        raise ValueError(
-            f"camera.color_matrix.from: {path}: the camera profile has no colour "
-            "matrix (a RAW calibration writes one)"
-        )
+        raise ValueError(f"camera.color_matrix.from: {path}: the camera profile has no colour "
+                         "matrix (a RAW calibration writes one)")
     return np.asarray(prof.matrix, np.float64)

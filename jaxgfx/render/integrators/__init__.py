@@ -54,9 +54,8 @@ def make_integrator(name: str, **options) -> Integrator:
     )
     if bad:
         detail = "; ".join(
-            f"{k}: the {name!r} integrator has {k} = {fixed[k]}"
-            if k in fixed
-            else f"{k}: not an option of the {name!r} integrator"
+            f"{k}: the {name!r} integrator has {k} = {fixed[k]}" if k in fixed else
+            f"{k}: not an option of the {name!r} integrator"
             for k in bad
         )
         takes = sorted(fields) or ["none"]
