@@ -334,7 +334,9 @@ class ProjectorLight(eqx.Module):
             raise ValueError(f"fov_axis: expected 'x' or 'y', got {fov_axis!r}")
         if fov_axis == "y":  # tan(fov_x / 2) = aspect tan(fov_y / 2)
             h, w = tex.image.shape[:2]
-            f = 2.0 * jnp.rad2deg(jnp.arctan(w / h * jnp.tan(jnp.deg2rad(f) / 2.0)))
+            # (host arithmetic: ``f`` is concrete here, checked above)
+            f = as_float_array(2.0 * math.degrees(math.atan(w / h * math.tan(
+                math.radians(float(f)) / 2.0))), "fov")  # fmt: skip
         return cls(p, frame, tex, s, f)
 
     @property

@@ -16,8 +16,7 @@ from jaxgfx.render.bsdf.texture import Texture
 from jaxgfx.render.emitters import ProjectorLight, SpotLight
 from jaxgfx.render.integrators.path import path_radiance
 from jaxgfx.render.scene import load_scene
-from jaxgfx.testing import check_grads_fd
-from tests.render._scenes import camera, rectangle
+from tests.render._scenes import camera, rectangle, sphere
 
 RHO = 0.6
 H = 2.0  # the projector's height above the plane y = 0
@@ -25,10 +24,14 @@ H = 2.0  # the projector's height above the plane y = 0
 XZ = np.array([[0.0, 0.0], [0.7, 0.3], [-1.2, 0.9], [1.9, -1.1], [2.6, 0.0], [0.0, -2.5]])
 
 
-def _plane_desc():
+def _plane_desc(plane=False):
+    """The diffuse plane y = 0 (``plane``; what the path-integrator test renders) or, for the
+    tests that only load scenes or sample lights, a sphere below it (the rectangle's eager
+    construction costs ~2.5 s of small XLA compilations here, the sphere's ~0.4 s)."""
+    shape = rectangle(size=(12, 12), material="m") if plane else sphere((0, -3, 0), 1.0, "m")
     return {
         "camera": camera([0, 3, 0.01], [0, 0, 0], fov=40, width=2),
-        "shapes": [rectangle(size=(12, 12), material="m")],
+        "shapes": [shape],
         "materials": {"m": {"type": "diffuse", "reflectance": RHO}},
     }
 
@@ -60,16 +63,83 @@ def _radiance(scene, o, d, u):
     return path_radiance(scene, o, d, u, max_depth=2)  # emitted + direct light
 
 
-def test_projected_constant_is_constant_on_a_facing_plane():
-    """Mitsuba's projector: irradiance pi * scale * E / z^2 on a plane facing it at distance
-    z (the 1 / cos^3 of the frustum cancels the point light's cos^3 falloff), so a diffuse
-    plane's radiance is rho * scale * E / z^2 inside the frustum (|x|, |z| < H tan 45) and 0
-    outside, through the path integrator under jit."""
-    L = np.asarray(_radiance(_plane_scene(_projector()), *_rays(jnp.float32)))
+def _two_lights_desc(plane=False):
+    """A projector (red, green) and a textured spot (blue) at the same place above y = 0."""
+    spot = {
+        "type": "spot",
+        "position": [0, H, 0],
+        "direction": [0, -1, 0],
+        "intensity": [0.0, 0.0, 2.0],
+        "cutoff_angle": 40.0,
+        "beam_width": 20.0,
+        "up": [0, 0, 1],
+        "texture": {"type": "bitmap", "image": np.full((2, 2, 3), 0.5)},
+    }
+    return {**_plane_desc(plane), "emitters": [_projector(irradiance=[1.0, 2.0, 0.0]), spot]}
+
+
+def _two_lights_closed_form():
+    """The diffuse plane's radiance ``rho / pi * irradiance`` at the points XZ from the
+    projector (red, green: (N, 2)) and from the spot (blue: (N,)). Projector (Mitsuba's):
+    irradiance pi * scale * E / z^2 on a plane facing it at distance z (the 1 / cos^3 of the
+    frustum cancels the point light's cos^3 falloff), so rho * scale * E / H^2 inside the
+    frustum (|x|, |z| < H tan 45) and 0 outside. Spot: a constant 0.5 texture, so the
+    untextured spot's rho / pi * I * falloff * cos / r^2 times 0.5."""
     inside = (np.abs(XZ) < H).all(1)
     assert inside.tolist() == [True, True, True, True, False, False]
-    ref = RHO * 0.5 * np.array([1.0, 2.0, 3.0]) / H**2 * inside[:, None]
-    np.testing.assert_allclose(L, ref, rtol=2e-5, atol=1e-7)
+    pr = RHO * 0.5 * np.array([1.0, 2.0]) / H**2 * inside[:, None]
+    r2 = XZ[:, 0] ** 2 + XZ[:, 1] ** 2 + H**2
+    cos = H / np.sqrt(r2)
+    theta = np.degrees(np.arccos(cos))
+    fall = np.where(theta <= 20, 1.0, np.clip((40 - theta) / 20, 0, 1)) * (theta < 40)
+    assert fall[0] == 1 and 0 < fall[2] < 1 and fall[-1] == 0  # on axis, falloff, outside
+    return pr, RHO / math.pi * 2.0 * 0.5 * fall * cos / r2
+
+
+@jax.jit
+def _sample_light(scene, p, u_sel):
+    from jaxgfx.render.integrators._common import sample_light
+
+    return sample_light(scene, p, u_sel, jnp.full(p.shape[:-1] + (2,), 0.5, p.dtype))
+
+
+def test_light_sampling_selects_projector_and_spot():
+    """The integrators' light sampling (``sample_light``, under jit) with a projector and a
+    textured spot: a uniform choice (pdf 1/2, delta), each light giving its closed form."""
+    p = jnp.asarray(np.stack([XZ[:, 0], np.zeros(len(XZ)), XZ[:, 1]], -1), jnp.float32)
+    scene = load_scene(_two_lights_desc())
+    ref_pr, ref_spot = _two_lights_closed_form()
+    r = np.sqrt(XZ[:, 0] ** 2 + XZ[:, 1] ** 2 + H**2)
+    for u_sel in (0.25, 0.75):
+        out = _sample_light(scene, p, jnp.full(len(XZ), u_sel, jnp.float32))
+        wi, dist, li, pdf, delta = (np.asarray(v, np.float64) for v in out)
+        assert np.all(delta) and np.allclose(pdf, 0.5)
+        L = RHO / math.pi * li * wi[:, 1:2]  # the plane's normal is +y
+        ref = np.zeros((len(XZ), 3))
+        if u_sel < 0.5:
+            ref[:, :2] = ref_pr
+        else:
+            ref[:, 2] = ref_spot
+        np.testing.assert_allclose(L, ref, rtol=2e-5, atol=1e-7)
+        np.testing.assert_allclose(dist, r, rtol=1e-6)
+
+
+@pytest.mark.slow  # ~9-11 s measured (load 15, 2 cores): compiling the path integrator
+def test_projector_and_textured_spot_through_the_path_integrator():
+    """One scene, one compiled program (the path integrator's light sampling, under jit): a
+    projector lighting the red and green channels and a textured spot the blue one; the
+    diffuse plane's radiance against the closed forms."""
+    # the integrator picks one of the two lights (weight 2): u = 0.25 everywhere selects the
+    # first, 0.75 the second; their mean is the sum of both lights' direct light
+    o, d, u = _rays(jnp.float32)
+    o, d, u = jnp.concatenate([o, o]), jnp.concatenate([d, d]), jnp.concatenate([u, u])
+    u = u.at[: len(XZ)].set(0.25).at[len(XZ) :].set(0.75)
+    L2 = np.asarray(_radiance(load_scene(_two_lights_desc(True)), o, d, u)).reshape(2, len(XZ), 3)
+    assert np.all(L2[0, :, 2] == 0) and np.all(L2[1, :, :2] == 0)  # one light per estimate
+    L = L2.mean(0)
+    ref_pr, ref_spot = _two_lights_closed_form()
+    np.testing.assert_allclose(L[:, :2], ref_pr, rtol=2e-5, atol=1e-7)
+    np.testing.assert_allclose(L[:, 2], ref_spot, rtol=2e-5, atol=1e-7)
 
 
 @pytest.mark.parametrize("tilt", [0.0, 30.0, 70.0])
@@ -142,6 +212,11 @@ def test_fov_axis_y_and_aspect():
     assert li[0] > 0 and li[1] == 0 and li[2] > 0 and li[3] == 0
 
 
+@jax.jit
+def _sample_and_uv(spot, p, d):
+    return spot.sample(p), spot.texture_uv(d)
+
+
 def test_spot_texture_uv_and_value():
     """Mitsuba's spot ``direction_to_uv``: uv = 0.5 + 0.5 (x, y) / (z tan(cutoff)) in the look_at
     frame (x = cross(up, axis)); with a one-texel image and nearest lookup the intensity is
@@ -154,12 +229,13 @@ def test_spot_texture_uv_and_value():
     t = math.tan(math.radians(30.0))
     g = np.linspace(-0.5, 0.5, 41) * t
     pts = np.array([[x, y, 1.0] for x in g for y in g])
-    wi, r, li = (np.asarray(v, np.float64) for v in _sample(s, jnp.asarray(pts, jnp.float32)))
     d = pts / np.linalg.norm(pts, axis=1, keepdims=True)
+    (wi, r, li), uv = _sample_and_uv(s, jnp.asarray(pts, jnp.float32), jnp.asarray(d, jnp.float32))
+    wi, r, li = (np.asarray(v, np.float64) for v in (wi, r, li))
     # x = cross(up, z) = cross(+y, +z) = +x: u increases with +x, v with +y
     u = 0.5 + 0.5 * d[:, 0] / (d[:, 2] * t)
     v = 0.5 + 0.5 * d[:, 1] / (d[:, 2] * t)
-    np.testing.assert_allclose(np.asarray(s.texture_uv(jnp.asarray(d))), np.stack([u, v], -1),
+    np.testing.assert_allclose(np.asarray(uv), np.stack([u, v], -1),
                                atol=1e-6)  # fmt: skip
     theta = np.degrees(np.arccos(d[:, 2]))
     fall = np.where(theta <= 25, 1.0, np.clip((30 - theta) / 5, 0, 1)) * (theta < 30)
@@ -172,121 +248,103 @@ def test_spot_texture_uv_and_value():
     np.testing.assert_allclose(li[~edge], ref[~edge], rtol=2e-5, atol=1e-7)
 
 
-def test_spot_texture_through_the_path_integrator():
-    """A textured spot (constant 0.5 texture, so the closed form is the untextured one times
-    0.5) lights the plane as the integrator's delta-light branch computes it, under jit."""
-    spot = {"type": "spot", "position": [0, H, 0], "direction": [0, -1, 0], "intensity": 2.0,
-            "cutoff_angle": 40.0, "beam_width": 20.0, "up": [0, 0, 1],
-            "texture": {"type": "bitmap", "image": np.full((2, 2, 3), 0.5)}}  # fmt: skip
-    L = np.asarray(_radiance(_plane_scene(spot), *_rays(jnp.float32)))[:, 0]
-    r2 = XZ[:, 0] ** 2 + XZ[:, 1] ** 2 + H**2
-    cos = H / np.sqrt(r2)
-    theta = np.degrees(np.arccos(cos))
-    fall = np.where(theta <= 20, 1.0, np.clip((40 - theta) / 20, 0, 1)) * (theta < 40)
-    ref = RHO / math.pi * 2.0 * 0.5 * fall * cos / r2
-    assert ref[0] > 0 and ref[-1] == 0
-    np.testing.assert_allclose(L, ref, rtol=2e-5, atol=1e-7)
-
-
 W3 = jnp.asarray([1.0, 0.5, 0.25])
 PTS = np.array([[0.1, 0.05, 1.0], [-0.3, 0.2, 1.3], [0.25, -0.35, 0.8], [0.02, 0.4, 1.1]])
 
 
-def _fd(fn, x0, h=1e-6):
+def _grad_and_fd(fn, x0, h=1e-6):
+    """``jax.grad(fn)`` and central differences ``(fn(x + h e_k) - fn(x - h e_k)) / 2h`` of every
+    element in one compiled program (the differences vmapped), float64."""
     x0 = jnp.asarray(x0, jnp.float64)
-    ok, g, fd = check_grads_fd(fn, x0, eps=h, rtol=1e-6, atol=1e-10, jit=True)
+    e = h * jnp.eye(x0.size, dtype=x0.dtype)
+
+    @jax.jit
+    def both(x):
+        fd = (jax.vmap(fn)(x + e) - jax.vmap(fn)(x - e)) / (2 * h)
+        return fn(x), jax.grad(fn)(x), fd
+
+    f0, g, fd = (np.asarray(v) for v in both(x0))
     assert np.all(np.isfinite(g))
-    np.testing.assert_allclose(g, fd, rtol=1e-6, atol=1e-10)
-    assert ok
+    # atol: the differences' rounding, ~ 2.2e-16 |f| / h (x 20 for the sums inside fn)
+    np.testing.assert_allclose(g, fd, rtol=1e-6, atol=20 * 2.2e-16 * abs(f0) / h)
     return g
 
 
-def test_projector_gradients_vs_fd(x64):
-    """d/d(texels, scale, fov, position) of the shading term sum(Li cos W) at points inside
-    the frustum (bilinear texture: Li is smooth in uv away from texel centres)."""
+@pytest.mark.slow  # ~11 s measured (load 15, 2 cores): grad + 2 x 94 vmapped FD, float64
+def test_gradients_vs_fd(x64):
+    """d/d(texels, scale, fov, position) of a projector's and d/d(intensity, cutoff_angle,
+    beam_width, texels) of a textured spot's shading term sum(Li cos W) at points inside the
+    frustum / cone (bilinear textures: Li is smooth in uv away from texel centres; the spot's
+    cutoff moves both the falloff and the texture's uv), against central differences in one
+    compiled program."""
     rng = np.random.default_rng(1)
     img = jnp.asarray(rng.uniform(0.2, 1.0, (3, 4, 3)))
+    simg = jnp.asarray(rng.uniform(0.2, 1.0, (4, 4, 3)))
     pr0 = ProjectorLight.create([0, 0, 0], [0, 0, 1], Texture(img), up=[0, 1, 0], fov=70.0)
-    pts = jnp.asarray(PTS)
-
-    def total(pr):
-        wi, _, li = pr.sample(pts)
-        return jnp.sum(li * -wi[..., 2:3] * W3)
-
-    def f_tex(x):
-        return total(ProjectorLight(pr0.position, pr0.frame, Texture(x.reshape(img.shape)),
-                                    pr0.scale, pr0.fov))  # fmt: skip
-
-    g = _fd(f_tex, img.reshape(-1))
-    assert np.count_nonzero(g) > 8  # the texels around the four points
-
-    def f_rest(x):
-        return total(ProjectorLight(x[2:5], pr0.frame, pr0.irradiance, x[0], x[1]))
-
-    g = _fd(f_rest, [1.3, 70.0, 0.05, -0.02, 0.1])
-    assert g[0] > 0 and np.all(g != 0)
-
-
-def test_spot_gradients_vs_fd(x64):
-    """d/d(intensity, cutoff_angle, beam_width, texels) of a textured spot's shading term; the
-    cutoff moves both the falloff and the texture's uv."""
-    rng = np.random.default_rng(2)
-    img = jnp.asarray(rng.uniform(0.2, 1.0, (4, 4, 3)))
     s0 = SpotLight.create([0, 0, 0], [0, 0, 1], [1.0, 2.0, 3.0], 30.0, 10.0,
-                          texture=Texture(img), up=[0, 1, 0])  # fmt: skip
+                          texture=Texture(simg), up=[0, 1, 0])  # fmt: skip
     pts = jnp.asarray(PTS)
+    n_pr, k = img.size + 5, img.size
 
-    def total(s):
-        wi, _, li = s.sample(pts)
+    def total(light):
+        wi, _, li = light.sample(pts)
         return jnp.sum(li * -wi[..., 2:3] * W3)
 
-    def f(x):
-        tex = Texture(x[5:].reshape(img.shape))
-        s = SpotLight(s0.position, s0.direction, x[:3], x[3], x[4], tex, s0.up)
-        return total(s)
+    def f(x):  # [texels, scale, fov, position] of the projector, then the spot's
+        xp, xs = x[:n_pr], x[n_pr:]
+        pr = ProjectorLight(xp[k + 2 :], pr0.frame, Texture(xp[:k].reshape(img.shape)), xp[k],
+                            xp[k + 1])  # fmt: skip
+        sp = SpotLight(s0.position, s0.direction, xs[:3], xs[3], xs[4],
+                       Texture(xs[5:].reshape(simg.shape)), s0.up)  # fmt: skip
+        return total(pr) + 0.7 * total(sp)
 
-    g = _fd(f, jnp.concatenate([jnp.asarray([1.0, 2.0, 3.0, 30.0, 10.0]), img.reshape(-1)]))
-    assert np.all(g[:3] > 0) and g[3] != 0 and g[4] != 0
+    x0 = np.concatenate([np.asarray(img).ravel(), [1.3, 70.0, 0.05, -0.02, 0.1],
+                         [1.0, 2.0, 3.0, 30.0, 10.0], np.asarray(simg).ravel()])  # fmt: skip
+    g = _grad_and_fd(f, x0)
+    gp, gs = g[:n_pr], g[n_pr:]
+    assert np.count_nonzero(gp[: img.size]) > 8  # the texels around the four points
+    assert gp[img.size] > 0 and np.all(gp[img.size :] != 0)  # scale, fov, position
+    assert np.all(gs[:3] > 0) and gs[3] != 0 and gs[4] != 0  # intensity, cutoff, beam width
+    assert np.count_nonzero(gs[5:]) > 8
 
 
 @jax.jit
-def _vg_projector(pr, pts):
-    def f(pr):
-        wi, dist, li = pr.sample(pts)
+def _values_and_grads(lights, points):
+    """Per light: ``Li`` at its points, and the value and gradient (all leaves) of the sum of
+    ``Li``, ``wi`` and the finite distances (one compiled program for all lights)."""
+
+    def f(light, pts):
+        wi, dist, li = light.sample(pts)
         return jnp.sum(li) + jnp.sum(wi) + jnp.sum(jnp.where(jnp.isfinite(dist), dist, 0.0))
 
-    return jax.value_and_grad(f)(pr)
+    pairs = zip(lights, points, strict=True)
+    return [(lt.sample(p)[2],) + jax.value_and_grad(f)(lt, p) for lt, p in pairs]
 
 
+@pytest.mark.slow  # ~13 s measured (load 15, 2 cores): value + gradient of both lights, float64
 def test_hard_cases_finite(x64):
     """At the projector itself, behind it, at its frustum's edges and corners, at z = 0 (the
     pinhole's plane), 1e-6 in front of it, grazing: values and gradients (all leaves) finite;
     0 outside. (Li grows as 1 / r^2 towards the pinhole, as a point light's: at r = 1e-30 its
-    derivative, ~1e90, overflows float64 products; at r = 0 the light gives 0.)"""
+    derivative, ~1e90, overflows float64 products; at r = 0 the light gives 0.) A textured
+    spot on and off its axis, at its cutoff, at itself, behind it: finite."""
     pr = ProjectorLight.create([0, 0, 0], [0, 0, 1], Texture(np.ones((2, 3, 3))), fov=90.0)
     t = 0.999  # just inside tan 45 (the edge itself is decided by rounding)
     a = 0.999 / 1.5  # the vertical half-extent at z = 1 (aspect 3 / 2)
     pts = jnp.asarray([[0, 0, 0], [0, 0, -1], [t, 0, 1], [-t, a, 1], [t, -a, 1], [1, 0, 0],
                        [1e-12, 0, 1e-12], [0, 0, 1e-6], [5, 0, 1e-3]], jnp.float64)  # fmt: skip
-    v, g = _vg_projector(pr, pts)
-    leaves = jax.tree_util.tree_leaves(g)
-    assert np.isfinite(v) and all(np.isfinite(np.asarray(x)).all() for x in leaves)
-    li = np.asarray(_sample(pr, pts)[2])[:, 0]
-    assert li[1] == 0 and li[5] == 0 and li[8] == 0  # behind, in the pinhole's plane, outside
-    assert li[2] > 0 and li[3] > 0  # the frustum's edges are lit (u, v in [0, 1])
-    # a textured spot on and off its axis, at its cutoff, behind it: finite
     s = SpotLight.create([0, 0, 0], [0, 0, 1], 1.0, 30.0, 30.0, texture=Texture(np.ones((2, 2))))
     tc = math.tan(math.radians(30.0))
     sp = jnp.asarray([[0, 0, 1], [tc, 0, 1], [0, 0, -1], [0, 0, 0], [1, 0, 0]], jnp.float64)
-
-    @jax.jit
-    def vg(s):
-        return jax.value_and_grad(lambda s: jnp.sum(s.sample(sp)[2]))(s)
-
-    v, g = vg(s)
-    assert np.isfinite(v) and all(
-        np.isfinite(np.asarray(x)).all() for x in jax.tree_util.tree_leaves(g)
-    )
+    out = _values_and_grads([pr, s], [pts, sp])
+    for _, v, g in out:
+        leaves = jax.tree_util.tree_leaves(g)
+        assert np.isfinite(v) and all(np.isfinite(np.asarray(x)).all() for x in leaves)
+    li = np.asarray(out[0][0])[:, 0]
+    assert li[1] == 0 and li[5] == 0 and li[8] == 0  # behind, in the pinhole's plane, outside
+    assert li[2] > 0 and li[3] > 0  # the frustum's edges are lit (u, v in [0, 1])
+    li = np.asarray(out[1][0])[:, 0]
+    assert li[0] > 0 and li[2] == 0 and li[4] == 0  # on the axis; behind; 90 degrees off
 
 
 @pytest.mark.parametrize(
