@@ -46,6 +46,8 @@ SLOW = {
     # the same path program as the block above: 3 s after it in one process
     ("docs/render.md", "PathIntegrator(max_depth=3"): "two 64-spp path renders",
     ("docs/render.md", "render_sharded"): "132 s: sharded render and its gradient",
+    # eager scene building: ~40 tiny XLA compilations (rectangle, projector, spot) at load 12
+    ("docs/render.md", 'load_scene("projector.yaml")'): "6 s: load_scene + one jitted sample",
     ("docs/render_backends.md", "build_traversal"): "64 s: mesh scene, three backends",
     ("docs/render_gradients.md", "grad_stats"): "104 s: 8 gradient estimates + FD",
     ("docs/render_gradients.md", 'visibility="edge"'): "182 s: edge-sampled gradient",

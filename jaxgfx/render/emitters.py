@@ -11,7 +11,14 @@ Conventions follow Mitsuba 3:
 - ``SpotLight``: a point light at ``position`` with axis ``direction``, ``intensity`` (W/sr) on
   the axis, full intensity inside ``beam_width`` and Mitsuba's linear-in-angle falloff
   ``(cutoff - theta) / (cutoff - beam_width)`` to zero at ``cutoff_angle`` (degrees, as in
-  Mitsuba's XML); a delta light, differentiable in both angles.
+  Mitsuba's XML); a delta light, differentiable in both angles. An optional projected
+  ``texture`` (Mitsuba's spot ``texture``) scales the intensity by the texel the direction maps
+  to: ``uv = 0.5 + 0.5 (x, y) / (z tan(cutoff))`` in the light's frame (``x`` = left of the
+  ``up`` vector seen along ``direction``, as Mitsuba's ``look_at``).
+- ``ProjectorLight``: Mitsuba's ``projector``, a pinhole that projects an ``irradiance``
+  texture through a perspective frustum (``fov``): a white diffuse plane facing it at distance
+  1 receives irradiance ``pi * scale * E(uv)`` everywhere in the frustum (the ``1 / cos^3``
+  that makes a projected constant truly constant on the plane); a delta light.
 - ``ConstantEnvironment``: radiance arriving from every direction.
 - ``EnvironmentMap``: latitude-longitude image, y-up, with Mitsuba's mapping
   ``u = atan2(d_x, -d_z) / (2 pi)`` (wrapped to [0, 1)), ``v = acos(d_y) / pi``; importance
@@ -40,6 +47,7 @@ from jaxgfx._math import (
 )
 from jaxgfx.color import LUMINANCE_WEIGHTS
 from jaxgfx.render.bsdf import rgb_param
+from jaxgfx.render.bsdf.texture import Texture, lookup
 from jaxgfx.render.sampling import Distribution2D
 
 __all__ = [
@@ -47,6 +55,7 @@ __all__ = [
     "AreaLight",
     "DirectionalLight",
     "SpotLight",
+    "ProjectorLight",
     "ConstantEnvironment",
     "EnvironmentMap",
     "direction_to_latlong",
@@ -136,6 +145,13 @@ class SpotLight(eqx.Module):
     1 for ``theta <= beam_width``, ``(cutoff - theta) / (cutoff - beam_width)`` between, 0 for
     ``theta >= cutoff``. Continuous in ``theta``, so images are differentiable in both angles
     without a boundary term. Light sampling only (a delta light).
+
+    ``texture`` (optional :class:`~jaxgfx.render.bsdf.texture.Texture`, RGB): Mitsuba's
+    projected texture, looked up at ``uv = 0.5 + 0.5 (x, y) / (z tan(cutoff))`` of the direction
+    in the light's frame (``z`` = ``direction``, ``x`` = ``normalize(cross(up, z))``, ``y`` =
+    ``cross(z, x)``; ``up`` is stored only with a texture). The cone's disc is inscribed in
+    the texture's square; the texels (and ``cutoff_angle``, through ``uv``) are differentiable.
+    Without a texture the light's program is the untextured one.
     """
 
     position: jnp.ndarray
@@ -143,6 +159,8 @@ class SpotLight(eqx.Module):
     intensity: jnp.ndarray
     cutoff_angle: jnp.ndarray
     beam_width: jnp.ndarray
+    texture: Texture | None = None
+    up: jnp.ndarray | None = None
 
     def __check_init__(self):
         check_finite(self.position, "position")
@@ -158,8 +176,11 @@ class SpotLight(eqx.Module):
                 raise ValueError(f"beam_width: expected degrees in [0, cutoff_angle], got {b}")
 
     @classmethod
-    def create(cls, position, direction, intensity, cutoff_angle=20.0, beam_width=None):
-        """Mitsuba's defaults: ``cutoff_angle`` 20 degrees, ``beam_width`` 3/4 of it."""
+    def create(cls, position, direction, intensity, cutoff_angle=20.0, beam_width=None, *,
+               texture=None, up=None):  # fmt: skip
+        """Mitsuba's defaults: ``cutoff_angle`` 20 degrees, ``beam_width`` 3/4 of it.
+        ``texture``: a :class:`Texture` (1 or 3 channels) or ``None``; ``up`` (with a texture
+        only; default ``(0, 1, 0)``): orients the texture around the axis."""
         p = as_float_array(position, "position")
         check_finite(p, "position")
         if p.shape != (3,):
@@ -171,7 +192,13 @@ class SpotLight(eqx.Module):
         if b.shape != ():
             raise ValueError(f"beam_width: expected a number, got shape {b.shape}")
         d = _unit_direction(direction, "direction")
-        return cls(p, d, rgb_param(intensity, "intensity"), c, b)
+        if texture is None:
+            if up is not None:
+                raise ValueError("up: only a spot light with a texture takes an up vector")
+            return cls(p, d, rgb_param(intensity, "intensity"), c, b)
+        tex = _rgb_texture(texture, "texture")
+        u = _up_vector([0.0, 1.0, 0.0] if up is None else up, d)
+        return cls(p, d, rgb_param(intensity, "intensity"), c, b, tex, u)
 
     def falloff(self, cos_theta):
         """Mitsuba's falloff curve at ``cos_theta`` (cosine to the axis), in [0, 1]."""
@@ -190,8 +217,171 @@ class SpotLight(eqx.Module):
         d2 = sum_last(v * v)
         dist = safe_sqrt(d2)
         wi = safe_div(v, dist[..., None])
-        cos_theta = -sum_last(wi * safe_normalize(self.direction.astype(p.dtype)))
+        axis = safe_normalize(self.direction.astype(p.dtype))
+        cos_theta = -sum_last(wi * axis)
         li = self.intensity.astype(p.dtype) * safe_div(self.falloff(cos_theta), d2)[..., None]
+        if self.texture is not None:
+            li = li * self.texture_value(-wi)
+        return wi, dist, li
+
+    def texture_uv(self, d):
+        """Mitsuba's ``direction_to_uv`` of world directions ``d (..., 3)`` leaving the light
+        (``(0.5, 0.5)`` on the axis; the cone's edge touches the square's sides)."""
+        frame = _look_at_frame(self.direction.astype(d.dtype), self.up.astype(d.dtype))
+        loc = d @ frame.T
+        t = jnp.tan(jnp.deg2rad(self.cutoff_angle.astype(d.dtype)))
+        z = loc[..., 2] * t
+        return 0.5 + 0.5 * safe_div(loc[..., :2], z[..., None])
+
+    def texture_value(self, d):
+        """The projected texture (RGB) toward world directions ``d (..., 3)``."""
+        # inside the cone uv lies in [0, 1]; the clip only keeps the lookup finite where the
+        # falloff is 0 (behind the light, z -> 0)
+        uv = jnp.clip(self.texture_uv(d), -1.0, 2.0)
+        return lookup(self.texture, uv).astype(d.dtype)
+
+
+def _rgb_texture(tex, name):
+    """``tex`` as an RGB :class:`Texture` (one channel repeated three times)."""
+    if not isinstance(tex, Texture):
+        raise TypeError(f"{name}: expected a Texture, got {type(tex).__name__}")
+    c = tex.image.shape[-1]
+    if c == 1:
+        return Texture(jnp.repeat(tex.image, 3, -1), wrap=tex.wrap, filter=tex.filter,
+                       to_uv=tex.to_uv)  # fmt: skip
+    if c != 3:
+        raise ValueError(f"{name}: expected a texture of 1 or 3 channels, got {c}")
+    check_nonnegative(tex.image, f"{name}.image")
+    return tex
+
+
+def _up_vector(up, d):
+    u = as_float_array(up, "up")
+    check_finite(u, "up")
+    if u.shape != (3,):
+        raise ValueError(f"up: expected 3 numbers, got shape {u.shape}")
+    n = float(jnp.linalg.norm(u))
+    if not n > 0 or float(jnp.linalg.norm(jnp.cross(u / n, d))) < 1e-6:
+        raise ValueError(f"up: expected a vector not parallel to the direction, got {up!r}")
+    return u / n
+
+
+def _look_at_frame(d, up):
+    """Rows ``(x, y, z)`` of Mitsuba's ``look_at`` frame: ``z = d``, ``x = cross(up, z)``
+    normalised ("left" in the image), ``y = cross(z, x)``."""
+    z = safe_normalize(d)
+    x = safe_normalize(jnp.cross(up, z))
+    return jnp.stack([x, jnp.cross(z, x), z])
+
+
+class ProjectorLight(eqx.Module):
+    """Projector (Mitsuba 3 ``projector``): a pinhole at ``position`` looking along
+    ``direction`` with ``up``, projecting the ``irradiance`` texture (RGB
+    :class:`~jaxgfx.render.bsdf.texture.Texture`, a constant is a 1 x 1 one) times ``scale``
+    through the frustum of horizontal field of view ``fov`` (degrees; the vertical one follows
+    from the texture's aspect ``W / H``), the reciprocal of a perspective camera.
+
+    A point at ``(x, y, z)`` in the light's frame (``z`` along ``direction``, ``x`` =
+    ``normalize(cross(up, z))`` the image's left, ``y = cross(z, x)``) maps to
+    ``u = 0.5 - 0.5 x / (z tan(fov / 2))``, ``v = 0.5 - 0.5 (W / H) y / (z tan(fov / 2))``
+    (texel row 0 at the top, the image upright on a wall facing the projector); outside
+    ``[0, 1]^2`` or behind (``z <= 0``) it gets nothing. The light arriving at distance ``r``
+    is ``Li = pi * scale * E(uv) * r / z^3`` (= ``pi scale E / (z^2 cos theta)``, Mitsuba's
+    ``sample_direction``): a plane facing the projector at distance ``z`` receives irradiance
+    ``pi * scale * E(uv) / z^2``, constant across the plane for a constant texture. A delta
+    light (pdf 1); differentiable in the texels, ``scale``, ``position`` and ``fov``.
+    """
+
+    position: jnp.ndarray
+    frame: jnp.ndarray
+    irradiance: Texture
+    scale: jnp.ndarray
+    fov: jnp.ndarray
+
+    def __check_init__(self):
+        check_finite(self.position, "position")
+        check_finite(self.frame, "frame")
+        check_nonnegative(self.irradiance.image, "irradiance")
+        check_nonnegative(self.scale, "scale")
+        check_finite(self.fov, "fov")
+        if is_concrete(self.fov) and not 0 < float(self.fov) < 180:
+            raise ValueError(f"fov: expected degrees in (0, 180), got {float(self.fov)}")
+
+    @classmethod
+    def create(cls, position, direction, irradiance=1.0, *, fov, up=(0.0, 1.0, 0.0), scale=1.0,
+               fov_axis="x"):  # fmt: skip
+        """``irradiance``: an RGB value (a 1 x 1 texture, as Mitsuba's constant) or a
+        :class:`Texture`; ``fov`` along ``fov_axis`` ``"x"`` or ``"y"`` (converted to the
+        horizontal one with the texture's aspect ratio)."""
+        p = as_float_array(position, "position")
+        check_finite(p, "position")
+        if p.shape != (3,):
+            raise ValueError(f"position: expected 3 numbers, got shape {p.shape}")
+        d = _unit_direction(direction, "direction")
+        frame = _look_at_frame(d, _up_vector(up, d))
+        if isinstance(irradiance, Texture):
+            tex = _rgb_texture(irradiance, "irradiance")
+        else:
+            tex = Texture(rgb_param(irradiance, "irradiance").reshape(1, 1, 3))
+        s = as_float_array(scale, "scale")
+        if s.shape != ():
+            raise ValueError(f"scale: expected a number, got shape {s.shape}")
+        check_nonnegative(s, "scale")
+        f = as_float_array(fov, "fov")
+        if f.shape != () or not 0 < float(f) < 180:
+            raise ValueError(f"fov: expected degrees in (0, 180), got {fov!r}")
+        if fov_axis not in ("x", "y"):
+            raise ValueError(f"fov_axis: expected 'x' or 'y', got {fov_axis!r}")
+        if fov_axis == "y":  # tan(fov_x / 2) = aspect tan(fov_y / 2)
+            h, w = tex.image.shape[:2]
+            # (host arithmetic: ``f`` is concrete here, checked above)
+            f = as_float_array(2.0 * math.degrees(math.atan(w / h * math.tan(
+                math.radians(float(f)) / 2.0))), "fov")  # fmt: skip
+        return cls(p, frame, tex, s, f)
+
+    @property
+    def aspect(self) -> float:
+        h, w = self.irradiance.image.shape[:2]
+        return w / h
+
+    @property
+    def direction(self):
+        return self.frame[2]
+
+    @property
+    def up(self):
+        return self.frame[1]
+
+    def local(self, p):
+        """Points ``p (..., 3)`` in the projector's frame."""
+        return (p - self.position.astype(p.dtype)) @ self.frame.astype(p.dtype).T
+
+    def uv(self, loc):
+        """Image coordinates of points ``loc (..., 3)`` in the projector's frame, and whether
+        they lie in the frustum (``z > 0``, ``uv`` in ``[0, 1]^2``)."""
+        t = jnp.tan(jnp.deg2rad(self.fov.astype(loc.dtype)) * 0.5)
+        z = loc[..., 2]
+        front = z > 0
+        zt = jnp.where(front, z, 1.0) * t
+        u = 0.5 - 0.5 * loc[..., 0] / zt
+        v = 0.5 - 0.5 * self.aspect * loc[..., 1] / zt
+        uv = jnp.stack([u, v], -1)
+        inside = front & jnp.all((uv >= 0) & (uv <= 1), -1)
+        return uv, inside
+
+    def sample(self, p):
+        """``(wi, dist, Li)`` at points ``p (..., 3)`` (pdf 1: a delta light)."""
+        v = self.position.astype(p.dtype) - p
+        d2 = sum_last(v * v)
+        dist = safe_sqrt(d2)
+        wi = safe_div(v, dist[..., None])
+        loc = self.local(p)
+        uv, inside = self.uv(loc)
+        e = lookup(self.irradiance, jnp.clip(uv, 0.0, 1.0)).astype(p.dtype)
+        z = jnp.where(inside, loc[..., 2], 1.0)
+        cos = jnp.where(inside, safe_div(z, dist), 1.0)  # cosine to the axis, in (0, 1]
+        k = math.pi * self.scale.astype(p.dtype) / (z * z * cos)
+        li = jnp.where(inside[..., None], e * k[..., None], 0.0)
         return wi, dist, li
 
 

@@ -431,9 +431,9 @@ def test_disk_is_a_fan_of_256_triangles(tmp_path):
             "jaxgfx)",
         ),  # fmt: skip
         (
-            '<emitter type="projector"/>',
+            '<emitter type="sunsky"/>',
             10,
-            "<emitter type='projector'>: emitter plugin 'projector' is not supported",
+            "<emitter type='sunsky'>: emitter plugin 'sunsky' is not supported",
         ),  # fmt: skip
         (
             '<shape type="sphere" id="s">\n<float name="foo" value="1"/></shape>',

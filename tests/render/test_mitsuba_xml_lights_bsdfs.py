@@ -382,9 +382,9 @@ def rx(s):
     "body,msg",
     [
         (
-            '<emitter type="spot" id="s">\n<texture type="bitmap" name="texture"/></emitter>',
-            "<emitter type='spot' id='s'>: parameter 'texture': projected textures are not "
-            "supported",
+            '<emitter type="spot" id="s">\n<rgb name="texture" value="1"/></emitter>',
+            "<emitter type='spot' id='s'>: parameter 'texture': expected a bitmap texture "
+            "(Mitsuba refuses a constant one)",
         ),
         (
             '<emitter type="spot" id="s">\n<transform name="to_world"><scale x="2"/>'

@@ -16,10 +16,12 @@ from jaxgfx.render.emitters import (
     DirectionalLight,
     EnvironmentMap,
     PointLights,
+    ProjectorLight,
     SpotLight,
 )
 from jaxgfx.render.film import make_filter
 from jaxgfx.render.geometry import Rectangles, SDFShape, Spheres, area
+from jaxgfx.render.scene._lights import SPOT_TEXTURE_KEYS, projector_from_desc, spot_texture
 from jaxgfx.render.scene._materials import material_from_desc
 from jaxgfx.render.scene.scene import Scene, id_problem, is_internal_name
 from jaxgfx.render.scene.schema import (
@@ -221,8 +223,9 @@ def load_scene(
                 ed,
                 where,
                 ("type", "position", "direction", "intensity"),
-                ("cutoff_angle", "beam_width", "id"),
+                ("cutoff_angle", "beam_width", "id", *SPOT_TEXTURE_KEYS),
             )
+            texture, up = spot_texture(ed, where, base_dir)
             delta_lights.append(
                 _prefixed(
                     where,
@@ -234,8 +237,12 @@ def load_scene(
                     None
                     if "beam_width" not in ed
                     else num(ed["beam_width"], f"{where}.beam_width"),
+                    texture=texture,
+                    up=up,
                 )
             )
+        elif kind == "projector":
+            delta_lights.append(projector_from_desc(ed, where, base_dir))
         elif kind == "area":
             expect_keys(ed, where, ("type", "shape", "radiance"), ("material", "id"))
             sk, shape = shape_from_desc(ed["shape"], f"{where}.shape", base_dir)
@@ -309,14 +316,16 @@ def _object_id(d, where, namespace, seen):
 
 
 def _delta_kind(light) -> str:
+    if isinstance(light, ProjectorLight):
+        return "projector"
     return "spot" if isinstance(light, SpotLight) else "directional"
 
 
-def _prefixed(where, build, *args):
-    """``build(*args)`` with its ``ValueError`` prefixed by ``where`` (``emitters[1].beam_width:
-    ...``)."""
+def _prefixed(where, build, *args, **kwargs):
+    """``build(*args, **kwargs)`` with its ``ValueError`` prefixed by ``where``
+    (``emitters[1].beam_width: ...``)."""
     try:
-        return build(*args)
+        return build(*args, **kwargs)
     except ValueError as e:
         raise ValueError(f"{where}.{e}") from None
 

@@ -788,16 +788,24 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
                 out[key(ed, where, f"emitter_{i}")] = {"type": "envmap", "filename": path,
                                                       "scale": float(scale)}  # fmt: skip
         else:  # "directional" / "spot" (check_choice above admits only S.EMITTER_TYPES)
-            out[key(ed, where, f"emitter_{i}")] = _delta_light(ed, where, mi)
+            out[key(ed, where, f"emitter_{i}")] = _delta_light(ed, where, mi, base_dir, work_dir)
     return out
 
 
-def _delta_light(ed, where, mi) -> dict:
-    """Mitsuba ``directional`` / ``spot`` dict of a jaxgfx emitter description, validated as
-    :func:`load_scene` validates it (the same light objects are built)."""
+def _delta_light(ed, where, mi, base_dir=None, work_dir=None) -> dict:
+    """Mitsuba ``directional`` / ``spot`` / ``projector`` dict of a jaxgfx emitter
+    description, validated as :func:`load_scene` validates it (the same light objects are
+    built); a spot's projected texture and a projector's irradiance texture as
+    :func:`_texture_dict` writes a material's."""
     from jaxgfx.render.emitters import DirectionalLight, SpotLight
     from jaxgfx.render.scene import schema as S
+    from jaxgfx.render.scene._lights import SPOT_TEXTURE_KEYS, projector_from_desc, spot_texture
 
+    if ed["type"] == "projector":
+        light = projector_from_desc(ed, where, base_dir)
+        irr = ed.get("irradiance")
+        return _projector_dict(light, mi, work_dir, where, desc=irr if isinstance(irr, dict)
+                               else None, base_dir=base_dir)  # fmt: skip
     try:
         if ed["type"] == "directional":
             S.expect_keys(ed, where, ("type", "direction", "irradiance"), ("id",))
@@ -807,7 +815,8 @@ def _delta_light(ed, where, mi) -> dict:
             )
         else:
             S.expect_keys(ed, where, ("type", "position", "direction", "intensity"),
-                          ("cutoff_angle", "beam_width", "id"))  # fmt: skip
+                          ("cutoff_angle", "beam_width", "id", *SPOT_TEXTURE_KEYS))  # fmt: skip
+            texture, up = spot_texture(ed, where, base_dir)
             light = SpotLight.create(
                 S.vec(ed["position"], f"{where}.position"),
                 S.vec(ed["direction"], f"{where}.direction"),
@@ -815,12 +824,34 @@ def _delta_light(ed, where, mi) -> dict:
                 S.num(ed.get("cutoff_angle", DEFAULTS["spot.cutoff_angle"]),
                       f"{where}.cutoff_angle"),
                 None if "beam_width" not in ed else S.num(ed["beam_width"], f"{where}.beam_width"),
+                texture=texture, up=up,
             )  # fmt: skip
     except ValueError as e:
         msg = str(e)
         raise ValueError(msg if msg.startswith(where) else f"{where}.{msg}") from None
     # the description's direction normalised in float64 (the light object holds float32)
-    return _delta_light_dict(light, mi, direction=np.asarray(ed["direction"], np.float64))
+    out = _delta_light_dict(light, mi, direction=np.asarray(ed["direction"], np.float64))
+    if getattr(light, "texture", None) is not None:
+        out["texture"] = _texture_dict(light.texture, f"{where}.texture", work_dir,
+                                       desc=ed["texture"], base_dir=base_dir)  # fmt: skip
+    return out
+
+
+def _projector_dict(light, mi, work_dir, where, *, desc=None, base_dir=None) -> dict:
+    """Mitsuba ``projector`` dict of a :class:`~jaxgfx.render.emitters.ProjectorLight`:
+    ``to_world = look_at(position, position + direction, up)`` (the same frame), the horizontal
+    ``fov``, ``scale`` and the irradiance (an ``rgb`` for a 1 x 1 texture, else a bitmap)."""
+    p = np.asarray(light.position, np.float64)
+    fr = np.asarray(light.frame, np.float64)
+    img = np.asarray(light.irradiance.image, np.float64)
+    if desc is None and img.shape[:2] == (1, 1):
+        irr = _rgb(img[0, 0])
+    else:
+        irr = _texture_dict(light.irradiance, f"{where}.irradiance", work_dir, desc=desc,
+                            base_dir=base_dir)  # fmt: skip
+    return {"type": "projector", "to_world": _transform(look_at_matrix(p, p + fr[2], fr[1]), mi),
+            "fov": _float(light.fov), "fov_axis": "x", "scale": _float(light.scale),
+            "irradiance": irr}  # fmt: skip
 
 
 def _delta_light_dict(light, mi, direction=None) -> dict:
@@ -836,7 +867,7 @@ def _delta_light_dict(light, mi, direction=None) -> dict:
         return {"type": "directional", "direction": d.tolist(),
                 "irradiance": _rgb(light.irradiance)}  # fmt: skip
     p = np.asarray(light.position, np.float64)
-    up, _ = _frame_from_normal(d)
+    up = _frame_from_normal(d)[0] if light.up is None else np.asarray(light.up, np.float64)
     return {
         "type": "spot",
         "to_world": _transform(look_at_matrix(p, p + d, up), mi),
@@ -848,6 +879,15 @@ def _delta_light_dict(light, mi, direction=None) -> dict:
 
 def _list(x):
     return np.asarray(x, np.float64).tolist()
+
+
+def _texture_desc(tex) -> dict:
+    """Inline ``bitmap`` description of a light's texture (its texels, wrap and filter)."""
+    d = {"type": "bitmap", "image": np.asarray(tex.image, np.float32), "wrap": tex.wrap,
+         "filter": tex.filter}  # fmt: skip
+    if tex.to_uv is not None:
+        d["to_uv"] = [list(r) for r in tex.to_uv]
+    return d
 
 
 def _bsdf_desc(m, where) -> dict:
@@ -951,7 +991,7 @@ def scene_to_desc(scene) -> dict:
     Example: ``load_scene(scene_to_desc(load_scene(desc)))`` renders like ``desc``.
     """
     from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera, ThinLensCamera
-    from jaxgfx.render.emitters import ConstantEnvironment, DirectionalLight
+    from jaxgfx.render.emitters import ConstantEnvironment, DirectionalLight, ProjectorLight
     from jaxgfx.render.film import GaussianFilter, TentFilter
     from jaxgfx.render.geometry import Instances, Rectangles, Spheres, TriangleMesh
 
@@ -1065,15 +1105,21 @@ def scene_to_desc(scene) -> dict:
     elif env is not None:
         desc["emitters"].append(named({"type": "envmap", "image": np.asarray(env.image, np.float32),
                                        "scale": float(env.scale)}, "environment", 0))  # fmt: skip
-    counts = {"directional": 0, "spot": 0}
-    for e in scene.delta_lights:  # directional and spot lights, in their order
+    counts = {"directional": 0, "spot": 0, "projector": 0}
+    for e in scene.delta_lights:  # directional, spot and projector lights, in their order
         if isinstance(e, DirectionalLight):
             d = {"type": "directional", "direction": _list(e.direction),
                  "irradiance": _list(e.irradiance)}  # fmt: skip
+        elif isinstance(e, ProjectorLight):
+            d = {"type": "projector", "position": _list(e.position),
+                 "direction": _list(e.direction), "up": _list(e.up), "fov": _list(e.fov),
+                 "scale": _list(e.scale), "irradiance": _texture_desc(e.irradiance)}  # fmt: skip
         else:
             d = {"type": "spot", "position": _list(e.position), "direction": _list(e.direction),
                  "intensity": _list(e.intensity), "cutoff_angle": _list(e.cutoff_angle),
                  "beam_width": _list(e.beam_width)}  # fmt: skip
+            if e.texture is not None:
+                d.update(texture=_texture_desc(e.texture), up=_list(e.up))
         desc["emitters"].append(named(d, d["type"], counts[d["type"]]))
         counts[d["type"]] += 1
     used = {d.get("material") for d in desc["shapes"] + desc["emitters"]}

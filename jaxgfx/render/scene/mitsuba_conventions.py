@@ -100,8 +100,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("emitter", "constant"): S,
     ("emitter", "envmap"): S + " (no rotation)",
     ("emitter", "directional"): S,
-    ("emitter", "spot"): S + " (no projected `texture`)",
-    ("emitter", "projector"): "refused: not in jaxgfx",
+    ("emitter", "spot"): S + " (a projected `texture` a bitmap)",
+    ("emitter", "projector"): S + " (`irradiance` a colour or a bitmap; rigid `to_world`)",
     ("emitter", "directionalarea"): "refused: not in jaxgfx",
     ("emitter", "sunsky"): "refused: not in jaxgfx",
     # sensors, films, filters, samplers

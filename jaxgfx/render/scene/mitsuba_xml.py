@@ -42,6 +42,10 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
 * ``directional``: the light travels along ``direction`` or ``to_world``'s +z (default +z);
   ``spot``: at ``to_world``'s origin, pointing along its +z, ``beam_width`` defaulting to 3/4 of
   ``cutoff_angle`` (20 degrees); the same falloff as :class:`jaxgfx.render.emitters.SpotLight`.
+  A projected ``texture`` (bitmap) keeps to_world's +y as its ``up``. ``projector``: to_world's
+  origin, +z and +y as ``position`` / ``direction`` / ``up``, ``irradiance`` (a colour or a
+  bitmap), ``scale``, ``fov`` as the perspective sensor's over the texture's resolution
+  (:class:`jaxgfx.render.emitters.ProjectorLight`).
 * ``blendbsdf``: ``(1 - weight) bsdf_0 + weight bsdf_1``, the nested BSDFs in document order
   (unnamed) or ordered by name (named), as Mitsuba orders its nested objects.
 * ``normalmap`` / ``bumpmap``: :class:`jaxgfx.render.bsdf.NormalMap` /
@@ -1368,9 +1372,6 @@ def _emitter(obj: _Obj, doc, desc):
         d = {"type": "directional", "direction": _unit(direction),
              "irradiance": p.color("irradiance", [1.0] * 3, emission=True)}  # fmt: skip
     elif t == "spot":
-        if "texture" in obj.props:
-            obj.props["texture"].used = True
-            raise p.err("texture", "projected textures are not supported")
         m = p.transform("to_world")
         m = np.eye(4) if m is None else m
         lin = m[:3, :3]
@@ -1378,6 +1379,7 @@ def _emitter(obj: _Obj, doc, desc):
         if not np.allclose(lin.T @ lin, s2 * np.eye(3), rtol=1e-6, atol=1e-9 * s2):
             raise p.err("to_world", "a spot light's to_world must be a rotation, uniform scale "
                                     "and translation (the cone would not be circular)")  # fmt: skip
+        tex = _light_texture(p, "texture", lin) if "texture" in obj.props else None
         cutoff = p.float("cutoff_angle", DEFAULTS["spot.cutoff_angle"])
         beam = p.float("beam_width", cutoff * DEFAULTS["spot.beam_width_fraction"])
         if not 0 < cutoff <= 180:
@@ -1387,12 +1389,63 @@ def _emitter(obj: _Obj, doc, desc):
         d = {"type": "spot", "position": m[:3, 3].tolist(), "direction": _unit(lin[:, 2]),
              "intensity": p.color("intensity", [1.0] * 3, emission=True),
              "cutoff_angle": cutoff, "beam_width": beam}  # fmt: skip
+        if tex is not None:  # the texture's orientation: to_world's +y (Mitsuba's look_at up)
+            d.update(texture=tex, up=_unit(lin[:, 1]))
+    elif t == "projector":
+        d = _projector(p)
     else:
         raise ValueError(f"{obj.where}: emitter plugin {t!r} is not supported "
-                         "(area, point, constant, envmap, directional, spot)")  # fmt: skip
+                         "(area, point, constant, envmap, directional, spot, "
+                         "projector)")  # fmt: skip
     p.done()
     _name_by_id(d, obj.id)
     desc["emitters"].append(d)
+
+
+def _light_texture(p: _Params, name, lin) -> dict:
+    """The bitmap description of a spot light's projected ``texture`` (Mitsuba refuses a
+    constant one); ``to_world`` must keep the image unmirrored (``det > 0``)."""
+    tex = p.color(name, texture=True)
+    if not isinstance(tex, dict) or tex.get("type") != "bitmap":
+        raise p.err(name, "expected a bitmap texture (Mitsuba refuses a constant one)")
+    if not np.linalg.det(lin) > 0:
+        raise p.err("to_world", "a mirroring to_world (det < 0) is not supported with a "
+                                "projected texture")  # fmt: skip
+    return tex
+
+
+def _projector(p: _Params) -> dict:
+    """A ``projector``: rotation and translation of ``to_world`` as ``position`` /
+    ``direction`` / ``up`` (a uniform scale ``s`` of it multiplies Mitsuba's emitted light by
+    ``s``, folded into ``scale``); ``fov`` / ``focal_length`` / ``fov_axis`` as the perspective
+    sensor's, with the texture's resolution as the image (a constant: 1 x 1)."""
+    m = p.transform("to_world")
+    m = np.eye(4) if m is None else m
+    if not np.allclose(m[3], [0, 0, 0, 1]):
+        raise p.err("to_world", "expected an affine transform")
+    lin = m[:3, :3]
+    s2 = float(np.mean(np.sum(lin * lin, 0)))
+    if not (s2 > 0 and np.allclose(lin.T @ lin, s2 * np.eye(3), rtol=1e-6, atol=1e-9 * s2)):
+        raise p.err("to_world", "a projector's to_world must be a rotation, uniform scale and "
+                                "translation")  # fmt: skip
+    if not np.linalg.det(lin) > 0:
+        raise p.err("to_world", "a mirroring to_world (det < 0) is not supported")
+    irr = p.color("irradiance", [1.0] * 3, emission=True, texture=True)
+    width = height = 1
+    if isinstance(irr, dict):
+        if irr.get("type") != "bitmap":
+            raise p.err("irradiance", f"expected a bitmap texture or a colour, got "
+                                      f"{irr.get('type')!r}")  # fmt: skip
+        from jaxgfx import io
+
+        try:
+            height, width = io.read_any(irr["file"]).shape[:2]
+        except (ValueError, OSError) as e:
+            raise p.err("irradiance", f"cannot read {irr['file']!r}: {e}") from None
+    fov, axis = _fov_x_or_y(p, width, height)
+    return {"type": "projector", "position": m[:3, 3].tolist(), "direction": _unit(lin[:, 2]),
+            "up": _unit(lin[:, 1]), "fov": fov, "fov_axis": axis, "irradiance": irr,
+            "scale": p.float("scale", 1.0) * math.sqrt(s2)}  # fmt: skip
 
 
 def _unit(v) -> list:

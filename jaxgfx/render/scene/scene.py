@@ -166,10 +166,11 @@ def _listed_names(obj) -> list[str]:
 
 
 def _delta_kind(light) -> str:
-    return "spot" if type(light).__name__ == "SpotLight" else "directional"
+    name = type(light).__name__
+    return {"SpotLight": "spot", "ProjectorLight": "projector"}.get(name, "directional")
 
 
-EMITTER_KINDS = ("point", "area", "environment", "directional", "spot")
+EMITTER_KINDS = ("point", "area", "environment", "directional", "spot", "projector")
 """The words after ``emitters.`` that name emitters by kind (not usable as ids)."""
 
 
@@ -203,7 +204,7 @@ class Scene(eqx.Module):
     (PointLights or None); ``area_lights`` (tuple of AreaLight); ``environment``
     (ConstantEnvironment / EnvironmentMap / None); ``emitter_shapes`` (tuple: the raw shape of each
     area light, for sampling); ``rfilter`` (reconstruction filter, static); ``delta_lights``
-    (tuple of DirectionalLight / SpotLight).
+    (tuple of DirectionalLight / SpotLight / ProjectorLight).
     """
 
     camera: PerspectiveCamera | ThinLensCamera | MatrixCamera
@@ -217,15 +218,16 @@ class Scene(eqx.Module):
     material_names: tuple = eqx.field(static=True)
     rfilter: object = eqx.field(static=True)
     delta_lights: tuple = ()
-    """Directional and spot lights (``DirectionalLight`` / ``SpotLight``), in description order;
+    """Directional, spot and projector lights (``DirectionalLight`` / ``SpotLight`` /
+    ``ProjectorLight``), in description order;
     empty for scenes without them (their programs are unchanged)."""
     object_ids: tuple = eqx.field(static=True, default=())
     """Named shapes and emitters (the description's / XML's ``id``): ``(id, kind, index, row,
     material)`` with ``kind`` ``"shape"`` (``index`` into :attr:`shapes`, ``row`` the sphere /
     rectangle of a batch or ``None``, ``material`` its material's name), ``"area"`` (into
     :attr:`area_lights`), ``"point"`` (``row`` of :attr:`point_lights`), ``"environment"``,
-    ``"directional"`` / ``"spot"`` (into :attr:`delta_lights`). Paths ``shapes.ID.FIELD`` and
-    ``emitters.ID.FIELD`` name them (:meth:`parameters`)."""
+    ``"directional"`` / ``"spot"`` / ``"projector"`` (into :attr:`delta_lights`). Paths
+    ``shapes.ID.FIELD`` and ``emitters.ID.FIELD`` name them (:meth:`parameters`)."""
 
     @property
     def width(self) -> int:
@@ -297,7 +299,11 @@ class Scene(eqx.Module):
                 raise ValueError(f"{path}: the scene has no environment emitter")
             getter = lambda s: s.environment  # noqa: E731
             rest = parts[2:]
-        elif head == "emitters" and len(parts) >= 3 and parts[1] in ("directional", "spot"):
+        elif (
+            head == "emitters"
+            and len(parts) >= 3
+            and parts[1] in ("directional", "spot", "projector")
+        ):
             kinds = [i for i, e in enumerate(self.delta_lights) if _delta_kind(e) == parts[1]]
             i = kinds[_index(path, parts[2], len(kinds), f"a {parts[1]} light")]
             getter = lambda s: s.delta_lights[i]  # noqa: E731
@@ -310,7 +316,7 @@ class Scene(eqx.Module):
             raise ValueError(
                 f"{path}: expected materials.NAME.FIELD, camera.FIELD, emitters.point.FIELD, "
                 "emitters.area.I.FIELD, emitters.environment.FIELD, emitters.directional.I.FIELD, "
-                "emitters.spot.I.FIELD or shapes.I.FIELD"
+                "emitters.spot.I.FIELD, emitters.projector.I.FIELD or shapes.I.FIELD"
             )
         if not rest:
             raise ValueError(f"{path}: expected a field name after the object")
@@ -393,7 +399,7 @@ class Scene(eqx.Module):
             objs += by_id("area", i, "emitters", f"emitters.area.{i}", a)
         if self.environment is not None:
             objs += by_id("environment", 0, "emitters", "emitters.environment", self.environment)
-        counts = {"directional": 0, "spot": 0}
+        counts = {"directional": 0, "spot": 0, "projector": 0}
         for e in self.delta_lights:
             k = _delta_kind(e)
             objs += by_id(k, counts[k], "emitters", f"emitters.{k}.{counts[k]}", e)

@@ -37,7 +37,7 @@ __all__ = [
 ]
 
 SHAPE_TYPES = ("sphere", "rectangle", "mesh", "sdf")
-EMITTER_TYPES = ("area", "point", "constant", "envmap", "directional", "spot")
+EMITTER_TYPES = ("area", "point", "constant", "envmap", "directional", "spot", "projector")
 SCENE_KEYS = (("camera", "shapes"), ("materials", "emitters", "film"))
 """(required, optional) top-level keys of a scene description."""
 
