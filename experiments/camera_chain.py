@@ -35,8 +35,13 @@ from jaxgfx.config import read_yaml
 VARIANTS = ("true_camera", "calibrated", "joint", "srgb")
 
 
-DORF = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tests",
-                    "data", "dorf", "ektachrome320t.crf")
+DORF = os.path.join(
+    os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+    "tests",
+    "data",
+    "dorf",
+    "ektachrome320t.crf",
+)
 
 
 def true_response(curve, base_dir: str):
@@ -50,8 +55,9 @@ def true_response(curve, base_dir: str):
     if isinstance(curve, str):
         return hdr.synthetic_response(curve, channels=3)
     if not isinstance(curve, dict) or set(curve) != {"dorf"}:
-        raise ValueError(f"calibration.curve: expected a response name or {{dorf: path}}, "
-                         f"got {curve!r}")
+        raise ValueError(
+            f"calibration.curve: expected a response name or {{dorf: path}}, got {curve!r}"
+        )
     path = curve["dorf"]
     path = path if os.path.isabs(path) else os.path.normpath(os.path.join(base_dir, path))
     curves = list(hdr.read_dorf_curves(path).values())
@@ -77,9 +83,13 @@ def calibrate(cal: dict, out: str, overwrite: bool, resp=None, seed: int = 0) ->
     rad = hdr.synthetic_radiance(key, n, n, dynamic_range=float(cal["dynamic_range"]))
     times = np.asarray(cal["exposure_times"], np.float32)
     st = hdr.make_jpeg_stack(
-        jax.random.fold_in(key, 1), rad, times, cal["curve"] if resp is None else resp,
+        jax.random.fold_in(key, 1),
+        rad,
+        times,
+        cal["curve"] if resp is None else resp,
         gain=float(cal["gain"]),
-        read_sigma=float(cal["read_sigma"]), quality=int(cal["jpeg_quality"]),
+        read_sigma=float(cal["read_sigma"]),
+        quality=int(cal["jpeg_quality"]),
     )
     folder = os.path.join(out, "bracket")
     os.makedirs(folder, exist_ok=True)
@@ -89,12 +99,16 @@ def calibrate(cal: dict, out: str, overwrite: bool, resp=None, seed: int = 0) ->
         Image.fromarray(img).save(os.path.join(folder, f"frame_{j}.png"))
     from jaxgfx.config import load_config
 
-    cfg = load_config(CalibrateConfig, {
-        "exposure_times": [float(t) for t in times],
-        "response": {"method": cal["method"], "compare": [cal["method"]]},
-    })
-    run_calibrate(CalibrateJob(cfg, (folder,), os.path.join(out, "calibrate"), overwrite,
-                               progress=False))
+    cfg = load_config(
+        CalibrateConfig,
+        {
+            "exposure_times": [float(t) for t in times],
+            "response": {"method": cal["method"], "compare": [cal["method"]]},
+        },
+    )
+    run_calibrate(
+        CalibrateJob(cfg, (folder,), os.path.join(out, "calibrate"), overwrite, progress=False)
+    )
     return os.path.join(out, "calibrate", "report.json")
 
 
@@ -124,19 +138,29 @@ def linear_target(fit: dict, base_dir: str, seed: int, renderer: str) -> np.ndar
         for k, v in fit["truth"].items():
             _set(desc, k, v)
         desc["camera"] = dict(desc["camera"], width=int(r["width"]), height=int(r["height"]))
-        return render_mitsuba(desc, spp=int(fit["target_spp"]), integrator=r["integrator"],
-                              max_depth=int(r.get("max_depth", 3)), seed=int(seed),
-                              base_dir=os.path.dirname(scene))
+        return render_mitsuba(
+            desc,
+            spp=int(fit["target_spp"]),
+            integrator=r["integrator"],
+            max_depth=int(r.get("max_depth", 3)),
+            seed=int(seed),
+            base_dir=os.path.dirname(scene),
+        )
     if renderer != "jaxgfx":
         raise ValueError(f"fit.targets: expected 'mitsuba' or 'jaxgfx', got {renderer!r}")
     from jaxgfx.config import load_config
     from jaxgfx.pipelines.fit import FitConfig, prepare_fit
     from jaxgfx.pipelines.fit.job import _target
 
-    cfg = load_config(FitConfig, {
-        "scene": fit["scene"], "params": fit["params"], "render": fit["render"],
-        "target": {"synthetic": fit["truth"], "spp": int(fit["target_spp"]), "seed": int(seed)},
-    })
+    cfg = load_config(
+        FitConfig,
+        {
+            "scene": fit["scene"],
+            "params": fit["params"],
+            "render": fit["render"],
+            "target": {"synthetic": fit["truth"], "spp": int(fit["target_spp"]), "seed": int(seed)},
+        },
+    )
     return np.asarray(_target(cfg, prepare_fit(cfg, base_dir=base_dir))[1], np.float32)
 
 
@@ -170,15 +194,23 @@ def photos(img: np.ndarray, tc: dict, resp, seed: int, out: str, edge_mask=None)
     from jaxgfx.io import write_png
 
     n = tc.get("noise") or {}
-    noise = NoiseModel(jnp.full((3,), float(n.get("gain", 0.0)), jnp.float32),
-                       jnp.full((3,), float(n.get("read_sigma", 0.0)) ** 2, jnp.float32))
+    noise = NoiseModel(
+        jnp.full((3,), float(n.get("gain", 0.0)), jnp.float32),
+        jnp.full((3,), float(n.get("read_sigma", 0.0)) ** 2, jnp.float32),
+    )
     key = jax.random.fold_in(jax.random.key(int(seed)), 1)
     ex = [float(tc["exposure"]) * float(r) for r in tc["exposures"]]
-    codes = np.stack([
-        np.asarray(Camera(resp, jnp.asarray(e, jnp.float32), noise=noise, bits=8)
-                   .capture(jnp.asarray(img), jax.random.fold_in(key, j)), np.uint8)
-        for j, e in enumerate(ex)
-    ])
+    codes = np.stack(
+        [
+            np.asarray(
+                Camera(resp, jnp.asarray(e, jnp.float32), noise=noise, bits=8).capture(
+                    jnp.asarray(img), jax.random.fold_in(key, j)
+                ),
+                np.uint8,
+            )
+            for j, e in enumerate(ex)
+        ]
+    )
     if tc.get("jpeg") is not None:
         codes = jpeg_roundtrip(codes, quality=int(tc["jpeg"]))
     os.makedirs(out, exist_ok=True)
@@ -231,8 +263,10 @@ def response_errors(resp, truth) -> dict:
     b = np.log(np.asarray(truth.to_linear_normalized(jnp.broadcast_to(zn, (236, truth.channels)))))
     d = a - b
     d = d - d.mean(axis=0, keepdims=True)
-    return {"rms_ln": float(hdr.response_curve_error(resp, truth)),
-            "max_ln": float(np.max(np.abs(d)))}
+    return {
+        "rms_ln": float(hdr.response_curve_error(resp, truth)),
+        "max_ln": float(np.max(np.abs(d))),
+    }
 
 
 def errors_vs_time(result: dict, truth: dict):
@@ -259,8 +293,12 @@ def plot(path, results: dict, truth: dict) -> None:
     for name, runs in results.items():
         for i, res in enumerate(runs):
             s, ea, er = errors_vs_time(res, truth)
-            kw = {"color": COLORS.get(name), "lw": 1.0, "alpha": 0.8,
-                  "label": name if i == 0 else None}
+            kw = {
+                "color": COLORS.get(name),
+                "lw": 1.0,
+                "alpha": 0.8,
+                "label": name if i == 0 else None,
+            }
             axes[0].semilogy(s, np.maximum(ea, 1e-4), **kw)
             axes[1].semilogy(s, np.maximum(er, 1e-4), **kw)
     axes[0].axhline(0.05, color="k", ls="--", lw=0.8)
@@ -273,8 +311,11 @@ def plot(path, results: dict, truth: dict) -> None:
         ax.set_xlabel("seconds of fit steps (after compilation)")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-    fig.suptitle("material error against time by the camera the fit assumes, one line per seed "
-                 "(dashed / dotted: the calibrated / joint targets)", fontsize=9)
+    fig.suptitle(
+        "material error against time by the camera the fit assumes, one line per seed "
+        "(dashed / dotted: the calibrated / joint targets)",
+        fontsize=9,
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -294,24 +335,52 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", default=None, help="override fit.seeds, e.g. 0,1,2")
     p.add_argument("--size", type=int, default=None, help="override the fit's render size")
     p.add_argument("--spp", type=int, default=None, help="override the fit's render.spp")
-    p.add_argument("--targets", default=None, choices=("mitsuba", "jaxgfx"),
-                   help="override fit.targets (the renderer of the photos)")
-    p.add_argument("--curve", default=None,
-                   help="override calibration.curve: a synthetic_response name or 'dorf'")
-    p.add_argument("--white-balance", default=None,
-                   help="override fit.white_balance: on | off | the variants that fit it (a,b)")
-    p.add_argument("--free-curve", default=None,
-                   help="override fit.free_curve keys, e.g. init=1.6,smoothness=0.01")
-    p.add_argument("--edge-mask", default=None,
-                   help="override fit.edge_mask: THRESHOLD,RADIUS (codes, pixels) or off")
+    p.add_argument(
+        "--targets",
+        default=None,
+        choices=("mitsuba", "jaxgfx"),
+        help="override fit.targets (the renderer of the photos)",
+    )
+    p.add_argument(
+        "--curve",
+        default=None,
+        help="override calibration.curve: a synthetic_response name or 'dorf'",
+    )
+    p.add_argument(
+        "--white-balance",
+        default=None,
+        help="override fit.white_balance: on | off | the variants that fit it (a,b)",
+    )
+    p.add_argument(
+        "--free-curve",
+        default=None,
+        help="override fit.free_curve keys, e.g. init=1.6,smoothness=0.01",
+    )
+    p.add_argument(
+        "--edge-mask",
+        default=None,
+        help="override fit.edge_mask: THRESHOLD,RADIUS (codes, pixels) or off",
+    )
     p.add_argument("--drop", default="", help="fit.camera keys to remove (jpeg,noise)")
     p.add_argument("--jpeg-chroma", default=None, help="override fit.loss.jpeg_chroma")
-    p.add_argument("--clip-code", type=int, default=None,
-                   help="override fit.clip_code (codes >= it are censored; 255: none)")
-    p.add_argument("--auto-exposure", default=None, choices=("on", "off"),
-                   help="override fit.auto_exposure (camera.exposure.auto of the fitted ones)")
-    p.add_argument("--clipped", default=None, choices=("bound", "unmeasured"),
-                   help="override fit.clipped (camera.clipped of every fit)")
+    p.add_argument(
+        "--clip-code",
+        type=int,
+        default=None,
+        help="override fit.clip_code (codes >= it are censored; 255: none)",
+    )
+    p.add_argument(
+        "--auto-exposure",
+        default=None,
+        choices=("on", "off"),
+        help="override fit.auto_exposure (camera.exposure.auto of the fitted ones)",
+    )
+    p.add_argument(
+        "--clipped",
+        default=None,
+        choices=("bound", "unmeasured"),
+        help="override fit.clipped (camera.clipped of every fit)",
+    )
     p.add_argument("--no-plot", action="store_true")
     p.add_argument("--overwrite", action="store_true")
     p.add_argument("--quiet", action="store_true")
@@ -343,8 +412,11 @@ def main(argv=None) -> int:
                 pass
             fit["free_curve"] = dict(fit["free_curve"], **{k: v})
     if a.edge_mask is not None:
-        fit["edge_mask"] = None if a.edge_mask == "off" else dict(
-            zip(("threshold", "radius"), map(float, a.edge_mask.split(",")), strict=True))
+        fit["edge_mask"] = (
+            None
+            if a.edge_mask == "off"
+            else dict(zip(("threshold", "radius"), map(float, a.edge_mask.split(",")), strict=True))
+        )
     drop = [k for k in a.drop.split(",") if k]
     fit["camera"] = {k: v for k, v in fit["camera"].items() if k not in drop}
     if a.targets is not None:
@@ -361,19 +433,27 @@ def main(argv=None) -> int:
     renderer = fit.get("targets", "jaxgfx")
     os.makedirs(a.out, exist_ok=True)
     true_resp = true_response(cal["curve"], base_dir)
-    true_file = os.path.abspath(hdr.save_response(os.path.join(a.out, "true_response.json"),
-                                                  true_resp))
+    true_file = os.path.abspath(
+        hdr.save_response(os.path.join(a.out, "true_response.json"), true_resp)
+    )
     variants = a.variants.split(",") if a.variants else base.get("variants", VARIANTS)
     summary = {
-        "curve": cal["curve"], "targets": renderer, "seeds": seeds,
+        "curve": cal["curve"],
+        "targets": renderer,
+        "seeds": seeds,
         "size": [int(fit["render"]["width"]), int(fit["render"]["height"])],
-        "render": fit["render"], "loss": fit.get("loss"),
-        "truth": fit["truth"], "truth_camera": fit["camera"],
-        "clip_code": fit.get("clip_code"), "clipped": fit.get("clipped", "bound"),
+        "render": fit["render"],
+        "loss": fit.get("loss"),
+        "truth": fit["truth"],
+        "truth_camera": fit["camera"],
+        "clip_code": fit.get("clip_code"),
+        "clipped": fit.get("clipped", "bound"),
         "auto_exposure": bool(fit.get("auto_exposure")),
-        "white_balance": fit.get("white_balance"), "dropped": drop,
+        "white_balance": fit.get("white_balance"),
+        "dropped": drop,
         "edge_mask": fit.get("edge_mask"),
-        "runs": {v: [] for v in variants}, "calibration": [],
+        "runs": {v: [] for v in variants},
+        "calibration": [],
     }
     results = {v: [] for v in variants}
     for seed in seeds:
@@ -383,8 +463,9 @@ def main(argv=None) -> int:
         summary["calibration"].append({"seed": seed, "report": report, "response": cal_err})
         print("seed", seed, "calibrated response", json.dumps(cal_err), flush=True)
         img = linear_target(fit, base_dir, seed, renderer)
-        target = photos(img, fit["camera"], true_resp, seed, os.path.join(sd, "photos"),
-                        fit.get("edge_mask"))
+        target = photos(
+            img, fit["camera"], true_resp, seed, os.path.join(sd, "photos"), fit.get("edge_mask")
+        )
         for v in variants:
             cfg = {
                 "scene": fit["scene"],
@@ -397,13 +478,21 @@ def main(argv=None) -> int:
                 "seed": int(seed),
                 "progress": not a.quiet,
             }
-            out = run_fit(FitJob.load(cfg, os.path.join(sd, f"fit_{v}"), base_dir=base_dir,
-                                      overwrite=a.overwrite))
+            out = run_fit(
+                FitJob.load(
+                    cfg, os.path.join(sd, f"fit_{v}"), base_dir=base_dir, overwrite=a.overwrite
+                )
+            )
             results[v].append(out)
             # photo files carry no truth: the errors against fit.truth (max abs per parameter)
-            errors = {k: float(np.max(np.abs(np.asarray(out["params"][k], np.float64)
-                                             - np.asarray(t, np.float64))))
-                      for k, t in fit["truth"].items()}
+            errors = {
+                k: float(
+                    np.max(
+                        np.abs(np.asarray(out["params"][k], np.float64) - np.asarray(t, np.float64))
+                    )
+                )
+                for k, t in fit["truth"].items()
+            }
             entry = {
                 "seed": seed,
                 "params": out["params"],
@@ -426,14 +515,17 @@ def main(argv=None) -> int:
             "response_max_ln": mean_sd([e["response_error"]["max_ln"] for e in runs]),
             "response_rms_ln": mean_sd([e["response_error"]["rms_ln"] for e in runs]),
             "alpha": mean_sd([e["params"]["materials.metal.alpha"] for e in runs]),
-            "albedo": [mean_sd(c) for c in zip(*[e["params"]["materials.clay.reflectance"]
-                                                 for e in runs], strict=True)],
+            "albedo": [
+                mean_sd(c)
+                for c in zip(
+                    *[e["params"]["materials.clay.reflectance"] for e in runs], strict=True
+                )
+            ],
         }
         for v, runs in summary["runs"].items()
     }
     summary["calibration_mean_sd"] = {
-        k: mean_sd([c["response"][k] for c in summary["calibration"]])
-        for k in ("rms_ln", "max_ln")
+        k: mean_sd([c["response"][k] for c in summary["calibration"]]) for k in ("rms_ln", "max_ln")
     }
     print("mean_sd", json.dumps(summary["mean_sd"], indent=1), flush=True)
     with open(os.path.join(a.out, "summary.json"), "w", encoding="utf-8") as f:

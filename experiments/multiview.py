@@ -210,8 +210,14 @@ def ring_views(n: int, radius: float = 3.3, elevation: float = 30.0, fov: float 
         az = np.radians(45.0 + 360.0 * k / n)
         h = radius * np.cos(el)
         o = [h * np.cos(az), radius * np.sin(el), h * np.sin(az)]
-        views.append({"origin": [round(float(c), 3) for c in o], "target": [0, 0, 0],
-                      "up": [0, 1, 0], "fov": fov})
+        views.append(
+            {
+                "origin": [round(float(c), 3) for c in o],
+                "target": [0, 0, 0],
+                "up": [0, 1, 0],
+                "fov": fov,
+            }
+        )
     return views
 
 
@@ -335,8 +341,12 @@ def run_mesh(
         "texture": list(truth.shape),
         "view_pixels": [int(prep.scene.width), int(prep.scene.height)],
         "views": len(photos),
-        "ablation": {"size": size, "drop": list(drop), "bracket": bracket,
-                     "jpeg_chroma": cfg.loss.jpeg_chroma},
+        "ablation": {
+            "size": size,
+            "drop": list(drop),
+            "bracket": bracket,
+            "jpeg_chroma": cfg.loss.jpeg_chroma,
+        },
         "exposures": [p["exposure"] for p in photos],
         "share_clipped_per_view": clipped,
         "visible": float(visible.mean()),
@@ -372,8 +382,14 @@ def run_mesh(
     return summary
 
 
-def run_view_counts(config: str, out: str, counts=(3, 6, 12), chroma=("none", "4:2:0"),
-                    steps: int = 300, size: int | None = None) -> list:
+def run_view_counts(
+    config: str,
+    out: str,
+    counts=(3, 6, 12),
+    chroma=("none", "4:2:0"),
+    steps: int = 300,
+    size: int | None = None,
+) -> list:
     """PSNR over the visible texels against the number of views (:func:`ring_views`), with
     and without ``loss.jpeg_chroma``: one :func:`run_mesh` (all views only, ``steps``) per
     pair; writes ``view_counts.json`` and ``view_counts.png`` under ``out``."""
@@ -383,16 +399,21 @@ def run_view_counts(config: str, out: str, counts=(3, 6, 12), chroma=("none", "4
             sub = os.path.join(out, f"views{n}_{c.replace(':', '')}")
             r = run_mesh(config, sub, (steps,), size, (), False, c, ("four_views",), n)
             run = r["runs"][0]
-            rows.append({
-                "views": n, "jpeg_chroma": c, "steps": steps,
-                "psnr_visible": run["psnr_visible"],
-                "psnr_visible_ge2px": run["psnr_visible_ge2px"],
-                "psnr_visible_lt1px": run["psnr_visible_lt1px"],
-                "visible": r["visible"],
-                "px_per_visible_texel_median": r["px_per_visible_texel_median"],
-                "seconds": run["seconds"], "compile_seconds": run["compile_seconds"],
-                "load_average": r["load_average"],
-            })
+            rows.append(
+                {
+                    "views": n,
+                    "jpeg_chroma": c,
+                    "steps": steps,
+                    "psnr_visible": run["psnr_visible"],
+                    "psnr_visible_ge2px": run["psnr_visible_ge2px"],
+                    "psnr_visible_lt1px": run["psnr_visible_lt1px"],
+                    "visible": r["visible"],
+                    "px_per_visible_texel_median": r["px_per_visible_texel_median"],
+                    "seconds": run["seconds"],
+                    "compile_seconds": run["compile_seconds"],
+                    "load_average": r["load_average"],
+                }
+            )
             log(json.dumps(rows[-1]))
             emit_json(rows, os.path.join(out, "view_counts.json"))
     plot_view_counts(rows, os.path.join(out, "view_counts.png"))
@@ -409,8 +430,12 @@ def plot_view_counts(rows: list, path: str) -> None:
     for c, mk in (("none", "o-"), ("4:2:0", "s-")):
         rr = sorted((r for r in rows if r["jpeg_chroma"] == c), key=lambda r: r["views"])
         if rr:
-            ax.plot([r["views"] for r in rr], [r["psnr_visible"] for r in rr], mk,
-                    label=f"loss.jpeg_chroma: {c}")
+            ax.plot(
+                [r["views"] for r in rr],
+                [r["psnr_visible"] for r in rr],
+                mk,
+                label=f"loss.jpeg_chroma: {c}",
+            )
     ax.axhline(30.0, color="k", ls="--", lw=0.8, label="issue 25's target")
     ax.set_xlabel("views (one JPEG photo each, q 90, 4:2:0)")
     ax.set_ylabel("PSNR over visible texels (dB)")
@@ -610,10 +635,17 @@ def main(argv=None) -> int:
     p.add_argument("--bracket", action="store_true", help="--mesh: every view at every exposure")
     p.add_argument("--jpeg-chroma", default=None, help="--mesh: the fits' loss.jpeg_chroma")
     p.add_argument("--four-views-only", action="store_true", help="--mesh: skip view 1 alone")
-    p.add_argument("--n-views", type=int, default=None,
-                   help="--mesh: that many views on a ring (ring_views) instead of the config's")
-    p.add_argument("--view-counts", default=None,
-                   help="--mesh: PSNR against the number of views, e.g. 3,6,12 (needs --out)")
+    p.add_argument(
+        "--n-views",
+        type=int,
+        default=None,
+        help="--mesh: that many views on a ring (ring_views) instead of the config's",
+    )
+    p.add_argument(
+        "--view-counts",
+        default=None,
+        help="--mesh: PSNR against the number of views, e.g. 3,6,12 (needs --out)",
+    )
     p.add_argument("--chroma", default="none,4:2:0", help="--view-counts: loss.jpeg_chroma values")
     p.add_argument("--write-texture", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--write-mesh", action="store_true", help=argparse.SUPPRESS)
@@ -634,11 +666,19 @@ def main(argv=None) -> int:
             if a.out is None:
                 p.error("--view-counts needs --out")
             counts = tuple(int(n) for n in a.view_counts.split(","))
-            run_view_counts(config, a.out, counts, tuple(a.chroma.split(",")), budgets[-1],
-                            a.size)
+            run_view_counts(config, a.out, counts, tuple(a.chroma.split(",")), budgets[-1], a.size)
         else:
-            run_mesh(config, a.out, budgets, a.size, drop, a.bracket, a.jpeg_chroma,
-                     fits_wanted, a.n_views)
+            run_mesh(
+                config,
+                a.out,
+                budgets,
+                a.size,
+                drop,
+                a.bracket,
+                a.jpeg_chroma,
+                fits_wanted,
+                a.n_views,
+            )
     elif a.write_texture:
         from jaxgfx.io import write_png
 
