@@ -326,6 +326,54 @@ def mean_sd(xs) -> list:
     return [float(x.mean()), float(x.std(ddof=1)) if x.size > 1 else 0.0]
 
 
+def finish(summary: dict, results: dict, truth: dict, out: str, plot_it: bool = True) -> None:
+    """Mean ± sd over the seeds per variant into ``summary``; write summary.json and chain.png."""
+    summary["mean_sd"] = {
+        v: {
+            "alpha_rel_error": mean_sd([e["alpha_rel_error"] for e in runs]),
+            "albedo_max_error": mean_sd([e["errors"]["materials.clay.reflectance"] for e in runs]),
+            "response_max_ln": mean_sd([e["response_error"]["max_ln"] for e in runs]),
+            "response_rms_ln": mean_sd([e["response_error"]["rms_ln"] for e in runs]),
+            "alpha": mean_sd([e["params"]["materials.metal.alpha"] for e in runs]),
+            "albedo": [
+                mean_sd(c)
+                for c in zip(
+                    *[e["params"]["materials.clay.reflectance"] for e in runs], strict=True
+                )
+            ],
+        }
+        for v, runs in summary["runs"].items()
+    }
+    summary["calibration_mean_sd"] = {
+        k: mean_sd([c["response"][k] for c in summary["calibration"]]) for k in ("rms_ln", "max_ln")
+    }
+    print("mean_sd", json.dumps(summary["mean_sd"], indent=1), flush=True)
+    with open(os.path.join(out, "summary.json"), "w", encoding="utf-8") as f:
+        json.dump(summary, f, indent=1)
+    if plot_it:
+        plot(os.path.join(out, "chain.png"), results, truth)
+
+
+def merge(dirs: list, out: str) -> None:
+    """One summary and plot from several runs' folders (e.g. some variants run apart): their
+    ``summary.json`` runs and each fit's ``result.json`` history, seeds in order."""
+    summary, results = None, {}
+    for d in dirs:
+        with open(os.path.join(d, "summary.json"), encoding="utf-8") as f:
+            s = json.load(f)
+        if summary is None:
+            summary = dict(s, runs={}, merged_from=[])
+        summary["merged_from"].append(os.path.abspath(d))
+        for v, runs in s["runs"].items():
+            summary["runs"][v] = runs
+            results[v] = []
+            for e in runs:
+                with open(os.path.join(d, f"seed{e['seed']}", f"fit_{v}", "result.json")) as f:
+                    results[v].append(json.load(f))
+    os.makedirs(out, exist_ok=True)
+    finish(summary, results, summary["truth"], out)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--config", default="configs/camera_chain.yaml")
@@ -382,9 +430,15 @@ def main(argv=None) -> int:
         help="override fit.clipped (camera.clipped of every fit)",
     )
     p.add_argument("--no-plot", action="store_true")
+    p.add_argument(
+        "--merge", default=None, help="DIR,DIR,...: one summary and plot of these runs in --out"
+    )
     p.add_argument("--overwrite", action="store_true")
     p.add_argument("--quiet", action="store_true")
     a = p.parse_args(argv)
+    if a.merge:
+        merge(a.merge.split(","), a.out)
+        return 0
 
     from jaxgfx import hdr
     from jaxgfx.pipelines.fit import FitJob, enable_compilation_cache, run_fit
@@ -508,30 +562,7 @@ def main(argv=None) -> int:
             entry["response_error"] = response_errors(resp, true_resp)
             summary["runs"][v].append(entry)
             print(v, json.dumps(entry), flush=True)
-    summary["mean_sd"] = {
-        v: {
-            "alpha_rel_error": mean_sd([e["alpha_rel_error"] for e in runs]),
-            "albedo_max_error": mean_sd([e["errors"]["materials.clay.reflectance"] for e in runs]),
-            "response_max_ln": mean_sd([e["response_error"]["max_ln"] for e in runs]),
-            "response_rms_ln": mean_sd([e["response_error"]["rms_ln"] for e in runs]),
-            "alpha": mean_sd([e["params"]["materials.metal.alpha"] for e in runs]),
-            "albedo": [
-                mean_sd(c)
-                for c in zip(
-                    *[e["params"]["materials.clay.reflectance"] for e in runs], strict=True
-                )
-            ],
-        }
-        for v, runs in summary["runs"].items()
-    }
-    summary["calibration_mean_sd"] = {
-        k: mean_sd([c["response"][k] for c in summary["calibration"]]) for k in ("rms_ln", "max_ln")
-    }
-    print("mean_sd", json.dumps(summary["mean_sd"], indent=1), flush=True)
-    with open(os.path.join(a.out, "summary.json"), "w", encoding="utf-8") as f:
-        json.dump(summary, f, indent=1)
-    if not a.no_plot:
-        plot(os.path.join(a.out, "chain.png"), results, fit["truth"])
+    finish(summary, results, fit["truth"], a.out, plot_it=not a.no_plot)
     return 0
 
 

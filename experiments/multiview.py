@@ -231,6 +231,7 @@ def run_mesh(
     jpeg_chroma: str | None = None,
     fits_wanted=("four_views", "view0"),
     n_views: int | None = None,
+    tv: float | None = None,
 ) -> dict:
     """The hostile case (module doc): PSNR over the visible texels against seconds for each
     step budget, four views against view 0 alone. Ablations: ``size`` the views' pixels
@@ -239,7 +240,8 @@ def run_mesh(
     as it is (every view at every exposure) instead of one photo per view; ``jpeg_chroma``
     the fits' ``loss.jpeg_chroma`` (None: the config's); ``fits_wanted`` which fits run;
     ``n_views``: :func:`ring_views` of that many views instead of the config's, view ``v`` at
-    exposure ``MESH_EXPOSURES[v % 4]`` (the fit "four_views" then uses all ``n_views``)."""
+    exposure ``MESH_EXPOSURES[v % 4]`` (the fit "four_views" then uses all ``n_views``);
+    ``tv``: the texture's tv prior weight (None: the config's)."""
     import tempfile
 
     from jaxgfx.config import config_to_dict, load_config, read_yaml
@@ -253,6 +255,8 @@ def run_mesh(
     raw["target"]["camera"] = {k: v for k, v in raw["target"]["camera"].items() if k not in drop}
     if jpeg_chroma is not None:
         raw["loss"] = dict(raw.get("loss", {}), jpeg_chroma=jpeg_chroma)
+    if tv is not None:
+        raw["params"][MESH_TEXTURE] = dict(raw["params"][MESH_TEXTURE], prior={"tv": tv})
     if n_views is not None:
         raw["target"]["views"] = ring_views(n_views)
         raw["target"]["camera"]["exposures"] = [
@@ -342,6 +346,8 @@ def run_mesh(
         "view_pixels": [int(prep.scene.width), int(prep.scene.height)],
         "views": len(photos),
         "ablation": {
+            "tv": tv,
+            "n_views": n_views,
             "size": size,
             "drop": list(drop),
             "bracket": bracket,
@@ -646,6 +652,7 @@ def main(argv=None) -> int:
         default=None,
         help="--mesh: PSNR against the number of views, e.g. 3,6,12 (needs --out)",
     )
+    p.add_argument("--tv", type=float, default=None, help="--mesh: the texture's tv weight")
     p.add_argument("--chroma", default="none,4:2:0", help="--view-counts: loss.jpeg_chroma values")
     p.add_argument("--write-texture", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--write-mesh", action="store_true", help=argparse.SUPPRESS)
@@ -678,6 +685,7 @@ def main(argv=None) -> int:
                 a.jpeg_chroma,
                 fits_wanted,
                 a.n_views,
+                a.tv,
             )
     elif a.write_texture:
         from jaxgfx.io import write_png
