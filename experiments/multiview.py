@@ -196,6 +196,31 @@ def photo_errors(codes, clean, curve: str = "camera") -> dict:
     }
 
 
+MESH_EXPOSURES = (1.0, 0.6, 1.6, 2.5)
+"""The views' exposures of configs/multiview_mesh.yaml; ``ring_views(n)`` cycles them."""
+
+
+def ring_views(n: int, radius: float = 3.3, elevation: float = 30.0, fov: float = 32.0) -> list:
+    """``n`` views of the mesh's centre ``radius`` away, ``elevation`` degrees above its mean
+    plane, at azimuths ``45 + 360 k / n`` degrees: ``n = 4`` gives the four views of
+    configs/multiview_mesh.yaml (to the 3 decimals written there)."""
+    el = np.radians(elevation)
+    views = []
+    for k in range(n):
+        az = np.radians(45.0 + 360.0 * k / n)
+        h = radius * np.cos(el)
+        o = [h * np.cos(az), radius * np.sin(el), h * np.sin(az)]
+        views.append(
+            {
+                "origin": [round(float(c), 3) for c in o],
+                "target": [0, 0, 0],
+                "up": [0, 1, 0],
+                "fov": fov,
+            }
+        )
+    return views
+
+
 def run_mesh(
     config: str,
     out: str | None,
@@ -205,13 +230,18 @@ def run_mesh(
     bracket: bool = False,
     jpeg_chroma: str | None = None,
     fits_wanted=("four_views", "view0"),
+    n_views: int | None = None,
+    tv: float | None = None,
 ) -> dict:
     """The hostile case (module doc): PSNR over the visible texels against seconds for each
     step budget, four views against view 0 alone. Ablations: ``size`` the views' pixels
     (``render.width`` and ``height``; None: the config's); ``drop`` keys of
     ``target.camera`` to remove (``jpeg``, ``noise``); ``bracket``: fit the synthetic target
     as it is (every view at every exposure) instead of one photo per view; ``jpeg_chroma``
-    the fits' ``loss.jpeg_chroma`` (None: the config's); ``fits_wanted`` which fits run."""
+    the fits' ``loss.jpeg_chroma`` (None: the config's); ``fits_wanted`` which fits run;
+    ``n_views``: :func:`ring_views` of that many views instead of the config's, view ``v`` at
+    exposure ``MESH_EXPOSURES[v % 4]`` (the fit "four_views" then uses all ``n_views``);
+    ``tv``: the texture's tv prior weight (None: the config's)."""
     import tempfile
 
     from jaxgfx.config import config_to_dict, load_config, read_yaml
@@ -225,6 +255,13 @@ def run_mesh(
     raw["target"]["camera"] = {k: v for k, v in raw["target"]["camera"].items() if k not in drop}
     if jpeg_chroma is not None:
         raw["loss"] = dict(raw.get("loss", {}), jpeg_chroma=jpeg_chroma)
+    if tv is not None:
+        raw["params"][MESH_TEXTURE] = dict(raw["params"][MESH_TEXTURE], prior={"tv": tv})
+    if n_views is not None:
+        raw["target"]["views"] = ring_views(n_views)
+        raw["target"]["camera"]["exposures"] = [
+            MESH_EXPOSURES[v % len(MESH_EXPOSURES)] for v in range(n_views)
+        ]
     cfg = load_config(FitConfig, raw)
     desc = config_to_dict(cfg)
     prep = prepare_fit(cfg, base_dir=base)
@@ -308,8 +345,14 @@ def run_mesh(
         "texture": list(truth.shape),
         "view_pixels": [int(prep.scene.width), int(prep.scene.height)],
         "views": len(photos),
-        "ablation": {"size": size, "drop": list(drop), "bracket": bracket,
-                     "jpeg_chroma": cfg.loss.jpeg_chroma},
+        "ablation": {
+            "tv": tv,
+            "n_views": n_views,
+            "size": size,
+            "drop": list(drop),
+            "bracket": bracket,
+            "jpeg_chroma": cfg.loss.jpeg_chroma,
+        },
         "exposures": [p["exposure"] for p in photos],
         "share_clipped_per_view": clipped,
         "visible": float(visible.mean()),
@@ -343,6 +386,71 @@ def run_mesh(
     else:
         emit_json(summary)
     return summary
+
+
+def run_view_counts(
+    config: str,
+    out: str,
+    counts=(3, 6, 12),
+    chroma=("none", "4:2:0"),
+    steps: int = 300,
+    size: int | None = None,
+) -> list:
+    """PSNR over the visible texels against the number of views (:func:`ring_views`), with
+    and without ``loss.jpeg_chroma``: one :func:`run_mesh` (all views only, ``steps``) per
+    pair; writes ``view_counts.json`` and ``view_counts.png`` under ``out``."""
+    rows = []
+    for n in counts:
+        for c in chroma:
+            sub = os.path.join(out, f"views{n}_{c.replace(':', '')}")
+            r = run_mesh(config, sub, (steps,), size, (), False, c, ("four_views",), n)
+            run = r["runs"][0]
+            rows.append(
+                {
+                    "views": n,
+                    "jpeg_chroma": c,
+                    "steps": steps,
+                    "psnr_visible": run["psnr_visible"],
+                    "psnr_visible_ge2px": run["psnr_visible_ge2px"],
+                    "psnr_visible_lt1px": run["psnr_visible_lt1px"],
+                    "visible": r["visible"],
+                    "px_per_visible_texel_median": r["px_per_visible_texel_median"],
+                    "seconds": run["seconds"],
+                    "compile_seconds": run["compile_seconds"],
+                    "load_average": r["load_average"],
+                }
+            )
+            log(json.dumps(rows[-1]))
+            emit_json(rows, os.path.join(out, "view_counts.json"))
+    plot_view_counts(rows, os.path.join(out, "view_counts.png"))
+    return rows
+
+
+def plot_view_counts(rows: list, path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.2, 3.4))
+    for c, mk in (("none", "o-"), ("4:2:0", "s-")):
+        rr = sorted((r for r in rows if r["jpeg_chroma"] == c), key=lambda r: r["views"])
+        if rr:
+            ax.plot(
+                [r["views"] for r in rr],
+                [r["psnr_visible"] for r in rr],
+                mk,
+                label=f"loss.jpeg_chroma: {c}",
+            )
+    ax.axhline(30.0, color="k", ls="--", lw=0.8, label="issue 25's target")
+    ax.set_xlabel("views (one JPEG photo each, q 90, 4:2:0)")
+    ax.set_ylabel("PSNR over visible texels (dB)")
+    ax.set_title("64x64 texture on the bumpy mesh", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
 
 
 def albedo_texture(n: int = 64, seed: int = 3) -> np.ndarray:
@@ -533,6 +641,19 @@ def main(argv=None) -> int:
     p.add_argument("--bracket", action="store_true", help="--mesh: every view at every exposure")
     p.add_argument("--jpeg-chroma", default=None, help="--mesh: the fits' loss.jpeg_chroma")
     p.add_argument("--four-views-only", action="store_true", help="--mesh: skip view 1 alone")
+    p.add_argument(
+        "--n-views",
+        type=int,
+        default=None,
+        help="--mesh: that many views on a ring (ring_views) instead of the config's",
+    )
+    p.add_argument(
+        "--view-counts",
+        default=None,
+        help="--mesh: PSNR against the number of views, e.g. 3,6,12 (needs --out)",
+    )
+    p.add_argument("--tv", type=float, default=None, help="--mesh: the texture's tv weight")
+    p.add_argument("--chroma", default="none,4:2:0", help="--view-counts: loss.jpeg_chroma values")
     p.add_argument("--write-texture", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--write-mesh", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--time-one", choices=("single", "vmap", "loop"), help=argparse.SUPPRESS)
@@ -548,7 +669,24 @@ def main(argv=None) -> int:
         drop = tuple(k for k in a.drop.split(",") if k)
         budgets = tuple(int(b) for b in a.budgets.split(","))
         fits_wanted = ("four_views",) if a.four_views_only else ("four_views", "view0")
-        run_mesh(config, a.out, budgets, a.size, drop, a.bracket, a.jpeg_chroma, fits_wanted)
+        if a.view_counts:
+            if a.out is None:
+                p.error("--view-counts needs --out")
+            counts = tuple(int(n) for n in a.view_counts.split(","))
+            run_view_counts(config, a.out, counts, tuple(a.chroma.split(",")), budgets[-1], a.size)
+        else:
+            run_mesh(
+                config,
+                a.out,
+                budgets,
+                a.size,
+                drop,
+                a.bracket,
+                a.jpeg_chroma,
+                fits_wanted,
+                a.n_views,
+                a.tv,
+            )
     elif a.write_texture:
         from jaxgfx.io import write_png
 
