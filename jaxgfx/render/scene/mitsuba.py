@@ -1087,7 +1087,8 @@ def mitsuba_integrator(name: str = "path", *, max_depth: int = 3, rr_depth: int 
 
     ``"path"`` -> ``{"type": "path", "max_depth": max_depth, "rr_depth": rr_depth}`` (same
     depth convention: 1 emitters only, 2 direct light, 3 one indirect bounce); ``"direct"`` ->
-    the same with ``max_depth = 2`` (as jaxgfx's ``direct``). ``whitted`` and ``aov`` have no
+    the same with ``max_depth = 2`` (as jaxgfx's ``direct``); ``"ptracer"`` -> Mitsuba's
+    ``ptracer`` with the same ``max_depth`` / ``rr_depth``. ``whitted`` and ``aov`` have no
     Mitsuba counterpart (``NotImplementedError``); other names raise ``ValueError``.
 
     Example: ``mitsuba_integrator("direct")["max_depth"] == 2``.
@@ -1099,9 +1100,10 @@ def mitsuba_integrator(name: str = "path", *, max_depth: int = 3, rr_depth: int 
         max_depth = 2
     elif name in ("whitted", "aov"):
         raise NotImplementedError(f"integrator: {name!r} has no Mitsuba 3 counterpart")
-    elif name != "path":
-        raise ValueError(f"integrator: expected 'path' or 'direct', got {name!r}")
-    return {"type": "path", "max_depth": int(max_depth), "rr_depth": int(rr_depth)}
+    elif name not in ("path", "ptracer"):
+        raise ValueError(f"integrator: expected 'path', 'direct' or 'ptracer', got {name!r}")
+    kind = "ptracer" if name == "ptracer" else "path"
+    return {"type": kind, "max_depth": int(max_depth), "rr_depth": int(rr_depth)}
 
 
 def import_mitsuba(variant: str = "scalar_rgb"):

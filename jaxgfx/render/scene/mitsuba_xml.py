@@ -95,9 +95,9 @@ CYLINDER_SEGMENTS = 256
 class XMLScene:
     """A translated Mitsuba scene: ``desc`` (the jaxgfx scene description; every file path in
     it is absolute), the sampler's ``spp`` (``None`` without a sensor sampler), the jaxgfx
-    ``integrator`` name (``"path"`` or ``"direct"``), ``max_depth`` in the common convention
-    (``None``: Mitsuba's ``-1``, unbounded; jaxgfx needs a number), ``rr_depth``, and
-    ``files`` (every XML file read, in order)."""
+    ``integrator`` name (``"path"``, ``"direct"`` or ``"ptracer"``), ``max_depth`` in the
+    common convention (``None``: Mitsuba's ``-1``, unbounded; jaxgfx needs a number),
+    ``rr_depth``, and ``files`` (every XML file read, in order)."""
 
     desc: dict
     spp: int | None
@@ -1586,19 +1586,21 @@ def _integrator(obj: _Obj, doc):
             raise ValueError(f"{obj.where}: expected exactly one nested <integrator>")
         p.done(children_ok=1)
         return _integrator(obj.children[0], doc)
-    if obj.type not in ("path", "direct"):
+    if obj.type not in ("path", "direct", "ptracer"):
         raise ValueError(f"{obj.where}: integrator plugin {obj.type!r} is not supported "
-                         "(path, direct, moment)")  # fmt: skip
+                         "(path, direct, ptracer, moment)")  # fmt: skip
     if p.bool("hide_emitters", False):
         raise p.err("hide_emitters", "hidden emitters are not supported")
-    if obj.type == "path":
+    if obj.type in ("path", "ptracer"):
         depth = p.int("max_depth", -1)
         rr = p.int("rr_depth", 5)
         if depth == 0 or depth < -1 or rr < 1:
             raise p.err("max_depth", f"expected max_depth -1 or >= 1 and rr_depth >= 1, got "
                                      f"{depth}, {rr}")  # fmt: skip
+        if obj.type == "ptracer":
+            p.int("samples_per_pass", -1)  # a work split: the same image
         p.done()
-        return "path", (None if depth == -1 else depth), rr
+        return obj.type, (None if depth == -1 else depth), rr
     for name in ("emitter_samples", "bsdf_samples"):
         if p.int(name, 1) != 1:
             raise p.err(name, "only 1 sample per strategy is supported (jaxgfx direct MIS)")

@@ -1,0 +1,435 @@
+"""The particle tracer (``ptracer``, Mitsuba 3's light tracer) against closed forms and the
+path tracer; its gradients against finite differences; its errors.
+
+Monte Carlo tolerances: every comparison renders ``K`` independent keys and measures the
+standard error of the mean from their spread (z-scores, bound 4.5: a false alarm rate below
+1e-4 per comparison for a normal statistic)."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxgfx.render import load_scene, render
+from jaxgfx.render.integrators import INTEGRATORS, ParticleTracer, make_integrator
+
+jax.config.update("jax_enable_x64", True)
+
+RHO, INTENSITY = 0.5, 10.0
+LIGHT = np.array([0.5, 0.3, 1.0])
+Z_MAX = 4.5
+
+
+def _plane_scene(n=8, **emitter):
+    em = emitter or {"type": "point", "position": LIGHT.tolist(), "intensity": INTENSITY}
+    return load_scene(
+        {
+            "camera": {
+                "origin": [0, 0, 3],
+                "target": [0, 0, 0],
+                "up": [0, 1, 0],
+                "fov": 40,
+                "width": n,
+                "height": n,
+            },  # fmt: skip
+            "shapes": [
+                {
+                    "type": "rectangle",
+                    "center": [0, 0, 0],
+                    "normal": [0, 0, 1],
+                    "size": [10, 10],
+                    "material": "w",
+                }
+            ],  # fmt: skip
+            "materials": {"w": {"type": "diffuse", "reflectance": RHO}},
+            "emitters": [em],
+        }
+    )
+
+
+def _plane_reference(scene, sub=16):
+    """Pixel averages of the closed form ``rho / pi * I cos / r^2`` over a ``sub x sub`` grid
+    of each pixel (the image of a point light over a diffuse plane z = 0)."""
+    cam = scene.camera
+    n = cam.width
+    g = (np.arange(sub) + 0.5) / sub
+    xs = (np.arange(n)[:, None] + g[None, :]).reshape(-1)
+    px = np.stack(np.meshgrid(xs, xs), -1)  # (n sub, n sub, 2): (x, y)
+    o, d = (np.asarray(a, np.float64) for a in cam.generate_ray(jnp.asarray(px)))
+    t = -o[..., 2] / d[..., 2]
+    x = o + t[..., None] * d
+    v = LIGHT - x
+    r2 = np.sum(v * v, -1)
+    le = RHO / math.pi * INTENSITY * (v[..., 2] / np.sqrt(r2)) / r2
+    return le.reshape(n, sub, n, sub).mean(axis=(1, 3))
+
+
+def _renders(scene, keys, spp, integrator):
+    return np.asarray(
+        jax.jit(jax.vmap(lambda k: render(scene, k, spp=spp, integrator=integrator)))(keys)
+    )
+
+
+def _z(samples, ref, axis=0):
+    m = samples.mean(axis)
+    se = samples.std(axis, ddof=1) / math.sqrt(samples.shape[axis])
+    return (m - ref) / np.where(se > 0, se, np.inf)
+
+
+def _blocks(img, b):
+    h, w = img.shape[-3:-1]
+    return img.reshape(*img.shape[:-3], h // b, b, w // b, b, img.shape[-1]).mean(axis=(-4, -2))
+
+
+@pytest.mark.slow  # slow: 4 s alone, ~20 s on 2 loaded cores
+def test_point_light_over_diffuse_plane_closed_form():
+    scene = _plane_scene()
+    ref = _plane_reference(scene)
+    imgs = _renders(scene, jax.random.split(jax.random.key(1), 8), 16, ParticleTracer(max_depth=2))
+    # the three channels are the same estimate (grey scene)
+    np.testing.assert_allclose(imgs[..., 1], imgs[..., 0], rtol=1e-12)
+    z_mean = _z(imgs[..., 0].mean(axis=(1, 2)), ref.mean())
+    assert abs(z_mean) < Z_MAX, (imgs[..., 0].mean(), ref.mean(), z_mean)
+    z_blk = _z(_blocks(imgs[..., :1], 2)[..., 0], _blocks(ref[..., None], 2)[..., 0])
+    assert np.max(np.abs(z_blk)) < Z_MAX, z_blk
+    # the relative error of the mean is small: a wrong constant (2, pi) fails by far
+    assert abs(imgs[..., 0].mean() / ref.mean() - 1) < 0.05
+
+
+def _cornerish(glossy="roughconductor"):
+    """A diffuse floor and back wall, a glossy sphere and a rectangle area light facing down,
+    partly in view (the visible-emitter connection is tested too)."""
+    mats = {
+        "floor": {"type": "diffuse", "reflectance": [0.7, 0.5, 0.3]},
+        "wall": {"type": "diffuse", "reflectance": 0.6},
+        "gloss": {"type": "roughconductor", "alpha": 0.3}
+        if glossy == "roughconductor"
+        else {"type": "roughplastic", "alpha": 0.2, "diffuse_reflectance": 0.4},
+    }
+    return load_scene(
+        {
+            "camera": {
+                "origin": [0, 1.2, 4],
+                "target": [0, 0.8, 0],
+                "up": [0, 1, 0],
+                "fov": 55,
+                "width": 8,
+                "height": 8,
+            },  # fmt: skip
+            "shapes": [
+                {
+                    "type": "rectangle",
+                    "center": [0, 0, 0],
+                    "normal": [0, 1, 0],
+                    "size": [6, 6],
+                    "material": "floor",
+                },  # fmt: skip
+                {
+                    "type": "rectangle",
+                    "center": [0, 1.5, -1.5],
+                    "normal": [0, 0, 1],
+                    "size": [6, 3],
+                    "material": "wall",
+                },  # fmt: skip
+                {"type": "sphere", "center": [0.3, 0.5, 0], "radius": 0.5, "material": "gloss"},
+            ],
+            "materials": mats,
+            "emitters": [
+                {
+                    "type": "area",
+                    "radiance": [6, 6, 6],
+                    "shape": {
+                        "type": "rectangle",
+                        "center": [-0.6, 2.2, 0.2],
+                        "normal": [0, -1, 0],
+                        "size": [0.8, 0.8],
+                    },
+                },  # fmt: skip
+            ],
+        }
+    )
+
+
+@pytest.mark.slow  # slow: ~50 s on 2 loaded cores (two integrators x 8 keys)
+def test_equals_path_tracer_in_expectation_area_light():
+    scene = _cornerish("roughconductor")
+    keys = jax.random.split(jax.random.key(2), 8)
+    pt = _renders(scene, keys, 16, ParticleTracer(max_depth=3))
+    pa = _renders(scene, keys, 16, make_integrator("path", max_depth=3))
+
+    def z2(a, b):
+        ma, mb = a.mean(0), b.mean(0)
+        va = a.var(0, ddof=1) / a.shape[0]
+        vb = b.var(0, ddof=1) / b.shape[0]
+        s = np.sqrt(va + vb)
+        return (ma - mb) / np.where(s > 0, s, np.inf)
+
+    z_ch = z2(pt.mean(axis=(1, 2)), pa.mean(axis=(1, 2)))
+    assert np.max(np.abs(z_ch)) < Z_MAX, z_ch
+    z_blk = z2(_blocks(pt, 4), _blocks(pa, 4))
+    assert np.max(np.abs(z_blk)) < Z_MAX, z_blk
+
+
+def _mirror_caustic_scene():
+    """A point light between a diffuse floor (z = 0) and a perfect mirror wall (x = 1) that
+    the camera does not see: the floor also receives the light of the mirror image of the
+    light at (1.8, 0, 1), which a camera path can never complete (delta BSDF then delta
+    light)."""
+    return load_scene(
+        {
+            "camera": {
+                "origin": [0, 0, 3],
+                "target": [0, 0, 0],
+                "up": [0, 1, 0],
+                "fov": 30,
+                "width": 8,
+                "height": 8,
+            },  # fmt: skip
+            "shapes": [
+                {
+                    "type": "rectangle",
+                    "center": [0, 0, 0],
+                    "normal": [0, 0, 1],
+                    "size": [10, 10],
+                    "material": "w",
+                },  # fmt: skip
+                {
+                    "type": "rectangle",
+                    "center": [1, 0, 0],
+                    "normal": [-1, 0, 0],
+                    "size": [10, 10],
+                    "material": "mirror",
+                },  # fmt: skip
+            ],
+            "materials": {
+                "w": {"type": "diffuse", "reflectance": RHO},
+                "mirror": {"type": "conductor"},
+            },  # fmt: skip
+            "emitters": [{"type": "point", "position": [0.2, 0, 1], "intensity": INTENSITY}],
+        }
+    )
+
+
+def _two_source_reference(scene, sources, sub=16):
+    cam = scene.camera
+    n = cam.width
+    g = (np.arange(sub) + 0.5) / sub
+    xs = (np.arange(n)[:, None] + g[None, :]).reshape(-1)
+    px = np.stack(np.meshgrid(xs, xs), -1)
+    o, d = (np.asarray(a, np.float64) for a in cam.generate_ray(jnp.asarray(px)))
+    x = o + (-o[..., 2] / d[..., 2])[..., None] * d
+    le = 0.0
+    for s in sources:
+        v = np.asarray(s) - x
+        r2 = np.sum(v * v, -1)
+        le = le + RHO / math.pi * INTENSITY * (v[..., 2] / np.sqrt(r2)) / r2
+    return le.reshape(n, sub, n, sub).mean(axis=(1, 3))
+
+
+@pytest.mark.slow  # slow: ~11 s on 2 loaded cores
+def test_mirror_caustic_of_a_point_light_only_the_light_tracer_sees():
+    scene = _mirror_caustic_scene()
+    direct = _two_source_reference(scene, [[0.2, 0, 1]])
+    both = _two_source_reference(scene, [[0.2, 0, 1], [1.8, 0, 1]])
+    keys = jax.random.split(jax.random.key(3), 8)
+    pt = _renders(scene, keys, 16, ParticleTracer(max_depth=3))[..., 0]
+    z = _z(_blocks(pt[..., None], 2)[..., 0], _blocks(both[..., None], 2)[..., 0])
+    assert np.max(np.abs(z)) < Z_MAX, z
+    # the caustic is 20-30 % of the floor's radiance here: far outside the noise (z = 8.7)
+    z_direct = _z(pt.mean(axis=(1, 2)), direct.mean())
+    assert z_direct > Z_MAX, z_direct
+    # the path tracer misses it (its estimate has no variance from the delta light here)
+    pa = np.asarray(render(scene, keys[0], spp=4, integrator="path", max_depth=3))[..., 0]
+    np.testing.assert_allclose(pa.mean(), direct.mean(), rtol=0.02)
+
+
+def _grad_loss(x, key, scene):
+    s = scene.replace("materials.floor.reflectance", x[:3]).replace(
+        "emitters.area.0.radiance", x[3:]
+    )
+    img = render(s, key, spp=2, integrator=ParticleTracer(max_depth=3))
+    return jnp.sum(img * jnp.linspace(0.5, 1.5, img.size).reshape(img.shape))
+
+
+@pytest.mark.slow  # slow: ~30 s on 2 loaded cores (AD + 12 perturbed renders, float64)
+def test_gradients_radiance_and_albedo_match_finite_differences():
+    from jaxgfx.testing import ad_fd_per_key
+
+    scene = load_scene(
+        {
+            "camera": {
+                "origin": [0, 1, 3],
+                "target": [0, 0.5, 0],
+                "up": [0, 1, 0],
+                "fov": 60,
+                "width": 4,
+                "height": 4,
+            },  # fmt: skip
+            "shapes": [
+                {
+                    "type": "rectangle",
+                    "center": [0, 0, 0],
+                    "normal": [0, 1, 0],
+                    "size": [4, 4],
+                    "material": "floor",
+                },  # fmt: skip
+                {
+                    "type": "rectangle",
+                    "center": [0, 1, -1],
+                    "normal": [0, 0, 1],
+                    "size": [4, 2],
+                    "material": "floor",
+                },  # fmt: skip
+            ],
+            "materials": {"floor": {"type": "diffuse", "reflectance": [0.6, 0.5, 0.4]}},
+            "emitters": [
+                {
+                    "type": "area",
+                    "radiance": [3, 4, 5],
+                    "shape": {
+                        "type": "rectangle",
+                        "center": [0, 1.8, 0],
+                        "normal": [0, -1, 0],
+                        "size": [0.6, 0.6],
+                    },
+                }
+            ],  # fmt: skip
+        }
+    )
+    x = jnp.array([0.6, 0.5, 0.4, 3.0, 4.0, 5.0])
+    keys = jax.random.split(jax.random.key(4), 1)
+    vals, ad, fd = ad_fd_per_key(_grad_loss, x, keys, 1e-4, args=(scene,))
+    assert np.all(np.isfinite(ad)) and np.all(vals > 0)
+    # per key the estimate is a polynomial in x (no sampling decision depends on it): AD and
+    # central differences agree to float64 rounding of the FD step
+    np.testing.assert_allclose(ad, fd, rtol=1e-6, atol=1e-9 * np.abs(fd).max())
+    assert np.all(np.abs(ad) > 1e-3)  # every parameter moves the image
+
+
+def test_integrator_registration():
+    assert INTEGRATORS["ptracer"] is ParticleTracer
+    integ = make_integrator("ptracer", max_depth=4, rr_depth=2)
+    assert (integ.max_depth, integ.rr_depth, integ.hide_emitters) == (4, 2, False)
+
+
+@pytest.mark.slow  # slow: ~3 s alone, ~8 s on 2 loaded cores (two compiles)
+def test_jit_deterministic_and_max_depth_one():
+    scene = _plane_scene(n=4)
+    f = jax.jit(lambda k: render(scene, k, spp=2, integrator="ptracer", max_depth=2))
+    a, b = np.asarray(f(jax.random.key(0))), np.asarray(f(jax.random.key(0)))
+    assert a.shape == (4, 4, 3) and np.all(np.isfinite(a)) and a.max() > 0
+    np.testing.assert_array_equal(a, b)
+    # max_depth 1: only directly visible emitters; a point light is never visible
+    one = np.asarray(render(scene, jax.random.key(0), spp=2, integrator="ptracer", max_depth=1))
+    assert np.all(one == 0)
+
+
+@pytest.mark.parametrize(
+    "emitter, match",
+    [
+        ({"type": "constant", "radiance": 1.0}, "environment emitters"),
+        (
+            {"type": "directional", "direction": [0, 0, -1], "irradiance": 1.0},
+            "DirectionalLight",
+        ),  # fmt: skip
+    ],
+)
+def test_unsupported_emitters_raise_one_clear_error(emitter, match):
+    scene = _plane_scene(n=4, **emitter)
+    with pytest.raises(ValueError, match=match):
+        render(scene, jax.random.key(0), spp=1, integrator="ptracer")
+
+
+def test_bad_options_and_camera_path_refused():
+    with pytest.raises(ValueError, match="max_depth"):
+        ParticleTracer(max_depth=0)
+    with pytest.raises(ValueError, match="hide_emitters"):
+        ParticleTracer(hide_emitters=1)
+    with pytest.raises(TypeError, match="strategy"):
+        make_integrator("ptracer", strategy="mis")
+    with pytest.raises(TypeError, match="not along camera rays"):
+        ParticleTracer()(None, None, None, None)
+
+
+def test_xml_integrator_row_and_writer(tmp_path):
+    from jaxgfx.render.scene.mitsuba import mitsuba_integrator
+    from jaxgfx.render.scene.mitsuba_xml import read_xml
+
+    xml = tmp_path / "s.xml"
+    xml.write_text(
+        """<scene version="3.0.0">
+  <integrator type="ptracer"><integer name="max_depth" value="4"/>
+    <integer name="samples_per_pass" value="4"/></integrator>
+  <sensor type="perspective"><float name="fov" value="40"/>
+    <transform name="to_world"><lookat origin="0, 0, 3" target="0, 0, 0" up="0, 1, 0"/>
+    </transform>
+    <film type="hdrfilm"><integer name="width" value="4"/><integer name="height" value="4"/>
+    </film></sensor>
+  <shape type="rectangle"><bsdf type="diffuse"/></shape>
+  <emitter type="point"><point name="position" x="0" y="0" z="1"/></emitter>
+</scene>"""
+    )
+    x = read_xml(str(xml))
+    assert (x.integrator, x.max_depth, x.rr_depth) == ("ptracer", 4, 5)
+    assert mitsuba_integrator("ptracer", max_depth=4, rr_depth=3) == {
+        "type": "ptracer", "max_depth": 4, "rr_depth": 3}  # fmt: skip
+    bad = tmp_path / "b.xml"
+    spp_pass = '<integer name="samples_per_pass" value="4"/>'
+    hide = '<boolean name="hide_emitters" value="true"/>'
+    bad.write_text(xml.read_text().replace(spp_pass, hide))
+    with pytest.raises(ValueError, match="hide_emitters"):
+        read_xml(str(bad))
+
+
+@pytest.mark.mitsuba
+@pytest.mark.slow  # slow: Mitsuba renders 4 seeds + jaxgfx 4 keys
+def test_same_run_mitsuba_ptracer():
+    pytest.importorskip("mitsuba")
+    from jaxgfx.render.scene.mitsuba import render_mitsuba
+
+    desc = {
+        "camera": {
+            "origin": [0, 0, 3],
+            "target": [0, 0, 0],
+            "up": [0, 1, 0],
+            "fov": 40,
+            "width": 8,
+            "height": 8,
+        },  # fmt: skip
+        "shapes": [
+            {
+                "type": "rectangle",
+                "center": [0, 0, 0],
+                "normal": [0, 0, 1],
+                "size": [4, 4],
+                "material": "w",
+            }
+        ],  # fmt: skip
+        "materials": {"w": {"type": "diffuse", "reflectance": [0.7, 0.5, 0.3]}},
+        "emitters": [
+            {"type": "point", "position": LIGHT.tolist(), "intensity": INTENSITY},
+            {
+                "type": "area",
+                "radiance": [2, 2, 2],
+                "shape": {
+                    "type": "rectangle",
+                    "center": [-0.4, 0, 1.2],
+                    "normal": [0, 0, -1],
+                    "size": [0.5, 0.5],
+                },
+            },  # fmt: skip
+        ],
+    }
+    k = 4
+    mi_imgs = np.stack([render_mitsuba(desc, spp=64, integrator="ptracer", max_depth=3, seed=s)
+                        for s in range(k)]).astype(np.float64)  # fmt: skip
+    jx = _renders(load_scene(desc), jax.random.split(jax.random.key(6), k), 64,
+                  ParticleTracer(max_depth=3))  # fmt: skip
+    va = jx.mean(axis=(1, 2)).var(0, ddof=1) / k + mi_imgs.mean(axis=(1, 2)).var(0, ddof=1) / k
+    z = (jx.mean(axis=(0, 1, 2)) - mi_imgs.mean(axis=(0, 1, 2))) / np.sqrt(va)
+    assert np.max(np.abs(z)) < Z_MAX, (jx.mean(axis=(0, 1, 2)), mi_imgs.mean(axis=(0, 1, 2)), z)
+    vb = (_blocks(jx, 4).var(0, ddof=1) + _blocks(mi_imgs, 4).var(0, ddof=1)) / k
+    zb = (_blocks(jx, 4).mean(0) - _blocks(mi_imgs, 4).mean(0)) / np.sqrt(vb)
+    assert np.max(np.abs(zb)) < Z_MAX, zb
