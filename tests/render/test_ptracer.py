@@ -83,7 +83,7 @@ def _blocks(img, b):
     return img.reshape(*img.shape[:-3], h // b, b, w // b, b, img.shape[-1]).mean(axis=(-4, -2))
 
 
-@pytest.mark.slow  # slow: 4 s alone, ~20 s on 2 loaded cores
+@pytest.mark.slow  # slow: 4 s alone, ~15-20 s on 2 loaded cores
 def test_point_light_over_diffuse_plane_closed_form():
     scene = _plane_scene()
     ref = _plane_reference(scene)
@@ -228,7 +228,7 @@ def _two_source_reference(scene, sources, sub=16):
     return le.reshape(n, sub, n, sub).mean(axis=(1, 3))
 
 
-@pytest.mark.slow  # slow: ~11 s on 2 loaded cores
+@pytest.mark.slow  # slow: ~21 s on 2 loaded cores
 def test_mirror_caustic_of_a_point_light_only_the_light_tracer_sees():
     scene = _mirror_caustic_scene()
     direct = _two_source_reference(scene, [[0.2, 0, 1]])
@@ -253,7 +253,7 @@ def _grad_loss(x, key, scene):
     return jnp.sum(img * jnp.linspace(0.5, 1.5, img.size).reshape(img.shape))
 
 
-@pytest.mark.slow  # slow: ~30 s on 2 loaded cores (AD + 12 perturbed renders, float64)
+@pytest.mark.slow  # slow: ~70 s on 2 loaded cores (AD + 12 perturbed renders, float64)
 def test_gradients_radiance_and_albedo_match_finite_differences():
     from jaxgfx.testing import ad_fd_per_key
 
@@ -314,7 +314,7 @@ def test_integrator_registration():
     assert (integ.max_depth, integ.rr_depth, integ.hide_emitters) == (4, 2, False)
 
 
-@pytest.mark.slow  # slow: ~3 s alone, ~8 s on 2 loaded cores (two compiles)
+@pytest.mark.slow  # slow: ~6-8 s on 2 loaded cores (two compiles)
 def test_jit_deterministic_and_max_depth_one():
     scene = _plane_scene(n=4)
     f = jax.jit(lambda k: render(scene, k, spp=2, integrator="ptracer", max_depth=2))
