@@ -38,10 +38,19 @@ Conventions (Mitsuba 3 ``ptracer``):
   integrators use filter importance sampling instead: with the box filter both estimate the
   same pixel integral; with ``gaussian`` / ``tent`` the two reconstructions differ slightly.
 
-Not supported (one ``ValueError`` naming it, before tracing): environment emitters
-(``constant``, ``envmap``) and directional lights (Mitsuba samples a disk over the scene's
-bounding sphere: not implemented), other emitter types (e.g. a textured spot light or a
-projector), cameras other than the pinhole :class:`~jaxgfx.render.camera.PerspectiveCamera`.
+- Distant emitters (Mitsuba 3's ``sample_ray`` of ``directional``, ``constant``, ``envmap``):
+  the direction is the light's (directional) or sampled by the environment's own sampler
+  (``constant``: uniform sphere, ``envmap``: its texel distribution; detached, the radiance
+  re-evaluated there); the origin is uniform on the disk of radius ``R`` perpendicular to it,
+  centred ``R`` upstream of the centre of the scene's bounding sphere (the bounding box's, the
+  camera not included); weight ``irradiance π R²`` or ``L / pdf π R²``. A directly visible
+  environment: a direction sampled from the camera's position, ``L We / pdf`` where
+  unoccluded (Mitsuba samples it from the sensor's position too).
+
+Not supported (one ``ValueError`` naming it, before tracing): other emitter types (e.g. a
+textured spot light or a projector, an area light with textured radiance), distant emitters in
+a scene with a shape that has no bounds here (SDFs), cameras other than the pinhole
+:class:`~jaxgfx.render.camera.PerspectiveCamera`.
 
 Derivatives: reverse mode through the splat (``.at[].add``): emitter intensities / radiances
 and material parameters. BSDF samples are detached as in the path tracer (the direction
@@ -60,16 +69,21 @@ import jax.numpy as jnp
 
 from jaxgfx._math import max_last, safe_div, safe_sqrt, sum_last, take_rows
 from jaxgfx.render.camera import PerspectiveCamera, look_at_basis
-from jaxgfx.render.emitters import AreaLight, SpotLight
+from jaxgfx.render.emitters import AreaLight, DirectionalLight, SpotLight
 from jaxgfx.render.film import BoxFilter, GaussianFilter, TentFilter
 from jaxgfx.render.geometry import sample_area
 from jaxgfx.render.geometry.frame import frame_from_normal, to_world
+from jaxgfx.render.geometry.instance import Instances
+from jaxgfx.render.geometry.mesh import TriangleMesh
+from jaxgfx.render.geometry.rectangle import Rectangles
+from jaxgfx.render.geometry.sphere import Spheres
 from jaxgfx.render.integrators import _common as C
 from jaxgfx.render.integrators.base import Integrator, check_depth
 from jaxgfx.render.sampler import uniform
 from jaxgfx.render.sampling import (
     square_to_cosine_hemisphere,
     square_to_uniform_cone,
+    square_to_uniform_disk_concentric,
     square_to_uniform_sphere,
 )
 
@@ -81,25 +95,21 @@ N_BOUNCE = 4  # per bounce: BSDF lobe, BSDF direction (2), Russian roulette
 
 def check_light_tracing(scene) -> None:
     """``ValueError`` naming what the particle tracer cannot trace in ``scene`` (host-side,
-    before tracing): a camera other than the pinhole, an environment, a directional light,
-    an emitter type it does not know (a textured spot light, a projector)."""
+    before tracing): a camera other than the pinhole, an emitter type it does not know (a
+    textured spot light, a projector, an area light with textured radiance), an environment or
+    directional light in a scene with a shape it cannot bound (an SDF)."""
     cam = scene.camera
     if type(cam) is not PerspectiveCamera:
         raise ValueError(
             f"camera: the 'ptracer' integrator connects paths to a pinhole camera "
             f"(PerspectiveCamera), got {type(cam).__name__}"
         )
-    if scene.environment is not None:
-        raise ValueError(
-            f"emitters: the 'ptracer' integrator does not trace environment emitters "
-            f"({type(scene.environment).__name__}); use 'path'"
-        )
     for k, light in enumerate(scene.delta_lights):
         name = type(light).__name__
-        if type(light) is not SpotLight:
+        if type(light) not in (SpotLight, DirectionalLight):
             raise ValueError(
                 f"emitters: the 'ptracer' integrator does not trace {name} (delta_lights[{k}]): "
-                "point, spot and area lights only; use 'path'"
+                "point, spot, directional, area and environment lights only; use 'path'"
             )
         if getattr(light, "texture", None) is not None:
             raise ValueError(
@@ -112,6 +122,60 @@ def check_light_tracing(scene) -> None:
                 f"emitters: the 'ptracer' integrator traces area lights of constant RGB "
                 f"radiance, got {type(al).__name__} (area_lights[{k}])"
             )
+    distant = scene.environment is not None or any(
+        type(x) is DirectionalLight for x in scene.delta_lights
+    )
+    if distant:
+        _bounds_parts(scene)  # raises for a shape it cannot bound
+
+
+# -- the scene's bounding sphere (environment and directional emission) -------------------
+
+
+def _bounds_parts(scene):
+    """Per shape ``(lo (M, 3), hi (M, 3))`` point bounds; ``ValueError`` naming a shape the
+    particle tracer cannot bound (needed only with an environment or a directional light)."""
+    parts = []
+    for k, sh in enumerate(scene.shapes):
+        m = getattr(sh, "mesh", sh)  # acceleration structures hold their mesh
+        if isinstance(m, Spheres):
+            c, r = m.centers.reshape(-1, 3), m.radii.reshape(-1, 1)
+            parts.append((c - r, c + r))
+        elif isinstance(m, Rectangles):
+            c = m.centers.reshape(-1, 3)
+            h = 0.5 * (jnp.abs(m.edge_u.reshape(-1, 3)) + jnp.abs(m.edge_v.reshape(-1, 3)))
+            parts.append((c - h, c + h))
+        elif isinstance(m, TriangleMesh):
+            parts.append((m.vertices, m.vertices))
+        elif isinstance(m, Instances) and m.bounds is not None:
+            parts.append((m.bounds[:, 0], m.bounds[:, 1]))
+        else:
+            raise ValueError(
+                f"shapes[{k}]: the 'ptracer' integrator emits environment and directional "
+                f"light from a disk over the scene's bounding sphere and cannot bound a "
+                f"{type(m).__name__}; use 'path'"
+            )
+    return parts
+
+
+def _bounding_sphere(scene, dtype):
+    """Centre and radius of the sphere around the scene's bounding box (Mitsuba 3: the
+    distant emitters' ``m_bsphere``; the camera is not included), slightly enlarged."""
+    parts = _bounds_parts(scene)
+    lo = jnp.min(jnp.concatenate([a.astype(dtype) for a, _ in parts]), 0)
+    hi = jnp.max(jnp.concatenate([b.astype(dtype) for _, b in parts]), 0)
+    center = 0.5 * (lo + hi)
+    radius = 0.5 * jnp.linalg.norm(hi - lo) * (1 + 1e-4) + 1e-4
+    return jax.lax.stop_gradient((center, radius))
+
+
+def _disk_origin(center, radius, d, u):
+    """Ray origins on the disk of ``radius`` perpendicular to the unit directions ``d``,
+    centred at ``center - radius d`` (the rays ``o + t d`` cross the whole bounding sphere)."""
+    off = square_to_uniform_disk_concentric(u)
+    zero = jnp.zeros_like(off[..., :1])
+    perp = to_world(frame_from_normal(d), jnp.concatenate([off, zero], -1))
+    return center + (perp - d) * radius
 
 
 # -- the sensor ---------------------------------------------------------------------------
@@ -206,7 +270,28 @@ def sample_emission(scene, u):
         d = square_to_uniform_sphere(u_dir)
         w = 4.0 * math.pi * take_rows(pl.intensities.astype(dtype), row)
         cands.append((o, d, w))
-    for light in scene.delta_lights:  # spot lights (check_light_tracing)
+    if scene.environment is not None or any(
+        type(x) is DirectionalLight for x in scene.delta_lights
+    ):
+        center, radius = _bounding_sphere(scene, dtype)
+        disk = math.pi * radius * radius
+    if scene.environment is not None:
+        env = scene.environment
+        wi, pdf, _ = env.sample(u_dir)  # towards the environment: the light travels along -wi
+        wi, pdf = jax.lax.stop_gradient((wi, pdf))
+        le = env.eval(wi)  # re-attached radiance at the detached direction (as light sampling)
+        d = -wi
+        o = _disk_origin(center, radius, d, u_pos)
+        w = le * (disk * safe_div(1.0, pdf))[..., None]
+        cands.append((o, d, w))
+    for light in scene.delta_lights:  # spot and directional lights (check_light_tracing)
+        if type(light) is DirectionalLight:
+            d = light.direction.astype(dtype)
+            d = jnp.broadcast_to(d / jnp.linalg.norm(d), batch + (3,))
+            o = _disk_origin(center, radius, d, u_pos)
+            w = jnp.broadcast_to(light.irradiance.astype(dtype) * disk, batch + (3,))
+            cands.append((o, d, w))
+            continue
         cos_cut = jnp.cos(jnp.deg2rad(light.cutoff_angle.astype(dtype)))
         local = square_to_uniform_cone(u_dir, cos_cut)
         axis = light.direction.astype(dtype)
@@ -222,24 +307,44 @@ def sample_emission(scene, u):
 
 
 def _visible_emitters(scene, u):
-    """Directly visible area lights: a point drawn by area on a uniformly chosen emitter,
-    connected to the camera -> ``(value (..., 3), pixel (..., 2))`` (0 for delta lights)."""
+    """Directly visible emitters: a point drawn by area on a uniformly chosen area light, or a
+    direction sampled on the environment from the camera, connected to the camera ->
+    ``(value (..., 3), pixel (..., 2))`` (0 for delta lights)."""
     dtype = u.dtype
     batch = u.shape[:-1]
-    if not scene.area_lights:
-        return jnp.zeros(batch + (3,), dtype), jnp.zeros(batch + (2,), dtype)
+    val = jnp.zeros(batch + (3,), dtype)
+    pix = jnp.zeros(batch + (2,), dtype)
+    if not scene.area_lights and scene.environment is None:
+        return val, pix
     cand, _ = _light_index(scene, u[..., 0])
-    cands = []
-    for al, sh in zip(scene.area_lights, scene.emitter_shapes, strict=True):
-        p, n, pdf_a = sample_area(sh, u[..., 1:3])
-        cands.append((p, n, al.radiance.astype(dtype) * safe_div(1.0, pdf_a)[..., None]))
-    p, n, le = _select(cands, jnp.clip(cand, 0, len(cands) - 1))
-    is_area = cand < len(scene.area_lights)
-    pix, to_cam, dist, we, ok = _sensor_connection(scene.camera, p)
-    cos_l = sum_last(n * to_cam)  # the front side only (jaxgfx area lights emit along ng)
-    ok = ok & is_area & (cos_l > 0) & _visible(scene, p, n, to_cam, dist)
-    val = le * (jnp.asarray(scene.n_lights, dtype) * we * jnp.maximum(cos_l, 0.0))[..., None]
-    return jnp.where(ok[..., None], val, 0.0), pix
+    n_sel = jnp.asarray(scene.n_lights, dtype)
+    na = len(scene.area_lights)
+    if scene.area_lights:
+        cands = []
+        for al, sh in zip(scene.area_lights, scene.emitter_shapes, strict=True):
+            p, n, pdf_a = sample_area(sh, u[..., 1:3])
+            cands.append((p, n, al.radiance.astype(dtype) * safe_div(1.0, pdf_a)[..., None]))
+        p, n, le = _select(cands, jnp.clip(cand, 0, na - 1))
+        pix, to_cam, dist, we, ok = _sensor_connection(scene.camera, p)
+        cos_l = sum_last(n * to_cam)  # the front side only (jaxgfx area lights emit along ng)
+        ok = ok & (cand < na) & (cos_l > 0) & _visible(scene, p, n, to_cam, dist)
+        v = le * (n_sel * we * jnp.maximum(cos_l, 0.0))[..., None]
+        val = jnp.where(ok[..., None], v, 0.0)
+    if scene.environment is not None:
+        env = scene.environment
+        has_point = scene.point_lights is not None
+        wi, pdf, _ = env.sample(u[..., 1:3])
+        wi, pdf = jax.lax.stop_gradient((wi, pdf))
+        le = env.eval(wi)
+        o = jnp.broadcast_to(scene.camera.origin.astype(dtype), wi.shape)
+        # We of the direction: the connection to the point at unit distance along wi
+        pix_e, _, _, we, ok = _sensor_connection(scene.camera, o + wi)
+        free = ~C.occluded(scene, o, wi, jnp.full(batch, jnp.inf, dtype))
+        ok = ok & (cand == na + int(has_point)) & free & (pdf > 0)
+        v = le * (n_sel * we * safe_div(1.0, pdf))[..., None]
+        val = jnp.where(ok[..., None], v, val)
+        pix = jnp.where(ok[..., None], pix_e, pix)
+    return val, pix
 
 
 # -- the light path -----------------------------------------------------------------------

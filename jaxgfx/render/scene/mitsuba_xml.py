@@ -97,7 +97,8 @@ class XMLScene:
     it is absolute), the sampler's ``spp`` (``None`` without a sensor sampler), the jaxgfx
     ``integrator`` name (``"path"``, ``"direct"`` or ``"ptracer"``), ``max_depth`` in the
     common convention (``None``: Mitsuba's ``-1``, unbounded; jaxgfx needs a number),
-    ``rr_depth``, and ``files`` (every XML file read, in order)."""
+    ``rr_depth``, ``files`` (every XML file read, in order) and ``hide_emitters`` (``ptracer``
+    only: pass it to ``ParticleTracer(hide_emitters=...)``)."""
 
     desc: dict
     spp: int | None
@@ -105,6 +106,7 @@ class XMLScene:
     max_depth: int | None
     rr_depth: int
     files: tuple
+    hide_emitters: bool = False
 
 
 # ------------------------------------------------------------------------------------------
@@ -1589,8 +1591,9 @@ def _integrator(obj: _Obj, doc):
     if obj.type not in ("path", "direct", "ptracer"):
         raise ValueError(f"{obj.where}: integrator plugin {obj.type!r} is not supported "
                          "(path, direct, ptracer, moment)")  # fmt: skip
-    if p.bool("hide_emitters", False):
-        raise p.err("hide_emitters", "hidden emitters are not supported")
+    hide = p.bool("hide_emitters", False)
+    if hide and obj.type != "ptracer":
+        raise p.err("hide_emitters", "hidden emitters are supported by 'ptracer' only")
     if obj.type in ("path", "ptracer"):
         depth = p.int("max_depth", -1)
         rr = p.int("rr_depth", 5)
@@ -1600,12 +1603,12 @@ def _integrator(obj: _Obj, doc):
         if obj.type == "ptracer":
             p.int("samples_per_pass", -1)  # a work split: the same image
         p.done()
-        return obj.type, (None if depth == -1 else depth), rr
+        return obj.type, (None if depth == -1 else depth), rr, hide
     for name in ("emitter_samples", "bsdf_samples"):
         if p.int(name, 1) != 1:
             raise p.err(name, "only 1 sample per strategy is supported (jaxgfx direct MIS)")
     p.done()
-    return "direct", 2, 5
+    return "direct", 2, 5, False
 
 
 def _point_triangles_distance(o, tri) -> float:
@@ -1687,7 +1690,7 @@ def read_xml(path, **params) -> XMLScene:
     desc["camera"] = cam
     if film:
         desc["film"] = film
-    integrator, depth, rr = _integrator(integ[0], doc) if integ else ("path", None, 5)
+    integrator, depth, rr, hide = _integrator(integ[0], doc) if integ else ("path", None, 5, False)
     for o in objs:
         if o.tag == "shape" and o.type == "shapegroup":
             _shapegroup(o, doc, desc, ctx)
@@ -1714,7 +1717,7 @@ def read_xml(path, **params) -> XMLScene:
     _check_clip(ctx)
     if not desc["emitters"]:
         del desc["emitters"]
-    return XMLScene(desc, spp, integrator, depth, rr, tuple(doc.files))
+    return XMLScene(desc, spp, integrator, depth, rr, tuple(doc.files), hide)
 
 
 # ------------------------------------------------------------------------------------------
