@@ -406,6 +406,18 @@ def test_xml_integrator_row_and_writer(tmp_path):
     hidden = tmp_path / "h.xml"
     hidden.write_text(xml.read_text().replace(spp_pass, hide))
     assert read_xml(str(hidden)).hide_emitters and not x.hide_emitters
+    # the writer: hide_emitters round-trips (ptracer only)
+    from jaxgfx.render.scene.mitsuba_xml import save_scene
+
+    desc = {"camera": {"origin": [0, 0, 3], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 40,
+                       "width": 4, "height": 4},
+            "shapes": [{"type": "rectangle", "center": [0, 0, 0], "normal": [0, 0, 1]}],
+            "emitters": [{"type": "point", "position": [0, 0, 1], "intensity": 1.0}]}  # fmt: skip
+    out = save_scene(desc, str(tmp_path / "w.xml"), integrator="ptracer", max_depth=3,
+                     hide_emitters=True)  # fmt: skip
+    assert read_xml(out).hide_emitters and read_xml(out).integrator == "ptracer"
+    with pytest.raises(ValueError, match="hide_emitters"):
+        mitsuba_integrator("path", hide_emitters=True)
     bad.write_text(hidden.read_text().replace('"ptracer"', '"path"'))
     with pytest.raises(ValueError, match="hide_emitters"):
         read_xml(str(bad))

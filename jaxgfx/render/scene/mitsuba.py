@@ -1082,13 +1082,16 @@ def scene_to_desc(scene) -> dict:
     return desc
 
 
-def mitsuba_integrator(name: str = "path", *, max_depth: int = 3, rr_depth: int = 5) -> dict:
+def mitsuba_integrator(
+    name: str = "path", *, max_depth: int = 3, rr_depth: int = 5, hide_emitters: bool = False
+) -> dict:
     """Mitsuba 3 integrator dict for a jaxgfx integrator name.
 
     ``"path"`` -> ``{"type": "path", "max_depth": max_depth, "rr_depth": rr_depth}`` (same
     depth convention: 1 emitters only, 2 direct light, 3 one indirect bounce); ``"direct"`` ->
     the same with ``max_depth = 2`` (as jaxgfx's ``direct``); ``"ptracer"`` -> Mitsuba's
-    ``ptracer`` with the same ``max_depth`` / ``rr_depth``. ``whitted`` and ``aov`` have no
+    ``ptracer`` with the same ``max_depth`` / ``rr_depth`` (and ``hide_emitters``, which only
+    ``ptracer`` takes: ``ValueError`` for the others). ``whitted`` and ``aov`` have no
     Mitsuba counterpart (``NotImplementedError``); other names raise ``ValueError``.
 
     Example: ``mitsuba_integrator("direct")["max_depth"] == 2``.
@@ -1102,8 +1105,17 @@ def mitsuba_integrator(name: str = "path", *, max_depth: int = 3, rr_depth: int 
         raise NotImplementedError(f"integrator: {name!r} has no Mitsuba 3 counterpart")
     elif name not in ("path", "ptracer"):
         raise ValueError(f"integrator: expected 'path', 'direct' or 'ptracer', got {name!r}")
+    if not isinstance(hide_emitters, bool):
+        raise ValueError(f"hide_emitters: expected a bool, got {hide_emitters!r}")
+    if hide_emitters and name != "ptracer":
+        raise ValueError(
+            f"hide_emitters: jaxgfx's {name!r} does not hide emitters ('ptracer' does)"
+        )
     kind = "ptracer" if name == "ptracer" else "path"
-    return {"type": kind, "max_depth": int(max_depth), "rr_depth": int(rr_depth)}
+    out = {"type": kind, "max_depth": int(max_depth), "rr_depth": int(rr_depth)}
+    if hide_emitters:
+        out["hide_emitters"] = True
+    return out
 
 
 def import_mitsuba(variant: str = "scalar_rgb"):

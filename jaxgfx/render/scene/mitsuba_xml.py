@@ -1816,6 +1816,7 @@ def save_scene(
     max_depth: int | None = None,
     rr_depth: int = 5,
     base_dir=None,
+    hide_emitters: bool = False,
 ) -> str:
     """Write a jaxgfx scene as a Mitsuba 3 XML file that Mitsuba loads to the same image.
 
@@ -1828,9 +1829,10 @@ def save_scene(
     meshes, the re-gridded environment map) are written into ``<stem>_files/`` next to
     ``path`` and referenced relatively; mesh files the description names are referenced by
     absolute path. ``spp`` -> the ``independent`` sampler, ``integrator`` / ``max_depth``
-    (``None``: Mitsuba's ``-1``, unbounded) / ``rr_depth`` as
-    :func:`jaxgfx.render.scene.mitsuba.mitsuba_integrator`. Returns ``path``. Features Mitsuba
-    lacks raise ``NotImplementedError`` naming the field (as ``to_mitsuba_dict``).
+    (``None``: Mitsuba's ``-1``, unbounded) / ``rr_depth`` / ``hide_emitters`` (``ptracer``
+    only) as :func:`jaxgfx.render.scene.mitsuba.mitsuba_integrator`. Returns ``path``.
+    Features Mitsuba lacks raise ``NotImplementedError`` naming the field (as
+    ``to_mitsuba_dict``).
 
     Example: ``save_scene("configs/scenes/example.yaml", "/tmp/example.xml", spp=64)``.
     """
@@ -1840,10 +1842,14 @@ def save_scene(
     if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)) or spp < 1:
         raise ValueError(f"spp: expected a positive integer, got {spp!r}")
     if max_depth is None:
-        integ = M.mitsuba_integrator(integrator, max_depth=1, rr_depth=rr_depth)
+        integ = M.mitsuba_integrator(
+            integrator, max_depth=1, rr_depth=rr_depth, hide_emitters=hide_emitters
+        )
         integ["max_depth"] = 2 if integrator == "direct" else -1
     else:
-        integ = M.mitsuba_integrator(integrator, max_depth=max_depth, rr_depth=rr_depth)
+        integ = M.mitsuba_integrator(
+            integrator, max_depth=max_depth, rr_depth=rr_depth, hide_emitters=hide_emitters
+        )
     if isinstance(scene, Scene):
         scene = M.scene_to_desc(scene)
     elif isinstance(scene, (str, os.PathLike)):
