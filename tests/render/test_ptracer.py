@@ -705,11 +705,12 @@ def _glass_scene():
     glass sphere (eta 1.5, in view): the light leaves the glass into air, where the radiance
     is ``1 / eta^2`` of the one inside: the path tracer gets that factor from radiance-mode
     refraction, the light tracer from the geometry of its particles (importance-mode
-    refraction, no factor); a missing or doubled eta^2 correction is off by 2.25 (without it
-    the light tracer's mean is 2.2x the path tracer's here, z = 11.3). The floor's shading
-    normals are tilted by ~25 degrees and a smooth-shaded coarse mesh sphere stands on it
-    (both diffuse; the shading-normal factor is checked sharply by the closed form test
-    below: here dropping it moves the block z only to 4.4). A
+    refraction, no factor); a missing or doubled eta^2 correction is off by 2.25 (with the
+    correction patched out of ``_bounce`` / ``_eta2_eval`` by hand, the light tracer's mean
+    came out 2.2x the path tracer's here, z = 11.3). The floor's shading normals are tilted
+    by ~25 degrees and a smooth-shaded coarse mesh sphere stands on it (both diffuse; the
+    shading-normal factor is checked sharply by the closed form test below: patching it out
+    moved this test's block z only to 4.4, at 16x16 pixels). A
     smooth glass sphere outside the view focuses the light of a second area light onto the
     floor: a caustic (the path tracer finds it by BSDF sampling, the light tracer through two
     sampled refractions)."""
