@@ -969,3 +969,42 @@ def test_textured_area_radiance_refused_with_file_and_line(tmp_path):
     )
     with pytest.raises(ValueError, match=r"t\.xml:8: .*<emitter type='area'>: .*'radiance'"):
         read_xml(str(xml))
+
+
+def _grazing_loss(x, scene):
+    s = scene.replace("emitters.directional.0.irradiance", x[:3]).replace(
+        "emitters.environment.radiance", x[3:]
+    )
+    return jnp.sum(render(s, jax.random.key(0), spp=2, integrator=ParticleTracer(max_depth=3)))
+
+
+@pytest.mark.slow  # slow: ~25 s on 2 cores under load ~15 (value + gradient compile)
+def test_grazing_directional_and_black_sky_finite_values_and_gradients():
+    """Hard cases of the distant emitters: a directional light exactly parallel to the plane
+    (its particles never hit it) and a black constant sky: the image is 0 and the gradient
+    finite (the irradiance's is 0, the sky radiance's is positive: its visible part)."""
+    desc_env = {"type": "constant", "radiance": 0.0}
+    scene = load_scene(
+        {
+            "camera": {
+                "origin": [0, -3, 1],
+                "target": [0, 0, 0.5],
+                "up": [0, 0, 1],
+                "fov": 60,
+                "width": 4,
+                "height": 4,
+            },  # fmt: skip
+            "shapes": [
+                {"type": "rectangle", "center": [0, 0, 0], "normal": [0, 0, 1], "size": [4, 4]}
+            ],  # fmt: skip
+            "emitters": [
+                {"type": "directional", "direction": [1, 0, 0], "irradiance": 1.0},
+                desc_env,
+            ],  # fmt: skip
+        }
+    )
+    x = jnp.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+    val, g = jax.jit(jax.value_and_grad(_grazing_loss))(x, scene)
+    assert float(val) == 0.0
+    g = np.asarray(g)
+    assert np.all(np.isfinite(g)) and np.all(g[:3] == 0) and np.all(g[3:] > 0), g
