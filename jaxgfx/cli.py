@@ -229,7 +229,7 @@ def _render_arguments(p):
         "beside it), .png/.jpg the sRGB display image",
     )
     p.add_argument("--spp", type=int, default=64)
-    p.add_argument("--integrator", default="path", help="path | direct | whitted | aov")
+    p.add_argument("--integrator", default="path", help="path | direct | whitted | aov | ptracer")
     p.add_argument(
         "--max-depth",
         type=int,

@@ -103,6 +103,11 @@ def render_sharded(
         sampling=sampling,
         caller="render_sharded",
     )
+    if getattr(integ, "traces_from_lights", False):
+        raise ValueError(
+            "integrator: the 'ptracer' integrator splats light paths over the whole image and "
+            "is not split over devices; use jaxgfx.render.render"
+        )
     return _render_sharded(scene, key, spp, integ, mesh, shard)
 
 

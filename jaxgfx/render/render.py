@@ -36,14 +36,17 @@ def render(
 
     ``integrator``: an :class:`~jaxgfx.render.integrators.Integrator` object
     (``PathIntegrator(max_depth=3, rr_depth=5, strategy="mis")``, ``DirectIntegrator()``,
-    ``WhittedIntegrator(max_depth)``, ``AOVIntegrator()``) or a name registered in
+    ``WhittedIntegrator(max_depth)``, ``AOVIntegrator()``, ``ParticleTracer(max_depth)``) or a
+    name registered in
     :data:`~jaxgfx.render.integrators.INTEGRATORS`: ``"path"`` (next-event estimation + MIS +
     Russian roulette after ``rr_depth`` bounces), ``"direct"`` (emitted + direct light with MIS;
     path of depth 2), ``"whitted"`` (point/area lights with shadows, recursive mirror reflection
     and refraction) or ``"aov"`` (returns ``(H, W, 7)``: albedo, shading normal, depth; see
-    ``AOV_CHANNELS``). With a name, ``max_depth`` (default 3), ``rr_depth`` (5) and ``strategy``
-    (``"mis"``, ``"light"`` or ``"bsdf"``) configure it; options the named integrator does not
-    use are ignored. With an object, set them on the object (``TypeError`` here).
+    ``AOV_CHANNELS``) or ``"ptracer"`` (particle tracing from the emitters, splatted into the
+    film: Mitsuba's ``ptracer``; docs/render.md). With a name, ``max_depth`` (default 3),
+    ``rr_depth`` (5) and ``strategy`` (``"mis"``, ``"light"`` or ``"bsdf"``) configure it;
+    options the named integrator does not use are ignored. With an object, set them on the
+    object (``TypeError`` here).
     ``sampling`` (``path``, ``direct``, ``whitted``): ``"detached"`` (default; unbiased
     derivatives, docs/render_gradients.md) or ``"attached"`` (plain AD through the samplers).
     ``max_depth`` follows Mitsuba 3 (1: emitters only, 2: direct light, 3: one indirect bounce).
@@ -76,7 +79,15 @@ def render(
         caller="render",
     )
     boundary = edge_sampling(visibility, scene, integ)
+    if getattr(integ, "traces_from_lights", False):  # the particle tracer splats light paths
+        integ.check_scene(scene)
+        return _render_light(scene, key, spp, integ)
     return _render(scene, key, spp, integ, boundary)
+
+
+@eqx.filter_jit
+def _render_light(scene, key, spp, integrator):
+    return integrator.render_image(scene, key, spp).astype(scene.dtype)
 
 
 @eqx.filter_jit

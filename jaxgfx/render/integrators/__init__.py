@@ -1,6 +1,7 @@
 """Integrators as objects: ``PathIntegrator`` (NEE + MIS + Russian roulette),
-``DirectIntegrator`` (path of depth 2), ``WhittedIntegrator`` (shadows, reflection, refraction)
-and ``AOVIntegrator`` (albedo, normal, depth), registered by name in :data:`INTEGRATORS`.
+``DirectIntegrator`` (path of depth 2), ``WhittedIntegrator`` (shadows, reflection, refraction),
+``AOVIntegrator`` (albedo, normal, depth) and ``ParticleTracer`` (light tracing, Mitsuba's
+``ptracer``), registered by name in :data:`INTEGRATORS`.
 
 Each is an ``eqx.Module`` whose options are static fields; :func:`jaxgfx.render.render` takes
 an instance (``integrator=PathIntegrator(max_depth=3)``) or a registered name.
@@ -23,6 +24,7 @@ from jaxgfx.render.integrators.base import Integrator as Integrator
 from jaxgfx.render.integrators.path import DirectIntegrator as DirectIntegrator
 from jaxgfx.render.integrators.path import PathIntegrator as PathIntegrator
 from jaxgfx.render.integrators.path import path_radiance as path_radiance
+from jaxgfx.render.integrators.ptracer import ParticleTracer as ParticleTracer
 from jaxgfx.render.integrators.whitted import WhittedIntegrator as WhittedIntegrator
 from jaxgfx.render.integrators.whitted import whitted_radiance as whitted_radiance
 
@@ -31,6 +33,7 @@ INTEGRATORS: dict[str, type[Integrator]] = {
     "direct": DirectIntegrator,
     "whitted": WhittedIntegrator,
     "aov": AOVIntegrator,
+    "ptracer": ParticleTracer,
 }
 """Integrator name -> class (the names ``render(..., integrator=NAME)`` accepts)."""
 
@@ -78,6 +81,7 @@ __all__ = [
     "DirectIntegrator",
     "WhittedIntegrator",
     "AOVIntegrator",
+    "ParticleTracer",
     "make_integrator",
     "aov",
     "path_radiance",

@@ -1128,12 +1128,16 @@ def scene_to_desc(scene) -> dict:
     return desc
 
 
-def mitsuba_integrator(name: str = "path", *, max_depth: int = 3, rr_depth: int = 5) -> dict:
+def mitsuba_integrator(
+    name: str = "path", *, max_depth: int = 3, rr_depth: int = 5, hide_emitters: bool = False
+) -> dict:
     """Mitsuba 3 integrator dict for a jaxgfx integrator name.
 
     ``"path"`` -> ``{"type": "path", "max_depth": max_depth, "rr_depth": rr_depth}`` (same
     depth convention: 1 emitters only, 2 direct light, 3 one indirect bounce); ``"direct"`` ->
-    the same with ``max_depth = 2`` (as jaxgfx's ``direct``). ``whitted`` and ``aov`` have no
+    the same with ``max_depth = 2`` (as jaxgfx's ``direct``); ``"ptracer"`` -> Mitsuba's
+    ``ptracer`` with the same ``max_depth`` / ``rr_depth`` (and ``hide_emitters``, which only
+    ``ptracer`` takes: ``ValueError`` for the others). ``whitted`` and ``aov`` have no
     Mitsuba counterpart (``NotImplementedError``); other names raise ``ValueError``.
 
     Example: ``mitsuba_integrator("direct")["max_depth"] == 2``.
@@ -1145,9 +1149,19 @@ def mitsuba_integrator(name: str = "path", *, max_depth: int = 3, rr_depth: int 
         max_depth = 2
     elif name in ("whitted", "aov"):
         raise NotImplementedError(f"integrator: {name!r} has no Mitsuba 3 counterpart")
-    elif name != "path":
-        raise ValueError(f"integrator: expected 'path' or 'direct', got {name!r}")
-    return {"type": "path", "max_depth": int(max_depth), "rr_depth": int(rr_depth)}
+    elif name not in ("path", "ptracer"):
+        raise ValueError(f"integrator: expected 'path', 'direct' or 'ptracer', got {name!r}")
+    if not isinstance(hide_emitters, bool):
+        raise ValueError(f"hide_emitters: expected a bool, got {hide_emitters!r}")
+    if hide_emitters and name != "ptracer":
+        raise ValueError(
+            f"hide_emitters: jaxgfx's {name!r} does not hide emitters ('ptracer' does)"
+        )
+    kind = "ptracer" if name == "ptracer" else "path"
+    out = {"type": kind, "max_depth": int(max_depth), "rr_depth": int(rr_depth)}
+    if hide_emitters:
+        out["hide_emitters"] = True
+    return out
 
 
 def import_mitsuba(variant: str = "scalar_rgb"):

@@ -135,7 +135,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("integrator", "prb_projective"): "refused: not in jaxgfx",
     ("integrator", "volpath"): "refused: jaxgfx renders surfaces only",
     ("integrator", "volpathmis"): "refused: jaxgfx renders surfaces only",
-    ("integrator", "ptracer"): "refused: no particle tracer in jaxgfx",
+    ("integrator", "ptracer"): S + " (point, spot, directional, area, constant and envmap "
+    "emitters; hide_emitters)",
     ("integrator", "aov"): "refused: not in jaxgfx",
     ("integrator", "stokes"): "refused: jaxgfx renders unpolarized RGB only",
 }

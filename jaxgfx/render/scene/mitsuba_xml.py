@@ -99,9 +99,10 @@ CYLINDER_SEGMENTS = 256
 class XMLScene:
     """A translated Mitsuba scene: ``desc`` (the jaxgfx scene description; every file path in
     it is absolute), the sampler's ``spp`` (``None`` without a sensor sampler), the jaxgfx
-    ``integrator`` name (``"path"`` or ``"direct"``), ``max_depth`` in the common convention
-    (``None``: Mitsuba's ``-1``, unbounded; jaxgfx needs a number), ``rr_depth``, and
-    ``files`` (every XML file read, in order)."""
+    ``integrator`` name (``"path"``, ``"direct"`` or ``"ptracer"``), ``max_depth`` in the
+    common convention (``None``: Mitsuba's ``-1``, unbounded; jaxgfx needs a number),
+    ``rr_depth``, ``files`` (every XML file read, in order) and ``hide_emitters`` (``ptracer``
+    only: pass it to ``ParticleTracer(hide_emitters=...)``)."""
 
     desc: dict
     spp: int | None
@@ -109,6 +110,7 @@ class XMLScene:
     max_depth: int | None
     rr_depth: int
     files: tuple
+    hide_emitters: bool = False
 
 
 # ------------------------------------------------------------------------------------------
@@ -1644,24 +1646,27 @@ def _integrator(obj: _Obj, doc):
             raise ValueError(f"{obj.where}: expected exactly one nested <integrator>")
         p.done(children_ok=1)
         return _integrator(obj.children[0], doc)
-    if obj.type not in ("path", "direct"):
+    if obj.type not in ("path", "direct", "ptracer"):
         raise ValueError(f"{obj.where}: integrator plugin {obj.type!r} is not supported "
-                         "(path, direct, moment)")  # fmt: skip
-    if p.bool("hide_emitters", False):
-        raise p.err("hide_emitters", "hidden emitters are not supported")
-    if obj.type == "path":
+                         "(path, direct, ptracer, moment)")  # fmt: skip
+    hide = p.bool("hide_emitters", False)
+    if hide and obj.type != "ptracer":
+        raise p.err("hide_emitters", "hidden emitters are supported by 'ptracer' only")
+    if obj.type in ("path", "ptracer"):
         depth = p.int("max_depth", -1)
         rr = p.int("rr_depth", 5)
         if depth == 0 or depth < -1 or rr < 1:
             raise p.err("max_depth", f"expected max_depth -1 or >= 1 and rr_depth >= 1, got "
                                      f"{depth}, {rr}")  # fmt: skip
+        if obj.type == "ptracer":
+            p.int("samples_per_pass", -1)  # a work split: the same image
         p.done()
-        return "path", (None if depth == -1 else depth), rr
+        return obj.type, (None if depth == -1 else depth), rr, hide
     for name in ("emitter_samples", "bsdf_samples"):
         if p.int(name, 1) != 1:
             raise p.err(name, "only 1 sample per strategy is supported (jaxgfx direct MIS)")
     p.done()
-    return "direct", 2, 5
+    return "direct", 2, 5, False
 
 
 def _point_triangles_distance(o, tri) -> float:
@@ -1743,7 +1748,7 @@ def read_xml(path, **params) -> XMLScene:
     desc["camera"] = cam
     if film:
         desc["film"] = film
-    integrator, depth, rr = _integrator(integ[0], doc) if integ else ("path", None, 5)
+    integrator, depth, rr, hide = _integrator(integ[0], doc) if integ else ("path", None, 5, False)
     for o in objs:
         if o.tag == "shape" and o.type == "shapegroup":
             _shapegroup(o, doc, desc, ctx)
@@ -1770,7 +1775,7 @@ def read_xml(path, **params) -> XMLScene:
     _check_clip(ctx)
     if not desc["emitters"]:
         del desc["emitters"]
-    return XMLScene(desc, spp, integrator, depth, rr, tuple(doc.files))
+    return XMLScene(desc, spp, integrator, depth, rr, tuple(doc.files), hide)
 
 
 # ------------------------------------------------------------------------------------------
@@ -1869,6 +1874,7 @@ def save_scene(
     max_depth: int | None = None,
     rr_depth: int = 5,
     base_dir=None,
+    hide_emitters: bool = False,
 ) -> str:
     """Write a jaxgfx scene as a Mitsuba 3 XML file that Mitsuba loads to the same image.
 
@@ -1881,9 +1887,10 @@ def save_scene(
     meshes, the re-gridded environment map) are written into ``<stem>_files/`` next to
     ``path`` and referenced relatively; mesh files the description names are referenced by
     absolute path. ``spp`` -> the ``independent`` sampler, ``integrator`` / ``max_depth``
-    (``None``: Mitsuba's ``-1``, unbounded) / ``rr_depth`` as
-    :func:`jaxgfx.render.scene.mitsuba.mitsuba_integrator`. Returns ``path``. Features Mitsuba
-    lacks raise ``NotImplementedError`` naming the field (as ``to_mitsuba_dict``).
+    (``None``: Mitsuba's ``-1``, unbounded) / ``rr_depth`` / ``hide_emitters`` (``ptracer``
+    only) as :func:`jaxgfx.render.scene.mitsuba.mitsuba_integrator`. Returns ``path``.
+    Features Mitsuba lacks raise ``NotImplementedError`` naming the field (as
+    ``to_mitsuba_dict``).
 
     Example: ``save_scene("configs/scenes/example.yaml", "/tmp/example.xml", spp=64)``.
     """
@@ -1893,10 +1900,14 @@ def save_scene(
     if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)) or spp < 1:
         raise ValueError(f"spp: expected a positive integer, got {spp!r}")
     if max_depth is None:
-        integ = M.mitsuba_integrator(integrator, max_depth=1, rr_depth=rr_depth)
+        integ = M.mitsuba_integrator(
+            integrator, max_depth=1, rr_depth=rr_depth, hide_emitters=hide_emitters
+        )
         integ["max_depth"] = 2 if integrator == "direct" else -1
     else:
-        integ = M.mitsuba_integrator(integrator, max_depth=max_depth, rr_depth=rr_depth)
+        integ = M.mitsuba_integrator(
+            integrator, max_depth=max_depth, rr_depth=rr_depth, hide_emitters=hide_emitters
+        )
     if isinstance(scene, Scene):
         scene = M.scene_to_desc(scene)
     elif isinstance(scene, (str, os.PathLike)):
