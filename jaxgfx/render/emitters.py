@@ -4,8 +4,9 @@ Conventions follow Mitsuba 3:
 
 - ``PointLights``: ``intensity`` in W/sr (radiance-like units per steradian); irradiance at
   distance r falls off as ``intensity / r^2``.
-- ``AreaLight``: a shape of the scene emits constant ``radiance`` from its front side (the side
-  its geometric normal points to); it is also ordinary geometry (it occludes and is hit).
+- ``AreaLight``: a shape of the scene emits ``radiance`` from its front side (the side its
+  geometric normal points to): a constant, or a texture looked up at the surface ``uv``; it is
+  also ordinary geometry (it occludes and is hit).
 - ``DirectionalLight``: a distant light, ``irradiance`` (W/m^2 on a surface facing it) arriving
   along ``direction`` (the direction the light travels, Mitsuba's ``direction``); a delta light.
 - ``SpotLight``: a point light at ``position`` with axis ``direction``, ``intensity`` (W/sr) on
@@ -25,6 +26,7 @@ from __future__ import annotations
 import math
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from jaxgfx._checks import as_float_array, check_finite, check_nonnegative, is_concrete
@@ -40,6 +42,7 @@ from jaxgfx._math import (
 )
 from jaxgfx.color import LUMINANCE_WEIGHTS
 from jaxgfx.render.bsdf import rgb_param
+from jaxgfx.render.bsdf.textured import texture_eval, texture_min
 from jaxgfx.render.sampling import Distribution2D
 
 __all__ = [
@@ -196,13 +199,41 @@ class SpotLight(eqx.Module):
 
 
 class AreaLight(eqx.Module):
-    """Constant ``radiance (3,)`` emitted from the front side of scene shape ``shape_index``."""
+    """``radiance`` emitted from the front side of scene shape ``shape_index``: an RGB
+    ``(3,)`` constant, or a texture (:class:`~jaxgfx.render.bsdf.texture.Texture` bitmap or
+    :class:`~jaxgfx.render.bsdf.textured.Checkerboard`) evaluated at the surface point's ``uv``
+    as Mitsuba 3's ``area`` emitter evaluates its ``radiance`` texture (a one-channel texture is
+    grey). The texels are differentiable leaves (``emitters.area.I.radiance.image``).
 
-    radiance: jnp.ndarray
+    Example: ``AreaLight(jnp.ones(3), 0).radiance_at(jnp.zeros((2, 2)))`` is ``ones((2, 3))``.
+    """
+
+    radiance: jnp.ndarray | eqx.Module
     shape_index: int = eqx.field(static=True)
 
     def __check_init__(self):  # also runs on Scene.replace (concrete values only)
-        check_nonnegative(self.radiance, "radiance")
+        if not self.textured:
+            check_nonnegative(self.radiance, "radiance")
+            return
+        if not all(is_concrete(x) for x in jax.tree_util.tree_leaves(self.radiance)):
+            return
+        lo = texture_min(self.radiance)
+        if not lo >= 0:  # NaN fails too
+            raise ValueError(f"radiance: texture values must be non-negative, got min {lo}")
+
+    @property
+    def textured(self) -> bool:
+        """Whether ``radiance`` is a texture (static: known at trace time)."""
+        return not eqx.is_array(self.radiance)
+
+    def radiance_at(self, uv):
+        """Emitted radiance ``(..., 3)`` at surface coordinates ``uv (..., 2)`` (the hit's or the
+        sampled point's ``uv``; a constant radiance is broadcast). Front-side and visibility
+        tests are the caller's."""
+        if not self.textured:
+            return jnp.broadcast_to(self.radiance.astype(uv.dtype), uv.shape[:-1] + (3,))
+        val = texture_eval(self.radiance, uv).astype(uv.dtype)
+        return jnp.broadcast_to(val, val.shape[:-1] + (3,))
 
 
 class ConstantEnvironment(eqx.Module):

@@ -21,6 +21,7 @@ __all__ = [
     "shading_frame",
     "tangent_space",
     "emitted",
+    "area_emission",
     "sample_light",
     "light_pdf_hit",
     "env_pdf",
@@ -208,13 +209,37 @@ def tangent_space(scene, hit, frame):
 
 
 def emission_table(scene, dtype):
+    """Per-shape constant radiance ``(S, 3)`` (0 for textured lights and non-emitters) and
+    inverse emitter area ``(S,)``."""
     n = len(scene.shapes)
     table = jnp.zeros((n, 3), dtype)
     inv_area = jnp.zeros((n,), dtype)
     for al, sh in zip(scene.area_lights, scene.emitter_shapes, strict=True):
-        table = table.at[al.shape_index].set(al.radiance.astype(dtype))
+        if not al.textured:  # textured lights: area_emission looks them up at the uv
+            table = table.at[al.shape_index].set(al.radiance.astype(dtype))
         inv_area = inv_area.at[al.shape_index].set(1.0 / area(sh).astype(dtype))
     return table, inv_area
+
+
+def _lookup_emission(scene, table, sid, uv, dtype):
+    out = take_rows(table, sid)
+    for al in scene.area_lights:  # textured lights only: nothing more for constant ones
+        if al.textured:
+            on = (sid == al.shape_index)[..., None]
+            out = jnp.where(on, al.radiance_at(uv[..., :2].astype(dtype)), out)
+    return out
+
+
+def area_emission(scene, shape_id, uv, dtype=None):
+    """Radiance ``(..., 3)`` of the area light on shape ``shape_id (...)`` at surface
+    coordinates ``uv (..., 2)`` (0 on shapes that do not emit; no front-side test): the emission
+    lookup by shape index and ``uv`` that camera / BSDF rays hitting an emitter use
+    (:func:`emitted`), for light tracers too. A textured light's texture is evaluated only in
+    scenes that have one (a scene of constant lights runs the table lookup alone)."""
+    dtype = uv.dtype if dtype is None else dtype
+    table, _ = emission_table(scene, dtype)
+    sid = jnp.clip(shape_id, 0, len(scene.shapes) - 1)
+    return _lookup_emission(scene, table, sid, uv, dtype)
 
 
 def emitted(scene, hit, d):
@@ -224,7 +249,7 @@ def emitted(scene, hit, d):
     table, _ = emission_table(scene, d.dtype)
     sid = jnp.clip(hit.shape_id, 0, len(scene.shapes) - 1)
     front = (sum_last(hit.ng * d) < 0) & hit.valid
-    return jnp.where(front[..., None], take_rows(table, sid), 0.0)
+    return jnp.where(front[..., None], _lookup_emission(scene, table, sid, hit.uv, d.dtype), 0.0)
 
 
 def mis_power(a, b):
@@ -309,14 +334,19 @@ def sample_light(scene, p, u_sel, u2, *, detached=False):
     idx = jnp.minimum((u_sel * n).astype(jnp.int32), n - 1)
     cands = []
     for al, sh in zip(scene.area_lights, scene.emitter_shapes, strict=True):
-        pl, nl, pdf_a = sample_area(sh, u2)
+        if al.textured:  # the radiance at the sampled point's uv (uniform-by-area sampling)
+            pl, nl, pdf_a, uvl = sample_area(sh, u2, with_uv=True)
+            rad = al.radiance_at(uvl.astype(dtype))
+        else:
+            pl, nl, pdf_a = sample_area(sh, u2)
+            rad = al.radiance.astype(dtype)
         v = pl - p
         d2 = sum_last(v * v)
         dist = safe_sqrt(d2)
         wi = safe_div(v, dist[..., None])
         cos_l = -sum_last(nl * wi)
         pdf = area_to_solid_angle(pdf_a, d2, cos_l)  # 0 for a point seen edge-on
-        li = jnp.where(((cos_l > 0) & (pdf > 0))[..., None], al.radiance.astype(dtype), 0.0)
+        li = jnp.where(((cos_l > 0) & (pdf > 0))[..., None], rad, 0.0)
         cands.append((wi, dist, li, pdf, jnp.zeros(p.shape[:-1], bool)))
     na = len(scene.area_lights)
     if scene.point_lights is not None:

@@ -20,7 +20,7 @@ from jaxgfx.render.emitters import (
 )
 from jaxgfx.render.film import make_filter
 from jaxgfx.render.geometry import Rectangles, SDFShape, Spheres, area
-from jaxgfx.render.scene._materials import material_from_desc
+from jaxgfx.render.scene._materials import emission_from_desc, material_from_desc
 from jaxgfx.render.scene.scene import Scene, id_problem, is_internal_name
 from jaxgfx.render.scene.schema import (
     EMITTER_TYPES,
@@ -254,7 +254,10 @@ def load_scene(
                 object_ids.append((shape_ident, "shape", len(shapes) - 1, row, names[mi]))
             n_prims = shape.faces.shape[0] if sk == "mesh" else 1
             shape_mats.append(jnp.full((n_prims,), mi, jnp.int32))
-            area_lights.append(AreaLight(rgb(ed["radiance"], f"{where}.radiance"), len(shapes) - 1))
+            rad = emission_from_desc(
+                ed["radiance"], f"{where}.radiance", base_dir=base_dir, rgb=rgb
+            )
+            area_lights.append(AreaLight(rad, len(shapes) - 1))
             emitter_shapes.append(shape)
         else:  # "constant" / "envmap"
             if environment is not None:
