@@ -42,6 +42,7 @@ from jaxgfx._math import (
 )
 from jaxgfx.color import LUMINANCE_WEIGHTS
 from jaxgfx.render.bsdf import rgb_param
+from jaxgfx.render.bsdf.texture import Texture
 from jaxgfx.render.bsdf.textured import texture_eval, texture_min
 from jaxgfx.render.sampling import Distribution2D
 
@@ -234,6 +235,37 @@ class AreaLight(eqx.Module):
             return jnp.broadcast_to(self.radiance.astype(uv.dtype), uv.shape[:-1] + (3,))
         val = texture_eval(self.radiance, uv).astype(uv.dtype)
         return jnp.broadcast_to(val, val.shape[:-1] + (3,))
+
+    @property
+    def samples_texture(self) -> bool:
+        """Whether light samples follow the texture (a bitmap without ``to_uv``; static)."""
+        return isinstance(self.radiance, Texture) and self.radiance.to_uv is None
+
+    def uv_distribution(self, dtype) -> Distribution2D:
+        """Sampling density on ``[0, 1]²`` of a bitmap radiance (``samples_texture``): as
+        Mitsuba 3's bitmap ``sample_position``, proportional to each texel's luminance (Rec. 709
+        Y of linear RGB); for bilinear lookup the luminance is first spread by the separable
+        ``(1/8, 3/4, 1/8)`` filter (wrapping for ``repeat``, clamped otherwise), as
+        :class:`EnvironmentMap` does, so every point of nonzero radiance has nonzero density
+        (Mitsuba instead offsets the texel sample by a tent). Piecewise constant per texel; built
+        from the texels without derivative (the density is frozen, the radiance is not)."""
+        img = jax.lax.stop_gradient(self.radiance.image).astype(dtype)
+        if img.shape[-1] >= 3:
+            lum = img[..., :3] @ jnp.asarray(LUMINANCE_WEIGHTS["rec709"], dtype)
+        else:
+            lum = img[..., 0]
+        lum = jnp.maximum(lum, 0.0)
+        if self.radiance.filter == "bilinear":
+            for axis in (0, 1):
+                if self.radiance.wrap == "repeat":
+                    a, b = jnp.roll(lum, 1, axis=axis), jnp.roll(lum, -1, axis=axis)
+                else:  # clamp / mirror: the edge texel is its own neighbour
+                    n = lum.shape[axis]
+                    idx = jnp.arange(n)
+                    a = jnp.take(lum, jnp.maximum(idx - 1, 0), axis=axis)
+                    b = jnp.take(lum, jnp.minimum(idx + 1, n - 1), axis=axis)
+                lum = 0.75 * lum + 0.125 * (a + b)
+        return Distribution2D(lum)
 
 
 class ConstantEnvironment(eqx.Module):

@@ -18,6 +18,7 @@ import pytest
 from jaxgfx.render.bsdf.texture import Texture
 from jaxgfx.render.emitters import AreaLight
 from jaxgfx.render.geometry import sample_area
+from jaxgfx.render.geometry.area import has_uv_map
 from jaxgfx.render.geometry.mesh_io import make_uv_sphere
 from jaxgfx.render.integrators import _common as C
 from jaxgfx.render.render import render
@@ -27,6 +28,7 @@ from jaxgfx.testing import ad_fd_per_key
 C0 = [1.0, 0.5, 0.2]  # texel (0, 0): u < 1/2
 C1 = [0.1, 0.3, 2.0]  # texel (0, 1): u > 1/2
 TWO = {"type": "bitmap", "image": [[C0, C1]], "filter": "nearest"}
+HALVES = {"type": "bitmap", "image": [[C0], [C1]], "filter": "nearest"}
 CHECKER = {"type": "checkerboard", "color0": [2.0, 1.0, 0.5], "color1": [0.2, 0.4, 0.1]}
 
 
@@ -88,7 +90,7 @@ def test_light_sample_uv_is_the_uv_a_ray_hitting_that_point_gets(kind):
 # irradiance: light sampling and BSDF-sampled hits against quadrature
 
 
-def _rect_reference(p, n_p, center, size, n_l):
+def _rect_reference(p, n_p, center, size, n_l, cols=(C0, C1)):
     """E at p from the 2 x 1 rectangle (normal -z, u along +x) with the 1 x 2 texture TWO:
     midpoint rule on 800 x 400 cells (the texel edge at u = 1/2 is a cell edge)."""
     nu, nv = 800, 400
@@ -101,13 +103,22 @@ def _rect_reference(p, n_p, center, size, n_l):
     r2 = np.sum(v * v, -1)
     w = v / np.sqrt(r2)[..., None]
     g = np.clip(w @ n_p, 0, None) * np.clip(-(w @ n_l), 0, None) / r2
-    L = np.where((S < 0.5)[..., None], np.asarray(C0), np.asarray(C1))
+    L = np.where((S < 0.5)[..., None], np.asarray(cols[0]), np.asarray(cols[1]))
     return np.sum(L * g[..., None], (0, 1)) * size[0] * size[1] / (nu * nv)
 
 
-def _sphere_reference(p, n_p, center, radius):
-    """E at p from the sphere with the checkerboard CHECKER at uv = (phi/2pi, theta/pi):
-    midpoint rule in (theta, phi) with the area element r² sin(theta)."""
+def _checker(u, v):
+    same = ((u % 1) > 0.5) == ((v % 1) > 0.5)
+    return np.where(same[..., None], np.asarray(CHECKER["color0"]), np.asarray(CHECKER["color1"]))
+
+
+def _hemispheres(u, v):  # HALVES: row 0 (v < 1/2, the +z half) C0, row 1 C1
+    return np.where((v < 0.5)[..., None], np.asarray(C0), np.asarray(C1))
+
+
+def _sphere_reference(p, n_p, center, radius, radiance):
+    """E at p from the sphere with radiance(u, v) at uv = (phi/2pi, theta/pi): midpoint rule
+    in (theta, phi) with the area element r² sin(theta)."""
     nt, nph = 600, 1200
     th = (np.arange(nt) + 0.5) / nt * np.pi
     ph = (np.arange(nph) + 0.5) / nph * 2 * np.pi
@@ -118,8 +129,7 @@ def _sphere_reference(p, n_p, center, radius):
     r2 = np.sum(v * v, -1)
     w = v / np.sqrt(r2)[..., None]
     g = np.clip(w @ n_p, 0, None) * np.clip(-np.sum(w * nl, -1), 0, None) / r2
-    same = ((PH / (2 * np.pi) % 1) > 0.5) == ((TH / np.pi % 1) > 0.5)
-    L = np.where(same[..., None], np.asarray(CHECKER["color0"]), np.asarray(CHECKER["color1"]))
+    L = radiance(PH / (2 * np.pi), TH / np.pi)
     dA = radius**2 * np.sin(TH) * (np.pi / nt) * (2 * np.pi / nph)
     return np.sum(L * (g * dA)[..., None], (0, 1))
 
@@ -133,14 +143,22 @@ def _within_se(samples, ref, n_se=5.0):
     assert np.all(np.abs(mean - ref) < n_se * se), (mean, ref, se)
 
 
-CASES = {
+def _sphere(radiance):
+    return {"type": "area", "radiance": radiance,
+            "shape": {"type": "sphere", "center": [1.0, -0.3, 0.4], "radius": 0.5}}  # fmt: skip
+
+
+CASES = {  # bitmaps on a rectangle / sphere: sampled by the texture; checkerboard: by area
     "rectangle": (_rect(TWO), lambda p, n: _rect_reference(p, n, (0, 0, 1), (2, 1), (0, 0, -1))),
-    "sphere": (
-        {"type": "area", "radiance": CHECKER,
-         "shape": {"type": "sphere", "center": [0.4, -0.3, 1.2], "radius": 0.5}},
-        lambda p, n: _sphere_reference(p, n, (0.4, -0.3, 1.2), 0.5),
+    "sphere_bitmap": (
+        _sphere(HALVES),
+        lambda p, n: _sphere_reference(p, n, (1.0, -0.3, 0.4), 0.5, _hemispheres),
     ),
-}  # fmt: skip
+    "sphere_checkerboard": (
+        _sphere(CHECKER),
+        lambda p, n: _sphere_reference(p, n, (1.0, -0.3, 0.4), 0.5, _checker),
+    ),
+}
 
 
 @pytest.mark.parametrize("case", list(CASES))
@@ -175,28 +193,92 @@ def test_irradiance_by_light_sampling_and_by_cosine_rays_matches_quadrature(case
     assert np.all(ref > 1e-3)
 
 
+@pytest.mark.parametrize("case", ["rectangle", "sphere_bitmap"])
+def test_texture_sampling_follows_luminance_and_its_density_is_the_mis_density(case, x64):
+    """A bitmap light's samples fall on each texel in proportion to its luminance (binomial,
+    5 standard errors), and the density ``sample_light`` returns is the one ``light_pdf_hit``
+    gives a ray that hits the sampled point (the MIS weights' two densities agree)."""
+    scene = _scene([CASES[case][0]], dtype=jnp.float64)  # float64: grazing hits agree too
+    al, sh = scene.area_lights[0], scene.emitter_shapes[0]
+    assert al.samples_texture
+    N = 1 << 14
+    u = jax.random.uniform(jax.random.key(11), (N, 3), jnp.float64)
+    p = jnp.broadcast_to(jnp.asarray([0.3, -0.2, 0.0]), (N, 3))
+
+    @jax.jit
+    def run(u):
+        pl, nl, _, rad = C.sample_area_light(al, sh, u[:, 1:], jnp.float64)
+        wi, dist, _, pdf, _ = C.sample_light(scene, p, u[:, 0], u[:, 1:])
+        hit = C.intersect(scene, p, wi)
+        seen = hit.valid & (hit.shape_id == 0) & (jnp.abs(hit.t - dist) < 1e-9)  # that point
+        return rad, pdf, C.light_pdf_hit(scene, p, hit, wi), seen
+
+    rad, pdf, pdf_hit, seen = (np.asarray(x) for x in run(u))
+    y = np.asarray([0.2126, 0.7152, 0.0722])
+    share = (np.asarray(C0) @ y) / (np.asarray(C0) @ y + np.asarray(C1) @ y)
+    first = np.mean(np.all(rad == np.asarray(C0), -1))
+    assert abs(first - share) < 5 * math.sqrt(share * (1 - share) / N), (first, share)
+    ok = seen & (pdf > 0)
+    assert ok.mean() > 0.1
+    np.testing.assert_allclose(pdf_hit[ok], pdf[ok], rtol=1e-5)  # 1e-6 but at grazing
+
+
+QUAD = {"type": "mesh", "vertices": [[-1, -0.5, 1], [1, -0.5, 1], [1, 0.5, 1], [-1, 0.5, 1]],
+        "faces": [[0, 2, 1], [0, 3, 2]], "uvs": [[0, 0], [1, 0], [1, 1], [0, 1]]}  # fmt: skip
+WEIGHTS = (0.3, 0.5, 0.2)  # loss = weighted sum of the channels
+
+
+def _nee_loss(x, key, scene, n=512):
+    """Weighted irradiance estimate at (0.3, -0.2, 0) by light sampling, texels ``x``."""
+    al = scene.area_lights[0]
+    tex = Texture(x, wrap=al.radiance.wrap, filter=al.radiance.filter)
+    sc = _with_light(scene, AreaLight(tex, al.shape_index))
+    p = jnp.broadcast_to(jnp.asarray([0.3, -0.2, 0.0], x.dtype), (n, 3))
+    u = jax.random.uniform(key, (n, 3), x.dtype)
+    wi, _, li, pdf, _ = C.sample_light(sc, p, u[:, 0], u[:, 1:])
+    w = jnp.where(pdf > 0, wi[:, 2] / jnp.where(pdf > 0, pdf, 1.0), 0.0)
+    return jnp.mean(jnp.sum(li * w[:, None] * jnp.asarray(WEIGHTS, x.dtype), -1))
+
+
 def test_irradiance_gradient_wrt_texels_matches_finite_differences(x64):
-    """d E_estimate / d texels (light sampling, fixed numbers, float64) = central differences;
-    one texel is black (a hard case: value 0, gradient still the texel's weight)."""
-    scene = _scene([_rect({**TWO, "filter": "bilinear"}, size=(2, 1))], dtype=jnp.float64)
-    x0 = jnp.asarray([[[0.0, 0.0, 0.0], C1]], jnp.float64)
-    p = jnp.broadcast_to(jnp.asarray([0.3, -0.2, 0.0]), (512, 3))
-
-    def loss(x, key, scene):
-        al = scene.area_lights[0]
-        light = AreaLight(Texture(x, wrap=al.radiance.wrap, filter="bilinear"), al.shape_index)
-        sc = _with_light(scene, light)
-        u = jax.random.uniform(key, (512, 3), jnp.float64)
-        wi, _, li, pdf, _ = C.sample_light(sc, p, u[:, 0], u[:, 1:])
-        w = jnp.where(pdf > 0, wi[:, 2] / jnp.where(pdf > 0, pdf, 1.0), 0.0)
-        return jnp.mean(jnp.sum(li * w[:, None] * jnp.asarray([0.3, 0.5, 0.2]), -1))
-
+    """d E_estimate / d texels in float64, light sampling with fixed numbers. A mesh light is
+    sampled by area (the points do not depend on the texels): reverse mode = central
+    differences per key (bilinear 2 x 2 texture, one texel black: value 0, gradient still its
+    weight). A bitmap rectangle is sampled by its texture, a density frozen w.r.t. the texels:
+    the mean reverse-mode gradient over 2^15 samples is within 5 standard errors of the
+    central differences of the quadrature reference."""
+    scene = _scene([{"type": "area", "radiance": {**TWO, "filter": "bilinear",
+                     "image": [[C0, C1], [[0, 0, 0], [0.5, 0.5, 0.5]]]}, "shape": QUAD}],
+                   dtype=jnp.float64)  # fmt: skip
+    assert not has_uv_map(scene.emitter_shapes[0])  # a mesh: sampled by area
+    x0 = scene.area_lights[0].radiance.image
     keys = jax.random.split(jax.random.key(0), 2)
-    vals, ad, fd = ad_fd_per_key(loss, x0, keys, 1e-5, args=(scene,))
+    _, ad, fd = ad_fd_per_key(_nee_loss, x0, keys, 1e-5, args=(scene,))
     assert np.all(np.isfinite(ad)) and np.abs(ad).max() > 1e-3
-    assert np.all(np.abs(ad[:, 0, 0]) > 1e-4)  # the black texel has a gradient
-    print("NEE: max |ad - fd| / max |ad|", np.abs(ad - fd).max() / np.abs(ad).max())
+    assert np.all(np.abs(ad[:, 1, 0]) > 1e-4)  # the black texel has a gradient
+    print("mesh NEE: max |ad - fd| / max |ad|", np.abs(ad - fd).max() / np.abs(ad).max())
     np.testing.assert_allclose(ad, fd, rtol=1e-7, atol=1e-10)
+
+    rect = _scene([_rect(TWO)], dtype=jnp.float64)
+    assert rect.area_lights[0].samples_texture
+    x0 = rect.area_lights[0].radiance.image
+    keys = jax.random.split(jax.random.key(1), 64)
+    grads = jax.vmap(jax.grad(lambda x, k: _nee_loss(x, k, rect)), (None, 0))(x0, keys)
+    grads = np.asarray(grads, np.float64).reshape(64, -1)
+    p, n_p = np.array([0.3, -0.2, 0.0]), np.array([0.0, 0.0, 1.0])
+    h = 1e-3
+    fd = []
+    for k in range(6):  # texel (0, j), channel c; the reference is linear in the texels
+        j, c = divmod(k, 3)
+        ref = []
+        for sign in (1, -1):
+            cols = [list(C0), list(C1)]
+            cols[j][c] += sign * h
+            ref.append(_rect_reference(p, n_p, (0, 0, 1), (2, 1), (0, 0, -1), cols) @ WEIGHTS)
+        fd.append((ref[0] - ref[1]) / (2 * h))
+    mean, se = grads.mean(0), grads.std(0, ddof=1) / math.sqrt(64)
+    print("texture-sampled NEE: mean AD", mean, "FD of quadrature", fd, "se", se)
+    assert np.all(np.abs(mean - fd) < 5 * se) and np.all(se < 0.05 * np.abs(fd))
 
 
 def _with_light(scene, light):
@@ -251,8 +333,8 @@ def test_constant_light_scenes_never_evaluate_a_texture(monkeypatch):
     trace([1.0, 2.0, 3.0])
     assert all(c == {} for c in calls) and calls  # only the plain sampler
     calls.clear()
-    trace(TWO)
-    assert 1 in calls and {"with_uv": True} in calls
+    trace(TWO)  # a bitmap rectangle: looked up at hits, sampled by its texture
+    assert 1 in calls and {} not in calls
 
 
 def _loss_render(x, key, scene):
@@ -264,13 +346,16 @@ def _loss_render(x, key, scene):
 
 @pytest.mark.slow  # slow: ~25 s on 2 loaded cores (float64 compile of value+grad and FD)
 def test_render_gradient_wrt_texels_matches_finite_differences(x64):
-    """d(mean image)/d(texels) of a direct render (a floor lit by the textured rectangle,
-    which is also seen): reverse mode = central differences with the same keys (the image is
-    linear in the texels); a black texel and the back-facing light's zero are hard cases."""
+    """d(mean image)/d(texels) of a direct render (a floor lit by a textured quad mesh, which
+    is also seen; sampled by area, so the samples do not move with the texels): reverse mode =
+    central differences with the same keys (the image is linear in the texels); one texel is
+    black (a hard case)."""
     floor = {"type": "rectangle", "center": [0, -1, 0], "normal": [0, 1, 0], "size": [6, 6],
              "material": "m"}  # fmt: skip
     tex = {"type": "bitmap", "image": [[C0, C1], [[0, 0, 0], [0.5, 0.5, 0.5]]]}
-    scene = _scene([_rect(tex, center=(0, 0.5, -1), normal=(0, -0.5, 1), size=(2, 1))],
+    quad = {"type": "mesh", "vertices": [[-1, 0, -1], [1, 0, -1], [1, 1, -0.7], [-1, 1, -0.7]],
+            "faces": [[0, 1, 2], [0, 2, 3]], "uvs": [[0, 0], [1, 0], [1, 1], [0, 1]]}  # fmt: skip
+    scene = _scene([{"type": "area", "radiance": tex, "shape": quad}],
                    shapes=[floor], camera=_cam(origin=(0, 1, 3), target=(0, -0.5, 0)),
                    dtype=jnp.float64)  # fmt: skip
     x0 = scene.area_lights[0].radiance.image

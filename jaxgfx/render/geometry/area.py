@@ -22,7 +22,7 @@ from jaxgfx.render.geometry.mesh import TriangleMesh
 from jaxgfx.render.geometry.rectangle import Rectangles
 from jaxgfx.render.geometry.sphere import Spheres
 
-__all__ = ["area", "sample_area", "primitive_areas"]
+__all__ = ["area", "sample_area", "primitive_areas", "has_uv_map", "point_at_uv"]
 
 
 def primitive_areas(shape):
@@ -111,3 +111,36 @@ def sample_area(shape, u, *, with_uv: bool = False) -> tuple:
     if with_uv:
         return p, n, pdf, uv.astype(p.dtype)
     return p, n, pdf
+
+
+def has_uv_map(shape) -> bool:
+    """Whether :func:`point_at_uv` maps ``uv`` onto ``shape``: one rectangle or one sphere
+    (their ``uv`` is a closed-form parameterisation; static, known at trace time)."""
+    return isinstance(shape, (Rectangles, Spheres)) and shape.centers.shape[0] == 1
+
+
+def point_at_uv(shape, uv):
+    """The point of a one-primitive rectangle / sphere with surface coordinates ``uv (..., 2)``
+    (the ``uv`` its hits get) and ``|dp/du x dp/dv|``, the area per unit ``uv`` area.
+
+    Returns ``(p, n, jacobian)``. Rectangles: ``p = c + (u - 1/2) e_u + (v - 1/2) e_v``,
+    jacobian ``|e_u x e_v|`` (the area); spheres: ``phi = 2 pi u``, ``theta = pi v``,
+    jacobian ``2 pi^2 r^2 sin(theta)`` (0 at the poles). Mitsuba 3's
+    ``Shape::eval_parameterization`` for these shapes. Differentiable w.r.t. the shape.
+    Example: a unit sphere at ``uv = (0, 1/2)`` gives ``p = (1, 0, 0)``, jacobian ``2 pi^2``.
+    """
+    if isinstance(shape, Rectangles):
+        c, eu, ev = shape.centers[0], shape.edge_u[0], shape.edge_v[0]
+        cr = jnp.cross(eu, ev)
+        p = c + (uv[..., :1] - 0.5) * eu + (uv[..., 1:2] - 0.5) * ev
+        n = jnp.broadcast_to(safe_normalize(cr), p.shape)
+        jac = jnp.broadcast_to(safe_sqrt(sum_last(cr * cr)), p.shape[:-1])
+        return p, n, jac
+    if isinstance(shape, Spheres):
+        st, ct = sincos(math.pi * uv[..., 1])
+        sp, cp = sincos(2 * math.pi * uv[..., 0])
+        n = jnp.stack([st * cp, st * sp, ct], axis=-1)
+        r = shape.radii[0]
+        jac = 2 * math.pi**2 * r * r * jnp.abs(st)
+        return shape.centers[0] + r * n, n, jac
+    raise TypeError(f"shape: expected a Rectangles or Spheres, got {type(shape).__name__}")

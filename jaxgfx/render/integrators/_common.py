@@ -9,6 +9,7 @@ import jax.numpy as jnp
 from jaxgfx._checks import check_choice
 from jaxgfx._math import eps_for, safe_div, safe_sqrt, sum_last, take_rows
 from jaxgfx.render.geometry import area, intersect_scene, occluded_scene, sample_area
+from jaxgfx.render.geometry.area import has_uv_map, point_at_uv
 from jaxgfx.render.geometry.frame import frame_from_normal, to_local, to_world
 from jaxgfx.render.geometry.ray import spawn_ray
 from jaxgfx.render.integrators._wavefront import run_if
@@ -23,6 +24,7 @@ __all__ = [
     "emitted",
     "area_emission",
     "sample_light",
+    "sample_area_light",
     "light_pdf_hit",
     "env_pdf",
     "mis_power",
@@ -306,8 +308,53 @@ def light_pdf_hit(scene, p_prev, hit, d):
     sid = jnp.clip(hit.shape_id, 0, len(scene.shapes) - 1)
     cos_l = sum_last(hit.ng * d)
     dist2 = sum_last((hit.p - p_prev) ** 2)
-    pdf = area_to_solid_angle(take_rows(inv_area, sid), dist2, cos_l)
+    pdf = area_to_solid_angle(_area_pdf(scene, inv_area, sid, hit.uv, d.dtype), dist2, cos_l)
     return jnp.where(hit.valid, pdf * _selection_prob(scene, d.dtype), 0.0)
+
+
+def _uv_sampled(al, sh) -> bool:
+    """Whether the light's samples follow its texture (static): a bitmap radiance on one
+    rectangle or sphere (the shapes whose uv maps back to a point); else uniform by area."""
+    return al.samples_texture and has_uv_map(sh)
+
+
+def _area_pdf(scene, inv_area, sid, uv, dtype):
+    """Area density of light sampling at hits on shapes ``sid`` with surface coordinates ``uv``."""
+    pdf = take_rows(inv_area, sid)
+    for al, sh in zip(scene.area_lights, scene.emitter_shapes, strict=True):
+        if _uv_sampled(al, sh):  # texture-sampled lights only: nothing more for the others
+            _, _, jac = point_at_uv(sh, uv[..., :2].astype(dtype))
+            pdf_uv = al.uv_distribution(dtype).pdf(uv[..., :2].astype(dtype))
+            pdf = jnp.where(sid == al.shape_index, _per_area(pdf_uv, jac), pdf)
+    return pdf
+
+
+def _per_area(pdf_uv, jac):
+    """``pdf_uv / jac`` (density per unit area), 0 where the map degenerates (sphere poles)."""
+    ok = jac > 0
+    return jnp.where(ok, pdf_uv / jnp.where(ok, jac, 1.0), 0.0)
+
+
+def sample_area_light(al, sh, u2, dtype):
+    """A point on area light ``al`` (shape ``sh``) from uniform numbers ``u2 (..., 2)``:
+    ``(p, n, pdf_area, radiance)``, the radiance the light emits there (front side).
+
+    As Mitsuba 3's ``area`` emitter: a constant radiance is sampled uniformly by area; a bitmap
+    radiance on a rectangle or sphere by the texture (:meth:`AreaLight.uv_distribution`, the
+    sampled ``uv`` mapped onto the shape, density ``pdf_uv / |dp/du x dp/dv|``, frozen w.r.t.
+    the texels); other textured lights (meshes, checkerboards) uniformly by area with the
+    texture looked up at the sampled point's ``uv``. For light tracers as for next-event
+    estimation."""
+    if _uv_sampled(al, sh):
+        uvl, pdf_uv = al.uv_distribution(dtype).sample(u2)
+        uvl = jax.lax.stop_gradient(uvl)
+        pl, nl, jac = point_at_uv(sh, uvl)
+        return pl, nl, _per_area(jax.lax.stop_gradient(pdf_uv), jac), al.radiance_at(uvl)
+    if al.textured:  # the radiance at the sampled point's uv
+        pl, nl, pdf_a, uvl = sample_area(sh, u2, with_uv=True)
+        return pl, nl, pdf_a, al.radiance_at(uvl.astype(dtype))
+    pl, nl, pdf_a = sample_area(sh, u2)
+    return pl, nl, pdf_a, al.radiance.astype(dtype)
 
 
 def env_pdf(scene, d):
@@ -334,12 +381,7 @@ def sample_light(scene, p, u_sel, u2, *, detached=False):
     idx = jnp.minimum((u_sel * n).astype(jnp.int32), n - 1)
     cands = []
     for al, sh in zip(scene.area_lights, scene.emitter_shapes, strict=True):
-        if al.textured:  # the radiance at the sampled point's uv (uniform-by-area sampling)
-            pl, nl, pdf_a, uvl = sample_area(sh, u2, with_uv=True)
-            rad = al.radiance_at(uvl.astype(dtype))
-        else:
-            pl, nl, pdf_a = sample_area(sh, u2)
-            rad = al.radiance.astype(dtype)
+        pl, nl, pdf_a, rad = sample_area_light(al, sh, u2, dtype)
         v = pl - p
         d2 = sum_last(v * v)
         dist = safe_sqrt(d2)
