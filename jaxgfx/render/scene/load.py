@@ -248,7 +248,8 @@ def load_scene(
                 mi = material_index(ed, where)
             else:
                 mi = _black_material(names, materials)
-            shapes.append(shape)
+            big = sk == "mesh" and shape.faces.shape[0] >= BVH_MIN_TRIANGLES
+            shapes.append(build_traversal(shape, accel) if big else shape)  # traced like meshes
             if shape_ident is not None:
                 row = 0 if sk in ("sphere", "rectangle") else None  # a batch of one
                 object_ids.append((shape_ident, "shape", len(shapes) - 1, row, names[mi]))
