@@ -62,7 +62,11 @@ def _uv_sphere_desc(n=4, center=(0, 0, 0), radius=0.5):
 # the sampled point's uv
 
 
-@pytest.mark.parametrize("kind", ["rectangle", "sphere", "mesh_uvs", "mesh_barycentric"])
+_SLOW_MESH = pytest.mark.slow  # slow: 1.7-4.4 s CPU each (mesh compile), 3-14 s on 2 loaded cores
+
+
+@pytest.mark.parametrize("kind", ["rectangle", "sphere", pytest.param("mesh_uvs", marks=_SLOW_MESH),
+                                  pytest.param("mesh_barycentric", marks=_SLOW_MESH)])  # fmt: skip
 def test_light_sample_uv_is_the_uv_a_ray_hitting_that_point_gets(kind):
     shapes = {
         "rectangle": {"type": "rectangle", "center": [0.2, 0, 0], "normal": [0.3, 0.2, 1],
@@ -161,7 +165,10 @@ CASES = {  # bitmaps on a rectangle / sphere: sampled by the texture; checkerboa
 }
 
 
-@pytest.mark.parametrize("case", list(CASES))
+@pytest.mark.parametrize(
+    "case",
+    ["rectangle", "sphere_bitmap", pytest.param("sphere_checkerboard", marks=pytest.mark.slow)],
+)
 def test_irradiance_by_light_sampling_and_by_cosine_rays_matches_quadrature(case):
     """Light sampling (``sample_light``: the texture at the sampled uv over the uniform-area
     density) and cosine-weighted rays hitting the emitter (``emitted``: the texture at the
@@ -193,7 +200,9 @@ def test_irradiance_by_light_sampling_and_by_cosine_rays_matches_quadrature(case
     assert np.all(ref > 1e-3)
 
 
-@pytest.mark.parametrize("case", ["rectangle", "sphere_bitmap"])
+@pytest.mark.parametrize(
+    "case", [pytest.param("rectangle", marks=pytest.mark.slow), "sphere_bitmap"]
+)  # slow: ~2.4 s CPU, ~7 s loaded
 def test_texture_sampling_follows_luminance_and_its_density_is_the_mis_density(case, x64):
     """A bitmap light's samples fall on each texel in proportion to its luminance (binomial,
     5 standard errors), and the density ``sample_light`` returns is the one ``light_pdf_hit``
@@ -243,22 +252,25 @@ def _nee_loss(x, key, scene, n=512):
 def test_irradiance_gradient_wrt_texels_matches_finite_differences(x64):
     """d E_estimate / d texels in float64, light sampling with fixed numbers. A mesh light is
     sampled by area (the points do not depend on the texels): reverse mode = central
-    differences per key (bilinear 2 x 2 texture, one texel black: value 0, gradient still its
-    weight). A bitmap rectangle is sampled by its texture, a density frozen w.r.t. the texels:
-    the mean reverse-mode gradient over 2^15 samples is within 5 standard errors of the
-    central differences of the quadrature reference."""
+    differences per key (bilinear 1 x 2 texture, one texel black: value 0, gradient still its
+    weight)."""
     scene = _scene([{"type": "area", "radiance": {**TWO, "filter": "bilinear",
-                     "image": [[C0, C1], [[0, 0, 0], [0.5, 0.5, 0.5]]]}, "shape": QUAD}],
-                   dtype=jnp.float64)  # fmt: skip
+                     "image": [[[0, 0, 0], C1]]}, "shape": QUAD}], dtype=jnp.float64)  # fmt: skip
     assert not has_uv_map(scene.emitter_shapes[0])  # a mesh: sampled by area
     x0 = scene.area_lights[0].radiance.image
     keys = jax.random.split(jax.random.key(0), 2)
     _, ad, fd = ad_fd_per_key(_nee_loss, x0, keys, 1e-5, args=(scene,))
     assert np.all(np.isfinite(ad)) and np.abs(ad).max() > 1e-3
-    assert np.all(np.abs(ad[:, 1, 0]) > 1e-4)  # the black texel has a gradient
+    assert np.all(np.abs(ad[:, 0, 0]) > 1e-4)  # the black texel has a gradient
     print("mesh NEE: max |ad - fd| / max |ad|", np.abs(ad - fd).max() / np.abs(ad).max())
     np.testing.assert_allclose(ad, fd, rtol=1e-7, atol=1e-10)
 
+
+@pytest.mark.slow  # slow: ~5 s CPU, ~10 s on 2 loaded cores (64 keys x 512 samples, float64)
+def test_texture_sampled_gradient_matches_finite_differences_of_the_quadrature(x64):
+    """A bitmap rectangle is sampled by its texture, a density frozen w.r.t. the texels: the
+    mean reverse-mode gradient of the irradiance estimate over 2^15 samples is within 5
+    standard errors of the central differences (float64) of the quadrature reference."""
     rect = _scene([_rect(TWO)], dtype=jnp.float64)
     assert rect.area_lights[0].samples_texture
     x0 = rect.area_lights[0].radiance.image
@@ -300,9 +312,25 @@ def _facing_and_away_scene(tex, dtype=jnp.float32):
     return _scene([top, bottom], camera=cam, dtype=dtype)
 
 
+def test_camera_rays_see_the_texel_values_and_the_back_is_black():
+    """Rays from the camera position onto the two rectangles of ``_facing_and_away_scene``:
+    ``emitted`` is the texel value under each ray (exactly), 0 on the back-facing one."""
+    scene = _facing_and_away_scene(TWO)
+    x, y = np.meshgrid((np.arange(8) + 0.5) / 4 - 1, 1 - (np.arange(8) + 0.5) / 4)
+    d = np.stack([x, y, -np.ones_like(x)], -1).reshape(-1, 3)
+    d = jnp.asarray(d / np.linalg.norm(d, axis=-1, keepdims=True), jnp.float32)
+    o = jnp.broadcast_to(jnp.asarray([0.0, 0.0, 1.0]), d.shape)
+    le = jax.jit(lambda s, o, d: C.emitted(s, C.intersect(s, o, d), d))(scene, o, d)
+    le = np.asarray(le).reshape(8, 8, 3)
+    np.testing.assert_array_equal(le[:4, :4], np.broadcast_to(np.float32(C0), (4, 4, 3)))
+    np.testing.assert_array_equal(le[:4, 4:], np.broadcast_to(np.float32(C1), (4, 4, 3)))
+    assert np.all(le[4:] == 0.0)
+
+
+@pytest.mark.slow  # slow: ~5.3 s CPU, ~15 s on 2 loaded cores (a path render's compile)
 def test_texels_seen_directly_and_the_back_is_black():
     """Pixels on the front-facing rectangle are the texel values (exactly: emission only), on
-    the back-facing one 0; under jit, path integrator."""
+    the back-facing one 0; under jit, path integrator (depth 1: what the camera sees)."""
     scene = _facing_and_away_scene(TWO)
     img = np.asarray(
         jax.jit(lambda s, k: render(s, k, spp=2, max_depth=2))(scene, jax.random.key(0))
@@ -344,7 +372,7 @@ def _loss_render(x, key, scene):
     return jnp.mean(img * jnp.asarray([0.3, 0.5, 0.2]))
 
 
-@pytest.mark.slow  # slow: ~25 s on 2 loaded cores (float64 compile of value+grad and FD)
+@pytest.mark.slow  # slow: ~16 s CPU, ~44 s on 2 loaded cores (float64 value+grad and FD)
 def test_render_gradient_wrt_texels_matches_finite_differences(x64):
     """d(mean image)/d(texels) of a direct render (a floor lit by a textured quad mesh, which
     is also seen; sampled by area, so the samples do not move with the texels): reverse mode =
@@ -431,6 +459,12 @@ def test_xml_texture_radiance_reads_and_round_trips(tmp_path):
     (tmp_path / "c.xml").write_text(_xml(chk))
     cb = load_scene(read_xml(tmp_path / "c.xml").desc).area_lights[0].radiance
     assert cb.scale == 3.0 and np.allclose(cb.color0, [2, 1, 0.5])
+    # a bitmap's affine to_uv is written as Mitsuba's to_uv and read back (area-sampled then)
+    m = [[2.0, 0.0, 0.5], [0.0, 1.0, 0.25]]
+    desc = {"camera": _cam(), "shapes": [{"type": "sphere", "center": [0, 0, -2], "radius": 1}],
+            "emitters": [_rect({**TWO, "to_uv": m})]}  # fmt: skip
+    back = load_scene(read_xml(save_scene(desc, tmp_path / "uv.xml")).desc).area_lights[0]
+    assert back.radiance.to_uv == tuple(map(tuple, m)) and not back.samples_texture
     # a texture a radiance cannot take names the file and line
     bad = (
         '<texture name="radiance" type="bitmap"><string name="filename" value="no.png"/></texture>'
@@ -554,7 +588,7 @@ VARIOUS_AREA = """<scene version="3.0.0">
 
 
 @pytest.mark.mitsuba
-@pytest.mark.slow  # slow: ~60 s on 2 loaded cores (a 32 512-triangle OBJ sphere: BVH, compile)
+@pytest.mark.slow  # slow: ~23 s CPU, 45-73 s on 2 loaded cores (a 32 512-triangle OBJ sphere)
 def test_various_emitters_area_lights_match_mitsuba(tmp_path):
     """The area emitters of mitsuba-data's ``various_emitters`` scene (an RGB rectangle, an OBJ
     rectangle, an OBJ sphere and a rectangle with ``flower.bmp`` radiance, 8-bit sRGB) over its
