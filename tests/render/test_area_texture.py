@@ -10,15 +10,17 @@ same run (marker ``mitsuba``).
 import math
 import os
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from jaxgfx.render.bsdf.texture import Texture
+from jaxgfx.render.bsdf.textured import Checkerboard
 from jaxgfx.render.emitters import AreaLight
 from jaxgfx.render.geometry import sample_area
-from jaxgfx.render.geometry.area import has_uv_map
+from jaxgfx.render.geometry.area import has_uv_map, point_at_uv
 from jaxgfx.render.geometry.mesh_io import make_uv_sphere
 from jaxgfx.render.integrators import _common as C
 from jaxgfx.render.render import render
@@ -293,9 +295,59 @@ def test_texture_sampled_gradient_matches_finite_differences_of_the_quadrature(x
     assert np.all(np.abs(mean - fd) < 5 * se) and np.all(se < 0.05 * np.abs(fd))
 
 
-def _with_light(scene, light):
-    import equinox as eqx
+def test_sphere_poles_and_black_textures_give_finite_values_and_gradients(x64):
+    """Hard cases: a texture sample at a sphere's pole (``|dp/du x dp/dv| = 0``: density 0,
+    the sample dropped), an all-black texture, and a shading point on the light's own
+    surface: values and gradients (texels, radius, centre) finite. The texels are reachable by
+    name (``Scene.replace``)."""
+    scene = _scene([_sphere(HALVES)], dtype=jnp.float64)
+    black = scene.replace("emitters.area.0.radiance.image", jnp.zeros((2, 1, 3)))
+    assert float(jnp.max(black.get("emitters.area.0.radiance.image"))) == 0.0
+    u2 = jnp.asarray([[0.3, 0.0], [0.7, 1.0], [0.5, 0.5], [0.2, 0.25]])  # poles, equator
+    p = jnp.asarray([[0.3, -0.2, 0.0], [0.3, -0.2, 0.0], [1.0, -0.3, 0.9], [1.0, -0.3, -0.1]])
 
+    def f(img, c, r, sc):
+        sh = sc.emitter_shapes[0]
+        sh = type(sh)(c[None], r[None])
+        al = AreaLight(Texture(img, filter="nearest"), 0)
+        sc = eqx.tree_at(lambda s: (s.area_lights[0], s.emitter_shapes[0]), sc, (al, sh))
+        wi, _, li, pdf, _ = C.sample_light(sc, p, jnp.zeros(4), u2)
+        hit = C.intersect(sc, p + 1e-3 * wi, wi)
+        return jnp.sum(li) + jnp.sum(pdf) + jnp.sum(C.light_pdf_hit(sc, p, hit, wi))
+
+    for sc in (scene, black):
+        args = (sc.area_lights[0].radiance.image, sc.emitter_shapes[0].centers[0],
+                sc.emitter_shapes[0].radii[0])  # fmt: skip
+        val, grads = jax.jit(jax.value_and_grad(f, argnums=(0, 1, 2)), static_argnums=())(*args, sc)
+        assert np.isfinite(float(val))
+        assert all(np.all(np.isfinite(np.asarray(g))) for g in grads)
+    _, _, jac = point_at_uv(scene.emitter_shapes[0], jnp.asarray([[0.3, 0.0], [0.3, 1.0]]))
+    np.testing.assert_allclose(jac, 0.0, atol=1e-15)
+
+
+def test_checkerboard_colour_gradients_match_finite_differences(x64):
+    """d E_estimate / d (color0, color1) of a checkerboard sphere light (sampled by area):
+    reverse mode = central differences per key, float64."""
+    scene = _scene([_sphere(CHECKER)], dtype=jnp.float64)
+
+    def loss(x, key, scene):
+        al = scene.area_lights[0]
+        light = AreaLight(Checkerboard(x[0], x[1], al.radiance.scale), al.shape_index)
+        sc = _with_light(scene, light)
+        p = jnp.broadcast_to(jnp.asarray([0.3, -0.2, 0.0], x.dtype), (256, 3))
+        u = jax.random.uniform(key, (256, 3), x.dtype)
+        wi, _, li, pdf, _ = C.sample_light(sc, p, u[:, 0], u[:, 1:])
+        w = jnp.where(pdf > 0, wi[:, 2] / jnp.where(pdf > 0, pdf, 1.0), 0.0)
+        return jnp.mean(jnp.sum(li * w[:, None] * jnp.asarray(WEIGHTS, x.dtype), -1))
+
+    x0 = jnp.stack([scene.area_lights[0].radiance.color0, scene.area_lights[0].radiance.color1])
+    keys = jax.random.split(jax.random.key(2), 2)
+    _, ad, fd = ad_fd_per_key(loss, x0, keys, 1e-5, args=(scene,))
+    assert np.abs(ad).max() > 1e-3
+    np.testing.assert_allclose(ad, fd, rtol=1e-7, atol=1e-10)
+
+
+def _with_light(scene, light):
     return eqx.tree_at(lambda s: s.area_lights[0], scene, light)
 
 
