@@ -168,8 +168,12 @@ CASES = {  # bitmaps on a rectangle / sphere: sampled by the texture; checkerboa
 
 
 @pytest.mark.parametrize(
-    "case",
-    ["rectangle", "sphere_bitmap", pytest.param("sphere_checkerboard", marks=pytest.mark.slow)],
+    "case",  # the spheres: slow, ~1.7-1.9 s CPU each
+    [
+        "rectangle",
+        pytest.param("sphere_bitmap", marks=pytest.mark.slow),
+        pytest.param("sphere_checkerboard", marks=pytest.mark.slow),
+    ],
 )
 def test_irradiance_by_light_sampling_and_by_cosine_rays_matches_quadrature(case):
     """Light sampling (``sample_light``: the texture at the sampled uv over the uniform-area
@@ -295,6 +299,7 @@ def test_texture_sampled_gradient_matches_finite_differences_of_the_quadrature(x
     assert np.all(np.abs(mean - fd) < 5 * se) and np.all(se < 0.05 * np.abs(fd))
 
 
+@pytest.mark.slow  # slow: ~5.3 s CPU, ~17 s on 2 loaded cores (float64 grads through hits)
 def test_sphere_poles_and_black_textures_give_finite_values_and_gradients(x64):
     """Hard cases: a texture sample at a sphere's pole (``|dp/du x dp/dv| = 0``: density 0,
     the sample dropped), an all-black texture, and a shading point on the light's own
