@@ -4,8 +4,9 @@ Conventions follow Mitsuba 3:
 
 - ``PointLights``: ``intensity`` in W/sr (radiance-like units per steradian); irradiance at
   distance r falls off as ``intensity / r^2``.
-- ``AreaLight``: a shape of the scene emits constant ``radiance`` from its front side (the side
-  its geometric normal points to); it is also ordinary geometry (it occludes and is hit).
+- ``AreaLight``: a shape of the scene emits ``radiance`` from its front side (the side its
+  geometric normal points to): a constant, or a texture looked up at the surface ``uv``; it is
+  also ordinary geometry (it occludes and is hit).
 - ``DirectionalLight``: a distant light, ``irradiance`` (W/m^2 on a surface facing it) arriving
   along ``direction`` (the direction the light travels, Mitsuba's ``direction``); a delta light.
 - ``SpotLight``: a point light at ``position`` with axis ``direction``, ``intensity`` (W/sr) on
@@ -32,6 +33,7 @@ from __future__ import annotations
 import math
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from jaxgfx._checks import as_float_array, check_finite, check_nonnegative, is_concrete
@@ -48,6 +50,7 @@ from jaxgfx._math import (
 from jaxgfx.color import LUMINANCE_WEIGHTS
 from jaxgfx.render.bsdf import rgb_param
 from jaxgfx.render.bsdf.texture import Texture, lookup
+from jaxgfx.render.bsdf.textured import texture_eval, texture_min
 from jaxgfx.render.sampling import Distribution2D
 
 __all__ = [
@@ -386,13 +389,72 @@ class ProjectorLight(eqx.Module):
 
 
 class AreaLight(eqx.Module):
-    """Constant ``radiance (3,)`` emitted from the front side of scene shape ``shape_index``."""
+    """``radiance`` emitted from the front side of scene shape ``shape_index``: an RGB
+    ``(3,)`` constant, or a texture (:class:`~jaxgfx.render.bsdf.texture.Texture` bitmap or
+    :class:`~jaxgfx.render.bsdf.textured.Checkerboard`) evaluated at the surface point's ``uv``
+    as Mitsuba 3's ``area`` emitter evaluates its ``radiance`` texture (a one-channel texture is
+    grey). The texels are differentiable leaves (``emitters.area.I.radiance.image``).
 
-    radiance: jnp.ndarray
+    Example: ``AreaLight(jnp.ones(3), 0).radiance_at(jnp.zeros((2, 2)))`` is ``ones((2, 3))``.
+    """
+
+    radiance: jnp.ndarray | eqx.Module
     shape_index: int = eqx.field(static=True)
 
     def __check_init__(self):  # also runs on Scene.replace (concrete values only)
-        check_nonnegative(self.radiance, "radiance")
+        if not self.textured:
+            check_nonnegative(self.radiance, "radiance")
+            return
+        if not all(is_concrete(x) for x in jax.tree_util.tree_leaves(self.radiance)):
+            return
+        lo = texture_min(self.radiance)
+        if not lo >= 0:  # NaN fails too
+            raise ValueError(f"radiance: texture values must be non-negative, got min {lo}")
+
+    @property
+    def textured(self) -> bool:
+        """Whether ``radiance`` is a texture (static: known at trace time)."""
+        return not eqx.is_array(self.radiance)
+
+    def radiance_at(self, uv):
+        """Emitted radiance ``(..., 3)`` at surface coordinates ``uv (..., 2)`` (the hit's or the
+        sampled point's ``uv``; a constant radiance is broadcast). Front-side and visibility
+        tests are the caller's."""
+        if not self.textured:
+            return jnp.broadcast_to(self.radiance.astype(uv.dtype), uv.shape[:-1] + (3,))
+        val = texture_eval(self.radiance, uv).astype(uv.dtype)
+        return jnp.broadcast_to(val, val.shape[:-1] + (3,))
+
+    @property
+    def samples_texture(self) -> bool:
+        """Whether light samples follow the texture (a bitmap without ``to_uv``; static)."""
+        return isinstance(self.radiance, Texture) and self.radiance.to_uv is None
+
+    def uv_distribution(self, dtype) -> Distribution2D:
+        """Sampling density on ``[0, 1]²`` of a bitmap radiance (``samples_texture``): as
+        Mitsuba 3's bitmap ``sample_position``, proportional to each texel's luminance (Rec. 709
+        Y of linear RGB); for bilinear lookup the luminance is first spread by the separable
+        ``(1/8, 3/4, 1/8)`` filter (wrapping for ``repeat``, clamped otherwise), as
+        :class:`EnvironmentMap` does, so every point of nonzero radiance has nonzero density
+        (Mitsuba instead offsets the texel sample by a tent). Piecewise constant per texel; built
+        from the texels without derivative (the density is frozen, the radiance is not)."""
+        img = jax.lax.stop_gradient(self.radiance.image).astype(dtype)
+        if img.shape[-1] >= 3:
+            lum = img[..., :3] @ jnp.asarray(LUMINANCE_WEIGHTS["rec709"], dtype)
+        else:
+            lum = img[..., 0]
+        lum = jnp.maximum(lum, 0.0)
+        if self.radiance.filter == "bilinear":
+            for axis in (0, 1):
+                if self.radiance.wrap == "repeat":
+                    a, b = jnp.roll(lum, 1, axis=axis), jnp.roll(lum, -1, axis=axis)
+                else:  # clamp / mirror: the edge texel is its own neighbour
+                    n = lum.shape[axis]
+                    idx = jnp.arange(n)
+                    a = jnp.take(lum, jnp.maximum(idx - 1, 0), axis=axis)
+                    b = jnp.take(lum, jnp.minimum(idx + 1, n - 1), axis=axis)
+                lum = 0.75 * lum + 0.125 * (a + b)
+        return Distribution2D(lum)
 
 
 class ConstantEnvironment(eqx.Module):

@@ -9,12 +9,20 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from jaxgfx._math import safe_div, safe_normalize, safe_sqrt, sincos, sum_last, take_rows
+from jaxgfx._math import (
+    safe_arccos,
+    safe_div,
+    safe_normalize,
+    safe_sqrt,
+    sincos,
+    sum_last,
+    take_rows,
+)
 from jaxgfx.render.geometry.mesh import TriangleMesh
 from jaxgfx.render.geometry.rectangle import Rectangles
 from jaxgfx.render.geometry.sphere import Spheres
 
-__all__ = ["area", "sample_area", "primitive_areas"]
+__all__ = ["area", "sample_area", "primitive_areas", "has_uv_map", "point_at_uv"]
 
 
 def primitive_areas(shape):
@@ -35,7 +43,7 @@ def area(shape) -> Float[Array, ""]:
     return jnp.sum(primitive_areas(shape))
 
 
-def sample_area(shape, u) -> tuple[Float[Array, "*b 3"], Float[Array, "*b 3"], Float[Array, "*b"]]:
+def sample_area(shape, u, *, with_uv: bool = False) -> tuple:
     """Uniform-by-area point on ``shape`` from uniform numbers ``u (..., 2)`` in [0, 1)^2.
 
     Returns ``(p, n, pdf_area)``: position, unit geometric normal (same convention as the hit
@@ -44,6 +52,10 @@ def sample_area(shape, u) -> tuple[Float[Array, "*b 3"], Float[Array, "*b 3"], F
     and reused. Spheres: ``z = 1 - 2 u0``, ``phi = 2 pi u1``; triangles: ``b0 = 1 - sqrt(u0)``,
     ``b1 = u1 sqrt(u0)`` (Shirley & Chiu 1997 / pbrt-v4 §6.5); rectangles: ``s, t = u``.
     Positions are differentiable w.r.t. the shape parameters (reparametrisation).
+    ``with_uv`` (static): also return the point's surface coordinates ``uv (..., 2)``, the
+    ``uv`` a ray hitting that point gets (rectangles ``(s, t)``; spheres
+    ``(phi / 2 pi, theta / pi)``; meshes the interpolated vertex ``uvs``, else the
+    barycentrics ``(b1, b2)``), for textured emitters; without it nothing is computed for them.
     Example: a unit sphere gives ``pdf_area = 1 / (4 pi) = 0.0795775``.
     """
     u = jnp.asarray(u)
@@ -70,10 +82,14 @@ def sample_area(shape, u) -> tuple[Float[Array, "*b 3"], Float[Array, "*b 3"], F
         sp, cp = sincos(phi)
         n = jnp.stack([r_xy * cp, r_xy * sp, z], axis=-1)
         p = take_rows(shape.centers, idx) + take_rows(shape.radii, idx)[..., None] * n
+        if with_uv:  # sphere_hit: phi = atan2(n_y, n_x) in [0, 2 pi), theta = acos(n_z)
+            uv = jnp.stack([u1, safe_arccos(z) / math.pi], axis=-1)
     elif isinstance(shape, Rectangles):
         eu, ev = take_rows(shape.edge_u, idx), take_rows(shape.edge_v, idx)
         p = take_rows(shape.centers, idx) + (u0 - 0.5)[..., None] * eu + (u1 - 0.5)[..., None] * ev
         n = safe_normalize(jnp.cross(eu, ev))
+        if with_uv:  # rectangle_hit: p = c + (s - 1/2) e_u + (t - 1/2) e_v
+            uv = jnp.stack([u0, u1], axis=-1)
     else:
         tri = shape.triangles[idx]
         su = safe_sqrt(u0)
@@ -85,4 +101,46 @@ def sample_area(shape, u) -> tuple[Float[Array, "*b 3"], Float[Array, "*b 3"], F
         n = safe_normalize(
             jnp.cross(tri[..., 1, :] - tri[..., 0, :], tri[..., 2, :] - tri[..., 0, :])
         )
+        if with_uv:  # mesh_hit: interpolated vertex uvs, else (b1, b2)
+            if shape.uvs is not None:
+                tuv = shape.uvs[shape.faces[idx]]
+                uv = b0[..., None] * tuv[..., 0, :] + b1[..., None] * tuv[..., 1, :]
+                uv = uv + b2[..., None] * tuv[..., 2, :]
+            else:
+                uv = jnp.stack([b1, b2], axis=-1)
+    if with_uv:
+        return p, n, pdf, uv.astype(p.dtype)
     return p, n, pdf
+
+
+def has_uv_map(shape) -> bool:
+    """Whether :func:`point_at_uv` maps ``uv`` onto ``shape``: one rectangle or one sphere
+    (their ``uv`` is a closed-form parameterisation; static, known at trace time)."""
+    return isinstance(shape, (Rectangles, Spheres)) and shape.centers.shape[0] == 1
+
+
+def point_at_uv(shape, uv):
+    """The point of a one-primitive rectangle / sphere with surface coordinates ``uv (..., 2)``
+    (the ``uv`` its hits get) and ``|dp/du x dp/dv|``, the area per unit ``uv`` area.
+
+    Returns ``(p, n, jacobian)``. Rectangles: ``p = c + (u - 1/2) e_u + (v - 1/2) e_v``,
+    jacobian ``|e_u x e_v|`` (the area); spheres: ``phi = 2 pi u``, ``theta = pi v``,
+    jacobian ``2 pi^2 r^2 sin(theta)`` (0 at the poles). Mitsuba 3's
+    ``Shape::eval_parameterization`` for these shapes. Differentiable w.r.t. the shape.
+    Example: a unit sphere at ``uv = (0, 1/2)`` gives ``p = (1, 0, 0)``, jacobian ``2 pi^2``.
+    """
+    if isinstance(shape, Rectangles):
+        c, eu, ev = shape.centers[0], shape.edge_u[0], shape.edge_v[0]
+        cr = jnp.cross(eu, ev)
+        p = c + (uv[..., :1] - 0.5) * eu + (uv[..., 1:2] - 0.5) * ev
+        n = jnp.broadcast_to(safe_normalize(cr), p.shape)
+        jac = jnp.broadcast_to(safe_sqrt(sum_last(cr * cr)), p.shape[:-1])
+        return p, n, jac
+    if isinstance(shape, Spheres):
+        st, ct = sincos(math.pi * uv[..., 1])
+        sp, cp = sincos(2 * math.pi * uv[..., 0])
+        n = jnp.stack([st * cp, st * sp, ct], axis=-1)
+        r = shape.radii[0]
+        jac = 2 * math.pi**2 * r * r * jnp.abs(st)
+        return shape.centers[0] + r * n, n, jac
+    raise TypeError(f"shape: expected a Rectangles or Spheres, got {type(shape).__name__}")

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 from jaxgfx._checks import check_choice
 from jaxgfx._math import eps_for, safe_div, safe_sqrt, sum_last, take_rows
 from jaxgfx.render.geometry import area, intersect_scene, occluded_scene, sample_area
+from jaxgfx.render.geometry.area import has_uv_map, point_at_uv
 from jaxgfx.render.geometry.frame import frame_from_normal, to_local, to_world
 from jaxgfx.render.geometry.ray import spawn_ray
 from jaxgfx.render.integrators._wavefront import run_if
@@ -21,7 +22,9 @@ __all__ = [
     "shading_frame",
     "tangent_space",
     "emitted",
+    "area_emission",
     "sample_light",
+    "sample_area_light",
     "light_pdf_hit",
     "env_pdf",
     "mis_power",
@@ -208,13 +211,37 @@ def tangent_space(scene, hit, frame):
 
 
 def emission_table(scene, dtype):
+    """Per-shape constant radiance ``(S, 3)`` (0 for textured lights and non-emitters) and
+    inverse emitter area ``(S,)``."""
     n = len(scene.shapes)
     table = jnp.zeros((n, 3), dtype)
     inv_area = jnp.zeros((n,), dtype)
     for al, sh in zip(scene.area_lights, scene.emitter_shapes, strict=True):
-        table = table.at[al.shape_index].set(al.radiance.astype(dtype))
+        if not al.textured:  # textured lights: area_emission looks them up at the uv
+            table = table.at[al.shape_index].set(al.radiance.astype(dtype))
         inv_area = inv_area.at[al.shape_index].set(1.0 / area(sh).astype(dtype))
     return table, inv_area
+
+
+def _lookup_emission(scene, table, sid, uv, dtype):
+    out = take_rows(table, sid)
+    for al in scene.area_lights:  # textured lights only: nothing more for constant ones
+        if al.textured:
+            on = (sid == al.shape_index)[..., None]
+            out = jnp.where(on, al.radiance_at(uv[..., :2].astype(dtype)), out)
+    return out
+
+
+def area_emission(scene, shape_id, uv, dtype=None):
+    """Radiance ``(..., 3)`` of the area light on shape ``shape_id (...)`` at surface
+    coordinates ``uv (..., 2)`` (0 on shapes that do not emit; no front-side test): the emission
+    lookup by shape index and ``uv`` that camera / BSDF rays hitting an emitter use
+    (:func:`emitted`), for light tracers too. A textured light's texture is evaluated only in
+    scenes that have one (a scene of constant lights runs the table lookup alone)."""
+    dtype = uv.dtype if dtype is None else dtype
+    table, _ = emission_table(scene, dtype)
+    sid = jnp.clip(shape_id, 0, len(scene.shapes) - 1)
+    return _lookup_emission(scene, table, sid, uv, dtype)
 
 
 def emitted(scene, hit, d):
@@ -224,7 +251,7 @@ def emitted(scene, hit, d):
     table, _ = emission_table(scene, d.dtype)
     sid = jnp.clip(hit.shape_id, 0, len(scene.shapes) - 1)
     front = (sum_last(hit.ng * d) < 0) & hit.valid
-    return jnp.where(front[..., None], take_rows(table, sid), 0.0)
+    return jnp.where(front[..., None], _lookup_emission(scene, table, sid, hit.uv, d.dtype), 0.0)
 
 
 def mis_power(a, b):
@@ -281,8 +308,53 @@ def light_pdf_hit(scene, p_prev, hit, d):
     sid = jnp.clip(hit.shape_id, 0, len(scene.shapes) - 1)
     cos_l = sum_last(hit.ng * d)
     dist2 = sum_last((hit.p - p_prev) ** 2)
-    pdf = area_to_solid_angle(take_rows(inv_area, sid), dist2, cos_l)
+    pdf = area_to_solid_angle(_area_pdf(scene, inv_area, sid, hit.uv, d.dtype), dist2, cos_l)
     return jnp.where(hit.valid, pdf * _selection_prob(scene, d.dtype), 0.0)
+
+
+def _uv_sampled(al, sh) -> bool:
+    """Whether the light's samples follow its texture (static): a bitmap radiance on one
+    rectangle or sphere (the shapes whose uv maps back to a point); else uniform by area."""
+    return al.samples_texture and has_uv_map(sh)
+
+
+def _area_pdf(scene, inv_area, sid, uv, dtype):
+    """Area density of light sampling at hits on shapes ``sid`` with surface coordinates ``uv``."""
+    pdf = take_rows(inv_area, sid)
+    for al, sh in zip(scene.area_lights, scene.emitter_shapes, strict=True):
+        if _uv_sampled(al, sh):  # texture-sampled lights only: nothing more for the others
+            _, _, jac = point_at_uv(sh, uv[..., :2].astype(dtype))
+            pdf_uv = al.uv_distribution(dtype).pdf(uv[..., :2].astype(dtype))
+            pdf = jnp.where(sid == al.shape_index, _per_area(pdf_uv, jac), pdf)
+    return pdf
+
+
+def _per_area(pdf_uv, jac):
+    """``pdf_uv / jac`` (density per unit area), 0 where the map degenerates (sphere poles)."""
+    ok = jac > 0
+    return jnp.where(ok, pdf_uv / jnp.where(ok, jac, 1.0), 0.0)
+
+
+def sample_area_light(al, sh, u2, dtype):
+    """A point on area light ``al`` (shape ``sh``) from uniform numbers ``u2 (..., 2)``:
+    ``(p, n, pdf_area, radiance)``, the radiance the light emits there (front side).
+
+    As Mitsuba 3's ``area`` emitter: a constant radiance is sampled uniformly by area; a bitmap
+    radiance on a rectangle or sphere by the texture (:meth:`AreaLight.uv_distribution`, the
+    sampled ``uv`` mapped onto the shape, density ``pdf_uv / |dp/du x dp/dv|``, frozen w.r.t.
+    the texels); other textured lights (meshes, checkerboards) uniformly by area with the
+    texture looked up at the sampled point's ``uv``. For light tracers as for next-event
+    estimation."""
+    if _uv_sampled(al, sh):
+        uvl, pdf_uv = al.uv_distribution(dtype).sample(u2)
+        uvl = jax.lax.stop_gradient(uvl)
+        pl, nl, jac = point_at_uv(sh, uvl)
+        return pl, nl, _per_area(jax.lax.stop_gradient(pdf_uv), jac), al.radiance_at(uvl)
+    if al.textured:  # the radiance at the sampled point's uv
+        pl, nl, pdf_a, uvl = sample_area(sh, u2, with_uv=True)
+        return pl, nl, pdf_a, al.radiance_at(uvl.astype(dtype))
+    pl, nl, pdf_a = sample_area(sh, u2)
+    return pl, nl, pdf_a, al.radiance.astype(dtype)
 
 
 def env_pdf(scene, d):
@@ -309,14 +381,14 @@ def sample_light(scene, p, u_sel, u2, *, detached=False):
     idx = jnp.minimum((u_sel * n).astype(jnp.int32), n - 1)
     cands = []
     for al, sh in zip(scene.area_lights, scene.emitter_shapes, strict=True):
-        pl, nl, pdf_a = sample_area(sh, u2)
+        pl, nl, pdf_a, rad = sample_area_light(al, sh, u2, dtype)
         v = pl - p
         d2 = sum_last(v * v)
         dist = safe_sqrt(d2)
         wi = safe_div(v, dist[..., None])
         cos_l = -sum_last(nl * wi)
         pdf = area_to_solid_angle(pdf_a, d2, cos_l)  # 0 for a point seen edge-on
-        li = jnp.where(((cos_l > 0) & (pdf > 0))[..., None], al.radiance.astype(dtype), 0.0)
+        li = jnp.where(((cos_l > 0) & (pdf > 0))[..., None], rad, 0.0)
         cands.append((wi, dist, li, pdf, jnp.zeros(p.shape[:-1], bool)))
     na = len(scene.area_lights)
     if scene.point_lights is not None:

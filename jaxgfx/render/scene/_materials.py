@@ -17,7 +17,7 @@ from jaxgfx.render.bsdf.textured import (
 )
 from jaxgfx.render.parameters import get_path
 
-__all__ = ["material_from_desc"]
+__all__ = ["material_from_desc", "emission_from_desc"]
 
 
 def material_from_desc(desc, *, where="material", base_dir=None):
@@ -59,6 +59,23 @@ def material_from_desc(desc, *, where="material", base_dir=None):
             raise ValueError(f"{pre}{k}: texture values must be {need}, got min {lo}")
         textures[k] = tex
     return Textured(bsdf, textures)
+
+
+def emission_from_desc(value, where, *, base_dir=None, rgb=None):
+    """An area light's ``radiance``: an RGB constant (``rgb(value, where)``, the schema's
+    parser) or a texture description (``bitmap`` / ``checkerboard``, as material textures:
+    8-bit files sRGB-decoded unless ``raw``), whose values must be non-negative. ``mesh_attribute``
+    radiance is refused (the attribute layout is laid out for materials only)."""
+    if not is_texture_desc(value):
+        return rgb(value, where)
+    if value.get("type") == "mesh_attribute":
+        raise ValueError(f"{where}: mesh_attribute radiance is not supported "
+                         "(bitmap or checkerboard)")  # fmt: skip
+    tex = texture_from_dict(value, where, base_dir=base_dir, channels=3)
+    lo = texture_min(tex)
+    if not lo >= 0:
+        raise ValueError(f"{where}: texture values must be non-negative, got min {lo}")
+    return tex
 
 
 _MAP_TEXTURE = {"normalmap": ("normalmap", 3), "bumpmap": ("height", 1)}

@@ -22,7 +22,7 @@ from jaxgfx.render.emitters import (
 from jaxgfx.render.film import make_filter
 from jaxgfx.render.geometry import Rectangles, SDFShape, Spheres, area
 from jaxgfx.render.scene._lights import SPOT_TEXTURE_KEYS, projector_from_desc, spot_texture
-from jaxgfx.render.scene._materials import material_from_desc
+from jaxgfx.render.scene._materials import emission_from_desc, material_from_desc
 from jaxgfx.render.scene.scene import Scene, id_problem, is_internal_name
 from jaxgfx.render.scene.schema import (
     EMITTER_TYPES,
@@ -255,13 +255,17 @@ def load_scene(
                 mi = material_index(ed, where)
             else:
                 mi = _black_material(names, materials)
-            shapes.append(shape)
+            big = sk == "mesh" and shape.faces.shape[0] >= BVH_MIN_TRIANGLES
+            shapes.append(build_traversal(shape, accel) if big else shape)  # traced like meshes
             if shape_ident is not None:
                 row = 0 if sk in ("sphere", "rectangle") else None  # a batch of one
                 object_ids.append((shape_ident, "shape", len(shapes) - 1, row, names[mi]))
             n_prims = shape.faces.shape[0] if sk == "mesh" else 1
             shape_mats.append(jnp.full((n_prims,), mi, jnp.int32))
-            area_lights.append(AreaLight(rgb(ed["radiance"], f"{where}.radiance"), len(shapes) - 1))
+            rad = emission_from_desc(
+                ed["radiance"], f"{where}.radiance", base_dir=base_dir, rgb=rgb
+            )
+            area_lights.append(AreaLight(rad, len(shapes) - 1))
             emitter_shapes.append(shape)
         else:  # "constant" / "envmap"
             if environment is not None:

@@ -754,7 +754,10 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
                 raise ValueError(f"{where}.shape.material: put 'material' on the emitter")
             sh = _shape(ed["shape"], f"{where}.shape", base_dir, work_dir, mi)
             sh["bsdf"] = material_of(ed, where, black, ed["shape"]["type"])
-            sh["emitter"] = {"type": "area", "radiance": _rgb(S.rgb(ed["radiance"], where))}
+            sh["emitter"] = {
+                "type": "area",
+                "radiance": _emission(ed["radiance"], where, base_dir, work_dir, mi),
+            }
             # the shape (the top-level object) by its id, else by the emitter's
             shape_key = ed["shape"].get("id") if isinstance(ed["shape"], Mapping) else None
             top = key(ed["shape"] if shape_key else ed, where, f"emitter_{i}")
@@ -790,6 +793,23 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
         else:  # "directional" / "spot" (check_choice above admits only S.EMITTER_TYPES)
             out[key(ed, where, f"emitter_{i}")] = _delta_light(ed, where, mi, base_dir, work_dir)
     return out
+
+
+def _emission(rad, where, base_dir, work_dir, mi):
+    """Mitsuba ``radiance`` of an area light's description: an ``rgb`` dict, or a ``bitmap`` /
+    ``checkerboard`` texture dict (validated and built as :func:`load_scene` builds it)."""
+    from jaxgfx.render.bsdf.textured import is_texture_desc
+    from jaxgfx.render.scene import schema as S
+    from jaxgfx.render.scene._materials import emission_from_desc
+
+    if not is_texture_desc(rad):
+        return _rgb(S.rgb(rad, where))
+    tex = emission_from_desc(rad, f"{where}.radiance", base_dir=base_dir, rgb=S.rgb)
+    out = _texture_dict(tex, f"{where}.radiance", work_dir, desc=rad, base_dir=base_dir)
+    if getattr(tex, "to_uv", None) is not None:  # a bitmap's affine uv map (2 x 3)
+        (a, b, c), (d, e, f) = tex.to_uv
+        out["to_uv"] = [[a, b, 0.0, c], [d, e, 0.0, f], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+    return _uv_transforms(out, mi)
 
 
 def _delta_light(ed, where, mi, base_dir=None, work_dir=None) -> dict:
@@ -882,12 +902,22 @@ def _list(x):
 
 
 def _texture_desc(tex) -> dict:
-    """Inline ``bitmap`` description of a light's texture (its texels, wrap and filter)."""
-    d = {"type": "bitmap", "image": np.asarray(tex.image, np.float32), "wrap": tex.wrap,
-         "filter": tex.filter}  # fmt: skip
+    """The description of a texture object (``bitmap`` texels inline)."""
+    from jaxgfx.render.bsdf.textured import Checkerboard
+
+    if isinstance(tex, Checkerboard):
+        return {"type": "checkerboard", "color0": _list(tex.color0),
+                "color1": _list(tex.color1), "scale": float(tex.scale)}  # fmt: skip
+    out = {"type": "bitmap", "image": np.asarray(tex.image, np.float32),
+           "wrap": tex.wrap, "filter": tex.filter}  # fmt: skip
     if tex.to_uv is not None:
-        d["to_uv"] = [list(r) for r in tex.to_uv]
-    return d
+        out["to_uv"] = [list(r) for r in tex.to_uv]
+    return out
+
+
+def _radiance_desc(light):
+    """An area light's ``radiance``: an RGB list or a texture description."""
+    return _texture_desc(light.radiance) if light.textured else _list(light.radiance)
 
 
 def _bsdf_desc(m, where) -> dict:
@@ -1081,7 +1111,7 @@ def scene_to_desc(scene) -> dict:
         if i in lit:
             j, light = lit[i]
             for d, name in rows(one(shape, mats, f"emitters.area.{i}", True), i):
-                e = named({"type": "area", "shape": d, "radiance": _list(light.radiance)},
+                e = named({"type": "area", "shape": d, "radiance": _radiance_desc(light)},
                           "area", j)  # fmt: skip
                 if name != "jaxgfx_black":
                     e["material"] = name

@@ -95,7 +95,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("texture", "mesh_attribute"): S + " (vertex_* / face_* of PLY files; not in shapegroups)",
     ("texture", "volume"): "refused: jaxgfx renders surfaces only",
     # emitters
-    ("emitter", "area"): S + " (inside a shape)",
+    ("emitter", "area"): S + " (inside a shape; `radiance` an RGB or a bitmap / checkerboard)",
     ("emitter", "point"): S,
     ("emitter", "constant"): S,
     ("emitter", "envmap"): S + " (no rotation)",

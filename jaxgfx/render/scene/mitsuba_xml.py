@@ -1239,7 +1239,7 @@ def _shape(obj: _Obj, doc, desc, ctx):
         ep = _Params(e, doc)
         if e.type != "area":
             raise ValueError(f"{e.where}: only 'area' emitters can be attached to a shape")
-        rad = ep.color("radiance", [1.0] * 3, emission=True)
+        rad = ep.color("radiance", [1.0] * 3, emission=True, texture=True)  # RGB or texture
         ep.done()
         ed = {"type": "area", "shape": sd, "radiance": rad, "material": mat}
         _name_by_id(ed, e.id or obj.id)  # an unnamed area emitter goes by its shape's id
