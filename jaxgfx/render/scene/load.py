@@ -19,7 +19,7 @@ from jaxgfx.render.emitters import (
     SpotLight,
 )
 from jaxgfx.render.film import make_filter
-from jaxgfx.render.geometry import Rectangles, SDFShape, Spheres, area
+from jaxgfx.render.geometry import Instances, Rectangles, SDFGridShape, SDFShape, Spheres, area
 from jaxgfx.render.scene._materials import material_from_desc
 from jaxgfx.render.scene.scene import Scene, id_problem, is_internal_name
 from jaxgfx.render.scene.schema import (
@@ -172,7 +172,7 @@ def load_scene(
                    None if k == "mesh" else pos, mat)
                   for ident, k, pos, mat in shape_ids]  # fmt: skip
     for m, mi in meshes:
-        if isinstance(m, SDFShape):
+        if isinstance(m, (SDFShape, SDFGridShape, Instances)):  # one primitive each
             shapes.append(m)
             shape_mats.append(jnp.full((1,), mi, jnp.int32))
             continue

@@ -62,7 +62,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("shape", "cylinder"): S + " (untextured; 512-triangle tube, no caps)",
     ("shape", "shapegroup"): S + " (meshes and analytic shapes; no emitters, no nesting)",
     ("shape", "instance"): S + " (any invertible affine to_world)",
-    ("shape", "sdfgrid"): "refused: no SDF grids in jaxgfx",
+    ("shape", "sdfgrid"): S + " (`filename`, `normals`; exact per-voxel intersection)",
     ("shape", "bsplinecurve"): "refused: no curves in jaxgfx",
     ("shape", "linearcurve"): "refused: no curves in jaxgfx",
     ("shape", "ellipsoids"): "refused: no ellipsoids in jaxgfx",

@@ -1217,10 +1217,29 @@ def _shape(obj: _Obj, doc, desc, ctx):
         vw = v @ lin.T + m[:3, 3]
         bbox = np.stack([vw.min(0), vw.max(0)])
         ctx.setdefault("triangles", {})[id(obj)] = vw[np.asarray(f)]  # _check_clip
+    elif t == "sdfgrid":  # the unit cube's grid, read now for file/line errors
+        from jaxgfx.render.geometry import read_vol
+
+        if emitters:
+            raise ValueError(f"{obj.where}: an sdfgrid cannot be an area emitter (as in Mitsuba)")
+        fname = p.string("filename")
+        if fname is None:
+            raise ValueError(f"{obj.where}: missing parameter 'filename'")
+        path = doc.resolve(fname, obj.props["filename"].node, obj.label)
+        try:
+            read_vol(path)
+        except (OSError, ValueError) as e:
+            raise p.err("filename", str(e)) from None
+        sd = {"type": "sdfgrid", "filename": os.path.abspath(path),
+              "normals": p.string("normals", "smooth", ("smooth", "analytic"))}  # fmt: skip
+        if not np.allclose(m, np.eye(4)):
+            sd["to_world"] = m.tolist()
+        c = np.array([[x, y, z, 1.0] for x in (0, 1) for y in (0, 1) for z in (0, 1)]) @ m.T
+        bbox = np.stack([c[:, :3].min(0), c[:, :3].max(0)])
     else:
         raise ValueError(f"{obj.where}: shape plugin {t!r} is not supported "
                          "(obj, ply, serialized, sphere, rectangle, cube, disk, "
-                         "cylinder)")  # fmt: skip
+                         "cylinder, sdfgrid)")  # fmt: skip
     p.done(children_ok=len(obj.children))
     ctx["bboxes"].append((bbox, obj))
     if emitters:
