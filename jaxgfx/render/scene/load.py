@@ -42,8 +42,16 @@ BVH_MIN_TRIANGLES = 64
 def _concat(shapes):
     first = shapes[0]
     if isinstance(first, Spheres):
+        frames = None
+        if any(s.frames is not None for s in shapes):  # the others in world axes
+            eye = jnp.eye(3, dtype=first.centers.dtype)
+            frames = jnp.concatenate([
+                s.frames if s.frames is not None
+                else jnp.broadcast_to(eye, (s.radii.shape[0], 3, 3)) for s in shapes])  # fmt: skip
         return Spheres(
-            jnp.concatenate([s.centers for s in shapes]), jnp.concatenate([s.radii for s in shapes])
+            jnp.concatenate([s.centers for s in shapes]),
+            jnp.concatenate([s.radii for s in shapes]),
+            frames,
         )
     return Rectangles(
         jnp.concatenate([s.centers for s in shapes]),

@@ -321,9 +321,16 @@ def shape_from_desc(d, where, base_dir):
     kind = check_choice(d["type"], f"{where}.type", SHAPE_TYPES)
     common = ("type", "material", "id")  # id: checked by load_scene
     if kind == "sphere":
-        expect_keys(d, where, ("type", "center", "radius"), common)
+        expect_keys(d, where, ("type", "center", "radius"), (*common, "frame"))
         r = num(d["radius"], f"{where}.radius", positive=True)
-        return "sphere", Spheres(vec(d["center"], f"{where}.center")[None], r[None])
+        frame = None
+        if d.get("frame") is not None:  # local axes (columns) of a rotated sphere: its uv
+            frame = np.asarray(d["frame"], np.float64)
+            if frame.shape != (3, 3) or not np.allclose(frame.T @ frame, np.eye(3), atol=1e-6):
+                raise ValueError(f"{where}.frame: expected an orthogonal 3x3 matrix (the "
+                                 "sphere's local axes as columns)")  # fmt: skip
+            frame = frame[None]
+        return "sphere", Spheres(vec(d["center"], f"{where}.center")[None], r[None], frame)
     if kind == "rectangle":
         if "edge_u" in d or "edge_v" in d:
             expect_keys(d, where, ("type", "center", "edge_u", "edge_v"), common)
