@@ -46,7 +46,7 @@ def _back_face_pixels(scene, sub=4):
     return back.any((1, 3))
 
 
-@pytest.mark.slow  # slow: 172 s measured here at load 10-17 on 2 cores (30-45 s CPU; mostly compile)
+@pytest.mark.slow  # slow: 172 s measured at load 10-17 on 2 cores (30-45 s CPU; mostly compile)
 def test_various_shapes_matches_mitsubas_reference():
     x = read_xml(os.path.join(SCENE, "test_various_shapes_path.xml"))
     desc = {**x.desc, "camera": {**x.desc["camera"], "width": N, "height": N}}

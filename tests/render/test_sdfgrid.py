@@ -12,8 +12,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from jaxgfx.render import render
 from jaxgfx.render.geometry import Instances, SDFGrid, SDFGridShape, read_vol, write_vol
 from jaxgfx.render.geometry.intersect import intersect_scene
+from jaxgfx.render.scene import load_scene
 
 DATA = os.path.join(os.path.dirname(__file__), "..", "data", "mitsuba")
 TORUS = os.path.join(DATA, "docs", "scenes", "sdfgrid", "torus_sdfgrid.vol")
@@ -77,49 +79,48 @@ def test_trilinear_values_are_exact_at_vertices_and_linear_between():
     g = SDFGrid(v)
     p = np.random.default_rng(1).uniform(-0.2, 1.2, (100, 3))
     q = np.clip(p, 0, 1)  # clamped outside the cube, as Mitsuba's texture lookups
-    assert np.allclose(g(jnp.asarray(p)), q[:, 0] + 2 * q[:, 1] - 3 * q[:, 2] + 0.1, atol=1e-5)
+    # one compiled program for both (eager dispatch of the lookups cost ~4 s)
+    val, grad = jax.jit(lambda g, p, q: (g(p), g.gradient(q)))(g, jnp.asarray(p), jnp.asarray(q))
+    assert np.allclose(val, q[:, 0] + 2 * q[:, 1] - 3 * q[:, 2] + 0.1, atol=1e-5)
     # a linear function's gradient is exact in every voxel
-    assert np.allclose(g.gradient(jnp.asarray(q)), [1, 2, -3], atol=1e-4)
+    assert np.allclose(grad, [1, 2, -3], atol=1e-4)
 
 
-@pytest.mark.slow  # slow: ~10 s on 2 shared cores (x64 compile of the voxel walk)
-def test_hit_distance_converges_like_h_squared(x64):
-    """Trilinear interpolation error bound: |f - I f| <= h²/8 Σ_i max|∂ii f| <= h²/8 · 2/(R - √3 h)
-    for the sphere distance (Hessian eigenvalues 1/r, 1/r, 0), hence the hit distance error
-    <= that / |cos| to first order (rays with |cos| > 0.3)."""
+@jax.jit
+def _intersect(values, o, d):
+    """Hits of the grid ``values`` (smooth shading normals ``ns``, analytic ``ng``): one
+    compiled walk per grid and ray shape, shared by the tests."""
+    return SDFGridShape(SDFGrid(values)).intersect(o, d)
+
+
+@pytest.mark.slow  # slow: ~25 s on 2 shared cores (x64 compile of the voxel walk, 3 grid sizes)
+def test_hit_distance_and_normals_converge(x64):
+    """Hit distance: the trilinear interpolation error bound |f - I f| <= h²/8 Σ_i max|∂ii f|
+    <= h²/8 · 2/(R - √3 h) for the sphere distance (Hessian eigenvalues 1/r, 1/r, 0), hence the
+    hit distance error <= that / |cos| to first order (rays with |cos| > 0.3), order 2.
+    Normals against the analytic sphere's: ``analytic`` (``ng``, the gradient of one voxel's
+    trilinear function) first order in h, ``smooth`` (``ns``, Hansson-Söderlund et al. 2022:
+    the blended voxel normals) second order."""
     o, d = _rays(400)
     ta, cos = _sphere_t(o, d)
     m = np.isfinite(ta) & (cos > 0.3)
-    errs = []
+    errs, err_n = [], {}
     for n in (9, 17, 33):
-        s = SDFGridShape(SDFGrid(_grid_of(_sphere_sdf, n)))
-        t = np.asarray(jax.jit(lambda o, d, s=s: s.closest_t(o, d)[0])(o, d))
-        h = 1 / (n - 1)
-        bound = h * h / 8 * 2 / (R - np.sqrt(3) * h) / cos[m]
+        h = _intersect(jnp.asarray(_grid_of(_sphere_sdf, n)), o, d)
+        t = np.asarray(h.t)
+        step = 1 / (n - 1)
+        bound = step * step / 8 * 2 / (R - np.sqrt(3) * step) / cos[m]
         err = np.abs(t[m] - ta[m])
         assert np.all(err <= 1.05 * bound), (n, np.max(err / bound))
         errs.append(err.max())
+        na = (np.asarray(h.p) - C) / np.linalg.norm(np.asarray(h.p) - C, axis=-1)[:, None]
+        err_n[n, "analytic"] = np.abs(np.asarray(h.ng)[m] - na[m]).max()
+        err_n[n, "smooth"] = np.abs(np.asarray(h.ns)[m] - na[m]).max()
     # measured max errors 0.0102, 0.0024 (17, 33 vertices): order 2
     assert errs[2] / errs[1] < 0.3 and errs[1] / errs[0] < 0.3, errs
-
-
-@pytest.mark.slow  # slow: ~38 s on 2 shared cores (x64 compile of the voxel walk)
-def test_normals_against_the_analytic_sphere(x64):
-    o, d = _rays(300, seed=2)
-    ta, cos = _sphere_t(o, d)
-    m = np.isfinite(ta) & (cos > 0.3)
-    err = {}
-    for n in (17, 33):
-        for mode in ("smooth", "analytic"):
-            s = SDFGridShape(SDFGrid(_grid_of(_sphere_sdf, n)), mode)
-            h = jax.jit(lambda o, d, s=s: s.intersect(o, d))(o, d)
-            na = (np.asarray(h.p) - C) / np.linalg.norm(np.asarray(h.p) - C, axis=-1)[:, None]
-            err[n, mode] = np.abs(np.asarray(h.ns)[m] - na[m]).max()
-    # analytic: the gradient of one voxel's trilinear function, first order in h;
-    # smooth (Hansson-Söderlund et al. 2022): the blended voxel normals, second order
-    assert 0.3 < err[33, "analytic"] / err[17, "analytic"] < 0.7, err
-    assert err[33, "smooth"] / err[17, "smooth"] < 0.35, err
-    assert err[33, "smooth"] < 0.1 * err[33, "analytic"], err
+    assert 0.3 < err_n[33, "analytic"] / err_n[17, "analytic"] < 0.7, err_n
+    assert err_n[33, "smooth"] / err_n[17, "smooth"] < 0.35, err_n
+    assert err_n[33, "smooth"] < 0.1 * err_n[33, "analytic"], err_n
 
 
 @pytest.mark.slow  # slow: ~33 s on 2 shared cores (x64 compile of the voxel walk)
@@ -323,3 +324,37 @@ def test_save_scene_writes_the_grid_back(tmp_path):
         sph = [s for s in back if s["type"] == "sphere"][0]
         np.testing.assert_allclose(sph["frame"], f, atol=1e-6)
         np.testing.assert_allclose(sph["center"], [3.0, 0, 0], atol=1e-6)
+
+
+def _grid_render_mean(x, key, scene, idx):
+    """Mean image of ``scene`` with grid values ``idx`` (flat) set to ``x[:-1]`` and the red
+    reflectance to ``x[-1]``."""
+    v = scene.get("shapes.0.grid.values")
+    v = v.reshape(-1).at[idx].set(x[:-1]).reshape(v.shape)
+    s = scene.replace("shapes.0.grid.values", v)
+    s = s.replace("materials.m.reflectance", jnp.stack([x[-1], 0.4, 0.2]))
+    return jnp.mean(render(s, key, spp=1, integrator="direct"))
+
+
+@pytest.mark.slow  # slow: ~60 s on 2 loaded cores (float64 compile of value+grad and FD)
+def test_render_gradient_wrt_grid_values_and_material_matches_finite_differences(x64):
+    """d(mean image)/d(three grid values, red reflectance) of a 4×4 direct-lighting render of a
+    grid sphere under a point light (the view inside the sphere's disk: no silhouette), reverse
+    mode against central differences with the same keys (float64)."""
+    from jaxgfx.testing import ad_fd_per_key
+
+    v = _grid_of(_sphere_sdf, 9)
+    desc = {"camera": {"origin": [0.5, 0.5, -3], "target": [0.5, 0.5, 0.5], "fov": 4,
+                       "width": 4, "height": 4},
+            "materials": {"m": {"type": "diffuse", "reflectance": [0.7, 0.4, 0.2]}},
+            "shapes": [{"type": "sdfgrid", "values": v.tolist(), "material": "m"}],
+            "emitters": [{"type": "point", "position": [2, 3, -4],
+                          "intensity": [30, 30, 30]}]}  # fmt: skip
+    scene = load_scene(desc, dtype=jnp.float64)
+    # the vertices of the voxels the camera rays hit (front of the sphere, around (.5, .5, .2))
+    idx = jnp.asarray(np.ravel_multi_index(([1, 2, 2], [4, 4, 5], [4, 5, 4]), v.shape))
+    x0 = jnp.concatenate([jnp.asarray(v).reshape(-1)[idx], jnp.asarray([0.7])])
+    keys = jax.random.split(jax.random.key(0), 2)
+    _, ad, fd = ad_fd_per_key(_grid_render_mean, x0, keys, 1e-6, args=(scene, idx))
+    assert np.all(np.abs(ad[:, -1]) > 1e-3) and np.abs(ad[:, :-1]).max() > 1e-2, ad
+    np.testing.assert_allclose(ad, fd, rtol=1e-5, atol=1e-8)
