@@ -93,7 +93,7 @@ def _intersect(values, o, d):
     return SDFGridShape(SDFGrid(values)).intersect(o, d)
 
 
-@pytest.mark.slow  # slow: ~25 s on 2 shared cores (x64 compile of the voxel walk, 3 grid sizes)
+@pytest.mark.slow  # slow: 40 s at load 10-17 on 2 cores (x64 walk compiled for 3 grid sizes)
 def test_hit_distance_and_normals_converge(x64):
     """Hit distance: the trilinear interpolation error bound |f - I f| <= h²/8 Σ_i max|∂ii f|
     <= h²/8 · 2/(R - √3 h) for the sphere distance (Hessian eigenvalues 1/r, 1/r, 0), hence the
@@ -123,7 +123,7 @@ def test_hit_distance_and_normals_converge(x64):
     assert err_n[33, "smooth"] < 0.1 * err_n[33, "analytic"], err_n
 
 
-@pytest.mark.slow  # slow: ~33 s on 2 shared cores (x64 compile of the voxel walk)
+@pytest.mark.slow  # slow: ~33 s (75 s at load 10-17) on 2 cores (x64 compiles of the walk)
 def test_hard_cases(x64):
     s = SDFGridShape(SDFGrid(_grid_of(_sphere_sdf, 17)))
     f = jax.jit(lambda o, d: s.intersect(o, d))
@@ -163,7 +163,7 @@ def test_hard_cases(x64):
     assert np.all(np.isinf(np.asarray(jax.jit(lambda o, d: empty.closest_t(o, d))(o, d)[0])))
 
 
-@pytest.mark.slow  # slow: ~21 s on 2 shared cores (x64 compile of the voxel walk)
+@pytest.mark.slow  # slow: ~21 s (36 s at load 10-17) on 2 cores (x64 compile of the walk)
 def test_instanced_grid_matches_the_transformed_sphere(x64):
     """A grid sphere in an instance (rotation, non-uniform scale, translation) against the
     analytic ellipsoid's hits mapped back to the grid space; the singular transform is
@@ -196,7 +196,7 @@ def test_instanced_grid_matches_the_transformed_sphere(x64):
         Instances(s, bad[None])
 
 
-@pytest.mark.slow  # slow: ~43 s on 2 shared cores (x64 compile of the voxel walk)
+@pytest.mark.slow  # slow: ~43 s (87 s at load 10-17) on 2 cores (x64 compile of the walk)
 def test_gradients_match_finite_differences(x64):
     """dt/d(values) and d(shading normal)/d(values) of instanced hits, and d/d(to_world),
     against central differences in float64 (a few voxel values near the hits)."""
@@ -336,7 +336,7 @@ def _grid_render_mean(x, key, scene, idx):
     return jnp.mean(render(s, key, spp=1, integrator="direct"))
 
 
-@pytest.mark.slow  # slow: ~60 s on 2 loaded cores (float64 compile of value+grad and FD)
+@pytest.mark.slow  # slow: 70 s at load 10-17 on 2 cores (float64 compile of value+grad, FD)
 def test_render_gradient_wrt_grid_values_and_material_matches_finite_differences(x64):
     """d(mean image)/d(three grid values, red reflectance) of a 4×4 direct-lighting render of a
     grid sphere under a point light (the view inside the sphere's disk: no silhouette), reverse
