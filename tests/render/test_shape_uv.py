@@ -65,8 +65,19 @@ def test_rotated_sphere_uv_and_tangents_in_its_frame():
     wv = np.pi * r * np.stack([np.cos(theta) * np.cos(phi), np.cos(theta) * np.sin(phi),
                                -np.sin(theta)], 1) @ f.T  # fmt: skip
     np.testing.assert_allclose(np.asarray(dpdv), wv, atol=1e-4)
+    # an instance turns the frame: the instanced hit and the flattened sphere agree
+    from jaxgfx.render.geometry import Instances
+
+    m = np.eye(4)
+    m[:3, :3], m[:3, 3] = 2.0 * _rot([0.0, 1.0, 1.0], 40.0), [1.0, 0.0, -1.0]
+    inst = Instances(s, m[None])
+    cw = m[:3, :3] @ c + m[:3, 3]
+    both = jax.jit(lambda a, b, o, d: (intersect_scene([a], o, d), intersect_scene([b], o, d)))
+    hi, hf = both(inst, inst.flatten(), cw + 8 * n, -n)
+    assert np.all(np.asarray(hi.valid))
+    np.testing.assert_allclose(np.asarray(hi.uv), np.asarray(hf.uv), atol=2e-6)
     # without a frame: world axes (unchanged behaviour)
-    h0 = intersect_scene([Spheres(c, r)], c + 4 * loc, -loc)
+    h0 = jax.jit(lambda o, d: intersect_scene([Spheres(c, r)], o, d))(c + 4 * loc, -loc)
     np.testing.assert_allclose(np.asarray(h0.uv), np.asarray(h.uv), atol=2e-6)
 
 

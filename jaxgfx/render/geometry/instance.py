@@ -342,4 +342,8 @@ class Instances(eqx.Module):
             raise ValueError("flatten: a non-uniformly scaled sphere is an ellipsoid")
         c = (_apply(lin[:, None], base.centers[None]) + b[:, None]).reshape(-1, 3)
         r = (sv[:, 0:1] * base.radii[None]).reshape(-1)
-        return Spheres(c, r)
+        # the uv frame: the instance's rotation after the sphere's own (as the instanced hit)
+        n = base.radii.shape[0]
+        bf = base.frames if base.frames is not None else jnp.broadcast_to(jnp.eye(3), (n, 3, 3))
+        rot = lin / sv[:, 0, None, None]
+        return Spheres(c, r, (rot[:, None] @ bf[None].astype(rot.dtype)).reshape(-1, 3, 3))
