@@ -65,9 +65,22 @@ def test_rotated_sphere_uv_and_tangents_in_its_frame():
     wv = np.pi * r * np.stack([np.cos(theta) * np.cos(phi), np.cos(theta) * np.sin(phi),
                                -np.sin(theta)], 1) @ f.T  # fmt: skip
     np.testing.assert_allclose(np.asarray(dpdv), wv, atol=1e-4)
-    # an instance turns the frame: the instanced hit and the flattened sphere agree
+    # without a frame: world axes (unchanged behaviour)
+    h0 = jax.jit(lambda o, d: intersect_scene([Spheres(c, r)], o, d))(c + 4 * loc, -loc)
+    np.testing.assert_allclose(np.asarray(h0.uv), np.asarray(h.uv), atol=2e-6)
+
+
+@pytest.mark.slow  # slow: 3-5 s at load 10 on 2 cores (two compiled intersections)
+def test_instanced_rotated_sphere_uv_equals_the_flattened_one():
+    """An instance turns the sphere's frame: the instanced hit's uv (local space) and that of
+    ``Instances.flatten()`` (frame = the instance's rotation after the sphere's own) agree."""
     from jaxgfx.render.geometry import Instances
 
+    f = _rot([1.0, 2.0, -0.5], 70.0)
+    c, r = np.array([0.5, -1.0, 2.0]), 1.5
+    s = Spheres(c, r, f)
+    u = np.random.default_rng(1).normal(size=(6, 3))
+    n = u / np.linalg.norm(u, axis=1, keepdims=True)
     m = np.eye(4)
     m[:3, :3], m[:3, 3] = 2.0 * _rot([0.0, 1.0, 1.0], 40.0), [1.0, 0.0, -1.0]
     inst = Instances(s, m[None])
@@ -76,9 +89,6 @@ def test_rotated_sphere_uv_and_tangents_in_its_frame():
     hi, hf = both(inst, inst.flatten(), cw + 8 * n, -n)
     assert np.all(np.asarray(hi.valid))
     np.testing.assert_allclose(np.asarray(hi.uv), np.asarray(hf.uv), atol=2e-6)
-    # without a frame: world axes (unchanged behaviour)
-    h0 = jax.jit(lambda o, d: intersect_scene([Spheres(c, r)], o, d))(c + 4 * loc, -loc)
-    np.testing.assert_allclose(np.asarray(h0.uv), np.asarray(h.uv), atol=2e-6)
 
 
 def test_rotated_sphere_uv_gradient_matches_finite_differences(x64):
@@ -99,6 +109,36 @@ def test_rotated_sphere_uv_gradient_matches_finite_differences(x64):
     assert abs(float(g[0])) > 0.01  # the frame's turn moves u
 
 
+def test_cube_disk_cylinder_vertex_uvs_are_mitsubas():
+    """The meshes' vertex uvs are the closed forms at the vertices: cube face +z (vertices
+    12-15) ((y+1)/2, (x+1)/2); disk (r, φ/2π) with the seam's rim vertex at v = 1 and the
+    centre at r = 0; cylinder (φ/2π, z) with the seam's vertices at u = 0 and u = 1."""
+    from jaxgfx.render.scene import mitsuba_xml as MX
+
+    v, f, _, uv = MX._cube()
+    assert v.shape == (24, 3) and f.shape == (12, 3)
+    top = slice(12, 16)
+    np.testing.assert_array_equal(v[top, 2], 1.0)
+    np.testing.assert_allclose(uv[top], np.stack([(v[top, 1] + 1) / 2, (v[top, 0] + 1) / 2], 1))
+    v, f, _, uv = MX._disk(16)
+    r = np.linalg.norm(v[:, :2], axis=1)
+    np.testing.assert_allclose(uv[:, 0], r, atol=1e-12)
+    rim = r > 0.5
+    phi = np.arctan2(v[rim, 1], v[rim, 0]) % (2 * np.pi) / (2 * np.pi)
+    dv = uv[rim, 1] - phi  # the seam's last rim vertex: v = 1 (φ computed as 0 or ~1)
+    assert np.all((np.abs(dv) < 1e-12) | (np.abs(dv - 1) < 1e-12)) and uv[rim, 1].max() == 1.0
+    v, f, _, uv = MX._cylinder(16)
+    phi = np.arctan2(v[:, 1], v[:, 0]) % (2 * np.pi) / (2 * np.pi)
+    du = uv[:, 0] - phi
+    assert np.all((np.abs(du) < 1e-12) | (np.abs(du - 1) < 1e-12)) and np.any(
+        np.abs(du - 1) < 1e-12
+    )
+    np.testing.assert_array_equal(uv[:, 1], v[:, 2])
+    # each triangle's uvs span less than one segment: no triangle wraps around the seam
+    assert np.ptp(uv[f][..., 0], axis=1).max() <= 1 / 16 + 1e-12
+
+
+@pytest.mark.slow  # slow: 5-11 s at load 10 on 2 cores (three scenes, three compiles)
 def test_cube_disk_cylinder_uv_closed_forms(tmp_path):
     """Cube (scaled 2, 3, 0.5, moved): on its +z face uv = ((y+1)/2, (x+1)/2) in local units
     (Mitsuba's face 3, corners (1,-1,1), (1,1,1), (-1,1,1), (-1,-1,1) with uv (0,1), (1,1),
