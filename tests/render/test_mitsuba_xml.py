@@ -422,7 +422,7 @@ def test_disk_is_a_fan_of_256_triangles(tmp_path):
         (
             '<shape type="sdfgrid"/>',
             10,
-            "<shape type='sdfgrid'>: shape plugin 'sdfgrid' is not supported",
+            "<shape type='sdfgrid'>: missing parameter 'filename'",
         ),  # fmt: skip
         (
             '<bsdf type="hair" id="p"/>',

@@ -78,9 +78,9 @@ def test_cylinder_vertices_lie_on_mitsubas_cylinder_and_face_outwards(tmp_path):
     d = (b - a) / h
     t = (v - a) @ d  # position along the axis
     radial = (v - a) - t[:, None] * d
-    assert v.shape == (512, 3) and f.shape == (512, 3)
+    assert v.shape == (514, 3) and f.shape == (512, 3)  # two rings of 257 (the seam twice)
     np.testing.assert_allclose(np.linalg.norm(radial, axis=1), r, rtol=1e-5)
-    np.testing.assert_allclose(np.sort(t)[[0, 255, 256, -1]], [0, 0, h, h], atol=1e-5)
+    np.testing.assert_allclose(np.sort(t)[[0, 256, 257, -1]], [0, 0, h, h], atol=1e-5)
     # unit radial vertex normals, pointing out
     rhat = radial / np.linalg.norm(radial, axis=1, keepdims=True)
     np.testing.assert_allclose(n, rhat, atol=1e-5)
@@ -106,7 +106,7 @@ def test_cylinder_defaults_are_mitsubas_unit_cylinder(tmp_path):
 def test_cylinder_tessellation_area_converges_to_2_pi_r_h():
     errors = []
     for n_seg in (8, 32, 128, 256):
-        v, f, _ = MX._cylinder(n_seg)
+        v, f, _, _ = MX._cylinder(n_seg)
         errors.append(abs(area(v, f) / (2 * math.pi) - 1))  # unit radius and height
     # the n-gon's perimeter error pi^2 / (6 n^2): a quarter per doubling of n, twice
     for e, n_seg in zip(errors, (8, 32, 128, 256), strict=True):
@@ -149,13 +149,6 @@ def test_what_the_mesh_cannot_reproduce_is_refused(tmp_path, body, msg):
     with pytest.raises(ValueError) as e:
         read_xml(p)
     assert f"{p}:10: " in str(e.value) and msg in str(e.value), str(e.value)
-
-
-def test_a_textured_cylinder_is_refused(tmp_path):
-    body = ('<shape type="cylinder"><bsdf type="diffuse"><texture type="checkerboard" '
-            'name="reflectance"/></bsdf></shape>')  # fmt: skip
-    with pytest.raises(ValueError, match="textured cylinders are not supported"):
-        read_xml(write(tmp_path, scene_xml(body)))
 
 
 def test_save_scene_writes_the_cylinder_back_as_the_same_mesh(tmp_path):

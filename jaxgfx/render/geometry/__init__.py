@@ -5,8 +5,9 @@ One file per algorithm: ``ray`` (rays, :class:`Hit` records, robust spawning), `
 ``triangle_moller_trumbore`` (Möller & Trumbore 1997), ``triangle_unit`` (affine map to the unit
 triangle), ``intersect`` (closest hit / any hit over shapes and scenes), ``instance``
 (instancing), ``area`` (areas and uniform area sampling for area lights), ``sdf`` (signed
-distance functions), ``sphere_tracing`` (Hart 1996; :class:`SDFShape`), ``mesh_io`` (OBJ /
-PLY, procedural meshes) and ``accel/`` (``bvh_sah``, ``grid_dda``, ``kdtree_sah``).
+distance functions), ``sdfgrid`` (SDF grids, ``.vol`` files), ``sphere_tracing`` (Hart
+1996; :class:`SDFShape`), ``mesh_io`` (OBJ / PLY, procedural meshes) and ``accel/``
+(``bvh_sah``, ``grid_dda``, ``kdtree_sah``).
 See docs/render_geometry.md.
 """
 
@@ -47,6 +48,10 @@ from jaxgfx.render.geometry.sdf import SDFTorus as SDFTorus
 from jaxgfx.render.geometry.sdf import SDFUnion as SDFUnion
 from jaxgfx.render.geometry.sdf import sdf_from_dict as sdf_from_dict
 from jaxgfx.render.geometry.sdf import sdf_normal as sdf_normal
+from jaxgfx.render.geometry.sdfgrid import SDFGrid as SDFGrid
+from jaxgfx.render.geometry.sdfgrid import SDFGridShape as SDFGridShape
+from jaxgfx.render.geometry.sdfgrid import read_vol as read_vol
+from jaxgfx.render.geometry.sdfgrid import write_vol as write_vol
 from jaxgfx.render.geometry.sphere import Spheres as Spheres
 from jaxgfx.render.geometry.sphere import sphere_intersect as sphere_intersect
 from jaxgfx.render.geometry.sphere_tracing import SDFShape as SDFShape
@@ -104,6 +109,10 @@ __all__ = [
     "sdf_from_dict",
     "sdf_normal",
     "SDFShape",
+    "SDFGrid",
+    "SDFGridShape",
+    "read_vol",
+    "write_vol",
     "sphere_trace",
     "accel",
 ]

@@ -15,7 +15,9 @@ Warp) — and ``to_world (K, 4, 4)``. It is a custom shape of
   the bottom level's root box rejects at once when they miss the instance.
 * hit record (differentiable): the local record of the found primitive (closed form), mapped
   back: ``p = A p' + b``, normals by the inverse transpose ``normalize(A⁻ᵀ n')``, ``uv``
-  unchanged, ``t = t'/s``. Differentiable w.r.t. the shape's parameters (vertices, radii...)
+  unchanged, ``t = t'/s``. SDF shapes (:class:`SDFShape`, :class:`SDFGridShape`: one
+  primitive each) build their own record in local space at the search's local ``t = s t_w``.
+  Differentiable w.r.t. the shape's parameters (vertices, radii...)
   and ``to_world`` (for the fixed primitive hit).
 
 ``prim_id`` of a hit is ``k · n + j`` (instance ``k``, primitive ``j`` of the ``n`` of the
@@ -36,7 +38,9 @@ from jaxgfx.render.geometry.intersect import primitive_hit
 from jaxgfx.render.geometry.mesh import TriangleMesh
 from jaxgfx.render.geometry.ray import Hit, hit_record, prepare_rays
 from jaxgfx.render.geometry.rectangle import Rectangles
+from jaxgfx.render.geometry.sdfgrid import SDFGridShape
 from jaxgfx.render.geometry.sphere import Spheres
+from jaxgfx.render.geometry.sphere_tracing import SDFShape
 
 __all__ = ["Instances", "check_instance_transforms"]
 
@@ -67,7 +71,14 @@ def _base(shape):
     return shape.mesh if hasattr(shape, "mesh") else shape
 
 
+def _is_sdf(shape) -> bool:
+    """SDF shapes (sphere-traced trees, grids): one primitive, their own ``hit``."""
+    return isinstance(shape, (SDFShape, SDFGridShape))
+
+
 def _prim_count(shape) -> int:
+    if _is_sdf(shape):
+        return 1
     s = _base(shape)
     if isinstance(s, TriangleMesh):
         return int(s.faces.shape[0])
@@ -76,7 +87,8 @@ def _prim_count(shape) -> int:
     if isinstance(s, Rectangles):
         return int(jnp.atleast_2d(s.centers).shape[0])
     raise TypeError(
-        "shape: expected Spheres, Rectangles, a TriangleMesh or a mesh traversal object, "
+        "shape: expected Spheres, Rectangles, a TriangleMesh, a mesh traversal object or an "
+        "SDF shape, "
         f"got {type(shape).__name__}"
     )
 
@@ -97,8 +109,13 @@ def _traced(tree):
 
 def _world_boxes(base, m):
     """World-space bounding boxes ``(K, 2, 3)`` of ``base`` under the matrices ``m (K, 4, 4)``
-    (the 8 corners of its local box, mapped), widened by a relative 1e-6."""
-    if isinstance(base, TriangleMesh):
+    (the 8 corners of its local box, mapped), widened by a relative 1e-6; ``None`` for a
+    sphere-traced SDF (unbounded)."""
+    if _is_sdf(base) and not isinstance(base, SDFGridShape):
+        return None
+    if isinstance(base, SDFGridShape):  # the unit cube
+        lo, hi = np.zeros(3), np.ones(3)
+    elif isinstance(base, TriangleMesh):
         v = np.asarray(base.vertices, np.float64)
         lo, hi = v.min(0), v.max(0)
     elif isinstance(base, Spheres):
@@ -183,7 +200,8 @@ class Instances(eqx.Module):
                                    if jnp.issubdtype(x.dtype, jnp.floating)])  # fmt: skip
             self.to_world = jnp.asarray(m, dt)
             if bounds is None and not _traced(shape):
-                self.bounds = jnp.asarray(_world_boxes(_base(shape), m), dt)
+                bx = _world_boxes(_base(shape), m)
+                self.bounds = None if bx is None else jnp.asarray(bx, dt)
         self.shape = shape
 
     @property
@@ -275,7 +293,13 @@ class Instances(eqx.Module):
         ol = _apply(inv, o - b)
         dl = _apply(inv, d)
         s = jnp.sqrt(sum_last(dl * dl))
-        h = primitive_hit(_base(self.shape), j, ol, dl / s[..., None], valid)
+        if _is_sdf(self.shape):  # SDFs: their own record at the search's (local) t
+            if t is None:
+                t = self.closest_t(o, d)[0]
+            tl = jax.lax.stop_gradient(jnp.where(valid, t * s, 0.0))
+            h = self.shape.hit(j, ol, dl / s[..., None], valid & jnp.isfinite(t), t=tl)
+        else:
+            h = primitive_hit(_base(self.shape), j, ol, dl / s[..., None], valid)
         inv_t = jnp.swapaxes(inv, -1, -2)
         p = _apply(lin, h.p) + b
         ng = safe_normalize(_apply(inv_t, h.ng))
@@ -287,13 +311,15 @@ class Instances(eqx.Module):
         """Closest hit over all instances (search, then :meth:`hit`)."""
         o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
         t, pid = self.closest_t(o, d, tmin=tmin, tmax=tmax)
-        h = self.hit(pid, o, d, jnp.isfinite(t))
+        h = self.hit(pid, o, d, jnp.isfinite(t), t=t)
         return eqx.tree_at(lambda h: h.shape_id, h, jnp.where(h.valid, shape_id, -1))
 
     def flatten(self):
         """The instances as one world-space shape of the same type (for comparisons and for
         shapes that need it): vertices / centres mapped, normals by the inverse transpose."""
         base = _base(self.shape)
+        if _is_sdf(base):
+            raise ValueError("flatten: SDF instances have no world-space form")
         lin, b = _split(self.to_world)
         if isinstance(base, TriangleMesh):
             v = _apply(lin[:, None], base.vertices[None]) + b[:, None]
@@ -316,4 +342,8 @@ class Instances(eqx.Module):
             raise ValueError("flatten: a non-uniformly scaled sphere is an ellipsoid")
         c = (_apply(lin[:, None], base.centers[None]) + b[:, None]).reshape(-1, 3)
         r = (sv[:, 0:1] * base.radii[None]).reshape(-1)
-        return Spheres(c, r)
+        # the uv frame: the instance's rotation after the sphere's own (as the instanced hit)
+        n = base.radii.shape[0]
+        bf = base.frames if base.frames is not None else jnp.broadcast_to(jnp.eye(3), (n, 3, 3))
+        rot = lin / sv[:, 0, None, None]
+        return Spheres(c, r, (rot[:, None] @ bf[None].astype(rot.dtype)).reshape(-1, 3, 3))

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -22,19 +23,24 @@ from jaxgfx._math import (
 from jaxgfx.render.geometry._points import as_points
 from jaxgfx.render.geometry.ray import Hit, hit_record
 
-__all__ = ["Spheres", "sphere_intersect", "sphere_hit"]
+__all__ = ["Spheres", "sphere_intersect", "sphere_hit", "sphere_local", "sphere_uv"]
 
 
 class Spheres(eqx.Module):
-    """``N`` spheres: ``centers (N, 3)``, ``radii (N,)`` (> 0, world units).
+    """``N`` spheres: ``centers (N, 3)``, ``radii (N,)`` (> 0, world units), and optionally
+    ``frames (N, 3, 3)``: orthogonal matrices whose columns are each sphere's local x, y, z
+    axes in world space (Mitsuba's rotated ``to_world``). The uv ``(φ/2π, θ/π)`` and the
+    tangents are those of the unit normal in that local frame; without ``frames`` the local
+    frame is the world's.
 
-    A 1-element sphere may be given as ``centers (3,)`` and a scalar radius.
+    A 1-element sphere may be given as ``centers (3,)`` and a scalar radius (and ``(3, 3)``).
     """
 
     centers: Float[Array, "N 3"]
     radii: Float[Array, " N"]
+    frames: Float[Array, "N 3 3"] | None = None
 
-    def __init__(self, centers, radii):
+    def __init__(self, centers, radii, frames=None):
         c = jnp.asarray(centers)
         if c.ndim == 1:
             c = c[None]
@@ -44,6 +50,37 @@ class Spheres(eqx.Module):
             raise ValueError(f"radii: expected shape ({c.shape[0]},), got {r.shape}")
         check_nonnegative(r, "radii")
         self.centers, self.radii = c, r
+        if frames is not None:
+            f = jnp.asarray(frames, c.dtype)
+            f = f[None] if f.ndim == 2 else f
+            if f.shape != (c.shape[0], 3, 3):
+                raise ValueError(f"frames: expected shape ({c.shape[0]}, 3, 3), got {f.shape}")
+            if not isinstance(f, jax.core.Tracer):
+                eye = jnp.eye(3, dtype=f.dtype)
+                err = jnp.abs(jnp.swapaxes(f, -1, -2) @ f - eye).max()
+                if not bool(err <= 1e-4):
+                    raise ValueError(f"frames: expected orthogonal 3x3 matrices (|FᵀF - I| = "
+                                     f"{float(err):.2g})")  # fmt: skip
+        else:
+            f = None
+        self.frames = f
+
+
+def sphere_local(shape: Spheres, pid, n):
+    """Unit normals ``n (..., 3)`` of sphere ``pid`` in its local frame (``Fᵀ n``)."""
+    if shape.frames is None:
+        return n
+    f = take_rows(shape.frames, pid).astype(n.dtype)
+    return jnp.einsum("...ji,...j->...i", f, n)
+
+
+def sphere_uv(local):
+    """Mitsuba's sphere uv ``(φ/2π, θ/π)`` of a local unit normal: ``φ = atan2(y, x)`` in
+    ``[0, 2π)``, ``θ = arccos z``."""
+    theta = safe_arccos(local[..., 2])
+    phi = safe_atan2(local[..., 1], local[..., 0])
+    phi = jnp.where(phi < 0, phi + 2 * math.pi, phi)
+    return jnp.stack([phi / (2 * math.pi), theta / math.pi], axis=-1)
 
 
 def sphere_intersect(center, radius, o, d, tmin=0.0, tmax=jnp.inf):
@@ -89,8 +126,5 @@ def sphere_hit(shape: Spheres, pid, o, d, valid, prim_id, sid) -> Hit:
     valid, tt = fusion_barrier((valid, jnp.where(valid, t, 0.0)))
     p = o + tt[..., None] * d
     ng = safe_div(p - c, jnp.where(r > 0, r, 1.0)[..., None])
-    theta = safe_arccos(ng[..., 2])
-    phi = safe_atan2(ng[..., 1], ng[..., 0])
-    phi = jnp.where(phi < 0, phi + 2 * math.pi, phi)
-    uv = jnp.stack([phi / (2 * math.pi), theta / math.pi], axis=-1)
+    uv = sphere_uv(sphere_local(shape, pid, ng))
     return hit_record(valid, tt, p, ng, ng, uv, prim_id, sid)

@@ -9,7 +9,8 @@ parameterisations are those of the hit's ``uv`` (Mitsuba 3's for each shape):
   ``det = Δu₁ Δv₂ - Δv₁ Δu₂``); without UVs (``uv`` = barycentrics): ``e₁``, ``e₂``;
 * rectangles: ``edge_u``, ``edge_v``;
 * spheres (``uv = (φ/2π, θ/π)``): ``dp/du = 2π r (-n_y, n_x, 0)``,
-  ``dp/dv = π r (n_z cos φ, n_z sin φ, -sin θ)``;
+  ``dp/dv = π r (n_z cos φ, n_z sin φ, -sin θ)`` (``n`` in the sphere's local frame, the
+  results rotated back by its ``frames``);
 * anything else (SDF shapes, custom shapes), degenerate UV triangles and misses: zero vectors;
   consumers then fall back to an arbitrary tangent.
 """
@@ -21,7 +22,7 @@ import jax.numpy as jnp
 from jaxgfx._math import safe_div, safe_sqrt, take_rows
 from jaxgfx.render.geometry.mesh import TriangleMesh
 from jaxgfx.render.geometry.rectangle import Rectangles
-from jaxgfx.render.geometry.sphere import Spheres
+from jaxgfx.render.geometry.sphere import Spheres, sphere_local
 
 __all__ = ["surface_tangents", "shape_tangents"]
 
@@ -38,12 +39,17 @@ def shape_tangents(shape, pid, p, ng):
         return eu * jnp.ones_like(p), ev * jnp.ones_like(p)
     if isinstance(shape, Spheres):
         r = take_rows(jnp.atleast_1d(shape.radii), pid).astype(p.dtype)[..., None]
-        x, y, z = ng[..., 0], ng[..., 1], ng[..., 2]
+        nl = sphere_local(shape, pid, ng)  # in the sphere's local frame
+        x, y, z = nl[..., 0], nl[..., 1], nl[..., 2]
         rho = safe_sqrt(x * x + y * y)  # sin θ
         cphi = safe_div(x, rho, fill=1.0)
         sphi = safe_div(y, rho)
         dpdu = 2 * jnp.pi * r * jnp.stack([-y, x, jnp.zeros_like(x)], axis=-1)
         dpdv = jnp.pi * r * jnp.stack([z * cphi, z * sphi, -rho], axis=-1)
+        if shape.frames is not None:
+            f = take_rows(shape.frames, pid).astype(p.dtype)
+            dpdu = jnp.einsum("...ij,...j->...i", f, dpdu)
+            dpdv = jnp.einsum("...ij,...j->...i", f, dpdv)
         return dpdu, dpdv
     if isinstance(shape, TriangleMesh):
         f = shape.faces[pid]

@@ -5,7 +5,8 @@ every member shape is placed once per matrix. Each member becomes ONE
 :class:`~jaxgfx.render.geometry.instance.Instances` whose shape (for meshes of at least
 ``BVH_MIN_TRIANGLES`` triangles: its traversal structure) is built once and shared by all
 instances. As in Mitsuba 3, groups do not nest and hold no emitters; an empty group or an
-empty matrix list adds nothing.
+empty matrix list adds nothing. SDF shapes (``sdf``, ``sdfgrid``) may be members: they are
+intersected in the instance's space.
 """
 
 from __future__ import annotations
@@ -13,8 +14,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import jax.numpy as jnp
+import numpy as np
 
-from jaxgfx.render.geometry import SDFShape
 from jaxgfx.render.geometry.instance import Instances, check_instance_transforms
 from jaxgfx.render.scene.schema import expect_keys, shape_from_desc
 
@@ -40,11 +41,13 @@ def instances_from_desc(d, where, base_dir, material_index, build_mesh):
         if isinstance(sd, Mapping) and sd.get("type") == "instances":
             raise ValueError(f"{w}: nested instancing is not supported (as in Mitsuba 3)")
         kind, shape = shape_from_desc(sd, w, base_dir)
-        if isinstance(shape, SDFShape):
-            raise ValueError(f"{w}: SDF shapes cannot be instanced")
+        m = to_world
+        if isinstance(shape, Instances):  # an sdfgrid with its own to_world: compose
+            m = to_world @ np.asarray(shape.to_world[0], np.float64)
+            shape = shape.shape
         mi = material_index(sd, w)
         if kind == "mesh":
             shape = build_mesh(shape)
-        inst = Instances(shape, to_world)
+        inst = Instances(shape, m)
         out.append((inst, jnp.full((inst.count * inst.n_prims,), mi, jnp.int32)))
     return out

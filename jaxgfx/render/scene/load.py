@@ -20,7 +20,7 @@ from jaxgfx.render.emitters import (
     SpotLight,
 )
 from jaxgfx.render.film import make_filter
-from jaxgfx.render.geometry import Rectangles, SDFShape, Spheres, area
+from jaxgfx.render.geometry import Instances, Rectangles, SDFGridShape, SDFShape, Spheres, area
 from jaxgfx.render.scene._lights import SPOT_TEXTURE_KEYS, projector_from_desc, spot_texture
 from jaxgfx.render.scene._materials import emission_from_desc, material_from_desc
 from jaxgfx.render.scene.scene import Scene, id_problem, is_internal_name
@@ -44,8 +44,16 @@ BVH_MIN_TRIANGLES = 64
 def _concat(shapes):
     first = shapes[0]
     if isinstance(first, Spheres):
+        frames = None
+        if any(s.frames is not None for s in shapes):  # the others in world axes
+            eye = jnp.eye(3, dtype=first.centers.dtype)
+            frames = jnp.concatenate([
+                s.frames if s.frames is not None
+                else jnp.broadcast_to(eye, (s.radii.shape[0], 3, 3)) for s in shapes])  # fmt: skip
         return Spheres(
-            jnp.concatenate([s.centers for s in shapes]), jnp.concatenate([s.radii for s in shapes])
+            jnp.concatenate([s.centers for s in shapes]),
+            jnp.concatenate([s.radii for s in shapes]),
+            frames,
         )
     return Rectangles(
         jnp.concatenate([s.centers for s in shapes]),
@@ -174,7 +182,7 @@ def load_scene(
                    None if k == "mesh" else pos, mat)
                   for ident, k, pos, mat in shape_ids]  # fmt: skip
     for m, mi in meshes:
-        if isinstance(m, SDFShape):
+        if isinstance(m, (SDFShape, SDFGridShape, Instances)):  # one primitive each
             shapes.append(m)
             shape_mats.append(jnp.full((1,), mi, jnp.int32))
             continue

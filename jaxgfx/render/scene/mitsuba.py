@@ -473,10 +473,33 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
     if kind == "sdf":
         raise NotImplementedError(f"{where}.type: SDF shapes have no Mitsuba 3 counterpart")
     if kind == "sphere":
-        S.expect_keys(d, where, ("type", "center", "radius"), common)
+        S.expect_keys(d, where, ("type", "center", "radius"), (*common, "frame"))
         c = np.asarray(S.vec(d["center"], f"{where}.center"), np.float64)
         r = float(S.num(d["radius"], f"{where}.radius", positive=True))
-        return {"type": "sphere", "center": c.tolist(), "radius": r}
+        if d.get("frame") is None:
+            return {"type": "sphere", "center": c.tolist(), "radius": r}
+        S.shape_from_desc(d, where, base_dir)  # validates the frame as load_scene does
+        m = np.eye(4)  # Mitsuba: to_world = translate(c) . frame . scale(r)
+        m[:3, :3] = np.asarray(d["frame"], np.float64) * r
+        m[:3, 3] = c
+        return {"type": "sphere", "to_world": _transform(m, mi)}
+    if kind == "sdfgrid":  # Mitsuba's sdfgrid: a .vol file (written for inline values)
+        from jaxgfx.render.geometry import write_vol
+
+        S.shape_from_desc(d, where, base_dir)  # validated as load_scene does
+        if "filename" in d:
+            path = os.fspath(d["filename"])
+            if not os.path.isabs(path) and base_dir:
+                path = os.path.join(base_dir, path)
+            path = os.path.abspath(path)
+        else:
+            name = re.sub(r"[^A-Za-z0-9]+", "_", where).strip("_")
+            path = os.path.join(work_dir(), f"{name}.vol")
+            write_vol(path, np.asarray(d["values"], np.float32))
+        out = {"type": "sdfgrid", "filename": path, "normals": d.get("normals", "smooth")}
+        if "to_world" in d:
+            out["to_world"] = _transform(np.asarray(d["to_world"], np.float64), mi)
+        return out
     if kind == "rectangle":
         if "edge_u" in d or "edge_v" in d:
             S.expect_keys(d, where, ("type", "center", "edge_u", "edge_v"), common)
@@ -1023,7 +1046,13 @@ def scene_to_desc(scene) -> dict:
     from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera, ThinLensCamera
     from jaxgfx.render.emitters import ConstantEnvironment, DirectionalLight, ProjectorLight
     from jaxgfx.render.film import GaussianFilter, TentFilter
-    from jaxgfx.render.geometry import Instances, Rectangles, Spheres, TriangleMesh
+    from jaxgfx.render.geometry import (
+        Instances,
+        Rectangles,
+        SDFGridShape,
+        Spheres,
+        TriangleMesh,
+    )
 
     cam = scene.camera
     if isinstance(cam, MatrixCamera):
@@ -1064,8 +1093,14 @@ def scene_to_desc(scene) -> dict:
         out = []
         if isinstance(shape, Spheres):
             for j in range(shape.radii.shape[0]):
-                out.append(({"type": "sphere", "center": _list(shape.centers[j]),
-                             "radius": float(shape.radii[j])}, mats[j]))  # fmt: skip
+                d = {"type": "sphere", "center": _list(shape.centers[j]),
+                     "radius": float(shape.radii[j])}  # fmt: skip
+                if shape.frames is not None:
+                    d["frame"] = _list(shape.frames[j])
+                out.append((d, mats[j]))
+        elif isinstance(shape, SDFGridShape):
+            out.append(({"type": "sdfgrid", "values": _list(shape.grid.values),
+                         "normals": shape.normals}, mats[0]))  # fmt: skip
         elif isinstance(shape, Rectangles):
             for j in range(shape.centers.shape[0]):
                 out.append(({"type": "rectangle", "center": _list(shape.centers[j]),

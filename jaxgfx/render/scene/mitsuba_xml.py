@@ -27,7 +27,9 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
   loaded as a :class:`~jaxgfx.render.camera.MatrixCamera` whose rays start on the near plane
   (:func:`~jaxgfx.render.scene.mitsuba_conventions.orthographic_view_proj_inverse`).
 * ``disk`` and ``cylinder`` (open, no caps; ``p0``, ``p1``, ``radius``) are tessellated
-  (256-triangle fan, 512-triangle tube with radial vertex normals), untextured.
+  (256-triangle fan, 512-triangle tube with radial vertex normals) with Mitsuba's uvs
+  (disk ``(r, φ/2π)``, cylinder ``(φ/2π, z)``, the cube mesh's per-face ``[0, 1]²``); rotated
+  spheres keep their local frame (uv ``(φ/2π, θ/π)`` in it).
 * OBJ texture coordinates are flipped (``v -> 1 - v``, Mitsuba's ``flip_tex_coords``); PLY's
   are not. Meshes without vertex normals get Mitsuba's angle-weighted smooth normals unless
   ``face_normals`` is true.
@@ -1027,56 +1029,66 @@ def _angle_weighted_normals(v, f):
 
 
 def _cube():
-    v, f, n, uv = [], [], [], []
-    for axis in range(3):
-        for sign in (-1.0, 1.0):
-            nn = np.zeros(3)
-            nn[axis] = sign
-            a, b = [i for i in range(3) if i != axis]
-            base = len(v)
-            for s, t in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
-                p = np.zeros(3)
-                p[axis], p[a], p[b] = sign, s, t
-                v.append(p)
-                n.append(nn)
-                uv.append(((s + 1) / 2, (t + 1) / 2))
-            q = [(0, 1, 2), (0, 2, 3)]
-            # counter-clockwise seen from outside: e_a x e_b = +axis for one orientation
-            flip = np.dot(np.cross(np.eye(3)[a], np.eye(3)[b]), nn) < 0
-            f += [(base + i, base + (k if not flip else j), base + (j if not flip else k))
-                  for i, j, k in q]  # fmt: skip
-    return np.array(v), np.array(f), np.array(n), np.array(uv)
+    """Mitsuba's cube mesh (``src/shapes/cube.cpp``): ``[-1, 1]³``, 24 vertices (four per face,
+    faces in the order -y, +y, +x, +z, -x, -z), 12 triangles ``(4s, 4s+1, 4s+2)``,
+    ``(4s+3, 4s, 4s+2)`` counter-clockwise seen from outside, face normals, and each face's
+    uvs ``(0, 1), (1, 1), (1, 0), (0, 0)`` for its vertices ``4s .. 4s+3``."""
+    corner_of = [1, 5, 4, 0, 3, 2, 6, 7, 1, 3, 7, 5, 5, 7, 6, 4, 4, 6, 2, 0, 3, 1, 0, 2]
+    normals = [(0, -1, 0), (0, 1, 0), (1, 0, 0), (0, 0, 1), (-1, 0, 0), (0, 0, -1)]
+    v = np.array([[1.0 if c & 1 else -1.0, 1.0 if c & 2 else -1.0, 1.0 if c & 4 else -1.0]
+                  for c in corner_of])  # fmt: skip
+    n = np.repeat(np.asarray(normals, np.float64), 4, axis=0)
+    uv = np.tile([[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]], (6, 1))
+    f = np.array([t for s in range(6) for t in ((4 * s, 4 * s + 1, 4 * s + 2),
+                                                (4 * s + 3, 4 * s, 4 * s + 2))])  # fmt: skip
+    return v, f, n, uv
 
 
 def _disk(n_seg=DISK_SEGMENTS):
-    ang = 2 * np.pi * np.arange(n_seg) / n_seg
-    v = np.concatenate([[[0.0, 0.0, 0.0]], np.stack([np.cos(ang), np.sin(ang),
-                                                       np.zeros(n_seg)], 1)])  # fmt: skip
-    f = np.array([(0, 1 + i, 1 + (i + 1) % n_seg) for i in range(n_seg)])
-    return v, f, np.tile([0.0, 0.0, 1.0], (n_seg + 1, 1))
+    """Mitsuba's unit disk (z = 0, normal +z) as a fan of ``n_seg`` triangles with its own
+    three vertices each, and Mitsuba's uv ``(r, φ/2π)``, ``φ`` in ``[0, 2π)``: rim vertices
+    ``(1, i/n)``, ``(1, (i+1)/n)`` and the centre ``(0, (i + 1/2)/n)``. Interpolated, ``u`` is
+    ``r`` to ``1 - cos(π/n)`` (7.5e-5) and ``v`` is exact on the rim, off by up to ``1/2n``
+    at the centre."""
+    i = np.arange(n_seg)
+    ang = 2 * np.pi * np.arange(n_seg + 1) / n_seg
+    rim = np.stack([np.cos(ang), np.sin(ang), np.zeros(n_seg + 1)], 1)
+    v = np.stack([np.zeros((n_seg, 3)), rim[i], rim[i + 1]], 1).reshape(-1, 3)
+    uv = np.stack([np.stack([np.zeros(n_seg), (i + 0.5) / n_seg], 1),
+                   np.stack([np.ones(n_seg), i / n_seg], 1),
+                   np.stack([np.ones(n_seg), (i + 1) / n_seg], 1)], 1).reshape(-1, 2)  # fmt: skip
+    f = np.arange(3 * n_seg).reshape(n_seg, 3)
+    return v, f, np.tile([0.0, 0.0, 1.0], (3 * n_seg, 1)), uv
 
 
 def _cylinder(n_seg=CYLINDER_SEGMENTS):
     """Mitsuba's unit cylinder (radius 1, axis z in [0, 1], no caps) as a strip of ``2 n_seg``
-    triangles between two rings of ``n_seg`` vertices, faces counter-clockwise seen from
-    outside (geometric normals outward, as Mitsuba's), vertex normals radial (the smooth
-    cylinder's shading normals)."""
-    ang = 2 * np.pi * np.arange(n_seg) / n_seg
-    ring = np.stack([np.cos(ang), np.sin(ang), np.zeros(n_seg)], 1)
+    triangles between two rings of ``n_seg + 1`` vertices (the seam's twice), faces
+    counter-clockwise seen from outside (geometric normals outward, as Mitsuba's), vertex
+    normals radial (the smooth cylinder's shading normals) and Mitsuba's uv ``(φ/2π, z)``."""
+    ang = 2 * np.pi * np.arange(n_seg + 1) / n_seg
+    ring = np.stack([np.cos(ang), np.sin(ang), np.zeros(n_seg + 1)], 1)
+    ring[-1] = ring[0]
     v = np.concatenate([ring, ring + [0.0, 0.0, 1.0]])
+    k = n_seg + 1
     i = np.arange(n_seg)
-    j = (i + 1) % n_seg
-    f = np.concatenate([np.stack([i, j, n_seg + j], 1), np.stack([i, n_seg + j, n_seg + i], 1)])
-    return v, f, np.concatenate([ring, ring])
+    j = i + 1
+    f = np.concatenate([np.stack([i, j, k + j], 1), np.stack([i, k + j, k + i], 1)])
+    u = np.arange(n_seg + 1) / n_seg
+    uv = np.concatenate([np.stack([u, np.zeros(k)], 1), np.stack([u, np.ones(k)], 1)])
+    return v, f, np.concatenate([ring, ring]), uv
 
 
 def _frame_to_world(n):
-    """A right-handed rotation taking +z to the unit vector ``n`` (the cylinder's frame; its
-    choice of x and y only turns the rotationally symmetric, untextured mesh about its axis)."""
-    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    s = np.cross(a, n)
-    s /= np.linalg.norm(s)
-    return np.stack([s, np.cross(n, s), n], 1)
+    """Mitsuba's ``Frame3f(n)`` as a rotation (columns s, t, n): the tangents of Duff et al.,
+    "Building an Orthonormal Basis, Revisited" (JCGT 6(1), 2017), which fix the cylinder's
+    uv origin (``φ = 0`` along s)."""
+    sign = 1.0 if n[2] >= 0 else -1.0
+    a = -1.0 / (sign + n[2])
+    b = n[0] * n[1] * a
+    s = np.array([1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]])
+    t = np.array([b, sign + n[1] * n[1] * a, -n[1]])
+    return np.stack([s, t, np.asarray(n, np.float64)], 1)
 
 
 def _is_textured(desc, name):
@@ -1135,10 +1147,9 @@ def _shape(obj: _Obj, doc, desc, ctx):
         if not np.allclose(ml.T @ ml, s * s * np.eye(3), rtol=1e-6, atol=1e-9 * s * s):
             raise p.err("to_world", "a sphere's to_world must be a rotation, uniform scale "
                                     "and translation (no ellipsoids)")  # fmt: skip
-        if _is_textured(desc, mat) and not np.allclose(ml / s, np.eye(3), atol=1e-9):
-            raise p.err("to_world", "rotated textured spheres are not supported (jaxgfx's "
-                                    "sphere uv is in world axes)")  # fmt: skip
         sd = {"type": "sphere", "center": mm[:3, 3].tolist(), "radius": float(s)}
+        if not np.allclose(ml / s, np.eye(3), atol=1e-9):  # rotated: uv in its local frame
+            sd["frame"] = (ml / s).tolist()
         bbox = np.stack([mm[:3, 3] - s, mm[:3, 3] + s])
     elif t == "rectangle":
         if emitters and det < 0:
@@ -1183,12 +1194,8 @@ def _shape(obj: _Obj, doc, desc, ctx):
             else:
                 normals = _angle_weighted_normals(v, f)
         elif t == "cube":
-            if _is_textured(desc, mat):
-                raise ValueError(f"{obj.where}: textured cubes are not supported (uv layout)")
-            v, f, _, _ = _cube()
+            v, f, _, uvs = _cube()
         elif t == "cylinder":
-            if _is_textured(desc, mat):
-                raise ValueError(f"{obj.where}: textured cylinders are not supported (uv layout)")
             p0 = np.asarray(p.vec("p0", [0.0, 0.0, 0.0]), np.float64)
             p1 = np.asarray(p.vec("p1", [0.0, 0.0, 1.0]), np.float64)
             radius = p.float("radius", 1.0, positive=True)
@@ -1208,11 +1215,9 @@ def _shape(obj: _Obj, doc, desc, ctx):
                 raise p.err("to_world", "a cylinder's to_world must keep its cross-section a "
                                         "circle (no non-uniform scale across the axis, no "
                                         "shear)")  # fmt: skip
-            v, f, normals = _cylinder()
+            v, f, normals, uvs = _cylinder()
         else:
-            if _is_textured(desc, mat):
-                raise ValueError(f"{obj.where}: textured disks are not supported (uv layout)")
-            v, f, normals = _disk()
+            v, f, normals, uvs = _disk()
         if emitters and det < 0:
             raise p.err("to_world", "a mirroring to_world (det < 0) on an emitting mesh "
                                     "flips its emitting side; not supported")  # fmt: skip
@@ -1228,10 +1233,29 @@ def _shape(obj: _Obj, doc, desc, ctx):
         vw = v @ lin.T + m[:3, 3]
         bbox = np.stack([vw.min(0), vw.max(0)])
         ctx.setdefault("triangles", {})[id(obj)] = vw[np.asarray(f)]  # _check_clip
+    elif t == "sdfgrid":  # the unit cube's grid, read now for file/line errors
+        from jaxgfx.render.geometry import read_vol
+
+        if emitters:
+            raise ValueError(f"{obj.where}: an sdfgrid cannot be an area emitter (as in Mitsuba)")
+        fname = p.string("filename")
+        if fname is None:
+            raise ValueError(f"{obj.where}: missing parameter 'filename'")
+        path = doc.resolve(fname, obj.props["filename"].node, obj.label)
+        try:
+            read_vol(path)
+        except (OSError, ValueError) as e:
+            raise p.err("filename", str(e)) from None
+        sd = {"type": "sdfgrid", "filename": os.path.abspath(path),
+              "normals": p.string("normals", "smooth", ("smooth", "analytic"))}  # fmt: skip
+        if not np.allclose(m, np.eye(4)):
+            sd["to_world"] = m.tolist()
+        c = np.array([[x, y, z, 1.0] for x in (0, 1) for y in (0, 1) for z in (0, 1)]) @ m.T
+        bbox = np.stack([c[:, :3].min(0), c[:, :3].max(0)])
     else:
         raise ValueError(f"{obj.where}: shape plugin {t!r} is not supported "
                          "(obj, ply, serialized, sphere, rectangle, cube, disk, "
-                         "cylinder)")  # fmt: skip
+                         "cylinder, sdfgrid)")  # fmt: skip
     p.done(children_ok=len(obj.children))
     ctx["bboxes"].append((bbox, obj))
     if emitters:

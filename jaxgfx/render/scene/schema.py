@@ -36,7 +36,7 @@ __all__ = [
     "MESH_SOURCES",
 ]
 
-SHAPE_TYPES = ("sphere", "rectangle", "mesh", "sdf")
+SHAPE_TYPES = ("sphere", "rectangle", "mesh", "sdf", "sdfgrid")
 EMITTER_TYPES = ("area", "point", "constant", "envmap", "directional", "spot", "projector")
 SCENE_KEYS = (("camera", "shapes"), ("materials", "emitters", "film"))
 """(required, optional) top-level keys of a scene description."""
@@ -321,9 +321,16 @@ def shape_from_desc(d, where, base_dir):
     kind = check_choice(d["type"], f"{where}.type", SHAPE_TYPES)
     common = ("type", "material", "id")  # id: checked by load_scene
     if kind == "sphere":
-        expect_keys(d, where, ("type", "center", "radius"), common)
+        expect_keys(d, where, ("type", "center", "radius"), (*common, "frame"))
         r = num(d["radius"], f"{where}.radius", positive=True)
-        return "sphere", Spheres(vec(d["center"], f"{where}.center")[None], r[None])
+        frame = None
+        if d.get("frame") is not None:  # local axes (columns) of a rotated sphere: its uv
+            frame = np.asarray(d["frame"], np.float64)
+            if frame.shape != (3, 3) or not np.allclose(frame.T @ frame, np.eye(3), atol=1e-6):
+                raise ValueError(f"{where}.frame: expected an orthogonal 3x3 matrix (the "
+                                 "sphere's local axes as columns)")  # fmt: skip
+            frame = frame[None]
+        return "sphere", Spheres(vec(d["center"], f"{where}.center")[None], r[None], frame)
     if kind == "rectangle":
         if "edge_u" in d or "edge_v" in d:
             expect_keys(d, where, ("type", "center", "edge_u", "edge_v"), common)
@@ -350,6 +357,8 @@ def shape_from_desc(d, where, base_dir):
             ),
         )
         return "mesh", mesh_from_desc(d, where, base_dir)
+    if kind == "sdfgrid":
+        return "sdf", sdfgrid_from_desc(d, where, base_dir)
     # "sdf"
     expect_keys(d, where, ("type", "expr"), (*common, "max_steps", "eps"))
     expr = d["expr"]
@@ -358,3 +367,37 @@ def shape_from_desc(d, where, base_dir):
         return "sdf", SDFShape(sdf, d.get("max_steps", 128), d.get("eps", 1e-4))
     except ValueError as e:
         raise ValueError(f"{where}.{e}") from None
+
+
+def sdfgrid_from_desc(d, where, base_dir):
+    """``{type: sdfgrid, filename: grid.vol | values: (Z, Y, X) nested lists, normals: smooth |
+    analytic, to_world: 4x4}``: an :class:`~jaxgfx.render.geometry.SDFGridShape` over the unit
+    cube, placed by ``to_world`` as one :class:`~jaxgfx.render.geometry.Instances` (Mitsuba's
+    ``sdfgrid``)."""
+    from jaxgfx.render.geometry import Instances, SDFGrid, SDFGridShape, read_vol
+    from jaxgfx.render.geometry.instance import check_instance_transforms
+
+    expect_keys(d, where, ("type",), ("material", "id", "filename", "values", "normals",
+                                      "to_world"))  # fmt: skip
+    if ("filename" in d) == ("values" in d):
+        raise ValueError(f"{where}: give exactly one of 'filename' and 'values'")
+    if "filename" in d:
+        path = d["filename"]
+        if not isinstance(path, str):
+            raise ValueError(f"{where}.filename: expected a path string, got {path!r}")
+        path = path if os.path.isabs(path) else os.path.join(base_dir or ".", path)
+        try:
+            values = read_vol(path)
+        except (OSError, ValueError) as e:
+            raise ValueError(f"{where}.filename: {e}") from None
+    else:
+        values = as_float_array(d["values"], f"{where}.values")
+    try:
+        shape = SDFGridShape(SDFGrid(values), d.get("normals", "smooth"))
+    except ValueError as e:
+        raise ValueError(f"{where}: {e}") from None
+    if "to_world" not in d:
+        return shape
+    m = check_instance_transforms(as_float_array(d["to_world"], f"{where}.to_world"),
+                                  f"{where}.to_world")  # fmt: skip
+    return Instances(shape, m)
