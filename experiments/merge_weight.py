@@ -1,6 +1,6 @@
 """The merge weight (issue 26): ``hat · (t/t_max)^p`` for p = 0, 1, 2 vs ``"slope"``.
 
-    python -m experiments.merge_weight [--json out.json]
+    python -m experiments.merge_weight [--json out.json] [--figure docs/images/hdr_merge_weight.png]
 
 Same curve per stack (jaxgfx's default ``recover_response``), merged with each weighting:
 
@@ -42,6 +42,7 @@ JPEG_LIKE = {
     "srgb, 5 frames x4": ("srgb", (1 / 256, 1 / 64, 1 / 16, 1 / 4, 1.0)),
     "filmic, 5 frames x4": ("filmic", (1 / 256, 1 / 64, 1 / 16, 1 / 4, 1.0)),
     "log, 5 frames x4": ("log", (1 / 256, 1 / 64, 1 / 16, 1 / 4, 1.0)),
+    "camera, 5 frames, misaligned 0.7 px": ("camera", (1 / 256, 1 / 64, 1 / 16, 1 / 4, 1.0), 0.7),
 }
 
 
@@ -82,8 +83,10 @@ def jpeg_rows(**fit):
 
     rows = []
     rad = hdr.synthetic_radiance(jax.random.key(1), 96, 96, dynamic_range=1e4)
-    for label, (name, times) in JPEG_LIKE.items():
-        st = hdr.make_jpeg_stack(jax.random.key(2), rad, jnp.asarray(times), name)
+    for label, (name, times, *shift) in JPEG_LIKE.items():
+        st = hdr.make_jpeg_stack(
+            jax.random.key(2), rad, jnp.asarray(times), name, max_shift=(shift or [0.0])[0]
+        )
         r = hdr.recover_response(st.images, st.exposure_times, **fit)
         row = {"stack": f"JPEG-like {label}", "metric": "LOO mean (levels)"}
         for k, o in WEIGHTS.items():
@@ -94,15 +97,48 @@ def jpeg_rows(**fit):
     return rows
 
 
+def figure(rows, path):
+    """Error relative to OpenCV's (1 = a tie; below 1 jaxgfx wins), one bar per weighting."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    labels, vals = [], {k: [] for k in WEIGHTS}
+    for r in rows:
+        cv = np.asarray(r["OpenCV"])
+        names = ["short", "middle", "long"] if cv.size == 3 else [""]
+        for i, nm in enumerate(names):
+            labels.append(f"{r['stack']} {nm}".replace("JPEG-like ", "").strip())
+            for k in WEIGHTS:
+                vals[k].append(float(np.asarray(r[k])[i] / cv[i]))
+    fig, ax = plt.subplots(figsize=(11, 3.8))
+    x = np.arange(len(labels))
+    w = 0.8 / len(WEIGHTS)
+    for i, k in enumerate(WEIGHTS):
+        ax.bar(x + (i - (len(WEIGHTS) - 1) / 2) * w, vals[k], w, label=k)
+    ax.axhline(1.0, color="k", lw=0.8)
+    ax.set_xticks(x)
+    ax.set_xticklabels(labels, rotation=60, ha="right", fontsize=6)
+    ax.set_ylabel("error / OpenCV Debevec's")
+    ax.set_title("Merge weights (same curve per stack); below 1: better than OpenCV")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", default=None)
+    ap.add_argument("--figure", default=None)
     ap.add_argument("--only", choices=("real", "measured", "jpeg"), default=None)
     a = ap.parse_args(argv)
     rows = []
     for part, fn in (("real", real_rows), ("measured", measured_rows), ("jpeg", jpeg_rows)):
         if a.only in (None, part):
             rows += fn()
+    if a.figure:
+        figure(rows, a.figure)
     emit_json(rows, a.json)
 
 

@@ -52,6 +52,17 @@ def slope_weights(response: CameraResponse, levels, dtype, noise_ratio=SLOPE_NOI
     Example: ``x = z²`` (``CameraResponse.gamma(2.0, anchor="unit")``) at ``z = 128/255``:
     ``x̂' = 2 z / 255``, so with ``ρ = 1e-2`` the weight is ``hat · ρ² / (x̂'² + ρ²) ≈ 0.86``."""
     c = levels.shape[-1]
+    f = _slope_factor(response, c, dtype, noise_ratio)
+    grid = jnp.linspace(0.0, 1.0, SLOPE_GRID, dtype=dtype)
+    flat = levels.reshape(-1, c)
+    f = jax.vmap(lambda lv, fc: jnp.interp(lv, grid, fc), in_axes=(1, 1), out_axes=1)(
+        flat, f
+    ).reshape(levels.shape)
+    return WEIGHTINGS["hat"](levels) * f
+
+
+def _slope_factor(response, c, dtype, noise_ratio):
+    """``ρ² / (x̂'² + ρ²)`` on the :data:`SLOPE_GRID` levels, ``(SLOPE_GRID, C)``."""
     grid = jnp.broadcast_to(
         jnp.linspace(0.0, 1.0, SLOPE_GRID, dtype=dtype)[:, None], (SLOPE_GRID, c)
     )
@@ -59,12 +70,7 @@ def slope_weights(response: CameraResponse, levels, dtype, noise_ratio=SLOPE_NOI
     xg = response.to_linear_normalized(grid) / x1
     dxdz = jnp.gradient(xg, axis=0) * ((SLOPE_GRID - 1) / 255.0)  # per 8-bit level
     rho2 = jnp.asarray(noise_ratio, dtype) ** 2
-    f = rho2 / (dxdz * dxdz + rho2)
-    flat = levels.reshape(-1, c)
-    f = jax.vmap(lambda lv, fc: jnp.interp(lv, grid[:, 0], fc), in_axes=(1, 1), out_axes=1)(
-        flat, f
-    ).reshape(levels.shape)
-    return WEIGHTINGS["hat"](levels) * f
+    return rho2 / (dxdz * dxdz + rho2)
 
 
 def _noise_arrays(noise, c, dtype):
@@ -94,10 +100,8 @@ def check_noise_ratio(noise_ratio) -> None:
 
 
 def resolve_time_power(weighting: str, time_power) -> float:
-    """``time_power`` checked (a number in ``[0, 4]``); ``None`` → 2 (unused by
-    ``"noise"``, whose weight has its own ``t²``)."""
-    if time_power is None:
-        return 0.0 if weighting == "noise" else 2.0  # "noise" has t² in its formula
+    """``time_power`` checked (a number in ``[0, 4]``), as a float. Every weighting but
+    ``"noise"`` (whose weight has its own ``t²``) multiplies by ``(t_j / t_max)^time_power``."""
     if isinstance(time_power, bool) or not isinstance(time_power, (int, float)):
         raise TypeError(f"time_power: expected a number, got {time_power!r}")
     if not 0.0 <= float(time_power) <= 4.0:
@@ -114,7 +118,7 @@ def merge_radiance(
     noise=None,
     return_variance: bool = False,
     domain: str = "linear",
-    time_power: float | None = None,
+    time_power: float = 2.0,
     noise_ratio=SLOPE_NOISE_RATIO,
 ):
     """Merge ``N`` differently exposed frames into one relative radiance map.
@@ -209,9 +213,11 @@ def _frame_terms(
     need_deriv = weighting == "noise" or need_var
     x1 = response.to_linear_normalized(jnp.ones((c,), dt))
 
-    def per_level(zz):
+    def per_level(zz, on_grid=False):
         out = {"x": response.to_linear_normalized(zz)}
-        if weighting == "slope":
+        if weighting == "slope" and on_grid:  # 8-bit codes: the tabulation grid itself
+            out["w"] = WEIGHTINGS["hat"](zz) * _slope_factor(response, c, dt, noise_ratio)
+        elif weighting == "slope":
             out["w"] = slope_weights(response, zz, dt, noise_ratio)
         elif weighting != "noise":
             out["w"] = WEIGHTINGS[weighting](zz)
@@ -233,7 +239,7 @@ def _frame_terms(
         levels = jnp.broadcast_to(
             jnp.linspace(0.0, 1.0, int(code_max) + 1, dtype=dt)[:, None], (int(code_max) + 1, c)
         )
-        lut = per_level(levels)
+        lut = per_level(levels, on_grid=int(code_max) + 1 == SLOPE_GRID)
         codes = z.astype(jnp.int32)
         ch = jnp.arange(c)
         q = {k: v[codes, ch] for k, v in lut.items() if k != "w" or weighting == "slope"}
@@ -337,7 +343,10 @@ def _merge_codes(z, t, response, noise, noise_ratio, weighting, code_max, time_p
         valid = (levels > 0.5 * step) & (levels < 1.0 - 0.5 * step) & (var_x > 0)
         b = jnp.where(valid, 1.0 / jnp.where(valid, var_x, 1.0), 0.0)[None] * tcol * tcol
     else:
-        if weighting == "slope":
+        if weighting == "slope" and nl == SLOPE_GRID:  # 8-bit: the grid itself, no search
+            f = _slope_factor(response, c, dt, noise_ratio)
+            b = (WEIGHTINGS["hat"](levels) * f)[None] * jnp.ones_like(tcol)
+        elif weighting == "slope":
             b = slope_weights(response, levels, dt, noise_ratio)[None] * jnp.ones_like(tcol)
         else:
             b = WEIGHTINGS[weighting](levels)[None] * jnp.ones_like(tcol)

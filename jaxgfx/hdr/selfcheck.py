@@ -90,7 +90,7 @@ def leave_one_out(
     noise=None,
     bands=LOO_BANDS,
     merge=None,
-    time_power: float | None = None,
+    time_power: float = 2.0,
     noise_ratio=SLOPE_NOISE_RATIO,
 ) -> LeaveOneOut:
     """Leave-one-out re-exposure error of ``response`` (and the merge) on a bracket.
