@@ -154,7 +154,7 @@ def load_camera_profile(path) -> CameraProfile:
         raise ValueError(f"camera profile {path}: not a JSON file ({e})") from None
     if not isinstance(doc, dict) or doc.get("format") != CAMERA_PROFILE_FORMAT:
         raise ValueError(
-            f'camera profile {path}: not a camera profile (expected "format": '
+            f"camera profile {path}: not a camera profile (expected \"format\": "
             f"{CAMERA_PROFILE_FORMAT!r}, as written by jaxgfx calibrate's camera.json)"
         )
     resp = doc.get("response")

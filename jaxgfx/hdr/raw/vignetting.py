@@ -96,9 +96,8 @@ class Vignetting(eqx.Module):
                 jnp.asarray(d["coefficients"], jnp.float32),
                 jnp.asarray(d["center_yx_px"], jnp.float32),
                 tuple(int(s) for s in d["shape"]),
-                jnp.asarray(
-                    np.nan if d.get("rms_residual") is None else d["rms_residual"], jnp.float32
-                ),
+                jnp.asarray(np.nan if d.get("rms_residual") is None else d["rms_residual"],
+                            jnp.float32),
             )
         except (KeyError, TypeError, ValueError) as e:
             raise ValueError(f"{where}: not a vignetting record ({e!r})") from None
