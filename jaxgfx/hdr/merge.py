@@ -135,7 +135,7 @@ def merge_radiance(
       :func:`slope_weights`; ``ρ`` = ``noise_ratio``, default :data:`SLOPE_NOISE_RATIO`,
       differentiable): a level that spans much exposure (a compressed shoulder, a steep toe)
       counts less. Measured on real JPEG brackets, it predicts the held-out short and middle
-      frames 1.4–1.7× better than ``hat`` with ``t²``, whose long frame's shoulder dominated
+      frames 1.2–1.7× better than ``hat`` with ``t²``, whose long frame's shoulder dominated
       (docs/hdr.md, "The merge weight");
     * ``"hat"``, ``"gaussian"``, ``"linear"`` (:data:`WEIGHTINGS`): functions of the level,
       zero at 0 and at saturation (Debevec & Malik 1997 use the hat), multiplied by
