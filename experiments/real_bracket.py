@@ -7,8 +7,9 @@ Mitianoudis, IST 2016; origin and licence in its README). The JPEGs carry no EXI
 exposure ratios are estimated with ``recover_response(..., method="polynomial")`` (Mitsunaga
 & Nayar; starting from ±2 EV, its weak prior pulls towards them) and normalised to the middle
 frame. Prints, per set, the ratios and the per-held-frame LOO error (levels, 0–255) of
-jaxgfx's defaults, of jaxgfx with the merge's ``time_power=0`` and of OpenCV
-``CalibrateDebevec`` + ``MergeDebevec``, as JSON.
+jaxgfx's defaults (the ``slope`` merge), of jaxgfx with the ``hat`` merge and
+``time_power=0`` and of OpenCV ``CalibrateDebevec`` + ``MergeDebevec`` (and the signed bias
+per held frame), as JSON.
 """
 
 from __future__ import annotations
@@ -66,15 +67,19 @@ def measure():
         t = estimate_times(ims)
         r = hdr.recover_response(ims, t)
         ours = hdr.leave_one_out(ims, t, r)
-        tp0 = hdr.leave_one_out(ims, t, r, time_power=0.0)
+        tp0 = hdr.leave_one_out(ims, t, r, weighting="hat", time_power=0.0)
         cv = opencv_loo(ims, t)
         row = {
             "set": name,
             "ratios": [round(float(v), 3) for v in t],
             "jaxgfx default": [round(float(v), 2) for v in np.asarray(ours.per_frame)],
-            "jaxgfx, merge time_power=0": [round(float(v), 2) for v in np.asarray(tp0.per_frame)],
+            "jaxgfx, merge hat time_power=0": [
+                round(float(v), 2) for v in np.asarray(tp0.per_frame)
+            ],
             "OpenCV Debevec": [round(float(v), 2) for v in np.asarray(cv.per_frame)],
             "jaxgfx per-band bias": [round(float(v), 2) for v in np.asarray(ours.per_band_bias)],
+            "jaxgfx per-frame bias": [round(float(v), 2) for v in np.asarray(ours.per_frame_bias)],
+            "OpenCV per-frame bias": [round(float(v), 2) for v in np.asarray(cv.per_frame_bias)],
         }
         log(row)
         rows.append(row)

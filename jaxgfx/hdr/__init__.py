@@ -12,7 +12,9 @@ from .camera import CAMERA_BITS as CAMERA_BITS
 from .camera import TONE_CURVES as TONE_CURVES
 from .camera import Camera as Camera
 from .camera import ToneCurve as ToneCurve
+from .merge import SLOPE_NOISE_RATIO as SLOPE_NOISE_RATIO
 from .merge import merge_radiance as merge_radiance
+from .merge import slope_weights as slope_weights
 from .response import MIN_USABLE_PIXELS as MIN_USABLE_PIXELS
 from .response import RESPONSE_METHODS as RESPONSE_METHODS
 from .response import check_response_options as check_response_options
@@ -59,6 +61,8 @@ __all__ = [
     "check_response_options",
     "MIN_USABLE_PIXELS",
     "merge_radiance",
+    "slope_weights",
+    "SLOPE_NOISE_RATIO",
     "response_curve_error",
     "radiance_error",
     "synthetic_radiance",

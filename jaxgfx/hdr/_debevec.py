@@ -103,6 +103,7 @@ def inverse_slope_weights(g, anchor_index):
 def _select_by_loo(z, t, g0, w0, lev, interior, valid, solve, m, code_max, anchor_z, passes):
     """The alternative inverse-slope-weighted fit and the choice between it and ``g0`` by the
     leave-one-out re-exposure error on the sampled candidate grid (see recover_debevec)."""
+    from .merge import SLOPE_NOISE_RATIO
     from .selfcheck import LOO_BANDS, _loo_jit
 
     base = interior.astype(w0.dtype) * valid[..., None].astype(w0.dtype)
@@ -117,7 +118,15 @@ def _select_by_loo(z, t, g0, w0, lev, interior, valid, solve, m, code_max, ancho
     def loo(g):
         r = CameraResponse(monotone_repair(g.T, m), "table", "debevec", 1.0, anchor_z)
         return _loo_jit(
-            z, t, r, None, weighting="hat", code_max=1.0, edges=LOO_BANDS, time_power=2.0
+            z,
+            t,
+            r,
+            None,
+            jnp.asarray(SLOPE_NOISE_RATIO, z.dtype),
+            weighting="slope",
+            code_max=1.0,
+            edges=LOO_BANDS,
+            time_power=2.0,
         ).mean_abs_error
 
     errs = jnp.stack([loo(g0), loo(g1)])

@@ -6,6 +6,7 @@ import functools
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._checks import check_choice
 from .._math import safe_log
@@ -15,7 +16,61 @@ from .weighting import WEIGHTINGS
 
 __all__ = ["merge_radiance", "MERGE_WEIGHTINGS"]
 
-MERGE_WEIGHTINGS = (*WEIGHTINGS, "noise")
+MERGE_WEIGHTINGS = (*WEIGHTINGS, "slope", "noise")
+
+SLOPE_GRID = 256
+SLOPE_NOISE_RATIO = 3e-4
+"""Default ``noise_ratio`` ρ of the ``"slope"`` weight (exposure noise per level of level
+noise, clipping exposure = 1): chosen from ``python -m experiments.merge_weight`` (docs/hdr.md,
+"The merge weight"): 1e-4…3e-4 give the same leave-one-out errors on the real brackets;
+1e-5 lost a JPEG-like stack with a lifted black (5.75 vs 5.08 levels)."""
+"""Levels on which the ``"slope"`` weight's log-slope ``g'(z)`` is tabulated (central
+differences of ``ln to_linear``; float input interpolates the table)."""
+
+
+@functools.partial(jax.jit, static_argnames=("dtype",))
+def slope_weights(response: CameraResponse, levels, dtype, noise_ratio=SLOPE_NOISE_RATIO):
+    """The ``"slope"`` merge weight per level, without its time factor:
+    ``hat(z) · ρ² / (x̂'(z)² + ρ²)`` (``ρ`` = ``noise_ratio``).
+
+    Derivation (Robertson et al. 2003; Granados et al. 2010 for the noise model): frame ``j``
+    estimates ``E_j = x(z_j) / t_j``. With noise of standard deviation ``σ_z`` *in levels*
+    (quantisation, JPEG coding, demosaicing) and ``σ_x`` *in exposure* (read noise, a black
+    level that moves), ``Var x_j = x'(z_j)² σ_z² + σ_x²`` and
+    ``Var E_j = (x'(z_j)² σ_z² + σ_x²) / t_j²``. Its inverse is, up to a factor common to
+    every frame, ``t_j² · ρ² / (x̂'(z_j)² + ρ²)`` with ``x̂' = dx/dz`` per 8-bit level in units
+    of the clipping exposure ``x(1)`` and ``ρ = σ_x / σ_z`` in the same units; the merge
+    multiplies by ``(t_j / t_max)^time_power`` (2). ``ρ → ∞`` is the ``hat · t²`` weight
+    (noise constant in exposure); small ``ρ`` the level-noise limit ``t² / x'²`` — a frame's
+    compressed shoulder or steep toe (large ``x'``: one level spans much exposure) loses
+    weight. ``ρ`` also floors the weight where a fitted table is flat (``x' → 0``, levels
+    never observed, e.g. below a lifted black). The hat removes the censored ends.
+    ``x'`` by central differences of ``to_linear`` on :data:`SLOPE_GRID` levels (linear
+    interpolation between them). ``levels``: normalised, ``(..., C)``; ``dtype``: the float
+    type of the computation (static). Returns ``levels``' shape. Jitted.
+
+    Example: ``x = z²`` (``CameraResponse.gamma(2.0, anchor="unit")``) at ``z = 128/255``:
+    ``x̂' = 2 z / 255``, so with ``ρ = 1e-2`` the weight is ``hat · ρ² / (x̂'² + ρ²) ≈ 0.86``."""
+    c = levels.shape[-1]
+    f = _slope_factor(response, c, dtype, noise_ratio)
+    grid = jnp.linspace(0.0, 1.0, SLOPE_GRID, dtype=dtype)
+    flat = levels.reshape(-1, c)
+    f = jax.vmap(lambda lv, fc: jnp.interp(lv, grid, fc), in_axes=(1, 1), out_axes=1)(
+        flat, f
+    ).reshape(levels.shape)
+    return WEIGHTINGS["hat"](levels) * f
+
+
+def _slope_factor(response, c, dtype, noise_ratio):
+    """``ρ² / (x̂'² + ρ²)`` on the :data:`SLOPE_GRID` levels, ``(SLOPE_GRID, C)``."""
+    grid = jnp.broadcast_to(
+        jnp.linspace(0.0, 1.0, SLOPE_GRID, dtype=dtype)[:, None], (SLOPE_GRID, c)
+    )
+    x1 = response.to_linear_normalized(jnp.ones((c,), dtype))
+    xg = response.to_linear_normalized(grid) / x1
+    dxdz = jnp.gradient(xg, axis=0) * ((SLOPE_GRID - 1) / 255.0)  # per 8-bit level
+    rho2 = jnp.asarray(noise_ratio, dtype) ** 2
+    return rho2 / (dxdz * dxdz + rho2)
 
 
 def _noise_arrays(noise, c, dtype):
@@ -31,16 +86,40 @@ def _noise_arrays(noise, c, dtype):
     return gain, read
 
 
+def check_noise_ratio(noise_ratio) -> None:
+    """``ValueError`` unless ``noise_ratio`` is a positive finite number (concrete values;
+    a traced one, e.g. under ``jax.grad``, is taken as given)."""
+    from .._checks import is_concrete
+
+    if isinstance(noise_ratio, bool):
+        raise TypeError(f"noise_ratio: expected a positive number, got {noise_ratio!r}")
+    if is_concrete(noise_ratio):
+        v = np.asarray(noise_ratio)
+        if v.ndim != 0 or not np.isfinite(v) or v <= 0:
+            raise ValueError(f"noise_ratio: expected a positive finite number, got {noise_ratio!r}")
+
+
+def resolve_time_power(weighting: str, time_power) -> float:
+    """``time_power`` checked (a number in ``[0, 4]``), as a float. Every weighting but
+    ``"noise"`` (whose weight has its own ``t²``) multiplies by ``(t_j / t_max)^time_power``."""
+    if isinstance(time_power, bool) or not isinstance(time_power, (int, float)):
+        raise TypeError(f"time_power: expected a number, got {time_power!r}")
+    if not 0.0 <= float(time_power) <= 4.0:
+        raise ValueError(f"time_power: expected a value in [0, 4], got {time_power}")
+    return float(time_power)
+
+
 def merge_radiance(
     images,
     exposure_times,
     response: CameraResponse,
     *,
-    weighting: str = "hat",
+    weighting: str = "slope",
     noise=None,
     return_variance: bool = False,
     domain: str = "linear",
     time_power: float = 2.0,
+    noise_ratio=SLOPE_NOISE_RATIO,
 ):
     """Merge ``N`` differently exposed frames into one relative radiance map.
 
@@ -51,9 +130,16 @@ def merge_radiance(
     Each frame gives an estimate ``E_j = x_j / t_j`` with ``x_j = response.to_linear(z_j)``;
     they are averaged with per-pixel weights ``w_j``:
 
+    * ``"slope"`` (default): the inverse variance of ``E_j`` under noise in levels *and* in
+      exposure, ``hat(z_j) · ρ² / (x̂'(z_j)² + ρ²) · (t_j / t_max)^time_power`` (see
+      :func:`slope_weights`; ``ρ`` = ``noise_ratio``, default :data:`SLOPE_NOISE_RATIO`,
+      differentiable): a level that spans much exposure (a compressed shoulder, a steep toe)
+      counts less. Measured on real JPEG brackets, it predicts the held-out short and middle
+      frames 1.2–1.7× better than ``hat`` with ``t²``, whose long frame's shoulder dominated
+      (docs/hdr.md, "The merge weight");
     * ``"hat"``, ``"gaussian"``, ``"linear"`` (:data:`WEIGHTINGS`): functions of the level,
       zero at 0 and at saturation (Debevec & Malik 1997 use the hat), multiplied by
-      ``(t_j / t_max)^time_power``. The default ``time_power=2`` makes the weight the inverse
+      ``(t_j / t_max)^time_power``. ``time_power=2`` (default) makes the weight the inverse
       variance of ``E_j = x_j / t_j`` when the noise of ``x`` does not depend on the exposure
       (quantisation, JPEG and read noise: ``Var E_j ∝ 1 / t_j²``), tapered by the level
       weight — as in Robertson et al. (2003) and Granados et al. (2010). ``time_power=0`` is
@@ -86,10 +172,8 @@ def merge_radiance(
         raise TypeError(f"response: expected a CameraResponse, got {type(response).__name__}")
     if weighting == "noise" and noise is None:
         raise ValueError('noise: weighting="noise" needs a noise model (.gain, .read_variance)')
-    if isinstance(time_power, bool) or not isinstance(time_power, (int, float)):
-        raise TypeError(f"time_power: expected a number, got {time_power!r}")
-    if not 0.0 <= float(time_power) <= 4.0:
-        raise ValueError(f"time_power: expected a value in [0, 4], got {time_power}")
+    time_power = resolve_time_power(weighting, time_power)
+    check_noise_ratio(noise_ratio)
     z, t, code_max, squeeze = prepare_stack(images, exposure_times, min_frames=1, raw=True)
     c = z.shape[-1]
     if response.channels not in (1, c):
@@ -105,6 +189,7 @@ def merge_radiance(
         t,
         response,
         noise_arr,
+        jnp.asarray(noise_ratio, dt),
         weighting=weighting,
         domain=domain,
         code_max=code_max,
@@ -116,7 +201,9 @@ def merge_radiance(
     return out
 
 
-def _frame_terms(z, t, response, noise, *, weighting, code_max, need_var, time_power):
+def _frame_terms(
+    z, t, response, noise, *, weighting, code_max, need_var, time_power, noise_ratio=None
+):
     """Per-frame ``x_j`` (to_linear), weights ``w_j``, ``Var x_j`` (or None) and the
     "bright" flag ``z_j >= 1/2`` used by the fallback, all ``(N, H, W, C)``."""
     c = z.shape[-1]
@@ -126,9 +213,13 @@ def _frame_terms(z, t, response, noise, *, weighting, code_max, need_var, time_p
     need_deriv = weighting == "noise" or need_var
     x1 = response.to_linear_normalized(jnp.ones((c,), dt))
 
-    def per_level(zz):
+    def per_level(zz, on_grid=False):
         out = {"x": response.to_linear_normalized(zz)}
-        if weighting != "noise":
+        if weighting == "slope" and on_grid:  # 8-bit codes: the tabulation grid itself
+            out["w"] = WEIGHTINGS["hat"](zz) * _slope_factor(response, c, dt, noise_ratio)
+        elif weighting == "slope":
+            out["w"] = slope_weights(response, zz, dt, noise_ratio)
+        elif weighting != "noise":
             out["w"] = WEIGHTINGS[weighting](zz)
         if need_deriv:
             dxdz = response.derivative_normalized(zz)
@@ -148,11 +239,11 @@ def _frame_terms(z, t, response, noise, *, weighting, code_max, need_var, time_p
         levels = jnp.broadcast_to(
             jnp.linspace(0.0, 1.0, int(code_max) + 1, dtype=dt)[:, None], (int(code_max) + 1, c)
         )
-        lut = per_level(levels)
+        lut = per_level(levels, on_grid=int(code_max) + 1 == SLOPE_GRID)
         codes = z.astype(jnp.int32)
         ch = jnp.arange(c)
-        q = {k: v[codes, ch] for k, v in lut.items() if k != "w"}
-        if "w" in lut:  # elementwise weights are cheaper to compute than to gather
+        q = {k: v[codes, ch] for k, v in lut.items() if k != "w" or weighting == "slope"}
+        if "w" in lut and weighting != "slope":  # elementwise: cheaper to compute than gather
             q["w"] = WEIGHTINGS[weighting](codes.astype(dt) * (1.0 / code_max))
         z_lo = None
     x = q["x"]
@@ -174,11 +265,23 @@ def _frame_terms(z, t, response, noise, *, weighting, code_max, need_var, time_p
 @functools.partial(
     jax.jit, static_argnames=("weighting", "domain", "code_max", "return_variance", "time_power")
 )
-def _merge(z, t, response, noise, *, weighting, domain, code_max, return_variance, time_power=2.0):
+def _merge(
+    z,
+    t,
+    response,
+    noise,
+    noise_ratio,
+    *,
+    weighting,
+    domain,
+    code_max,
+    return_variance,
+    time_power=2.0,
+):
     """``z``: normalised float levels, or integer codes (then every per-level quantity is
     computed once on the ``code_max + 1`` levels and gathered: a lookup table)."""
     if not jnp.issubdtype(z.dtype, jnp.floating) and not return_variance and domain == "linear":
-        return _merge_codes(z, t, response, noise, weighting, code_max, time_power)
+        return _merge_codes(z, t, response, noise, noise_ratio, weighting, code_max, time_power)
     tb = t[:, None, None, None]
     x, w, var_x, use_short = _frame_terms(
         z,
@@ -189,6 +292,7 @@ def _merge(z, t, response, noise, *, weighting, domain, code_max, return_varianc
         code_max=code_max,
         need_var=return_variance,
         time_power=time_power,
+        noise_ratio=noise_ratio,
     )
     i_short = jnp.argmin(t)
     i_long = jnp.argmax(t)
@@ -216,7 +320,7 @@ def _merge(z, t, response, noise, *, weighting, domain, code_max, return_varianc
     return e, var
 
 
-def _merge_codes(z, t, response, noise, weighting, code_max, time_power):
+def _merge_codes(z, t, response, noise, noise_ratio, weighting, code_max, time_power):
     """Integer codes, linear domain, no variance: per frame ``j`` two tables over the levels,
     ``a_j = w_j x / t_j`` and ``b_j = w_j`` (``(N, L, C)``, tiny), gathered with one flat
     index per pixel and summed over frames in the same pass: ``E = Σ a / Σ b``. The same
@@ -239,7 +343,13 @@ def _merge_codes(z, t, response, noise, weighting, code_max, time_power):
         valid = (levels > 0.5 * step) & (levels < 1.0 - 0.5 * step) & (var_x > 0)
         b = jnp.where(valid, 1.0 / jnp.where(valid, var_x, 1.0), 0.0)[None] * tcol * tcol
     else:
-        b = WEIGHTINGS[weighting](levels)[None] * jnp.ones_like(tcol)
+        if weighting == "slope" and nl == SLOPE_GRID:  # 8-bit: the grid itself, no search
+            f = _slope_factor(response, c, dt, noise_ratio)
+            b = (WEIGHTINGS["hat"](levels) * f)[None] * jnp.ones_like(tcol)
+        elif weighting == "slope":
+            b = slope_weights(response, levels, dt, noise_ratio)[None] * jnp.ones_like(tcol)
+        else:
+            b = WEIGHTINGS[weighting](levels)[None] * jnp.ones_like(tcol)
         if time_power != 0.0:
             b = b * (tcol / jnp.max(t)) ** time_power
     a = b * x[None] / tcol  # (N, L, C)

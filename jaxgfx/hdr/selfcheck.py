@@ -18,7 +18,14 @@ import numpy as np
 from .._checks import check_choice
 from ._model import CameraResponse
 from ._stack import prepare_stack
-from .merge import MERGE_WEIGHTINGS, _frame_terms, _noise_arrays
+from .merge import (
+    MERGE_WEIGHTINGS,
+    SLOPE_NOISE_RATIO,
+    _frame_terms,
+    _noise_arrays,
+    check_noise_ratio,
+    resolve_time_power,
+)
 
 __all__ = ["leave_one_out", "LeaveOneOut", "LOO_BANDS"]
 
@@ -79,11 +86,12 @@ def leave_one_out(
     exposure_times,
     response: CameraResponse,
     *,
-    weighting: str = "hat",
+    weighting: str = "slope",
     noise=None,
     bands=LOO_BANDS,
     merge=None,
     time_power: float = 2.0,
+    noise_ratio=SLOPE_NOISE_RATIO,
 ) -> LeaveOneOut:
     """Leave-one-out re-exposure error of ``response`` (and the merge) on a bracket.
 
@@ -96,7 +104,7 @@ def leave_one_out(
     Args:
       images, exposure_times: the stack as for :func:`merge_radiance` (N ≥ 2; any order).
       response: the :class:`CameraResponse` to check (usually recovered from all N frames).
-      weighting, noise, time_power: merge options (:func:`merge_radiance`).
+      weighting, noise, time_power, noise_ratio: merge options (:func:`merge_radiance`).
       bands: increasing band edges on the 0–255 scale (at least 2).
       merge: optional callable ``merge(images, times) -> E`` (``(H, W, C)``, in units of
         ``response.to_linear`` per second) replacing :func:`merge_radiance`, e.g. a peer's
@@ -108,6 +116,8 @@ def leave_one_out(
     (see ``tests/hdr/test_selfcheck.py``).
     """
     check_choice(weighting, "weighting", MERGE_WEIGHTINGS)
+    time_power = resolve_time_power(weighting, time_power)
+    check_noise_ratio(noise_ratio)
     if not isinstance(response, CameraResponse):
         raise TypeError(f"response: expected a CameraResponse, got {type(response).__name__}")
     edges = tuple(float(b) for b in bands)
@@ -130,10 +140,11 @@ def leave_one_out(
             t,
             response,
             noise_arr,
+            jnp.asarray(noise_ratio, fdt),
             weighting=weighting,
             code_max=code_max,
             edges=edges,
-            time_power=float(time_power),
+            time_power=time_power,
         )
     order = np.argsort(np.asarray(t))
     zs, ts = z[order], t[order]
@@ -152,7 +163,7 @@ def _norm(z, code_max, dt):
 
 
 @functools.partial(jax.jit, static_argnames=("weighting", "code_max", "edges", "time_power"))
-def _loo_jit(z, t, response, noise, *, weighting, code_max, edges, time_power):
+def _loo_jit(z, t, response, noise, noise_ratio, *, weighting, code_max, edges, time_power):
     """Per-frame terms once (one lookup), then for each held frame ``k`` the weighted mean
     over the others (the same as :func:`merge_radiance` on the other frames, fallback
     included)."""
@@ -168,6 +179,7 @@ def _loo_jit(z, t, response, noise, *, weighting, code_max, edges, time_power):
         code_max=code_max,
         need_var=False,
         time_power=time_power,
+        noise_ratio=noise_ratio,
     )
     e_j = x / t[:, None, None, None]
     we = w * e_j
