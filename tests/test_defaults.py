@@ -5,9 +5,10 @@ computed for the documented default (a closed form, or scikit-image), plus a neg
 showing that the next plausible value would give a different answer, so changing the default
 fails here. ``tools/mutants.py`` holds one mutant per default (``defaults.*``).
 
-* ``hdr.merge_radiance``: ``weighting="hat"``, ``time_power=2`` (commit 2b64734: hat x t^2,
+* ``hdr.merge_radiance``: ``weighting="slope"``, ``time_power=2`` (commit 2b64734: hat x t^2,
   the inverse variance of ``x / t`` for exposure-independent noise; ``time_power=0`` let a
-  short frame's near-black levels pull dark pixels too bright).
+  short frame's near-black levels pull dark pixels too bright; issue 26: the ``slope`` factor
+  ``rho^2 / (x'^2 + rho^2)`` for noise in levels, docs/hdr.md "The merge weight").
 * ``image.canny``: ``sigma=1.0`` (and ``truncate=4``), scikit-image's defaults.
 * ``optim.fit``: ``optimizer="adam"``, ``learning_rate=1e-2``, ``patience=10``.
 * ``hdr.merge_deghosted``: ``threshold=4``, ``sigma=2``, ``region_sigma=4``,
@@ -39,30 +40,45 @@ def _hat(z):  # Debevec & Malik (1997): 2 min(z, 1 - z) on normalised levels
     return 2.0 * np.minimum(z, 1.0 - z)
 
 
-def _merge_reference(z, t, time_power):
-    """Closed form of the weighted merge with a linear response: sum w E / sum w,
-    ``E_j = z_j / t_j``, ``w_j = hat(z_j) (t_j / t_max)^time_power``."""
+def _merge_reference(z, t, time_power, gamma=1.0, rho=None):
+    """Closed form of the weighted merge with the response ``x = z^gamma``: sum w E / sum w,
+    ``E_j = x(z_j) / t_j``, ``w_j = hat(z_j) (t_j / t_max)^time_power``, times the slope
+    factor ``rho^2 / (x'^2 + rho^2)`` with ``x' = gamma z^(gamma - 1) / 255`` per 8-bit level
+    when ``rho`` is given."""
     w = _hat(z) * (t / t.max())[:, None] ** time_power
-    return np.sum(w * z / t[:, None], axis=0) / np.sum(w, axis=0)
+    if rho is not None:
+        dx = gamma * z ** (gamma - 1.0) / 255.0
+        w = w * rho**2 / (dx * dx + rho**2)
+    return np.sum(w * z**gamma / t[:, None], axis=0) / np.sum(w, axis=0)
 
 
-def test_merge_default_is_hat_times_t_squared():
+def test_merge_default_is_slope_times_t_squared():
     # two frames per pixel that disagree (E = 0.25 vs 0.30, 0.10 vs 0.14): the weights decide
     z = np.array([[0.25, 0.10, 0.45], [0.60, 0.28, 0.70]], np.float32)  # (N=2, pixels)
     t = np.array([1.0, 2.0], np.float32)
+    zd, td = z.astype(np.float64), t.astype(np.float64)
+    # a linear response: the slope factor is the same for every level, so hat x t^2
     resp = CameraResponse.gamma(1.0, anchor="unit")
     got = np.asarray(hdr.merge_radiance(z[:, None, :], t, resp))[0]
-    ref = _merge_reference(z.astype(np.float64), t.astype(np.float64), 2.0)
+    ref = _merge_reference(zd, td, 2.0)
     np.testing.assert_allclose(got, ref, rtol=1e-6)
     # pixel 0 by hand: (0.5/4 * 0.25 + 0.8 * 0.30) / (0.5/4 + 0.8)
     assert got[0] == pytest.approx((0.125 * 0.25 + 0.8 * 0.3) / 0.925, rel=1e-6)
     # negative controls: time_power 1 or 0, or the Gaussian weight, are each >= 1 % away
     for other in (
-        _merge_reference(z, t, 1.0),
-        _merge_reference(z, t, 0.0),
+        _merge_reference(zd, td, 1.0),
+        _merge_reference(zd, td, 0.0),
         np.asarray(hdr.merge_radiance(z[:, None, :], t, resp, weighting="gaussian"))[0],
     ):
         assert np.max(np.abs(other / ref - 1)) > 0.01
+    # a curved response x = z^2: the slope factor (rho = hdr.SLOPE_NOISE_RATIO) weighs the
+    # frames differently; the implementation differentiates a 256-level table (rtol 2e-3)
+    resp2 = CameraResponse.gamma(2.0, anchor="unit")
+    got2 = np.asarray(hdr.merge_radiance(z[:, None, :], t, resp2))[0]
+    ref2 = _merge_reference(zd, td, 2.0, gamma=2.0, rho=hdr.SLOPE_NOISE_RATIO)
+    np.testing.assert_allclose(got2, ref2, rtol=2e-3)
+    hat2 = np.asarray(hdr.merge_radiance(z[:, None, :], t, resp2, weighting="hat"))[0]
+    assert np.max(np.abs(hat2 / ref2 - 1)) > 0.01  # the old default is told apart
 
 
 # ------------------------------------------------------------------ image.canny

@@ -87,7 +87,7 @@ class ResponseConfig:
 
 @dataclasses.dataclass(frozen=True)
 class MergeConfig:
-    weighting: str = "hat"
+    weighting: str = "slope"
     deghost: bool = False  # hdr.merge_deghosted: frames inconsistent with a reference dropped
 
     def __post_init__(self):
