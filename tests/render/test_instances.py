@@ -306,11 +306,6 @@ def test_xml_instancing_errors_name_the_object_and_line(tmp_path):
         read_xml(_write(tmp_path, _XML.replace("EXTRA", em)))
 
 
-# Known defect (issue 24): in the whole `-m mitsuba` run (one process, after the other Mitsuba
-# tests) this test's jaxgfx render blocked forever in BlockUntilReady at 0 % CPU (2026-12-05);
-# run alone it passes (channel z -0.07 / 0.95 / 0.73). Skipped so that CI cannot hang on it
-# until the cause (a callback / thread-pool interaction with Dr.Jit?) is found.
-@pytest.mark.skip(reason="hangs after other Mitsuba tests in one process; passes alone (issue 24)")
 @pytest.mark.mitsuba
 @pytest.mark.slow  # slow: ~40 s on 2 cores (Mitsuba 256 spp + jaxgfx 256 spp, 32²)
 def test_instanced_scene_matches_mitsuba(tmp_path):
