@@ -149,30 +149,17 @@ def _tlas_query(handle, m, top, cand, o, d, tmin, tmax, any_hit, n):
     ck, ct, cnt = (np.asarray(x) for x in cand)
     C = ck.shape[-1]
     ck, ct, cnt = ck.reshape(-1, C), ct.reshape(-1, C).astype(np.float64), cnt.reshape(-1)
-    over = np.flatnonzero(cnt > C)
-    keep = (ck >= 0) & (cnt <= C)[:, None]
-    r = np.broadcast_to(np.arange(o.shape[0])[:, None], ck.shape)[keep]
-    k, te = ck[keep], ct[keep]
-    if over.size:  # rays that met more boxes than the list holds: all their boxes
-        ro, ko, to = tlas_candidates(*top, o[over], d[over], t0[over], best[over])
-        r, k, te = np.r_[r, over[ro]], np.r_[k, ko], np.r_[te, to]
-        order = np.lexsort((te, r))  # by ray, then by entry (the lists already are)
-        r, k, te = r[order], k[order], te[order]
-    if r.size == 0:
-        return np.full(batch, np.inf, np.float32), prim.astype(np.int32).reshape(batch)
     inv = np.linalg.inv(m[:, :3, :3])
-    # round 1: each ray's nearest candidate box; round 2: the rest that start before the hit
-    first = np.r_[True, r[1:] != r[:-1]]
-    for rnd in (first, ~first):
-        sel = rnd & (te <= best[r]) & ((prim[r] < 0) if any_hit else True)
-        rr, kk = r[sel], k[sel]
+
+    def query(rr, kk):
+        """Query the pairs (ray rr, instance kk) and keep each ray's nearest hit."""
         if rr.size == 0:
-            continue
+            return
         by = np.argsort(kk, kind="stable")
         rr, kk = rr[by], kk[by]
         ol = np.einsum("pij,pj->pi", inv[kk], o[rr] - m[kk, :3, 3])
         dl = np.einsum("pij,pj->pi", inv[kk], d[rr])
-        s = np.linalg.norm(dl, axis=1)
+        s = np.sqrt(np.einsum("pi,pi->p", dl, dl))
         dl /= s[:, None]
         cuts = np.flatnonzero(np.r_[True, kk[1:] != kk[:-1], True])
         t = np.full(rr.size, np.inf)
@@ -181,15 +168,32 @@ def _tlas_query(handle, m, top, cand, o, d, tmin, tmax, any_hit, n):
             sl = slice(a, b)
             ta, pa = host.query(ol[sl], dl[sl], t0[rr[sl]] * s[sl], best[rr[sl]] * s[sl], any_hit)
             t[sl], p[sl] = np.asarray(ta, np.float64) / s[sl], pa
-        hit = p >= 0
+        h = np.flatnonzero(p >= 0)
         if any_hit:
-            prim[rr[hit]] = kk[hit] * n + p[hit]
-            continue
-        # a ray may have several candidates in round 2: keep its nearest
-        tw = np.where(hit, t, np.inf)
-        np.minimum.at(best, rr, tw)
-        win = hit & (tw == best[rr])
-        prim[rr[win]] = kk[win] * n + p[win]
+            prim[rr[h]] = kk[h] * n + p[h]
+            return
+        h = h[np.lexsort((t[h], rr[h]))]  # several candidates of a ray: its nearest hit
+        h = h[np.r_[True, rr[h][1:] != rr[h][:-1]]] if h.size else h
+        best[rr[h]] = t[h]
+        prim[rr[h]] = kk[h] * n + p[h]
+
+    # round 1: each ray's nearest box
+    r1 = np.flatnonzero(ck[:, 0] >= 0)
+    query(r1, ck[r1, 0])
+    # round 2: the other listed boxes entered before the best hit (the lists are sorted)
+    live = (ck[:, 1:] >= 0) & (ct[:, 1:] <= best[:, None])
+    if any_hit:
+        live &= (prim < 0)[:, None]
+    r2, j2 = np.nonzero(live)
+    k2 = ck[:, 1:][r2, j2]
+    over = np.flatnonzero(cnt > C)
+    if over.size:  # rays that met more boxes than the list holds: all their boxes (the
+        # listed ones again: a repeated query finds nothing closer, and ties in entry t,
+        # e.g. an origin inside many boxes, leave no safe cut)
+        ro, ko, _ = tlas_candidates(*top, o[over], d[over], t0[over], best[over])
+        rest = (prim[over[ro]] < 0) if any_hit else np.ones(ro.size, bool)
+        r2, k2 = np.r_[r2, over[ro[rest]]], np.r_[k2, ko[rest]]
+    query(r2, k2)
     t = np.where(prim >= 0, best, np.inf).astype(np.float32)
     return t.reshape(batch), prim.astype(np.int32).reshape(batch)
 
