@@ -2,7 +2,7 @@
 (docs/render_geometry.md, "Instancing").
 
 Usage: ``JAX_PLATFORMS=cpu python tools/instancing_cost.py [--instances 100 1000] [--level 4]
-[--no-render]``.
+[--no-render] [--backends jax embree]``.
 ``K`` instances of a ``20 * 4**level``-triangle blob (level 4: 5 120 triangles) on a grid, each
 rotated and non-uniformly scaled, as :class:`~jaxgfx.render.geometry.Instances` over ONE
 traversal structure, and as one flattened mesh of ``K`` times the triangles, per backend
@@ -63,12 +63,13 @@ def main():
     ap.add_argument("--level", type=int, default=4)
     ap.add_argument("--rays", type=int, default=65536)
     ap.add_argument("--no-render", action="store_true")
+    ap.add_argument("--backends", nargs="+", default=["jax", "embree"])
     a = ap.parse_args()
     for k in a.instances:
-        run(k, a.level, a.rays, not a.no_render)
+        run(k, a.level, a.rays, not a.no_render, a.backends)
 
 
-def run(instances, level, rays, with_render):
+def run(instances, level, rays, with_render, backends):
     mesh = make_blob(level, seed=3)
     mats = _mats(instances)
     inst0 = Instances(mesh, mats)
@@ -86,7 +87,7 @@ def run(instances, level, rays, with_render):
     trace = jax.jit(lambda s, o, d: s.closest_t(o, d, tmin=0.0, tmax=jnp.inf)[0])
     cam = {"origin": [0.0, 3 * ext, 1.5 * ext], "target": [0, 0, 0], "fov": 50,
            "width": 64, "height": 64}  # fmt: skip
-    for backend in [b for b in ("jax", "embree") if b in available_backends()]:
+    for backend in [b for b in backends if b in available_backends()]:
         for layout in ("instanced", "flattened"):
             t0 = time.perf_counter()
             if layout == "instanced":

@@ -133,8 +133,9 @@ def _tlas_query(handle, m, top, cand, o, d, tmin, tmax, any_hit, n):
     rays that met more boxes than it keeps are completed here by
     :func:`~jaxgfx.render.geometry.accel.tlas.tlas_candidates` over ``top``). The
     ``(ray, instance)`` pairs are mapped into their instances' spaces in one vectorised step and
-    queried, instance by instance, against the ONE shared Embree scene: first each ray's
-    nearest box, then the others that still start before the best hit."""
+    queried in ONE call against the shared Embree scene (every local ray meets the same
+    scene): first each ray's nearest box, then the others that still start before the best
+    hit."""
     from jaxgfx.render.geometry.accel.backends import lookup_native
     from jaxgfx.render.geometry.accel.tlas import tlas_candidates
 
@@ -155,19 +156,13 @@ def _tlas_query(handle, m, top, cand, o, d, tmin, tmax, any_hit, n):
         """Query the pairs (ray rr, instance kk) and keep each ray's nearest hit."""
         if rr.size == 0:
             return
-        by = np.argsort(kk, kind="stable")
-        rr, kk = rr[by], kk[by]
         ol = np.einsum("pij,pj->pi", inv[kk], o[rr] - m[kk, :3, 3])
         dl = np.einsum("pij,pj->pi", inv[kk], d[rr])
         s = np.sqrt(np.einsum("pi,pi->p", dl, dl))
         dl /= s[:, None]
-        cuts = np.flatnonzero(np.r_[True, kk[1:] != kk[:-1], True])
-        t = np.full(rr.size, np.inf)
-        p = np.full(rr.size, -1, np.int64)
-        for a, b in zip(cuts[:-1], cuts[1:], strict=True):
-            sl = slice(a, b)
-            ta, pa = host.query(ol[sl], dl[sl], t0[rr[sl]] * s[sl], best[rr[sl]] * s[sl], any_hit)
-            t[sl], p[sl] = np.asarray(ta, np.float64) / s[sl], pa
+        # all pairs' local rays meet the same shared scene: one Embree call
+        t, p = host.query(ol, dl, t0[rr] * s, best[rr] * s, any_hit)
+        t = np.asarray(t, np.float64) / s
         h = np.flatnonzero(p >= 0)
         if any_hit:
             prim[rr[h]] = kk[h] * n + p[h]
