@@ -31,7 +31,6 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from jaxgfx._math import safe_normalize, sum_last, take_rows
-from jaxgfx.render.geometry.accel._common import flat_rays
 from jaxgfx.render.geometry.accel.bvh_sah import BVH
 from jaxgfx.render.geometry.accel.tlas import (
     TopLevel,
@@ -287,9 +286,12 @@ class Instances(eqx.Module):
     def _two_level(self, o, d, tmin, tmax, any_hit):
         """JAX BVH bottom level under the top-level BVH: one wavefront through both levels
         (:func:`~jaxgfx.render.geometry.accel.tlas.two_level_trace`); ``(t, prim)``."""
-        _, _, batch, (O, D, T0, T1) = flat_rays(o, d, tmin, tmax)
-        t, p = two_level_trace(self.tlas, self.shape, self.to_world, O, D, T0, T1,
-                               any_hit=any_hit)  # fmt: skip
+        sg = jax.lax.stop_gradient
+        batch = o.shape[:-1]
+        flat = (sg(o).reshape(-1, 3), sg(d).reshape(-1, 3),
+                jnp.broadcast_to(sg(tmin), batch).reshape(-1),
+                jnp.broadcast_to(sg(tmax), batch).reshape(-1))  # fmt: skip
+        t, p = two_level_trace(self.tlas, self.shape, self.to_world, *flat, any_hit=any_hit)
         return t.reshape(batch), p.reshape(batch)
 
     def _jax_tlas(self):
