@@ -217,7 +217,6 @@ def _wavefront(o, d, tmin, tmax, root, width, slot0, load, step, out0, write):
     perm = jnp.zeros(N, jnp.int32).at[pos].set(jnp.arange(N, dtype=jnp.int32))
     queue = tuple(x[perm] for x in (o, d, tmin, tn, tmax))
     vstep = jax.vmap(step)
-    slot0 = tuple(x[:W] if x.shape[0] != W else x for x in slot0)
 
     def body(c):
         ray, o, d, a, s, nxt, out = c
