@@ -483,7 +483,7 @@ def test_closed_form_inverse_and_its_gradient(x64):
     jax.test_util.check_grads(inv3, (jnp.asarray(a[1:3]),), order=1, modes=["rev"], eps=1e-6)
 
 
-# slow: ~11-14 s each on 2 cores at load 13 (float64 compiles of the search, hit and any-hit)
+# slow: 6-14 s each on 2 cores at load 13-18 (float64 compiles of the search, hit and any-hit)
 @pytest.mark.slow
 @pytest.mark.parametrize("backend", ["jax", "embree"])
 def test_many_overlapping_instances_equal_the_flattened_mesh(backend, x64):
