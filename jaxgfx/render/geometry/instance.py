@@ -33,6 +33,14 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from jaxgfx._math import safe_normalize, sum_last, take_rows
+from jaxgfx.render.geometry.accel.bvh_sah import BVH
+from jaxgfx.render.geometry.accel.tlas import (
+    TopLevel,
+    build_tlas,
+    inv3,
+    tlas_collect,
+    two_level_trace,
+)
 from jaxgfx.render.geometry.intersect import closest_t as _closest_t
 from jaxgfx.render.geometry.intersect import primitive_hit
 from jaxgfx.render.geometry.mesh import TriangleMesh
@@ -133,9 +141,19 @@ def _world_boxes(base, m):
     return np.stack([blo - pad, bhi + pad], 1)
 
 
-def _tlas_query(handle, m, bx, o, d, tmin, tmax, any_hit, n):
-    """Host top level over the instances of one Embree scene: ``(t float32, prim int32)``."""
+def _tlas_query(handle, m, top, cand, o, d, tmin, tmax, any_hit, n):
+    """Host two-level query of one Embree scene: ``(t float32, prim int32)``.
+
+    ``cand = (inst, entry t, count)``: each ray's nearest instance boxes from the top level
+    (:func:`~jaxgfx.render.geometry.accel.tlas.tlas_collect`, run in JAX before the callback;
+    rays that met more boxes than it keeps are completed here by
+    :func:`~jaxgfx.render.geometry.accel.tlas.tlas_candidates` over ``top``). The
+    ``(ray, instance)`` pairs are mapped into their instances' spaces in one vectorised step and
+    queried in ONE call against the shared Embree scene (every local ray meets the same
+    scene): first each ray's nearest box, then the others that still start before the best
+    hit."""
     from jaxgfx.render.geometry.accel.backends import lookup_native
+    from jaxgfx.render.geometry.accel.tlas import tlas_candidates
 
     host = lookup_native(handle)
     batch = np.shape(o)[:-1]
@@ -145,29 +163,48 @@ def _tlas_query(handle, m, bx, o, d, tmin, tmax, any_hit, n):
     best = np.broadcast_to(np.asarray(tmax, np.float64), batch).reshape(-1).copy()
     prim = np.full(o.shape[0], -1, np.int64)
     m = np.asarray(m, np.float64).reshape(-1, 4, 4)
-    bx = np.asarray(bx, np.float64).reshape(-1, 2, 3)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv_d = 1.0 / np.where(d == 0, 1e-30, d)
-    for k in range(m.shape[0]):
-        ta, tb = (bx[k, 0] - o) * inv_d, (bx[k, 1] - o) * inv_d
-        tn = np.maximum(np.minimum(ta, tb).max(1), t0)
-        tf = np.minimum(np.maximum(ta, tb).min(1) * (1 + 1e-6), best)
-        sel = np.nonzero((tn <= tf) & (prim < 0 if any_hit else True))[0]
-        if sel.size == 0:
-            continue
-        inv = np.linalg.inv(m[k, :3, :3])
-        ol = (o[sel] - m[k, :3, 3]) @ inv.T
-        dl = d[sel] @ inv.T
-        s = np.linalg.norm(dl, axis=1)
-        t, p = host.query(ol, dl / s[:, None], t0[sel] * s, best[sel] * s, any_hit)
-        hit = p >= 0
+    ck, ct, cnt = (np.asarray(x) for x in cand)
+    C = ck.shape[-1]
+    ck, ct, cnt = ck.reshape(-1, C), ct.reshape(-1, C).astype(np.float64), cnt.reshape(-1)
+    inv = np.linalg.inv(m[:, :3, :3])
+
+    def query(rr, kk):
+        """Query the pairs (ray rr, instance kk) and keep each ray's nearest hit."""
+        if rr.size == 0:
+            return
+        ol = np.einsum("pij,pj->pi", inv[kk], o[rr] - m[kk, :3, 3])
+        dl = np.einsum("pij,pj->pi", inv[kk], d[rr])
+        s = np.sqrt(np.einsum("pi,pi->p", dl, dl))
+        dl /= s[:, None]
+        # all pairs' local rays meet the same shared scene: one Embree call
+        t, p = host.query(ol, dl, t0[rr] * s, best[rr] * s, any_hit)
+        t = np.asarray(t, np.float64) / s
+        h = np.flatnonzero(p >= 0)
         if any_hit:
-            prim[sel[hit]] = k * n + p[hit]
-            continue
-        tw = t.astype(np.float64) / s
-        closer = hit & (tw < best[sel])
-        best[sel[closer]] = tw[closer]
-        prim[sel[closer]] = k * n + p[closer]
+            prim[rr[h]] = kk[h] * n + p[h]
+            return
+        h = h[np.lexsort((t[h], rr[h]))]  # several candidates of a ray: its nearest hit
+        h = h[np.r_[True, rr[h][1:] != rr[h][:-1]]] if h.size else h
+        best[rr[h]] = t[h]
+        prim[rr[h]] = kk[h] * n + p[h]
+
+    # round 1: each ray's nearest box
+    r1 = np.flatnonzero(ck[:, 0] >= 0)
+    query(r1, ck[r1, 0])
+    # round 2: the other listed boxes entered before the best hit (the lists are sorted)
+    live = (ck[:, 1:] >= 0) & (ct[:, 1:] <= best[:, None])
+    if any_hit:
+        live &= (prim < 0)[:, None]
+    r2, j2 = np.nonzero(live)
+    k2 = ck[:, 1:][r2, j2]
+    over = np.flatnonzero(cnt > C)
+    if over.size:  # rays that met more boxes than the list holds: all their boxes (the
+        # listed ones again: a repeated query finds nothing closer, and ties in entry t,
+        # e.g. an origin inside many boxes, leave no safe cut)
+        ro, ko, _ = tlas_candidates(*top, o[over], d[over], t0[over], best[over])
+        rest = (prim[over[ro]] < 0) if any_hit else np.ones(ro.size, bool)
+        r2, k2 = np.r_[r2, over[ro[rest]]], np.r_[k2, ko[rest]]
+    query(r2, k2)
     t = np.where(prim >= 0, best, np.inf).astype(np.float32)
     return t.reshape(batch), prim.astype(np.int32).reshape(batch)
 
@@ -187,11 +224,13 @@ class Instances(eqx.Module):
     shape: object
     to_world: Float[Array, "K 4 4"]
     bounds: Float[Array, "K 2 3"] | None
+    tlas: TopLevel | None
     n_prims: int = eqx.field(static=True)
 
-    def __init__(self, shape, to_world, bounds=None):
+    def __init__(self, shape, to_world, bounds=None, tlas=None):
         self.n_prims = _prim_count(shape)
         self.bounds = bounds
+        self.tlas = tlas
         if isinstance(to_world, jax.core.Tracer):
             self.to_world = to_world
         else:
@@ -202,6 +241,8 @@ class Instances(eqx.Module):
             if bounds is None and not _traced(shape):
                 bx = _world_boxes(_base(shape), m)
                 self.bounds = None if bx is None else jnp.asarray(bx, dt)
+                if tlas is None and bx is not None:  # the top level over the boxes (host, once)
+                    self.tlas = build_tlas(bx)
         self.shape = shape
 
     @property
@@ -213,7 +254,7 @@ class Instances(eqx.Module):
         """Rays of batch ``(...)`` in every instance's space: ``(K, ...)`` (no derivatives)."""
         sg = jax.lax.stop_gradient
         lin, b = _split(sg(self.to_world).astype(o.dtype))
-        inv = jnp.linalg.inv(lin)  # (K, 3, 3)
+        inv = inv3(lin)  # (K, 3, 3)
         ex = (slice(None),) + (None,) * (o.ndim - 1)
         ol = _apply(inv[ex], sg(o)[None] - b[ex])
         dl = _apply(inv[ex], sg(d)[None])
@@ -231,34 +272,56 @@ class Instances(eqx.Module):
         return ol, dl, s, tmin_w * s, tmax_w * s
 
     def _host_tlas(self, o, d, tmin, tmax, any_hit):
-        """Embree: the instance loop runs on the host in ONE callback (world rays in; per
-        instance only the rays that reach its box before the best hit so far are mapped and
-        queried), instead of ``K`` times the rays through the callback."""
+        """Embree: both levels run on the host in ONE callback (world rays in; the top-level
+        BVH picks the instances whose boxes each ray meets, see :func:`_tlas_query`), instead
+        of ``K`` times the rays through the callback."""
         sg = jax.lax.stop_gradient
         batch = o.shape[:-1]
         out = (jax.ShapeDtypeStruct(batch, jnp.float32), jax.ShapeDtypeStruct(batch, jnp.int32))
         n = self.n_prims
 
-        def cb(h, m, bx, o, d, t0, t1):
-            return _tlas_query(h, m, bx, o, d, t0, t1, any_hit, n)
+        def cb(h, m, tb, to, tl, ck, ct, cnt, o, d, t0, t1):
+            return _tlas_query(h, m, (tb, to, tl), (ck, ct, cnt), o, d, t0, t1, any_hit, n)
 
+        top = self.tlas
+        t0 = jnp.broadcast_to(sg(tmin), batch)
+        t1 = jnp.broadcast_to(sg(tmax), batch)
+        flat = (sg(o).reshape(-1, 3), sg(d).reshape(-1, 3), t0.reshape(-1), t1.reshape(-1))
+        cand = tuple(x.reshape(*batch, *x.shape[1:]) for x in tlas_collect(top, *flat))
         t, p = jax.pure_callback(
-            cb, out, self.shape.handle, sg(self.to_world), sg(self.bounds), sg(o), sg(d),
-            jnp.broadcast_to(sg(tmin), batch), jnp.broadcast_to(sg(tmax), batch),
-            vmap_method="expand_dims",
+            cb, out, self.shape.handle, sg(self.to_world), top.bounds, top.offset, top.leaf,
+            *cand, sg(o), sg(d),
+            t0, t1, vmap_method="expand_dims",
         )  # fmt: skip
         return t.astype(o.dtype), p
 
     def _host(self):
         from jaxgfx.render.geometry.accel.embree import EmbreeMesh
 
-        return isinstance(self.shape, EmbreeMesh) and self.bounds is not None
+        return isinstance(self.shape, EmbreeMesh) and self.tlas is not None
+
+    def _two_level(self, o, d, tmin, tmax, any_hit):
+        """JAX BVH bottom level under the top-level BVH: one wavefront through both levels
+        (:func:`~jaxgfx.render.geometry.accel.tlas.two_level_trace`); ``(t, prim)``."""
+        sg = jax.lax.stop_gradient
+        batch = o.shape[:-1]
+        flat = (sg(o).reshape(-1, 3), sg(d).reshape(-1, 3),
+                jnp.broadcast_to(sg(tmin), batch).reshape(-1),
+                jnp.broadcast_to(sg(tmax), batch).reshape(-1))  # fmt: skip
+        t, p = two_level_trace(self.tlas, self.shape, self.to_world, *flat, any_hit=any_hit)
+        return t.reshape(batch), p.reshape(batch)
+
+    def _jax_tlas(self):
+        return isinstance(self.shape, BVH) and self.tlas is not None
 
     def closest_t(self, o, d, *, tmin=0.0, tmax=jnp.inf):
         """Nearest world ``(t, prim_id)`` over all instances (``prim_id = k·n + j``)."""
         o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
         if self._host():
             t, p = self._host_tlas(o, d, tmin, tmax, False)
+            return jnp.where(p >= 0, t, jnp.inf), jnp.maximum(p, 0)
+        if self._jax_tlas():
+            t, p = self._two_level(o, d, tmin, tmax, False)
             return jnp.where(p >= 0, t, jnp.inf), jnp.maximum(p, 0)
         ol, dl, s, tmin_l, tmax_l = self._local_rays(o, d, tmin, tmax)
         t, p = _closest_t(self.shape, ol, dl, tmin_l, tmax_l)
@@ -273,6 +336,8 @@ class Instances(eqx.Module):
         o, d, tmin, tmax = prepare_rays(o, d, tmin, tmax)
         if self._host():
             return self._host_tlas(o, d, tmin, tmax, True)[1] >= 0
+        if self._jax_tlas():
+            return self._two_level(o, d, tmin, tmax, True)[1] >= 0
         ol, dl, _, tmin_l, tmax_l = self._local_rays(o, d, tmin, tmax)
         if hasattr(self.shape, "occluded"):
             hit = self.shape.occluded(ol, dl, tmax_l, tmin=tmin_l)
@@ -289,7 +354,7 @@ class Instances(eqx.Module):
         j = pid % self.n_prims
         m = take_rows(self.to_world.astype(o.dtype), k)  # (..., 4, 4)
         lin, b = _split(m)
-        inv = jnp.linalg.inv(lin)
+        inv = inv3(lin)
         ol = _apply(inv, o - b)
         dl = _apply(inv, d)
         s = jnp.sqrt(sum_last(dl * dl))
@@ -327,7 +392,7 @@ class Instances(eqx.Module):
             f = (base.faces[None] + nv * jnp.arange(self.count)[:, None, None]).reshape(-1, 3)
             n = None
             if base.normals is not None:
-                it = jnp.swapaxes(jnp.linalg.inv(lin), -1, -2)
+                it = jnp.swapaxes(inv3(lin), -1, -2)
                 n = safe_normalize(_apply(it[:, None], base.normals[None])).reshape(-1, 3)
             uv = None if base.uvs is None else jnp.tile(base.uvs, (self.count, 1))
             return TriangleMesh(v.reshape(-1, 3), f, n, uv)
