@@ -131,3 +131,55 @@ def test_textured_emitters_equal_path_tracer_in_expectation():
     assert np.max(np.abs(z_blk)) < Z_MAX
     # every emitter contributes: the lit regions are not black in either renderer
     assert pa.mean() > 0 and np.mean(pt > 0) > 0.3
+
+
+# -- the emission weights under jit: closed forms and derivatives -----------------------------
+
+
+def test_projector_and_textured_spot_emission_weights_and_gradients():
+    """``sample_emission`` under jit: the projector's weight is ``n_lights pi scale E(uv) A``
+    (``A = 4 tan²(fov / 2) / aspect``) and its direction points through the image-plane point
+    of ``uv``; AD of the weights w.r.t. scale, fov and the spot's intensity equals central
+    differences (float64)."""
+    from jaxgfx.render.integrators.ptracer import sample_emission
+
+    e = [0.3, 0.6, 0.9]
+    proj = {"type": "projector", "position": [0, 0, 2], "direction": [0, 0, -1],
+            "up": [0, 1, 0], "fov": 50.0, "irradiance": e, "scale": 0.7}  # fmt: skip
+    spot = {"type": "spot", "position": [0.4, 0.3, 1.2], "direction": [0, 0, -1],
+            "intensity": 1.5, "cutoff_angle": 30.0, "beam_width": 15.0, "up": [0, 1, 0],
+            "texture": BITMAP}  # fmt: skip
+    scene = load_scene(
+        {"camera": camera([0, 0, 3], [0, 0, 0], fov=40, width=2, up=[0, 1, 0]),
+         "shapes": [{"type": "sphere", "center": [0, 0, -3], "radius": 1.0}],
+         "emitters": [proj, spot]}, dtype=jnp.float64)  # fmt: skip
+    u = jax.random.uniform(jax.random.key(0), (64, 5), jnp.float64)
+    u_proj = u.at[:, 0].set(0.25)  # the first delta light (the projector)
+    o, d, w = jax.jit(sample_emission)(scene, u_proj)
+    t = math.tan(math.radians(25.0))
+    np.testing.assert_allclose(w, np.tile(2 * math.pi * 0.7 * np.array(e) * 4 * t * t, (64, 1)),
+                               rtol=1e-12)  # fmt: skip
+    # the direction crosses the image plane at the sampled uv (the projector's own mapping)
+    light = scene.delta_lights[0]
+    uv, inside = light.uv(light.local(o + d))
+    assert np.all(inside)
+    np.testing.assert_allclose(uv, u[:, 3:5], atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=-1), 1.0, rtol=1e-12)
+    np.testing.assert_allclose(o, np.tile([0.0, 0.0, 2.0], (64, 1)))
+
+    @jax.jit
+    def total(x, uu):
+        s = scene.replace("emitters.projector.0.scale", x[0])
+        s = s.replace("emitters.projector.0.fov", x[1]).replace("emitters.spot.0.intensity", x[2:])
+        return jnp.sum(sample_emission(s, uu)[2])
+
+    x0 = jnp.asarray([0.7, 50.0, 1.5, 1.5, 1.5], jnp.float64)
+    u_spot = u.at[:, 0].set(0.75)
+    grad = jax.jit(jax.grad(total))
+    h = 1e-5
+    steps = h * np.eye(5)
+    for uu in (u_proj, u_spot):
+        g = grad(x0, uu)
+        fd = [(total(x0 + steps[i], uu) - total(x0 - steps[i], uu)) / (2 * h) for i in range(5)]
+        np.testing.assert_allclose(g, fd, rtol=1e-6, atol=1e-9)
+        assert float(jnp.abs(g).sum()) > 0
