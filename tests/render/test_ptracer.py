@@ -947,30 +947,6 @@ def test_shading_normals_closed_form():
     assert abs(z_wrong) > 10  # the uncorrected light tracer would be rejected by far
 
 
-def test_textured_area_radiance_refused_with_file_and_line(tmp_path):
-    """Bitmap radiance on an area emitter is not traced (neither by ``ptracer`` nor ``path``):
-    the XML loader names the file, the line and the emitter."""
-    from jaxgfx.render.scene.mitsuba_xml import read_xml
-
-    xml = tmp_path / "t.xml"
-    xml.write_text(
-        """<scene version="3.0.0">
-  <integrator type="ptracer"/>
-  <sensor type="perspective"><float name="fov" value="40"/>
-    <film type="hdrfilm"><integer name="width" value="4"/><integer name="height" value="4"/>
-    </film></sensor>
-  <shape type="rectangle"><bsdf type="diffuse"/></shape>
-  <shape type="rectangle">
-    <emitter type="area">
-      <texture type="bitmap" name="radiance"><string name="filename" value="x.exr"/></texture>
-    </emitter>
-  </shape>
-</scene>"""
-    )
-    with pytest.raises(ValueError, match=r"t\.xml:8: .*<emitter type='area'>: .*'radiance'"):
-        read_xml(str(xml))
-
-
 def _grazing_loss(x, scene):
     s = scene.replace("emitters.directional.0.irradiance", x[:3]).replace(
         "emitters.environment.radiance", x[3:]

@@ -16,9 +16,15 @@ Conventions (Mitsuba 3 ``ptracer``):
 - Emission: an emitter is picked uniformly (the order of
   :func:`~jaxgfx.render.integrators._common.sample_light`); point lights emit uniformly over
   the sphere (weight ``4π I``), spot lights uniformly in their cutoff cone (weight
-  ``I falloff 2π (1 - cos cutoff)``), area lights from a point drawn by area and a
-  cosine-weighted direction on their front side (weight ``π L / pdf_area``); each divided by
-  the selection probability.
+  ``I falloff 2π (1 - cos cutoff)``, times the projected texture at the direction's ``uv``
+  for a textured spot), projectors through a point uniform on their image rectangle at unit
+  distance (weight ``π scale E(uv) A``, ``A`` the rectangle's area: the density of the
+  direction ``r³ / A`` against the intensity ``π scale E / cos³θ``), area lights from a
+  point drawn as the path tracer's light sampling draws it
+  (:func:`~jaxgfx.render.integrators._common.sample_area_light`: by area, or by the texels
+  of a bitmap radiance) and a cosine-weighted direction on their front side (weight
+  ``π L(uv) / pdf_area``, ``L(uv)`` the radiance there, textured or constant); each divided
+  by the selection probability.
 - Sensor: the pinhole's importance ``We = 1 / (A cos³θ)`` (``A`` the area of the image
   rectangle at unit distance) divided by the squared distance; the film holds the sum of the
   splats of ``W H spp`` light paths divided by ``spp``.
@@ -47,9 +53,8 @@ Conventions (Mitsuba 3 ``ptracer``):
   environment: a direction sampled from the camera's position, ``L We / pdf`` where
   unoccluded (Mitsuba samples it from the sensor's position too).
 
-Not supported (one ``ValueError`` naming it, before tracing): other emitter types (e.g. a
-textured spot light or a projector, an area light with textured radiance), distant emitters in
-a scene with a shape that has no bounds here (SDFs), cameras other than the pinhole
+Not supported (one ``ValueError`` naming it, before tracing): other emitter types, distant
+emitters in a scene with a shape that has no bounds here (SDFs), cameras other than the pinhole
 :class:`~jaxgfx.render.camera.PerspectiveCamera`.
 
 Derivatives: reverse mode through the splat (``.at[].add``): emitter intensities / radiances
@@ -68,10 +73,10 @@ import jax
 import jax.numpy as jnp
 
 from jaxgfx._math import max_last, safe_div, safe_sqrt, sum_last, take_rows
+from jaxgfx.render.bsdf.texture import lookup
 from jaxgfx.render.camera import PerspectiveCamera, look_at_basis
-from jaxgfx.render.emitters import AreaLight, DirectionalLight, SpotLight
+from jaxgfx.render.emitters import AreaLight, DirectionalLight, ProjectorLight, SpotLight
 from jaxgfx.render.film import BoxFilter, GaussianFilter, TentFilter
-from jaxgfx.render.geometry import sample_area
 from jaxgfx.render.geometry.frame import frame_from_normal, to_world
 from jaxgfx.render.geometry.instance import Instances
 from jaxgfx.render.geometry.mesh import TriangleMesh
@@ -95,9 +100,8 @@ N_BOUNCE = 4  # per bounce: BSDF lobe, BSDF direction (2), Russian roulette
 
 def check_light_tracing(scene) -> None:
     """``ValueError`` naming what the particle tracer cannot trace in ``scene`` (host-side,
-    before tracing): a camera other than the pinhole, an emitter type it does not know (a
-    textured spot light, a projector, an area light with textured radiance), an environment or
-    directional light in a scene with a shape it cannot bound (an SDF)."""
+    before tracing): a camera other than the pinhole, an emitter type it does not know, an
+    environment or directional light in a scene with a shape it cannot bound (an SDF)."""
     cam = scene.camera
     if type(cam) is not PerspectiveCamera:
         raise ValueError(
@@ -106,20 +110,16 @@ def check_light_tracing(scene) -> None:
         )
     for k, light in enumerate(scene.delta_lights):
         name = type(light).__name__
-        if type(light) not in (SpotLight, DirectionalLight):
+        if type(light) not in (SpotLight, DirectionalLight, ProjectorLight):
             raise ValueError(
                 f"emitters: the 'ptracer' integrator does not trace {name} (delta_lights[{k}]): "
-                "point, spot, directional, area and environment lights only; use 'path'"
-            )
-        if getattr(light, "texture", None) is not None:
-            raise ValueError(
-                f"emitters: the 'ptracer' integrator does not trace a textured spot light "
-                f"(delta_lights[{k}]) yet; use 'path'"
+                "point, spot, projector, directional, area and environment lights only; use "
+                "'path'"
             )
     for k, al in enumerate(scene.area_lights):
-        if type(al) is not AreaLight or jnp.shape(al.radiance) != (3,):
+        if type(al) is not AreaLight or (not al.textured and jnp.shape(al.radiance) != (3,)):
             raise ValueError(
-                f"emitters: the 'ptracer' integrator traces area lights of constant RGB "
+                f"emitters: the 'ptracer' integrator traces area lights of RGB or textured "
                 f"radiance, got {type(al).__name__} (area_lights[{k}])"
             )
     distant = scene.environment is not None or any(
@@ -248,6 +248,27 @@ def _light_index(scene, u_sel):
     return cand, row
 
 
+def _projector_emission(light, u):
+    """A ray leaving projector ``light`` from ``u (..., 2)``: a point uniform on the image
+    rectangle at unit distance (``uv = u``; ``x = (1 - 2u) t``, ``y = (1 - 2v) t / aspect``,
+    ``t = tan(fov / 2)``, area ``A = 4 t² / aspect``). Its solid-angle density is
+    ``r³ / A`` (``r = 1 / cos θ`` the distance to the point) and the intensity there
+    ``π scale E(uv) / cos³ θ`` (the irradiance ``π scale E / z²`` on a plane facing it), so the
+    weight is ``π scale E(uv) A``."""
+    dtype = u.dtype
+    t = jnp.tan(jnp.deg2rad(light.fov.astype(dtype)) * 0.5)
+    x = (1.0 - 2.0 * u[..., 0]) * t
+    y = (1.0 - 2.0 * u[..., 1]) * t / light.aspect
+    loc = jnp.stack([x, y, jnp.ones_like(x)], -1)
+    d = loc @ light.frame.astype(dtype)
+    d = d / jnp.linalg.norm(d, axis=-1, keepdims=True)  # |loc| >= 1: no zero norm
+    area = 4.0 * t * t / light.aspect
+    e = lookup(light.irradiance, u).astype(dtype)
+    w = e * (math.pi * light.scale.astype(dtype) * area)
+    o = jnp.broadcast_to(light.position.astype(dtype), d.shape)
+    return o, d, w
+
+
 def sample_emission(scene, u):
     """A ray leaving an emitter, from uniform numbers ``u (..., 5)`` (select, position (2),
     direction (2)): ``(o, d, weight)`` with ``weight = Le cos / (p_select p_pos p_dir)``."""
@@ -258,11 +279,11 @@ def sample_emission(scene, u):
     n_sel = jnp.asarray(scene.n_lights, dtype)
     cands = []
     for al, sh in zip(scene.area_lights, scene.emitter_shapes, strict=True):
-        p, n, pdf_a = sample_area(sh, u_pos)
+        p, n, pdf_a, rad = C.sample_area_light(al, sh, u_pos, dtype)  # L(uv) if textured
         local = square_to_cosine_hemisphere(u_dir)
         d = to_world(frame_from_normal(n), local)
         o, _ = C.spawn_ray(p, n, d)
-        w = al.radiance.astype(dtype) * safe_div(math.pi, pdf_a)[..., None]
+        w = rad * safe_div(math.pi, pdf_a)[..., None]
         cands.append((o, d, w))
     if scene.point_lights is not None:
         pl = scene.point_lights
@@ -284,7 +305,10 @@ def sample_emission(scene, u):
         o = _disk_origin(center, radius, d, u_pos)
         w = le * (disk * safe_div(1.0, pdf))[..., None]
         cands.append((o, d, w))
-    for light in scene.delta_lights:  # spot and directional lights (check_light_tracing)
+    for light in scene.delta_lights:  # spot, projector, directional (check_light_tracing)
+        if type(light) is ProjectorLight:
+            cands.append(_projector_emission(light, u_dir))
+            continue
         if type(light) is DirectionalLight:
             d = light.direction.astype(dtype)
             d = jnp.broadcast_to(d / jnp.linalg.norm(d), batch + (3,))
@@ -299,6 +323,8 @@ def sample_emission(scene, u):
         d = to_world(frame_from_normal(jnp.broadcast_to(axis, batch + (3,))), local)
         fall = light.falloff(local[..., 2])
         w = (light.intensity.astype(dtype) * (2.0 * math.pi) * (1.0 - cos_cut)) * fall[..., None]
+        if light.texture is not None:  # the projected texture at the direction's uv
+            w = w * light.texture_value(d)
         o = jnp.broadcast_to(light.position.astype(dtype), batch + (3,))
         cands.append((o, d, w))
     o, d, w = _select([jax.tree_util.tree_map(lambda a: jnp.broadcast_to(
@@ -322,8 +348,8 @@ def _visible_emitters(scene, u):
     if scene.area_lights:
         cands = []
         for al, sh in zip(scene.area_lights, scene.emitter_shapes, strict=True):
-            p, n, pdf_a = sample_area(sh, u[..., 1:3])
-            cands.append((p, n, al.radiance.astype(dtype) * safe_div(1.0, pdf_a)[..., None]))
+            p, n, pdf_a, rad = C.sample_area_light(al, sh, u[..., 1:3], dtype)
+            cands.append((p, n, rad * safe_div(1.0, pdf_a)[..., None]))
         p, n, le = _select(cands, jnp.clip(cand, 0, na - 1))
         pix, to_cam, dist, we, ok = _sensor_connection(scene.camera, p)
         cos_l = sum_last(n * to_cam)  # the front side only (jaxgfx area lights emit along ng)
