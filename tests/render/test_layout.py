@@ -21,6 +21,7 @@ from jaxgfx.render import (
     render,
 )
 from jaxgfx.render.bsdf import RoughConductor, RoughPlastic
+from jaxgfx.render.integrators import ParticleTracer
 from jaxgfx.render.parameters import parameter_paths
 from jaxgfx.render.scene.mitsuba import to_mitsuba_dict
 
@@ -58,6 +59,7 @@ def test_integrator_registry_and_options():
         "direct": DirectIntegrator,
         "whitted": WhittedIntegrator,
         "aov": AOVIntegrator,
+        "ptracer": ParticleTracer,
     }
     assert PathIntegrator(max_depth=4).random_shape == (4, 7)
     assert DirectIntegrator().max_depth == 2

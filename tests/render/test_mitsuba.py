@@ -197,7 +197,7 @@ def test_integrator_mapping():
             NotImplementedError,
             "view_proj_inverse",
         ),  # fmt: skip
-        ({"emitters": [{"type": "projector"}]}, ValueError, r"emitters\[0\]\.type"),
+        ({"emitters": [{"type": "sunsky"}]}, ValueError, r"emitters\[0\]\.type"),
         # spot and directional are exported since their XML mapping; validated as load_scene
         ({"emitters": [{"type": "spot"}]}, ValueError, r"emitters\[0\]: missing key"),
         (

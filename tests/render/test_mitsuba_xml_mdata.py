@@ -71,7 +71,7 @@ def test_checkerboard_eval_and_eval_1_patterns_match_mitsuba():
 
 
 @pytest.mark.parametrize("shape", ["cube", "disk", "cylinder"])
-def test_a_constant_mask_on_a_tessellated_shape_loads_a_textured_one_is_refused(tmp_path, shape):
+def test_constant_and_textured_masks_on_tessellated_shapes_load(tmp_path, shape):
     mask = ('<bsdf type="mask"><float name="opacity" value="0.3"/><bsdf type="twosided">'
             '<bsdf type="diffuse"/></bsdf></bsdf>')  # fmt: skip
     at = '<transform name="to_world"><translate z="5"/></transform>'
@@ -80,8 +80,10 @@ def test_a_constant_mask_on_a_tessellated_shape_loads_a_textured_one_is_refused(
     assert m["type"] == "mask" and m["opacity"] == 0.3
     tex = mask.replace('<float name="opacity" value="0.3"/>',
                        '<texture name="opacity" type="checkerboard"/>')  # fmt: skip
-    with pytest.raises(ValueError, match=f"textured {shape}s are not supported"):
-        _read(tmp_path, f'<shape type="{shape}">{at}{tex}</shape>')
+    # textured since the cube / disk / cylinder carry Mitsuba's uv layouts (test_shape_uv.py)
+    _, desc = _read(tmp_path, f'<shape type="{shape}">{at}{tex}</shape>')
+    (m,) = desc["materials"].values()
+    assert m["type"] == "mask" and m["opacity"]["type"] == "checkerboard"
 
 
 # ------------------------------------------------------------------------------ rawconstant

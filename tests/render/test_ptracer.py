@@ -15,7 +15,11 @@ import pytest
 from jaxgfx.render import load_scene, render
 from jaxgfx.render.integrators import INTEGRATORS, ParticleTracer, make_integrator
 
-jax.config.update("jax_enable_x64", True)
+
+@pytest.fixture(autouse=True)
+def _float64(x64):
+    """float64 in every test of this module, restored after it (tests/conftest.py ``x64``)."""
+    yield
 
 RHO, INTENSITY = 0.5, 10.0
 LIGHT = np.array([0.5, 0.3, 1.0])

@@ -16,7 +16,11 @@ from jaxgfx.render import load_scene, render
 from jaxgfx.render.integrators import ParticleTracer, make_integrator
 from tests.render._scenes import camera, rectangle
 
-jax.config.update("jax_enable_x64", True)
+
+@pytest.fixture(autouse=True)
+def _float64(x64):
+    """float64 in every test of this module, restored after it (tests/conftest.py ``x64``)."""
+    yield
 
 RHO = 0.5
 Z_MAX = 5.0
