@@ -19,6 +19,7 @@ from jaxgfx.render.bsdf._conductor import Mirror as Mirror
 from jaxgfx.render.bsdf._dielectric import SmoothDielectric as SmoothDielectric
 from jaxgfx.render.bsdf._diffuse import Diffuse as Diffuse
 from jaxgfx.render.bsdf._mask import Mask as Mask
+from jaxgfx.render.bsdf._mask import Null as Null
 from jaxgfx.render.bsdf._normalmap import BumpMap as BumpMap
 from jaxgfx.render.bsdf._normalmap import NormalMap as NormalMap
 from jaxgfx.render.bsdf._normalmap import TangentSpace as TangentSpace
@@ -47,6 +48,7 @@ __all__ = [
     "ThinDielectric",
     "BlendBSDF",
     "Mask",
+    "Null",
     "NormalMap",
     "BumpMap",
     "TangentSpace",
@@ -68,6 +70,7 @@ BSDF_TYPES = {
     "thindielectric": ThinDielectric,
     "blendbsdf": BlendBSDF,
     "mask": Mask,
+    "null": Null,
     "principled": Principled,
     "principledthin": PrincipledThin,
     "normalmap": NormalMap,

@@ -17,8 +17,9 @@ from jaxgfx.render.bsdf._base import (
     prep_dirs,
     sample_setup,
 )
+from jaxgfx.render.bsdf._diffuse import Diffuse
 
-__all__ = ["Mask"]
+__all__ = ["Mask", "Null"]
 
 
 def _frac(p):
@@ -99,3 +100,13 @@ class Mask(BSDF):
             is_delta=jnp.where(nested, s.is_delta, True),
             eta=jnp.where(nested, s.eta, 1.0).astype(wo.dtype),
         )
+
+
+class Null(Mask):
+    """Invisible surface (Mitsuba 3 ``null``): a :class:`Mask` of opacity 0 over a black
+    diffuse BSDF, so ``eval = pdf = 0`` and ``sample`` always continues the ray straight on
+    (``wi = -wo``, weight 1, ``pdf`` 1, delta), a bounce as in Mitsuba 3.9's ``path``. No
+    parameters; shadow rays see the surface as opaque, as for a mask."""
+
+    def __init__(self):
+        super().__init__(Diffuse(0.0), 0.0)

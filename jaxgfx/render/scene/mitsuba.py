@@ -356,6 +356,8 @@ def _mitsuba_bsdf(m, where) -> dict:
         # jaxgfx shades a reflection-only nested BSDF on both sides: twosided in Mitsuba
         out = {"type": kind, "opacity": _float(m.opacity),
                "bsdf": _twosided(_mitsuba_bsdf(m.bsdf, f"{where}.bsdf"))}  # fmt: skip
+    elif kind == "null":
+        out = {"type": kind}
     elif kind in ("principled", "principledthin"):
         out = _principled_keys(m, where)
     else:
@@ -1003,6 +1005,8 @@ def _bsdf_desc(m, where) -> dict:
         return {"type": "blendbsdf", "weight": _list(m.weight),
                 "bsdf0": _bsdf_desc(m.bsdf0, f"{where}.bsdf0"),
                 "bsdf1": _bsdf_desc(m.bsdf1, f"{where}.bsdf1")}  # fmt: skip
+    if isinstance(m, B.Null):
+        return {"type": "null"}
     if isinstance(m, B.Mask):
         return {"type": "mask", "opacity": _list(m.opacity),
                 "bsdf": _bsdf_desc(m.bsdf, f"{where}.bsdf")}  # fmt: skip

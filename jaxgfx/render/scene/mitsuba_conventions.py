@@ -86,7 +86,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("bsdf", "polarizer"): "refused: no polarized BSDFs in jaxgfx",
     ("bsdf", "retarder"): "refused: no polarized BSDFs in jaxgfx",
     ("bsdf", "measured"): "refused: no measured BSDFs in jaxgfx",
-    ("bsdf", "null"): "refused: no null BSDF in jaxgfx",
+    ("bsdf", "null"): S + " (`Null`: a mask of opacity 0; not nested)",
     ("bsdf", "hair"): "refused: no hair BSDF in jaxgfx",
     # textures
     ("texture", "bitmap"): S + " (`to_uv` an affine uv map)",
@@ -166,6 +166,7 @@ BSDF_TO_MITSUBA = {
     "ThinDielectric": "thindielectric",
     "BlendBSDF": "blendbsdf",
     "Mask": "mask",
+    "Null": "null",
     "Principled": "principled",
     "PrincipledThin": "principledthin",
 }

@@ -920,6 +920,11 @@ def _bsdf_dict(obj: _Obj, doc, *, nested=False, in_map=False) -> dict:
             raise ValueError(f"{obj.where}: a mask nested in a blendbsdf or mask is not supported")
         m = _mask_dict(obj, p, doc)
         children_ok = len(obj.children)
+    elif t == "null":  # no parameters: Mask(Diffuse(0), opacity 0)
+        if nested:
+            raise ValueError(f"{obj.where}: a null BSDF nested in a blendbsdf or mask is not "
+                             "supported (a mask's opacity does that)")  # fmt: skip
+        m = {"type": "null"}
     elif t in ("normalmap", "bumpmap"):
         if nested:
             raise ValueError(f"{obj.where}: a {t} nested in a blendbsdf is not supported")
