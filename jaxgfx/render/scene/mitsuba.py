@@ -1207,7 +1207,10 @@ def mitsuba_integrator(
     the same with ``max_depth = 2`` (as jaxgfx's ``direct``); ``"ptracer"`` -> Mitsuba's
     ``ptracer`` with the same ``max_depth`` / ``rr_depth`` (and ``hide_emitters``, which only
     ``ptracer`` takes: ``ValueError`` for the others). ``whitted`` and ``aov`` have no
-    Mitsuba counterpart (``NotImplementedError``); other names raise ``ValueError``.
+    Mitsuba counterpart (``NotImplementedError``); other names raise ``ValueError``. The
+    Mitsuba names ``"prb"`` / ``"prb_basic"`` (path replay backpropagation: jaxgfx's
+    ``PathIntegrator(adjoint="replay")``, with ``strategy="bsdf"`` for ``prb_basic``) are
+    written as they are, with ``max_depth`` and ``rr_depth``.
 
     Example: ``mitsuba_integrator("direct")["max_depth"] == 2``.
     """
@@ -1218,15 +1221,17 @@ def mitsuba_integrator(
         max_depth = 2
     elif name in ("whitted", "aov"):
         raise NotImplementedError(f"integrator: {name!r} has no Mitsuba 3 counterpart")
-    elif name not in ("path", "ptracer"):
-        raise ValueError(f"integrator: expected 'path', 'direct' or 'ptracer', got {name!r}")
+    elif name not in ("path", "ptracer", "prb", "prb_basic"):
+        raise ValueError(
+            f"integrator: expected 'path', 'direct', 'ptracer', 'prb' or 'prb_basic', got {name!r}"
+        )
     if not isinstance(hide_emitters, bool):
         raise ValueError(f"hide_emitters: expected a bool, got {hide_emitters!r}")
     if hide_emitters and name != "ptracer":
         raise ValueError(
             f"hide_emitters: jaxgfx's {name!r} does not hide emitters ('ptracer' does)"
         )
-    kind = "ptracer" if name == "ptracer" else "path"
+    kind = name if name in ("ptracer", "prb", "prb_basic") else "path"
     out = {"type": kind, "max_depth": int(max_depth), "rr_depth": int(rr_depth)}
     if hide_emitters:
         out["hide_emitters"] = True

@@ -103,8 +103,11 @@ class XMLScene:
     it is absolute), the sampler's ``spp`` (``None`` without a sensor sampler), the jaxgfx
     ``integrator`` name (``"path"``, ``"direct"`` or ``"ptracer"``), ``max_depth`` in the
     common convention (``None``: Mitsuba's ``-1``, unbounded; jaxgfx needs a number),
-    ``rr_depth``, ``files`` (every XML file read, in order) and ``hide_emitters`` (``ptracer``
-    only: pass it to ``ParticleTracer(hide_emitters=...)``)."""
+    ``rr_depth``, ``files`` (every XML file read, in order), ``hide_emitters`` (``ptracer``
+    only: pass it to ``ParticleTracer(hide_emitters=...)``), and the ``PathIntegrator`` options
+    ``adjoint`` (``"replay"`` for Mitsuba's ``prb`` / ``prb_basic``, else ``"ad"``) and
+    ``strategy`` (``"bsdf"`` for ``prb_basic``, else ``"mis"``); :attr:`integrator_spec` is
+    all of them as the mapping ``render(..., integrator=...)`` takes."""
 
     desc: dict
     spp: int | None
@@ -113,6 +116,22 @@ class XMLScene:
     rr_depth: int
     files: tuple
     hide_emitters: bool = False
+    adjoint: str = "ad"
+    strategy: str = "mis"
+
+    @property
+    def integrator_spec(self) -> dict:
+        """``{type, max_depth, rr_depth, ...}`` for ``render(scene, key, integrator=...)``
+        (``max_depth`` left out when unbounded: jaxgfx needs a number; ``hide_emitters``
+        left out: pass it to ``ParticleTracer``)."""
+        out = {"type": self.integrator}
+        if self.max_depth is not None and self.integrator != "direct":
+            out["max_depth"] = self.max_depth
+        if self.integrator in ("path", "ptracer"):
+            out["rr_depth"] = self.rr_depth
+        if self.integrator == "path":
+            out.update(strategy=self.strategy, adjoint=self.adjoint)
+        return out
 
 
 # ------------------------------------------------------------------------------------------
@@ -1675,14 +1694,16 @@ def _integrator(obj: _Obj, doc):
             raise ValueError(f"{obj.where}: expected exactly one nested <integrator>")
         p.done(children_ok=1)
         return _integrator(obj.children[0], doc)
-    if obj.type not in ("path", "direct", "ptracer"):
+    if obj.type not in ("path", "direct", "ptracer", "prb", "prb_basic"):
         raise ValueError(f"{obj.where}: integrator plugin {obj.type!r} is not supported "
-                         "(path, direct, ptracer, moment)")  # fmt: skip
+                         "(path, direct, ptracer, prb, prb_basic, moment)")  # fmt: skip
     hide = p.bool("hide_emitters", False)
     if hide and obj.type != "ptracer":
         raise p.err("hide_emitters", "hidden emitters are supported by 'ptracer' only")
-    if obj.type in ("path", "ptracer"):
-        depth = p.int("max_depth", -1)
+    opts = {}
+    if obj.type in ("path", "ptracer", "prb", "prb_basic"):
+        # Mitsuba's differentiable integrators default to max_depth 6, path / ptracer to -1
+        depth = p.int("max_depth", 6 if obj.type.startswith("prb") else -1)
         rr = p.int("rr_depth", 5)
         if depth == 0 or depth < -1 or rr < 1:
             raise p.err("max_depth", f"expected max_depth -1 or >= 1 and rr_depth >= 1, got "
@@ -1690,12 +1711,18 @@ def _integrator(obj: _Obj, doc):
         if obj.type == "ptracer":
             p.int("samples_per_pass", -1)  # a work split: the same image
         p.done()
-        return obj.type, (None if depth == -1 else depth), rr, hide
+        depth = None if depth == -1 else depth
+        if obj.type.startswith("prb"):  # path replay backpropagation: jaxgfx's replay adjoint
+            opts["adjoint"] = "replay"
+            if obj.type == "prb_basic":  # BSDF sampling only, no Russian roulette
+                opts["strategy"] = "bsdf"
+                rr = depth if depth is not None else rr
+        return ("ptracer" if obj.type == "ptracer" else "path"), depth, rr, hide, opts
     for name in ("emitter_samples", "bsdf_samples"):
         if p.int(name, 1) != 1:
             raise p.err(name, "only 1 sample per strategy is supported (jaxgfx direct MIS)")
     p.done()
-    return "direct", 2, 5, False
+    return "direct", 2, 5, False, opts
 
 
 def _point_triangles_distance(o, tri) -> float:
@@ -1777,7 +1804,8 @@ def read_xml(path, **params) -> XMLScene:
     desc["camera"] = cam
     if film:
         desc["film"] = film
-    integrator, depth, rr, hide = _integrator(integ[0], doc) if integ else ("path", None, 5, False)
+    integrator, depth, rr, hide, opts = (_integrator(integ[0], doc) if integ else
+                                         ("path", None, 5, False, {}))  # fmt: skip
     for o in objs:
         if o.tag == "shape" and o.type == "shapegroup":
             _shapegroup(o, doc, desc, ctx)
@@ -1804,7 +1832,7 @@ def read_xml(path, **params) -> XMLScene:
     _check_clip(ctx)
     if not desc["emitters"]:
         del desc["emitters"]
-    return XMLScene(desc, spp, integrator, depth, rr, tuple(doc.files), hide)
+    return XMLScene(desc, spp, integrator, depth, rr, tuple(doc.files), hide, **opts)
 
 
 # ------------------------------------------------------------------------------------------
