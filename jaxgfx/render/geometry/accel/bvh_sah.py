@@ -72,6 +72,17 @@ def _min_slot(t):
     return jax.lax.reduce((t, k), init, pick, (t.ndim - 1,))
 
 
+def near_far(hl, hr, ctn, left, right):
+    """Which child to visit first: ``(near, tnear, far, tfar)`` from the two children's hit
+    flags ``hl``, ``hr`` and entry distances ``ctn (2, ...)`` (the left one on ties)."""
+    l_first = ctn[0] <= ctn[1]
+    near = jnp.where(hl & (~hr | l_first), left, right)
+    tnear = jnp.where(near == left, ctn[0], ctn[1])
+    far = jnp.where(near == left, right, left)
+    tfar = jnp.where(near == left, ctn[1], ctn[0])
+    return near, tnear, far, tfar
+
+
 def _slab_reduced(bmin, bmax, o, inv, t0, t1):
     """:func:`slab`'s ``(tn, hit)`` with the per-axis max and min as one reduction (materialised,
     like :func:`_min_slot`)."""
@@ -120,11 +131,7 @@ def _step(bvh, tris, bounds, ray, s, any_hit, materialize=True):
         ctn, _, chit = slab(bl[:, 0], bl[:, 1], o, inv, tmin, best)
     inner = ~is_leaf & ~skip
     hl, hr = inner & chit[0], inner & chit[1]
-    l_first = ctn[0] <= ctn[1]
-    near = jnp.where(hl & (~hr | l_first), left, right)
-    tnear = jnp.where(near == left, ctn[0], ctn[1])
-    far = jnp.where(near == left, right, left)
-    tfar = jnp.where(near == left, ctn[1], ctn[0])
+    near, tnear, far, tfar = near_far(hl, hr, ctn, left, right)
     push = hl & hr & (sp < STACK_SIZE)
     # The slot above the top is free: write it unconditionally (an index past the end is
     # dropped), an in-place update of the loop carry.

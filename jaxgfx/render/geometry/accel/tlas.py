@@ -33,6 +33,7 @@ from jaxgfx.render.geometry.accel.bvh_sah import (
     _min_slot,
     _slab_reduced,
     build_bvh,
+    near_far,
     pool_width,
 )
 from jaxgfx.render.geometry.mesh import TriangleMesh
@@ -171,11 +172,7 @@ def _step(top, blas, bounds, tris, inv_lin, shift, n, ray, s, any_hit):
     bl = bounds[jnp.stack([left, jnp.minimum(right, bounds.shape[0] - 1)])]
     ctn, chit = _slab_reduced(bl[:, 0], bl[:, 1], ol, inv, tmin, best)
     hl, hr = inner & chit[0], inner & chit[1]
-    l_first = ctn[0] <= ctn[1]
-    near = jnp.where(hl & (~hr | l_first), left, right)
-    tnear = jnp.where(near == left, ctn[0], ctn[1])
-    far = jnp.where(near == left, right, left)
-    tfar = jnp.where(near == left, ctn[1], ctn[0])
+    near, tnear, far, tfar = near_far(hl, hr, ctn, left, right)
     push = hl & hr & (sp < TWO_LEVEL_STACK)
     sn = sn.at[sp].set(far, mode="drop")
     si = si.at[sp].set(inst, mode="drop")
@@ -318,11 +315,7 @@ def _collect_step(top, bounds, C, ray, s):
     ctn, chit = _slab_reduced(bl[:, 0], bl[:, 1], o, inv, tmin, tmax)
     inner = ~top.leaf[node] & ~done
     hl, hr = inner & chit[0], inner & chit[1]
-    l_first = ctn[0] <= ctn[1]
-    near = jnp.where(hl & (~hr | l_first), left, right)
-    tnear = jnp.where(near == left, ctn[0], ctn[1])
-    far = jnp.where(near == left, right, left)
-    tfar = jnp.where(near == left, ctn[1], ctn[0])
+    near, tnear, far, tfar = near_far(hl, hr, ctn, left, right)
     push = hl & hr & (sp < STACK_SIZE)
     sn = sn.at[sp].set(far, mode="drop")
     st = st.at[sp].set(tfar, mode="drop")
