@@ -152,6 +152,22 @@ def dispatch(scene, mat_id, fn, *, uv=None, lazy=False, tangents=None):
     return jax.tree_util.tree_map(select, *outs)
 
 
+def select_candidate(cands, idx):
+    """Per element, the pytree ``cands[idx]`` of a list of same-structure candidate pytrees
+    (``idx`` integer, the batch shape of the leaves' leading axes): a chain of ``where``."""
+    out = cands[0]
+    for k in range(1, len(cands)):
+        sel = idx == k
+        out = jax.tree_util.tree_map(
+            lambda a, b, sel=sel: jnp.where(
+                sel.reshape(sel.shape + (1,) * (a.ndim - sel.ndim)), b, a
+            ),
+            out,
+            cands[k],
+        )
+    return out
+
+
 def material_flag(scene, mat_id, attr):
     flags = [bool(getattr(m, attr)) for m in scene.materials]
     if all(flags):
@@ -414,15 +430,5 @@ def sample_light(scene, p, u_sel, u2, *, detached=False):
             ones = jnp.ones(p.shape[:-1], dtype)
             cands.append((wi, dist, li, ones, jnp.ones(p.shape[:-1], bool)))
         cand_idx = jnp.where(idx < n_before, cand_idx, c_before + idx - n_before)
-    out = cands[0]
-    for k in range(1, len(cands)):
-        sel = cand_idx == k
-        out = jax.tree_util.tree_map(
-            lambda a, b, sel=sel: jnp.where(
-                sel.reshape(sel.shape + (1,) * (a.ndim - sel.ndim)), b, a
-            ),
-            out,
-            cands[k],
-        )
-    wi, dist, li, pdf, is_delta = out
+    wi, dist, li, pdf, is_delta = select_candidate(cands, cand_idx)
     return wi, dist, li, pdf * _selection_prob(scene, dtype), is_delta

@@ -220,20 +220,6 @@ def _visible(scene, x, n, to_cam, dist):
 # -- emission -----------------------------------------------------------------------------
 
 
-def _select(cands, idx):
-    out = cands[0]
-    for k in range(1, len(cands)):
-        sel = idx == k
-        out = jax.tree_util.tree_map(
-            lambda a, b, sel=sel: jnp.where(
-                sel.reshape(sel.shape + (1,) * (a.ndim - sel.ndim)), b, a
-            ),
-            out,
-            cands[k],
-        )
-    return out
-
-
 def _light_index(scene, u_sel):
     """Uniform light choice ``-> (candidate index, point-light row)``: candidates are the area
     lights, the point lights (one candidate), then the spot lights."""
@@ -327,7 +313,7 @@ def sample_emission(scene, u):
             w = w * light.texture_value(d)
         o = jnp.broadcast_to(light.position.astype(dtype), batch + (3,))
         cands.append((o, d, w))
-    o, d, w = _select([jax.tree_util.tree_map(lambda a: jnp.broadcast_to(
+    o, d, w = C.select_candidate([jax.tree_util.tree_map(lambda a: jnp.broadcast_to(
         a, batch + a.shape[-1:]), c) for c in cands], cand)  # fmt: skip
     return o, d, w * n_sel
 
@@ -350,7 +336,7 @@ def _visible_emitters(scene, u):
         for al, sh in zip(scene.area_lights, scene.emitter_shapes, strict=True):
             p, n, pdf_a, rad = C.sample_area_light(al, sh, u[..., 1:3], dtype)
             cands.append((p, n, rad * safe_div(1.0, pdf_a)[..., None]))
-        p, n, le = _select(cands, jnp.clip(cand, 0, na - 1))
+        p, n, le = C.select_candidate(cands, jnp.clip(cand, 0, na - 1))
         pix, to_cam, dist, we, ok = _sensor_connection(scene.camera, p)
         cos_l = sum_last(n * to_cam)  # the front side only (jaxgfx area lights emit along ng)
         ok = ok & (cand < na) & (cos_l > 0) & _visible(scene, p, n, to_cam, dist)
