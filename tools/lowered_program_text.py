@@ -43,6 +43,7 @@ CASES = [
     ("spot", _desc(_SPOT), "path", 3),
     ("spot+point+directional", _desc(_SPOT, _POINT, _DIR), "path", 3),
     ("spot+directional whitted", _desc(_SPOT, _DIR), "whitted", 3),
+    ("spot, tent filter", {**_desc(_SPOT), "film": {"filter": "tent"}}, "path", 3),
 ]
 
 

@@ -23,7 +23,10 @@ from jaxgfx.render.emitters import ConstantEnvironment as ConstantEnvironment
 from jaxgfx.render.emitters import EnvironmentMap as EnvironmentMap
 from jaxgfx.render.emitters import PointLights as PointLights
 from jaxgfx.render.film import BoxFilter as BoxFilter
+from jaxgfx.render.film import CatmullRomFilter as CatmullRomFilter
 from jaxgfx.render.film import GaussianFilter as GaussianFilter
+from jaxgfx.render.film import LanczosFilter as LanczosFilter
+from jaxgfx.render.film import MitchellFilter as MitchellFilter
 from jaxgfx.render.film import TentFilter as TentFilter
 from jaxgfx.render.geometry import Hit as Hit
 from jaxgfx.render.geometry import Rectangles as Rectangles
@@ -66,6 +69,9 @@ __all__ = [
     "ThinLensCamera",
     "MatrixCamera",
     "BoxFilter",
+    "CatmullRomFilter",
+    "LanczosFilter",
+    "MitchellFilter",
     "GaussianFilter",
     "TentFilter",
     "PointLights",

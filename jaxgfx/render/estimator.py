@@ -218,6 +218,8 @@ def render_partial(
     rows (``(k R, W)`` rays): a small image does not pay one step's overhead per pass, and
     every sample keeps its random numbers (``rays_per_step=None``: one pass per step; same
     image up to the rounding of the differently compiled program, tests/render/test_layout.py).
+    A filter with negative lobes (``mitchell``, ``catmullrom``, ``lanczos``) multiplies each
+    sample's radiance by its signed weight (``film.pixel_samples(..., with_weights=True)``).
 
     ``rows``: ``None`` (all ``H`` rows) or global row indices ``(R,)`` (int32, may be traced;
     rows ``>= H`` are padding: rendered beyond the image with their own numbers). A row's
@@ -232,7 +234,9 @@ def render_partial(
     w, h = scene.width, scene.height
     kp, ku = jax.random.split(key)
     dtype = scene.dtype
-    px = pixel_samples(kp, w, h, spp, scene.rfilter, rows=rows, dtype=dtype)  # (R, W, spp, 2)
+    px, wt = pixel_samples(kp, w, h, spp, scene.rfilter, rows=rows, dtype=dtype, with_weights=True)
+    # px (R, W, spp, 2); wt (R, W, spp): a negative-lobe filter's signed sample weights, None
+    # for the others (their program is unchanged)
     shape_u = integrator.random_shape
     r = px.shape[0]
     # a camera with a lens (ThinLensCamera) takes `lens_uniforms` numbers per ray, drawn from
@@ -257,7 +261,8 @@ def render_partial(
     def one_pass(s):
         o, d = rays(px[:, :, s, :], lens(s) if n_lens else None)
         u = None if shape_u is None else numbers(s)
-        return integrator(scene, o, d, u)
+        out = integrator(scene, o, d, u)
+        return out if wt is None else out * wt[:, :, s, None]
 
     def k_passes(ss):  # (k,) pass indices -> (k, R, W, C): the k passes as one (k R, W) batch
         k = ss.shape[0]
@@ -267,7 +272,8 @@ def render_partial(
         u = None
         if shape_u is not None:
             u = jax.vmap(numbers)(ss).reshape(k * r, w, *shape_u)
-        return integrator(scene, o, d, u).reshape(k, r, w, -1)
+        out = integrator(scene, o, d, u).reshape(k, r, w, -1)
+        return out if wt is None else out * jnp.moveaxis(wt[:, :, ss], 2, 0)[..., None]
 
     if passes is None:
         passes = jnp.arange(spp)

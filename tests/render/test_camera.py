@@ -137,7 +137,7 @@ def test_gaussian_filter_moments():
     xu = np.asarray(jax.jit(f.sample)(jnp.asarray(uu)))
     np.testing.assert_allclose(np.interp(xu, xs, cdf / cdf[-1]), uu, atol=2e-6)
     with pytest.raises(ValueError, match="filter"):
-        make_filter("mitchell")
+        make_filter("sinc")
 
 
 @pytest.mark.mitsuba

@@ -26,6 +26,7 @@ from jaxgfx.render.scene._materials import emission_from_desc, material_from_des
 from jaxgfx.render.scene.scene import Scene, id_problem, is_internal_name
 from jaxgfx.render.scene.schema import (
     EMITTER_TYPES,
+    FILM_KEYS,
     SCENE_KEYS,
     build_camera,
     envmap_image,
@@ -98,7 +99,7 @@ def load_scene(
     expect_keys(desc, "scene", *SCENE_KEYS)
     camera = build_camera(desc["camera"])
     film = desc.get("film", {}) or {}
-    expect_keys(film, "film", (), ("filter", "stddev", "radius"))
+    expect_keys(film, "film", (), FILM_KEYS)
     fopts = {k: v for k, v in film.items() if k != "filter"}
     rfilter = make_filter(film.get("filter", "box"), **fopts)
 

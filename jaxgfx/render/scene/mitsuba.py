@@ -16,8 +16,9 @@ Mapping of conventions (jaxgfx -> Mitsuba 3), each checked by ``tests/render/tes
   :func:`~jaxgfx.render.scene.mitsuba_conventions.orthographic_to_world`; projective ones are
   refused); film ``hdrfilm`` (RGB, float32); ``box`` filter (radius 0.5 only) or
   ``gaussian`` (``stddev``; Mitsuba truncates at 4 stddev, so ``radius`` must be ``4 stddev``)
-  or ``tent`` (``radius``), ``sample_border`` on for the Gaussian and the tent (jaxgfx's filter
-  importance sampling also draws samples outside the image).
+  or ``tent`` (``radius``) or ``mitchell`` (``B``, ``C``), ``catmullrom``, ``lanczos``
+  (``lobes``), ``sample_border`` on for all but the box (jaxgfx's filter importance sampling
+  also draws samples outside the image).
 * rectangle ``{center, normal, size: [w, h]}`` -> Mitsuba ``rectangle`` (``[-1, 1]^2`` in its
   local xy plane, normal +z) with ``to_world`` columns ``(s w/2, t h/2, n, center)`` where
   ``(s, t, n)`` is the same Duff et al. 2017 frame jaxgfx builds, so uv and normal agree.
@@ -641,7 +642,7 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
         # a thin lens's aperture and focus)
         S.build_camera(cam)
     film_d = desc.get("film", {}) or {}
-    S.expect_keys(film_d, "film", (), ("filter", "stddev", "radius"))
+    S.expect_keys(film_d, "film", (), S.FILM_KEYS)
     fname = film_d.get("filter", "box")
     from jaxgfx.render.film import make_filter
 
@@ -660,6 +661,15 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
     elif fname == "tent":
         film["rfilter"] = {"type": "tent", "radius": float(rf.radius)}
         film["sample_border"] = True  # as for the Gaussian: jaxgfx samples beyond the border
+    elif fname == "mitchell":
+        film["rfilter"] = {"type": "mitchell", "B": float(rf.B), "C": float(rf.C)}
+        film["sample_border"] = True
+    elif fname == "catmullrom":
+        film["rfilter"] = {"type": "catmullrom"}
+        film["sample_border"] = True
+    elif fname == "lanczos":
+        film["rfilter"] = {"type": "lanczos", "lobes": int(rf.lobes)}
+        film["sample_border"] = True
     else:
         if abs(float(rf.radius) - 4.0 * float(rf.stddev)) > 1e-6 * float(rf.radius):
             raise NotImplementedError(
@@ -1049,7 +1059,13 @@ def scene_to_desc(scene) -> dict:
     """
     from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera, ThinLensCamera
     from jaxgfx.render.emitters import ConstantEnvironment, DirectionalLight, ProjectorLight
-    from jaxgfx.render.film import GaussianFilter, TentFilter
+    from jaxgfx.render.film import (
+        CatmullRomFilter,
+        GaussianFilter,
+        LanczosFilter,
+        MitchellFilter,
+        TentFilter,
+    )
     from jaxgfx.render.geometry import (
         Instances,
         Rectangles,
@@ -1083,6 +1099,12 @@ def scene_to_desc(scene) -> dict:
                         "radius": float(rf.radius)}  # fmt: skip
     elif isinstance(rf, TentFilter):
         desc["film"] = {"filter": "tent", "radius": float(rf.radius)}
+    elif isinstance(rf, MitchellFilter):
+        desc["film"] = {"filter": "mitchell", "B": float(rf.B), "C": float(rf.C)}
+    elif isinstance(rf, CatmullRomFilter):
+        desc["film"] = {"filter": "catmullrom"}
+    elif isinstance(rf, LanczosFilter):
+        desc["film"] = {"filter": "lanczos", "lobes": int(rf.lobes)}
     else:
         desc["film"] = {"filter": "box", "radius": float(rf.radius)}
     internal = {"__default__": "jaxgfx_default", "__black__": "jaxgfx_black"}

@@ -1567,9 +1567,24 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
             film = {"filter": "tent", "radius": rp.float("radius", DEFAULTS["tent.radius"],
                                                          positive=True)}  # fmt: skip
             rp.done()
+        elif rf.type == "mitchell":
+            rp = _Params(rf, doc)
+            film = {"filter": "mitchell", "B": rp.float("B", DEFAULTS["mitchell.B"]),
+                    "C": rp.float("C", DEFAULTS["mitchell.C"])}  # fmt: skip
+            rp.done()
+        elif rf.type == "catmullrom":
+            _Params(rf, doc).done()
+            film = {"filter": "catmullrom"}
+        elif rf.type == "lanczos":
+            rp = _Params(rf, doc)
+            lobes = rp.int("lobes", DEFAULTS["lanczos.lobes"])
+            if lobes < 1:
+                raise rp.err("lobes", f"expected a positive integer, got {lobes}")
+            film = {"filter": "lanczos", "lobes": lobes}
+            rp.done()
         else:
             raise ValueError(f"{rf.where}: reconstruction filter {rf.type!r} is not supported "
-                             "(box, gaussian, tent)")  # fmt: skip
+                             "(box, gaussian, tent, mitchell, catmullrom, lanczos)")  # fmt: skip
         fp.done(children_ok=len(rfs))
         if len(rfs) > 1:
             raise ValueError(f"{fo.where}: expected at most one <rfilter>")

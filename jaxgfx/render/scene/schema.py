@@ -40,6 +40,10 @@ SHAPE_TYPES = ("sphere", "rectangle", "mesh", "sdf", "sdfgrid")
 EMITTER_TYPES = ("area", "point", "constant", "envmap", "directional", "spot", "projector")
 SCENE_KEYS = (("camera", "shapes"), ("materials", "emitters", "film"))
 """(required, optional) top-level keys of a scene description."""
+FILM_KEYS = ("filter", "stddev", "radius", "B", "C", "lobes")
+"""Optional keys of a scene's ``film`` (the filter's name and its options: ``radius`` for box
+and tent, ``stddev`` and ``radius`` for gaussian, ``B``, ``C`` for mitchell, ``lobes`` for
+lanczos; :func:`jaxgfx.render.film.make_filter` says which belong to which)."""
 
 
 def envmap_image(ed, where, base_dir=None) -> np.ndarray:
