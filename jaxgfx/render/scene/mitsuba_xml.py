@@ -74,6 +74,7 @@ from jaxgfx.render.scene.mitsuba_conventions import (
     CONDUCTOR_IOR,
     DEFAULTS,
     IOR_TABLE,
+    ONE_SIDED_BSDFS,
     envmap_from_mitsuba,
     look_at_matrix,
     orthographic_view_proj_inverse,
@@ -238,7 +239,7 @@ class _Obj:
     node: _Node
     props: dict = dataclasses.field(default_factory=dict)
     children: list = dataclasses.field(default_factory=list)
-    converted: object = None  # the BSDF's material name once converted
+    converted: object = None  # (material name, inside twosided) once converted
 
     @property
     def label(self) -> str:
@@ -989,22 +990,40 @@ def _mask_dict(obj: _Obj, p: _Params, doc) -> dict:
     return {"type": "mask", "opacity": opacity, "bsdf": _bsdf_dict(kids[0], doc, nested=True)}
 
 
-def _bsdf(obj: _Obj, doc, desc, *, name=None) -> str:
+def _bsdf(obj: _Obj, doc, desc, *, name=None, twosided=False) -> str:
     """The material name of a BSDF object (converted once, shared by references): its ``id``,
-    else ``name`` (the id of an enclosing ``twosided``), else ``bsdf_N``."""
-    if obj.converted is not None:
-        return obj.converted
+    else ``name`` (the id of an enclosing ``twosided``), else ``bsdf_N``. A BSDF that Mitsuba
+    shades on the front side only (:func:`_is_one_sided`) and that no ``twosided`` encloses
+    gets ``one_sided: true``."""
+    if obj.converted is not None and obj.converted[1] == twosided:
+        return obj.converted[0]
     if obj.type == "twosided":
-        name = _bsdf(_twosided_child(obj, doc), doc, desc, name=obj.id or name)
-        obj.converted = name
+        name = _bsdf(_twosided_child(obj, doc), doc, desc, name=obj.id or name, twosided=True)
+        obj.converted = (name, twosided)
         return name
     m = _bsdf_dict(obj, doc)
+    if not twosided and _is_one_sided(obj, m):
+        m["one_sided"] = True
     name = obj.id or name or f"bsdf_{len(desc['materials'])}"
     while name in desc["materials"]:
         name += "_"
     desc["materials"][name] = m
-    obj.converted = name
+    obj.converted = (name, twosided)
     return name
+
+
+def _is_one_sided(obj: _Obj, m: dict) -> bool:
+    """Whether Mitsuba 3 shades the BSDF ``obj`` (jaxgfx description ``m``) on the front side
+    only: one of :data:`ONE_SIDED_BSDFS` (a ``principled`` without ``spec_trans``), or a
+    ``normalmap`` / ``bumpmap`` around one (not wrapped in ``twosided`` inside the map).
+    ``mask`` and ``blendbsdf`` stay two-sided (as before; their nested BSDFs are not
+    checked), transmissive BSDFs scatter on both sides anyway."""
+    if obj.type in ("normalmap", "bumpmap"):
+        kids = [c for c in obj.children if c.tag == "bsdf"]
+        kids += [q.value for q in obj.props.values()
+                 if q.kind == "object" and q.value.tag == "bsdf"]  # fmt: skip
+        return len(kids) == 1 and _is_one_sided(kids[0], m["bsdf"])
+    return obj.type in ONE_SIDED_BSDFS and "spec_trans" not in m
 
 
 # ------------------------------------------------------------------------------------------
@@ -1130,10 +1149,11 @@ def _shape(obj: _Obj, doc, desc, ctx):
         raise p.err("flip_normals", "flipped normals are not supported")
     if bsdfs:
         mat = _bsdf(bsdfs[0], doc, desc)
-    else:  # Mitsuba's default BSDF
+    else:  # Mitsuba's default BSDF: a (one-sided) diffuse
         mat = "mitsuba_default"
+        rho = [DEFAULTS["diffuse.reflectance"]] * 3
         desc["materials"].setdefault(
-            mat, {"type": "diffuse", "reflectance": [DEFAULTS["diffuse.reflectance"]] * 3}
+            mat, {"type": "diffuse", "reflectance": rho, "one_sided": True}
         )
     lin, det = m[:3, :3], float(np.linalg.det(m[:3, :3]))
     t = obj.type

@@ -228,6 +228,12 @@ class Scene(eqx.Module):
     :attr:`area_lights`), ``"point"`` (``row`` of :attr:`point_lights`), ``"environment"``,
     ``"directional"`` / ``"spot"`` / ``"projector"`` (into :attr:`delta_lights`). Paths
     ``shapes.ID.FIELD`` and ``emitters.ID.FIELD`` name them (:meth:`parameters`)."""
+    one_sided: tuple = eqx.field(static=True, default=())
+    """Per material (aligned with :attr:`materials`): ``True`` where the material reflects
+    from the front side only (black from behind, as Mitsuba 3's ``diffuse``, ``conductor``,
+    ``plastic``, ... without ``twosided``; the description's ``one_sided: true``). Empty
+    (the default) when no material is one-sided: every reflection-only material is then
+    shaded on both sides and the programs are those of a scene without the field."""
 
     @property
     def width(self) -> int:
