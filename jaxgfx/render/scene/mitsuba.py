@@ -21,9 +21,10 @@ Mapping of conventions (jaxgfx -> Mitsuba 3), each checked by ``tests/render/tes
 * rectangle ``{center, normal, size: [w, h]}`` -> Mitsuba ``rectangle`` (``[-1, 1]^2`` in its
   local xy plane, normal +z) with ``to_world`` columns ``(s w/2, t h/2, n, center)`` where
   ``(s, t, n)`` is the same Duff et al. 2017 frame jaxgfx builds, so uv and normal agree.
-* reflection-only materials are shaded on both sides in jaxgfx; Mitsuba's ``diffuse``,
-  ``conductor``, ``roughconductor``, ``plastic`` and ``roughplastic`` are one-sided (black from
-  behind), so they are wrapped in ``twosided``. ``dielectric`` and ``roughdielectric`` are not
+* reflection-only materials are shaded on both sides in jaxgfx unless ``one_sided: true``;
+  Mitsuba's ``diffuse``, ``conductor``, ``roughconductor``, ``plastic`` and ``roughplastic`` are
+  one-sided (black from behind), so a two-sided one is wrapped in ``twosided`` and a one-sided
+  one written as it is. ``dielectric`` and ``roughdielectric`` are not
   wrapped. Emitter shapes without a material
   get a black ``diffuse`` (jaxgfx's default) instead of Mitsuba's grey default.
 * anisotropic roughness (``alpha_v``) is exported on rectangles only: jaxgfx's tangent is the

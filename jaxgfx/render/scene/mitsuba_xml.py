@@ -39,8 +39,11 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
   observer from colour-science, 1000 samples over 360-830 nm; reflectances weighted by D65 and
   normalised by its luminance, emission normalised by the CMFs' y integral).
 * Mitsuba's one-sided BSDFs (``diffuse``, ``conductor``, ``roughconductor``, ``plastic``,
-  ``roughplastic``) are shaded on both sides in jaxgfx: the image agrees where back faces are
-  not seen (``twosided`` is therefore a pass-through wrapper).
+  ``roughplastic``, ``principled`` without ``spec_trans``; a ``normalmap`` / ``bumpmap`` around
+  one; a shape's default ``diffuse``) not wrapped in ``twosided`` get ``one_sided: true`` (black
+  from behind, :attr:`~jaxgfx.render.scene.Scene.one_sided`); inside ``twosided`` they are
+  two-sided. ``blendbsdf`` and ``mask`` are loaded two-sided whatever their nested BSDFs
+  (``twosided`` inside them is a pass-through); transmissive BSDFs scatter on both sides.
 * ``directional``: the light travels along ``direction`` or ``to_world``'s +z (default +z);
   ``spot``: at ``to_world``'s origin, pointing along its +z, ``beam_width`` defaulting to 3/4 of
   ``cutoff_angle`` (20 degrees); the same falloff as :class:`jaxgfx.render.emitters.SpotLight`.

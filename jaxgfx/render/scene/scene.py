@@ -19,6 +19,9 @@
       - {type: point, position: [2, 3, 1], intensity: [50, 50, 50]}
       - {type: constant, radiance: [1, 1, 1]}          # or {type: envmap, file: sky.exr}
 
+A material key ``one_sided: true`` (reflection-only materials; default false) makes it black
+from behind, as Mitsuba 3's ``diffuse`` etc. without ``twosided`` (:attr:`Scene.one_sided`).
+
 Every float is a differentiable leaf. Unknown keys, missing materials, NaN parameters raise
 ``ValueError`` naming the field (``shapes[1].radius``). Only what a scene uses is built: no
 acceleration structure without meshes, no environment without an environment emitter, and the
