@@ -220,7 +220,9 @@ def test_include_path_and_refs(tmp_path):
     assert x.files == (str(tmp_path / "scene.xml"), str(tmp_path / "frag" / "materials.xml"))
     mesh, sphere = x.desc["shapes"]
     assert mesh["material"] == sphere["material"] == "red"
-    assert x.desc["materials"] == {"red": {"type": "diffuse", "reflectance": [0.8, 0.1, 0.1]}}
+    # Mitsuba's diffuse outside twosided: black from behind (one_sided)
+    red = {"type": "diffuse", "reflectance": [0.8, 0.1, 0.1], "one_sided": True}
+    assert x.desc["materials"] == {"red": red}
     # OBJ texture coordinates are flipped (Mitsuba's flip_tex_coords), normals smooth
     np.testing.assert_allclose(mesh["uvs"], [[0, 0.75], [1, 0.75], [0, 0]])
     np.testing.assert_allclose(mesh["normals"], [[0, 0, 1]] * 3)
@@ -243,6 +245,7 @@ def test_values_rgb_spectrum_float(tmp_path):
         "diffuse_reflectance": [0.3] * 3,
         "specular_reflectance": [0.9] * 3,
         "nonlinear": False,
+        "one_sided": True,  # not in twosided
     }
 
 
@@ -292,15 +295,17 @@ def test_bsdf_mappings(tmp_path):
         )
     )
     mats = read_xml(write(tmp_path, scene_xml(body))).desc["materials"]
+    # only the first is in twosided: the others are Mitsuba's one-sided plugins
     assert list(mats.values()) == [
         {"type": "diffuse", "reflectance": [0.5] * 3},
-        {"type": "conductor", "reflectance": [1.0] * 3, "fresnel": "none"},
+        {"type": "conductor", "reflectance": [1.0] * 3, "fresnel": "none", "one_sided": True},
         {
             "type": "conductor",
             "reflectance": [1.0] * 3,
             "fresnel": "conductor",
             "eta": [0.2] * 3,
             "k": [3.0, 2.0, 1.0],
+            "one_sided": True,
         },  # fmt: skip
         {
             "type": "roughconductor",
@@ -309,6 +314,7 @@ def test_bsdf_mappings(tmp_path):
             "sample_visible": True,
             "reflectance": [1.0] * 3,
             "fresnel": "none",
+            "one_sided": True,
         },  # fmt: skip
         {
             "type": "diffuse",
@@ -318,6 +324,7 @@ def test_bsdf_mappings(tmp_path):
                 "color1": [0.2] * 3,
                 "scale": 5.0,
             },
+            "one_sided": True,
         },  # fmt: skip
     ]
 

@@ -182,15 +182,24 @@ def shading_frame(scene, hit, d, mat_id):
 
     For reflection-only materials the normals are flipped to the side of the incoming ray
     (two-sided shading); transmissive materials keep the geometric orientation so that
-    ``wo.z < 0`` means "inside".
+    ``wo.z < 0`` means "inside", and so do one-sided materials (:attr:`Scene.one_sided
+    <jaxgfx.render.scene.Scene.one_sided>`): seen from behind, ``wo.z < 0`` and their
+    reflection lobes return 0 (Mitsuba 3's ``diffuse`` etc. without ``twosided``). A scene
+    without one-sided materials computes exactly what it did before the flag existed.
     """
     trans = material_flag(scene, mat_id, "is_transmissive")
+    one_sided = any(getattr(scene, "one_sided", ()))  # static
+    if one_sided:  # nothing more in scenes without one-sided materials
+        sided = jnp.asarray(scene.one_sided)[mat_id]
+        trans = trans | sided
     facing = sum_last(hit.ng * d) < 0
     flip = jnp.where(trans | facing, 1.0, -1.0)[..., None]
     ng = hit.ng * flip
     ns = hit.ns * flip
     # keep the shading normal on the geometric side of the ray
     ns = jnp.where((sum_last(ns * ng) > 0)[..., None], ns, ng)
+    if one_sided:  # Mitsuba's one-sided BSDFs test the side in the shading frame as it is
+        ns = jnp.where(sided[..., None], hit.ns, ns)
     frame = frame_from_normal(ns)
     wo = to_local(frame, -d)
     return frame, ng, wo

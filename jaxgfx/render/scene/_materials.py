@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from jaxgfx.render.bsdf import BSDF_TYPES, make_bsdf
+from jaxgfx.render.bsdf import BSDF_TYPES, Mask, make_bsdf
 from jaxgfx.render.bsdf.textured import (
     Textured,
     is_texture_desc,
@@ -17,7 +17,7 @@ from jaxgfx.render.bsdf.textured import (
 )
 from jaxgfx.render.parameters import get_path
 
-__all__ = ["material_from_desc", "emission_from_desc"]
+__all__ = ["material_from_desc", "emission_from_desc", "check_one_sided"]
 
 
 def material_from_desc(desc, *, where="material", base_dir=None):
@@ -59,6 +59,27 @@ def material_from_desc(desc, *, where="material", base_dir=None):
             raise ValueError(f"{pre}{k}: texture values must be {need}, got min {lo}")
         textures[k] = tex
     return Textured(bsdf, textures)
+
+
+def check_one_sided(value, material, where) -> bool:
+    """A material description's ``one_sided`` flag, checked against the built ``material``:
+    a bool (default false: jaxgfx shades reflection-only materials on both sides), true only
+    for a reflection-only material (not transmissive, no ``mask``, whose pass-through is seen
+    from both sides). ``where``: the key's path for the error."""
+    if not isinstance(value, bool):
+        raise ValueError(f"{where}: expected true or false, got {value!r}")
+    if value and (material.is_transmissive or _has_mask(material)):
+        kind = "a mask" if _has_mask(material) else f"{type(material).__name__} (transmissive)"
+        raise ValueError(f"{where}: only reflection-only materials can be one-sided; "
+                         f"{kind} scatters on both sides")  # fmt: skip
+    return value
+
+
+def _has_mask(m) -> bool:
+    """Whether a ``mask`` is ``m`` or nested in it (textured, mapped or blended)."""
+    if isinstance(m, Mask):
+        return True
+    return any(_has_mask(getattr(m, k)) for k in ("bsdf", "bsdf0", "bsdf1") if hasattr(m, k))
 
 
 def emission_from_desc(value, where, *, base_dir=None, rgb=None):

@@ -22,7 +22,11 @@ from jaxgfx.render.emitters import (
 from jaxgfx.render.film import make_filter
 from jaxgfx.render.geometry import Instances, Rectangles, SDFGridShape, SDFShape, Spheres, area
 from jaxgfx.render.scene._lights import SPOT_TEXTURE_KEYS, projector_from_desc, spot_texture
-from jaxgfx.render.scene._materials import emission_from_desc, material_from_desc
+from jaxgfx.render.scene._materials import (
+    check_one_sided,
+    emission_from_desc,
+    material_from_desc,
+)
 from jaxgfx.render.scene.scene import Scene, id_problem, is_internal_name
 from jaxgfx.render.scene.schema import (
     EMITTER_TYPES,
@@ -106,17 +110,22 @@ def load_scene(
     mats_desc = desc.get("materials", {}) or {}
     if not isinstance(mats_desc, Mapping):
         raise ValueError("materials: expected a mapping from names to material descriptions")
-    names, materials = [], []
+    names, materials, one_sided = [], [], []
     for name, md in mats_desc.items():
         if is_internal_name(name):
             raise ValueError(
                 f"materials.{name}: names of the form __NAME__ are the loader's own "
                 "(__default__, __black__); rename the material"
             )
+        sided = False
+        if isinstance(md, Mapping) and "one_sided" in md:
+            md = dict(md)
+            sided = md.pop("one_sided")
         try:
             materials.append(material_from_desc(md, where="", base_dir=base_dir))
         except (ValueError, TypeError) as e:
             raise ValueError(f"materials.{name}: {e}") from None
+        one_sided.append(check_one_sided(sided, materials[-1], f"materials.{name}.one_sided"))
         names.append(str(name))
     from jaxgfx.render.scene._mesh_attributes import attach_attributes, attribute_slots, with_slots
 
@@ -307,6 +316,10 @@ def load_scene(
         rfilter=rfilter,
         delta_lights=tuple(delta_lights),
         object_ids=tuple(object_ids),
+        # the loader's own materials (__default__, __black__) are two-sided
+        one_sided=tuple(one_sided + [False] * (len(materials) - len(one_sided)))
+        if any(one_sided)
+        else (),
     )
     return cast_floats(scene, dtype)
 

@@ -22,9 +22,10 @@ Mapping of conventions (jaxgfx -> Mitsuba 3), each checked by ``tests/render/tes
 * rectangle ``{center, normal, size: [w, h]}`` -> Mitsuba ``rectangle`` (``[-1, 1]^2`` in its
   local xy plane, normal +z) with ``to_world`` columns ``(s w/2, t h/2, n, center)`` where
   ``(s, t, n)`` is the same Duff et al. 2017 frame jaxgfx builds, so uv and normal agree.
-* reflection-only materials are shaded on both sides in jaxgfx; Mitsuba's ``diffuse``,
-  ``conductor``, ``roughconductor``, ``plastic`` and ``roughplastic`` are one-sided (black from
-  behind), so they are wrapped in ``twosided``. ``dielectric`` and ``roughdielectric`` are not
+* reflection-only materials are shaded on both sides in jaxgfx unless ``one_sided: true``;
+  Mitsuba's ``diffuse``, ``conductor``, ``roughconductor``, ``plastic`` and ``roughplastic`` are
+  one-sided (black from behind), so a two-sided one is wrapped in ``twosided`` and a one-sided
+  one written as it is. ``dielectric`` and ``roughdielectric`` are not
   wrapped. Emitter shapes without a material
   get a black ``diffuse`` (jaxgfx's default) instead of Mitsuba's grey default.
 * anisotropic roughness (``alpha_v``) is exported on rectangles only: jaxgfx's tangent is the
@@ -193,11 +194,35 @@ def _material(md, where, base_dir=None, work_dir=None) -> dict:
 
     if not isinstance(md, Mapping):
         raise ValueError(f"{where}: expected a mapping with a 'type' key")
-    if md.get("type") in _MAP_KEYS:
-        return _map_material(md, where, base_dir, work_dir)
+    md = dict(md)
+    one_sided = md.pop("one_sided", False)
     if md.get("type") == "phong":
         raise NotImplementedError(f"{where}.type: 'phong' has no Mitsuba 3 counterpart")
-    return _twosided(_textured_bsdf(md, where, base_dir, work_dir))
+    if one_sided is not False:  # checked as the loader checks it
+        from jaxgfx.render.scene._materials import check_one_sided, material_from_desc
+
+        try:
+            built = material_from_desc(md, where="", base_dir=base_dir)
+        except (ValueError, TypeError) as e:
+            raise ValueError(f"{where}: {e}") from None
+        one_sided = check_one_sided(one_sided, built, f"{where}.one_sided")
+    if md.get("type") in _MAP_KEYS:
+        out = _map_material(md, where, base_dir, work_dir)
+    else:
+        out = _twosided(_textured_bsdf(md, where, base_dir, work_dir))
+    # a one-sided material: Mitsuba's plugin as it is (black from behind), no twosided
+    return _without_twosided(out) if one_sided else out
+
+
+def _without_twosided(d: dict) -> dict:
+    """``d`` without the ``twosided`` wrappers the writer adds (also around a blend's nested
+    BSDFs): the Mitsuba dict of a one-sided material."""
+    if d["type"] == "twosided":
+        return _without_twosided(d["bsdf"])
+    if d["type"] == "blendbsdf":
+        return {**d, "bsdf_0": _without_twosided(d["bsdf_0"]),
+                "bsdf_1": _without_twosided(d["bsdf_1"])}  # fmt: skip
+    return d
 
 
 # Mitsuba's name of a jaxgfx material key that a texture may drive, where they differ
@@ -1109,8 +1134,10 @@ def scene_to_desc(scene) -> dict:
         desc["film"] = {"filter": "box", "radius": float(rf.radius)}
     internal = {"__default__": "jaxgfx_default", "__black__": "jaxgfx_black"}
     names = [internal.get(n, n) for n in scene.material_names]
-    for n, m in zip(names, scene.materials, strict=True):
+    for i, (n, m) in enumerate(zip(names, scene.materials, strict=True)):
         desc["materials"][n] = _bsdf_desc(m, f"materials.{n}")
+        if scene.one_sided and scene.one_sided[i]:
+            desc["materials"][n]["one_sided"] = True
 
     def one(shape, mats, where, keep):
         """Shape descriptions of ``shape``, each with a material when ``keep`` says so."""

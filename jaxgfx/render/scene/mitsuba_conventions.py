@@ -175,9 +175,9 @@ BSDF_TO_MITSUBA = {
 ONE_SIDED_BSDFS = (
     "diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "principled"
 )  # fmt: skip
-"""Mitsuba BSDFs that are black from behind (``principled`` only without ``spec_trans``);
-jaxgfx shades them on both sides, so the writer wraps them in ``twosided`` and the loader treats
-``twosided`` as a pass-through."""
+"""Mitsuba BSDFs that are black from behind (``principled`` only without ``spec_trans``). The
+XML reader loads them ``one_sided: true`` unless a ``twosided`` encloses them; the writer wraps
+a two-sided jaxgfx material of these plugins in ``twosided`` and writes a one-sided one bare."""
 
 DEFAULTS = {
     "diffuse.reflectance": 0.5,

@@ -39,8 +39,11 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
   observer from colour-science, 1000 samples over 360-830 nm; reflectances weighted by D65 and
   normalised by its luminance, emission normalised by the CMFs' y integral).
 * Mitsuba's one-sided BSDFs (``diffuse``, ``conductor``, ``roughconductor``, ``plastic``,
-  ``roughplastic``) are shaded on both sides in jaxgfx: the image agrees where back faces are
-  not seen (``twosided`` is therefore a pass-through wrapper).
+  ``roughplastic``, ``principled`` without ``spec_trans``; a ``normalmap`` / ``bumpmap`` around
+  one; a shape's default ``diffuse``) not wrapped in ``twosided`` get ``one_sided: true`` (black
+  from behind, :attr:`~jaxgfx.render.scene.Scene.one_sided`); inside ``twosided`` they are
+  two-sided. ``blendbsdf`` and ``mask`` are loaded two-sided whatever their nested BSDFs
+  (``twosided`` inside them is a pass-through); transmissive BSDFs scatter on both sides.
 * ``directional``: the light travels along ``direction`` or ``to_world``'s +z (default +z);
   ``spot``: at ``to_world``'s origin, pointing along its +z, ``beam_width`` defaulting to 3/4 of
   ``cutoff_angle`` (20 degrees); the same falloff as :class:`jaxgfx.render.emitters.SpotLight`.
@@ -74,6 +77,7 @@ from jaxgfx.render.scene.mitsuba_conventions import (
     CONDUCTOR_IOR,
     DEFAULTS,
     IOR_TABLE,
+    ONE_SIDED_BSDFS,
     envmap_from_mitsuba,
     look_at_matrix,
     orthographic_view_proj_inverse,
@@ -257,7 +261,7 @@ class _Obj:
     node: _Node
     props: dict = dataclasses.field(default_factory=dict)
     children: list = dataclasses.field(default_factory=list)
-    converted: object = None  # the BSDF's material name once converted
+    converted: object = None  # (material name, inside twosided) once converted
 
     @property
     def label(self) -> str:
@@ -1013,22 +1017,40 @@ def _mask_dict(obj: _Obj, p: _Params, doc) -> dict:
     return {"type": "mask", "opacity": opacity, "bsdf": _bsdf_dict(kids[0], doc, nested=True)}
 
 
-def _bsdf(obj: _Obj, doc, desc, *, name=None) -> str:
+def _bsdf(obj: _Obj, doc, desc, *, name=None, twosided=False) -> str:
     """The material name of a BSDF object (converted once, shared by references): its ``id``,
-    else ``name`` (the id of an enclosing ``twosided``), else ``bsdf_N``."""
-    if obj.converted is not None:
-        return obj.converted
+    else ``name`` (the id of an enclosing ``twosided``), else ``bsdf_N``. A BSDF that Mitsuba
+    shades on the front side only (:func:`_is_one_sided`) and that no ``twosided`` encloses
+    gets ``one_sided: true``."""
+    if obj.converted is not None and obj.converted[1] == twosided:
+        return obj.converted[0]
     if obj.type == "twosided":
-        name = _bsdf(_twosided_child(obj, doc), doc, desc, name=obj.id or name)
-        obj.converted = name
+        name = _bsdf(_twosided_child(obj, doc), doc, desc, name=obj.id or name, twosided=True)
+        obj.converted = (name, twosided)
         return name
     m = _bsdf_dict(obj, doc)
+    if not twosided and _is_one_sided(obj, m):
+        m["one_sided"] = True
     name = obj.id or name or f"bsdf_{len(desc['materials'])}"
     while name in desc["materials"]:
         name += "_"
     desc["materials"][name] = m
-    obj.converted = name
+    obj.converted = (name, twosided)
     return name
+
+
+def _is_one_sided(obj: _Obj, m: dict) -> bool:
+    """Whether Mitsuba 3 shades the BSDF ``obj`` (jaxgfx description ``m``) on the front side
+    only: one of :data:`ONE_SIDED_BSDFS` (a ``principled`` without ``spec_trans``), or a
+    ``normalmap`` / ``bumpmap`` around one (not wrapped in ``twosided`` inside the map).
+    ``mask`` and ``blendbsdf`` stay two-sided (as before; their nested BSDFs are not
+    checked), transmissive BSDFs scatter on both sides anyway."""
+    if obj.type in ("normalmap", "bumpmap"):
+        kids = [c for c in obj.children if c.tag == "bsdf"]
+        kids += [q.value for q in obj.props.values()
+                 if q.kind == "object" and q.value.tag == "bsdf"]  # fmt: skip
+        return len(kids) == 1 and _is_one_sided(kids[0], m["bsdf"])
+    return obj.type in ONE_SIDED_BSDFS and "spec_trans" not in m
 
 
 # ------------------------------------------------------------------------------------------
@@ -1154,10 +1176,11 @@ def _shape(obj: _Obj, doc, desc, ctx):
         raise p.err("flip_normals", "flipped normals are not supported")
     if bsdfs:
         mat = _bsdf(bsdfs[0], doc, desc)
-    else:  # Mitsuba's default BSDF
+    else:  # Mitsuba's default BSDF: a (one-sided) diffuse
         mat = "mitsuba_default"
+        rho = [DEFAULTS["diffuse.reflectance"]] * 3
         desc["materials"].setdefault(
-            mat, {"type": "diffuse", "reflectance": [DEFAULTS["diffuse.reflectance"]] * 3}
+            mat, {"type": "diffuse", "reflectance": rho, "one_sided": True}
         )
     lin, det = m[:3, :3], float(np.linalg.det(m[:3, :3]))
     t = obj.type

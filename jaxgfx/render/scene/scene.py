@@ -19,6 +19,9 @@
       - {type: point, position: [2, 3, 1], intensity: [50, 50, 50]}
       - {type: constant, radiance: [1, 1, 1]}          # or {type: envmap, file: sky.exr}
 
+A material key ``one_sided: true`` (reflection-only materials; default false) makes it black
+from behind, as Mitsuba 3's ``diffuse`` etc. without ``twosided`` (:attr:`Scene.one_sided`).
+
 Every float is a differentiable leaf. Unknown keys, missing materials, NaN parameters raise
 ``ValueError`` naming the field (``shapes[1].radius``). Only what a scene uses is built: no
 acceleration structure without meshes, no environment without an environment emitter, and the
@@ -228,6 +231,12 @@ class Scene(eqx.Module):
     :attr:`area_lights`), ``"point"`` (``row`` of :attr:`point_lights`), ``"environment"``,
     ``"directional"`` / ``"spot"`` / ``"projector"`` (into :attr:`delta_lights`). Paths
     ``shapes.ID.FIELD`` and ``emitters.ID.FIELD`` name them (:meth:`parameters`)."""
+    one_sided: tuple = eqx.field(static=True, default=())
+    """Per material (aligned with :attr:`materials`): ``True`` where the material reflects
+    from the front side only (black from behind, as Mitsuba 3's ``diffuse``, ``conductor``,
+    ``plastic``, ... without ``twosided``; the description's ``one_sided: true``). Empty
+    (the default) when no material is one-sided: every reflection-only material is then
+    shaded on both sides and the programs are those of a scene without the field."""
 
     @property
     def width(self) -> int:
