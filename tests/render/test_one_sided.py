@@ -258,7 +258,9 @@ def _blocks_mean_se(imgs, b=4):
     return blocks(imgs.mean(0)), np.sqrt(blocks(imgs.var(0, ddof=1)) / (b * b) / len(imgs))
 
 
-# slow + mitsuba: ~25 s under load (8 Mitsuba scalar_rgb renders, two jaxgfx path programs at 32x32); measured: max block |z| 2.28, image means 0.02541 vs 0.02539; all two-sided: max |z| 2438
+# slow + mitsuba: ~25 s under load (8 Mitsuba scalar_rgb renders, two jaxgfx path programs
+# at 32x32); measured: max block |z| 2.28, image means 0.02541 vs 0.02539; all two-sided: max
+# |z| 2438
 @pytest.mark.slow
 @pytest.mark.mitsuba
 def test_back_faces_render_like_mitsuba(tmp_path):
@@ -299,3 +301,27 @@ def test_back_faces_render_like_mitsuba(tmp_path):
     z2 = (_blocks_mean_se(ours(two))[0] - m2) / se
     print("two-sided: max |z|", np.max(np.abs(z2)))
     assert np.max(np.abs(z2)) > 20, np.max(np.abs(z2))
+
+
+def test_anisotropic_transmissive_principled_in_xml_stays_two_sided(tmp_path):
+    """An anisotropic principled is shaded inside the dp/du-frame wrapper (a normal map):
+    with ``spec_trans`` it is transmissive and must not be marked one-sided (it was, and its
+    scene failed to load); without it, it is one-sided like Mitsuba's."""
+    from jaxgfx.render.scene.mitsuba_xml import read_xml  # noqa: PLC0415
+
+    def mats(extra):
+        p = tmp_path / "p.xml"
+        p.write_text(
+            '<scene version="3.0.0"><sensor type="perspective"><film type="hdrfilm">'
+            '<integer name="width" value="4"/><integer name="height" value="4"/></film>'
+            '</sensor><shape type="sphere"><point name="center" z="5"/>'
+            f'<bsdf type="principled"><float name="anisotropic" value="0.5"/>{extra}</bsdf>'
+            "</shape></scene>"
+        )
+        return list(read_xml(str(p)).desc["materials"].values())
+
+    (m,) = mats('<float name="spec_trans" value="0.5"/>')
+    assert "one_sided" not in m
+    load_scene({**_desc(3.0, -1.0, None), "materials": {"m": m}})
+    (m,) = mats("")
+    assert m.get("one_sided") is True

@@ -1050,7 +1050,10 @@ def _is_one_sided(obj: _Obj, m: dict) -> bool:
         kids += [q.value for q in obj.props.values()
                  if q.kind == "object" and q.value.tag == "bsdf"]  # fmt: skip
         return len(kids) == 1 and _is_one_sided(kids[0], m["bsdf"])
-    return obj.type in ONE_SIDED_BSDFS and "spec_trans" not in m
+    leaf = m
+    while leaf.get("type") in ("normalmap", "bumpmap") and isinstance(leaf.get("bsdf"), dict):
+        leaf = leaf["bsdf"]  # the dp/du-frame wrapper of an anisotropic BSDF (_dpdu_frame)
+    return obj.type in ONE_SIDED_BSDFS and "spec_trans" not in leaf
 
 
 # ------------------------------------------------------------------------------------------
