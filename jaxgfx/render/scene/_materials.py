@@ -27,9 +27,12 @@ def material_from_desc(desc, *, where="material", base_dir=None):
     validates everything else), then wrapped in :class:`Textured` (the keys resolve to BSDF
     fields through the class's ``PARAMETER_ALIASES``). Without texture keys the plain BSDF is
     returned (no wrapper, no cost). Roughness / exponent / eta textures must be positive,
-    colour textures non-negative.
+    colour textures non-negative. A ``one_sided`` key (a scene property, read by
+    :func:`~jaxgfx.render.scene.load_scene`) is ignored here.
     """
     desc = dict(desc)
+    # one-sidedness is the scene's (Scene.one_sided, read by load_scene), not the BSDF's
+    desc.pop("one_sided", None)
     pre = f"{where}." if where else ""
     if isinstance(desc.get("type"), str) and desc["type"] in _MAP_TEXTURE:
         return _map_material(desc, pre, base_dir)

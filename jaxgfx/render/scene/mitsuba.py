@@ -737,7 +737,8 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
             return fallback
         if name not in mats:
             raise ValueError(f"{where}.material: unknown material {name!r}; have {list(mats)}")
-        inner = mats[name].get("bsdf", mats[name])
+        m = mats[name]  # a two-sided material's BSDF is inside its `twosided` wrapper
+        inner = m["bsdf"] if m.get("type") == "twosided" else m
         aniso = "alpha_u" in inner or inner.get("anisotropic", 0.0) != 0.0
         if aniso and shape_type in ("sphere", "mesh"):
             # jaxgfx's tangent is the Duff et al. frame around the normal; Mitsuba's is dp/du
