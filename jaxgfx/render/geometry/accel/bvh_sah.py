@@ -83,6 +83,26 @@ def near_far(hl, hr, ctn, left, right):
     return near, tnear, far, tfar
 
 
+def next_node(node, hl, hr, ctn, left, right, sp, sn, st, done):
+    """One stack step of a BVH traversal: descend into the nearer hit child (pushing the
+    other when both are hit) or pop the stack. Returns ``(node, t_node, sp, sn, st,
+    finished)``; ``finished``: nothing hit and the stack empty."""
+    near, tnear, far, tfar = near_far(hl, hr, ctn, left, right)
+    push = hl & hr & (sp < STACK_SIZE)
+    # The slot above the top is free: write it unconditionally (an index past the end is
+    # dropped), an in-place update of the loop carry.
+    sn = sn.at[sp].set(far, mode="drop")
+    st = st.at[sp].set(tfar, mode="drop")
+    sp = sp + push.astype(jnp.int32)
+    descend = hl | hr
+    empty = sp == 0
+    top = jnp.maximum(sp - 1, 0)
+    node_new = jnp.where(done, node, jnp.where(descend, near, sn[top]))
+    t_new = jnp.where(descend, tnear, st[top])
+    sp = jnp.where(descend | empty | done, sp, sp - 1)
+    return node_new, t_new, sp, sn, st, ~descend & empty
+
+
 def _slab_reduced(bmin, bmax, o, inv, t0, t1):
     """:func:`slab`'s ``(tn, hit)`` with the per-axis max and min as one reduction (materialised,
     like :func:`_min_slot`)."""
@@ -131,20 +151,9 @@ def _step(bvh, tris, bounds, ray, s, any_hit, materialize=True):
         ctn, _, chit = slab(bl[:, 0], bl[:, 1], o, inv, tmin, best)
     inner = ~is_leaf & ~skip
     hl, hr = inner & chit[0], inner & chit[1]
-    near, tnear, far, tfar = near_far(hl, hr, ctn, left, right)
-    push = hl & hr & (sp < STACK_SIZE)
-    # The slot above the top is free: write it unconditionally (an index past the end is
-    # dropped), an in-place update of the loop carry.
-    sn = sn.at[sp].set(far, mode="drop")
-    st = st.at[sp].set(tfar, mode="drop")
-    sp = sp + push.astype(jnp.int32)
-    descend = hl | hr
-    empty = sp == 0
-    top = jnp.maximum(sp - 1, 0)
-    node_new = jnp.where(done, node, jnp.where(descend, near, sn[top]))
-    t_new = jnp.where(descend, tnear, st[top])
-    sp = jnp.where(descend | empty | done, sp, sp - 1)
-    done = done | (~descend & empty) | (any_hit & (bprim >= 0))
+    node_new, t_new, sp, sn, st, finished = next_node(node, hl, hr, ctn, left, right, sp, sn,
+                                                      st, done)  # fmt: skip
+    done = done | finished | (any_hit & (bprim >= 0))
     return node_new, t_new, sp, sn, st, best, bprim, done
 
 

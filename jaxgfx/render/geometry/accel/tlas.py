@@ -34,6 +34,7 @@ from jaxgfx.render.geometry.accel.bvh_sah import (
     _slab_reduced,
     build_bvh,
     near_far,
+    next_node,
     pool_width,
 )
 from jaxgfx.render.geometry.mesh import TriangleMesh
@@ -315,18 +316,9 @@ def _collect_step(top, bounds, C, ray, s):
     ctn, chit = _slab_reduced(bl[:, 0], bl[:, 1], o, inv, tmin, tmax)
     inner = ~top.leaf[node] & ~done
     hl, hr = inner & chit[0], inner & chit[1]
-    near, tnear, far, tfar = near_far(hl, hr, ctn, left, right)
-    push = hl & hr & (sp < STACK_SIZE)
-    sn = sn.at[sp].set(far, mode="drop")
-    st = st.at[sp].set(tfar, mode="drop")
-    sp = sp + push.astype(jnp.int32)
-    descend = hl | hr
-    empty = sp == 0
-    top_ = jnp.maximum(sp - 1, 0)
-    node = jnp.where(done, node, jnp.where(descend, near, sn[top_]))
-    tnode = jnp.where(descend, tnear, st[top_])
-    sp = jnp.where(descend | empty | done, sp, sp - 1)
-    done = done | (~descend & empty)
+    node, tnode, sp, sn, st, finished = next_node(node, hl, hr, ctn, left, right, sp, sn, st,
+                                                  done)  # fmt: skip
+    done = done | finished
     return node, tnode, tmax, sp, sn, st, ck, ct, cnt, done
 
 
