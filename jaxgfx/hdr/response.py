@@ -27,6 +27,7 @@ from ._parametric import recover_gamma, recover_polynomial, recover_spline
 from ._robertson import recover_robertson
 from ._sampling import _stride_for
 from ._stack import normalize_stack, prepare_stack
+from ._subspace import recover_subspace
 
 __all__ = [
     "CameraResponse",
@@ -52,6 +53,7 @@ RESPONSE_METHODS = {
     "gamma": recover_gamma,
     "polynomial": recover_polynomial,
     "spline": recover_spline,
+    "subspace": recover_subspace,
 }
 """Response-recovery methods by name; each ``fn(z, t, code_max, **options) -> CameraResponse``
 with normalised levels ``z`` ``(N, H, W, C)`` and ascending times ``t`` ``(N,)``."""
@@ -134,7 +136,8 @@ def recover_response(images, exposure_times, *, method: str = "debevec", **optio
     error at run time instead of returning a meaningless curve.
 
     References: Debevec & Malik, SIGGRAPH 1997; Robertson, Borman & Stevenson, JEI 2003;
-    Mitsunaga & Nayar, CVPR 1999.
+    Mitsunaga & Nayar, CVPR 1999; Grossberg & Nayar, PAMI 2004 (``"subspace"``: a
+    low-dimensional curve space, here an analytic one).
 
     Example: a noise-free float stack of ``x = z^2.2`` data gives back ``gamma ≈ 2.2`` with
     ``method="gamma"``.
@@ -158,7 +161,7 @@ def recover_response(images, exposure_times, *, method: str = "debevec", **optio
 
 @functools.partial(jax.jit, static_argnames=("method", "code_max", "opts"))
 def _recover_jit(raw, t, key, *, method, code_max, opts):
-    if method == "debevec":
+    if method in ("debevec", "subspace"):
         # Debevec only looks at the pixels of select_samples' candidate grid: cut it out with
         # one strided slice of the raw codes before normalising and sorting (at 1 MP the full
         # conversion and the n-d gathers cost 5x the rest); flatness is then measured
