@@ -10,8 +10,10 @@ radiance map is in the repository). Brackets: a camera's 3-frame AEB (±3 EV) an
 2 EV apart, the longest exposure 20 (so the darkest radiance reaches the toe), 8-bit, shot
 gain 1e-5 and read σ 2e-4 (about 0.6 code of noise in the mid-tones). Prints, per curve and
 bracket, the median |Δ ln E| (``radiance_error(..., per_channel=True)``) of jaxgfx's
-defaults (and which of its two Debevec fits the self-check chose), the end-weighted fit alone
-(``reweight_passes=0``, the default before issue 26), Debevec without the end weight,
+defaults (which of its two Debevec fits the self-check chose, the bracket overlap and whether
+the sparse-bracket rule chose the ``"subspace"`` fit), the end-weighted fit alone
+(``reweight_passes=0``, the default before issue 26), Debevec without the end weight, the
+default without the sparse-bracket rule (``sparse_overlap=0``), ``method="subspace"``,
 ``spline``, OpenCV ``CalibrateDebevec + MergeDebevec`` and the true curve through
 ``merge_radiance``, as JSON.
 """
@@ -74,10 +76,22 @@ def measure(with_spline=True):
         d = hdr.recover_response(st.images, st.exposure_times)
         r["jaxgfx default"] = err(hdr.merge_radiance(st.images, st.exposure_times, d))
         r["inverse-slope fit chosen"] = bool(d.diagnostics["inverse_slope_chosen"])
-        d1 = hdr.recover_response(st.images, st.exposure_times, reweight_passes=0)
+        r["subspace chosen"] = bool(np.all(d.diagnostics["subspace_chosen"]))
+        r["overlap"] = round(float(np.min(d.diagnostics["overlap"])), 3)
+        d1 = hdr.recover_response(
+            st.images, st.exposure_times, reweight_passes=0, sparse_overlap=0.0
+        )
         r["end-weighted only"] = err(hdr.merge_radiance(st.images, st.exposure_times, d1))
-        d0 = hdr.recover_response(st.images, st.exposure_times, end_weight=0.0, reweight_passes=0)
+        d0 = hdr.recover_response(
+            st.images, st.exposure_times, end_weight=0.0, reweight_passes=0, sparse_overlap=0.0
+        )
         r["debevec end_weight=0"] = err(hdr.merge_radiance(st.images, st.exposure_times, d0))
+        fr = hdr.recover_response(st.images, st.exposure_times, sparse_overlap=0.0)
+        r["free table (sparse_overlap=0)"] = err(
+            hdr.merge_radiance(st.images, st.exposure_times, fr)
+        )
+        sp = hdr.recover_response(st.images, st.exposure_times, method="subspace")
+        r["subspace"] = err(hdr.merge_radiance(st.images, st.exposure_times, sp))
         if with_spline:
             s = hdr.recover_response(st.images, st.exposure_times, method="spline")
             r["spline"] = err(hdr.merge_radiance(st.images, st.exposure_times, s))
@@ -94,7 +108,8 @@ def figure(rows, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    keys = [k for k in rows[0] if k not in ("curve", "bracket", "inverse-slope fit chosen")]
+    skip = ("curve", "bracket", "inverse-slope fit chosen", "subspace chosen", "overlap")
+    keys = [k for k in rows[0] if k not in skip]
     fig, ax = plt.subplots(figsize=(9, 3.6))
     x = np.arange(len(rows))
     w = 0.8 / len(keys)

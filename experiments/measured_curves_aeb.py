@@ -2,13 +2,18 @@
 weight and smoothness, and ``spline``, scored by the radiance error *and* by the
 leave-one-out self-check that the default uses to choose between its candidates.
 
-    python -m experiments.measured_curves_aeb [--spline] [--levels]
+    python -m experiments.measured_curves_aeb [--spline] [--levels] [--subspace]
+        [--figure docs/images/hdr_subspace_aeb.png]
 
 Stacks: ``experiments.measured_curves.measured_stacks`` (DoRF Ektachrome 320T curves, 96×96,
 AEB 3 frames ±3 EV and 5 frames 2 EV apart). For ``end_weight`` in {0, 0.05, 0.2} and ``lam``
 in {1e-6, 3e-6, 1e-5} (``reweight_passes=0``: the single fit) prints median |Δ ln E| per
 channel-scale and the mean LOO error (levels, default merge); with ``--spline`` also
 ``method="spline"`` (its fit time included: slow) and the default's two LOO candidates.
+``--subspace``: ``method="subspace"`` for ``n_poly`` 0…4 (radiance error, LOO, bracket
+overlap) on every stack instead. ``--figure PATH``: the curve-space basis (``n_poly=2``) and,
+for the three AEB stacks, the default's curve, the free table (``sparse_overlap=0``) and
+OpenCV's against the measured truth.
 """
 
 from __future__ import annotations
@@ -40,7 +45,12 @@ def measure(spline=False):
         for ew in (0.0, 0.05, 0.2):
             for lam in (1e-6, 3e-6, 1e-5):
                 r = hdr.recover_response(
-                    st.images, st.exposure_times, lam=lam, end_weight=ew, reweight_passes=0
+                    st.images,
+                    st.exposure_times,
+                    lam=lam,
+                    end_weight=ew,
+                    reweight_passes=0,
+                    sparse_overlap=0.0,
                 )
                 row[f"end_weight {ew:g}, lam {lam:g}: |d ln E|, LOO"] = _score(st, r)
         if spline:
@@ -70,7 +80,7 @@ def levels():
     lv = jnp.broadcast_to(jnp.linspace(0, 1, 256)[:, None], (256, 3))
     gt = np.log(np.asarray(st.response.to_linear_normalized(lv)))[:, 0]
     out = {"levels": list(range(5, 251, 15))}
-    d = hdr.recover_response(st.images, st.exposure_times, reweight_passes=0)
+    d = hdr.recover_response(st.images, st.exposure_times, reweight_passes=0, sparse_overlap=0.0)
     bgr = [np.ascontiguousarray(np.asarray(im)[..., ::-1]) for im in st.images]
     crv = cv2.createCalibrateDebevec().process(bgr, np.asarray(st.exposure_times, np.float32))
     tab = np.log(np.maximum(crv[:, 0, ::-1].astype(np.float64), 1e-30)).astype(np.float32)
@@ -88,12 +98,82 @@ def levels():
     return out
 
 
+def subspace_rows():
+    rows = []
+    for cname, bname, st in measured_stacks():
+        row = {"curve": cname[17:], "bracket": bname}
+        d = hdr.recover_response(st.images, st.exposure_times)
+        row["overlap"] = [round(float(v), 3) for v in np.asarray(d.diagnostics["overlap"])]
+        row["default: |d ln E|, LOO"] = _score(st, d)
+        for k in range(5):
+            r = hdr.recover_response(st.images, st.exposure_times, method="subspace", n_poly=k)
+            row[f"subspace n_poly={k}: |d ln E|, LOO"] = _score(st, r)
+        log(row)
+        rows.append(row)
+    return rows
+
+
+def figure(path):
+    import cv2
+    import jax.numpy as jnp
+    import matplotlib
+
+    from jaxgfx.hdr._subspace import response_basis
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 4, figsize=(14, 3.4))
+    lv = np.arange(256)
+    b = response_basis(256, 2)
+    for k, name in enumerate(["1", "ln z", "ln(1-z)", "P1", "P2"]):
+        axes[0].plot(lv, b[:, k], label=f"basis {k} (from {name})")
+    axes[0].set_title("curve-space basis (orthonormal, n_poly=2)")
+    axes[0].set_xlabel("level")
+    axes[0].legend(fontsize=6)
+    zz = jnp.broadcast_to(jnp.linspace(0, 1, 256)[:, None], (256, 3))
+    aeb = [s for s in measured_stacks() if "AEB" in s[1]]
+    for ax, (cname, _, st) in zip(axes[1:], aeb, strict=True):
+        gt = np.log(np.asarray(st.response.to_linear_normalized(zz)))[:, 0]
+        bgr = [np.ascontiguousarray(np.asarray(im)[..., ::-1]) for im in st.images]
+        crv = cv2.createCalibrateDebevec().process(bgr, np.asarray(st.exposure_times, np.float32))
+        tab = np.log(np.maximum(crv[:, 0, ::-1].astype(np.float64), 1e-30)).astype(np.float32)
+        cv = hdr.CameraResponse(jnp.asarray(tab), "table", "opencv", 255.0, 0.5)
+        curves = {
+            "truth": st.response,
+            "default (subspace chosen)": hdr.recover_response(st.images, st.exposure_times),
+            "free table (sparse_overlap=0)": hdr.recover_response(
+                st.images, st.exposure_times, sparse_overlap=0.0
+            ),
+            "OpenCV Debevec": cv,
+        }
+        for label, r in curves.items():
+            g = np.log(np.asarray(r.to_linear_normalized(zz)))[:, 0]
+            g = g - np.median((g - gt)[30:225]) if label != "truth" else g
+            ax.plot(lv, g, label=label, lw=1.5 if label == "truth" else 1.0)
+        ax.set_title(f"AEB ±3 EV, {cname[17:]}")
+        ax.set_xlabel("level")
+        ax.set_ylim(-8, 2)
+        ax.legend(fontsize=6)
+    axes[1].set_ylabel("ln x (offset to the truth, levels 30-224)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spline", action="store_true")
     ap.add_argument("--levels", action="store_true", help="only the red AEB per-level errors")
+    ap.add_argument("--subspace", action="store_true", help="only method='subspace' by n_poly")
+    ap.add_argument("--figure", default=None, help="only the basis / AEB curves figure")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
+    if a.figure:
+        figure(a.figure)
+        return
+    if a.subspace:
+        emit_json(subspace_rows(), a.json)
+        return
     emit_json(levels() if a.levels else measure(spline=a.spline), a.json)
 
 

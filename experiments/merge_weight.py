@@ -11,6 +11,8 @@ Same curve per stack (jaxgfx's default ``recover_response``), merged with each w
   ``|Δ ln E|`` per channel-scale, OpenCV in the same run;
 * the JPEG-like synthetic stacks of issue 16 (``tests/hdr/test_selfcheck.py``): LOO, OpenCV.
 
+``--middle``: flowers' held-out middle frame per level band (:func:`middle_frame`).
+
 Prints JSON rows ``{"stack", "metric", <weighting>: value, ..., "OpenCV": value}``.
 """
 
@@ -127,12 +129,65 @@ def figure(rows, path):
     fig.savefig(path, dpi=110)
 
 
+def middle_frame(name="flowers"):
+    """Issue 26's open real-bracket row: the held-out *middle* frame of ``name`` predicted
+    from the other two (frames sorted by time), per level band of 32 of the actual level:
+    mean signed error (levels) and pixel count, for the default curve (free table; the
+    bracket's overlap is above ``SPARSE_OVERLAP``), the ``"subspace"`` curve (``n_poly`` 0 and
+    2) merged with the default merge, and OpenCV's curve with OpenCV's merge."""
+    import cv2
+
+    ims, t = load(name), np.asarray(REAL_RATIOS[name])
+    held = ims[1]
+    rest, tr = ims[[0, 2]], t[[0, 2]]
+    edges = np.arange(0, 257, 32)
+    band = np.clip(np.digitize(held, edges) - 1, 0, len(edges) - 2)
+    keep = (held > 0) & (held < 255)
+
+    def bands(pred):
+        e = np.asarray(pred, np.float64) - held
+        out = {"mean abs (levels)": round(float(np.mean(np.abs(e[keep]))), 2)}
+        out["signed by band"] = [
+            round(float(np.mean(e[keep & (band == b)])), 2) if np.any(keep & (band == b)) else None
+            for b in range(len(edges) - 1)
+        ]
+        return out
+
+    row = {"stack": name, "held": "middle", "bands": edges.tolist()}
+    row["count by band"] = [int(np.sum(keep & (band == b))) for b in range(len(edges) - 1)]
+    d = hdr.recover_response(ims, t)
+    row["overlap"] = _r(np.asarray(d.diagnostics["overlap"]))
+    fits = {"default": d}
+    for npoly in (0, 2):
+        fits[f"subspace n_poly={npoly}"] = hdr.recover_response(
+            ims, t, method="subspace", n_poly=npoly
+        )
+    for k, r in fits.items():
+        e = hdr.merge_radiance(rest, tr, r)
+        row[k] = bands(np.clip(np.round(np.asarray(r.from_linear(e * t[1]))), 0, 255))
+    bgr = [np.ascontiguousarray(im[..., ::-1]) for im in ims]
+    crv = cv2.createCalibrateDebevec().process(bgr, t.astype(np.float32))
+    e = cv2.createMergeDebevec().process(
+        [bgr[0], bgr[2]], tr.astype(np.float32), crv
+    )  # BGR, OpenCV's unit
+    inv = [np.interp(e[..., c] * t[1], crv[:, 0, c], np.arange(256)) for c in range(3)]
+    row["OpenCV"] = bands(np.round(np.stack(inv[::-1], axis=-1)))
+    log(row)
+    return [row]
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", default=None)
     ap.add_argument("--figure", default=None)
     ap.add_argument("--only", choices=("real", "measured", "jpeg"), default=None)
+    ap.add_argument(
+        "--middle", action="store_true", help="only flowers' held middle frame, per level"
+    )
     a = ap.parse_args(argv)
+    if a.middle:
+        emit_json(middle_frame(), a.json)
+        return
     rows = []
     for part, fn in (("real", real_rows), ("measured", measured_rows), ("jpeg", jpeg_rows)):
         if a.only in (None, part):

@@ -12,13 +12,19 @@ from .weighting import get_weighting
 
 DEBEVEC_MAX_CANDIDATES = 1 << 14
 
-SPARSE_OVERLAP = 0.94
+SPARSE_OVERLAP = 0.06
 """Default ``sparse_overlap`` of ``"debevec"``: a channel in which fewer than this fraction of
-the candidate pixels is strictly between black and clipping in at least 2 frames is fitted in
-the 3-parameter curve space of ``"subspace"`` (``n_poly=0``) instead of the free table.
-Measured (docs/hdr.md, "Measured curves"): 0.83–0.92 on the 3-frame ±3 EV AEBs through the
-Ektachrome curves (where the free table loses to OpenCV and the subspace fit wins), 0.95–0.99
-on every 5-frame, real and synthetic bracket of the tests (where the free table is better)."""
+the candidate pixels is well exposed (8-bit levels 16…239, :data:`WELL_EXPOSED`) in at least
+2 frames (:func:`bracket_overlap`) is fitted in the 3-parameter curve space of
+``"subspace"`` (``n_poly=0``) instead of the free table. Measured (docs/hdr.md, "Measured
+curves"): 0.00–0.04 on the 3-frame ±3 EV AEBs through the Ektachrome curves (where the free
+table loses to OpenCV and the subspace fit wins); 0.10–0.99 on every other bracket of the
+tests (5-frame measured, real JPEG, JPEG-like and analytic synthetic stacks), where the free
+table is kept."""
+
+WELL_EXPOSED = (16.0 / 255.0, 239.0 / 255.0)
+"""Normalised level range counted as well exposed by :func:`bracket_overlap` (1/16 of the
+range from black and from clipping)."""
 
 __all__ = [
     "recover_debevec",
@@ -30,6 +36,7 @@ __all__ = [
     "inverse_slope_weights",
     "bracket_overlap",
     "SPARSE_OVERLAP",
+    "WELL_EXPOSED",
 ]
 
 
@@ -199,8 +206,10 @@ def data_residual_rms(g, lev, w, log_t):
 
 def bracket_overlap(z):
     """Per channel ``(C,)``: the fraction of pixels of the stack ``z`` ``(N, H, W, C)``
-    (normalised) strictly between black and clipping in at least 2 frames."""
-    inside = (z > 0) & (z < 1)
+    (normalised) that are well exposed (:data:`WELL_EXPOSED`, levels 16…239 of 255) in at
+    least 2 frames."""
+    lo, hi = WELL_EXPOSED
+    inside = (z >= lo - 1e-6) & (z <= hi + 1e-6)
     return jnp.mean((jnp.sum(inside, axis=0) >= 2).astype(z.dtype), axis=(0, 1))
 
 
@@ -271,9 +280,9 @@ def recover_debevec(
     with ``reweight_passes > 0`` also ``diagnostics["loo_candidates"]`` ``(2,)`` (the LOO
     error of the end-weighted and of the inverse-slope curve, levels on 0–255) and
     ``diagnostics["inverse_slope_chosen"]`` (bool).
-    ``sparse_overlap`` (default :data:`SPARSE_OVERLAP` = 0.94; 0 turns it off): a channel in
-    which fewer than this fraction of the candidate pixels is seen strictly between black and
-    clipping in at least 2 frames (:func:`bracket_overlap`; a 3-frame ±3 EV AEB) gets the
+    ``sparse_overlap`` (default :data:`SPARSE_OVERLAP` = 0.06; 0 turns it off): a channel in
+    which fewer than this fraction of the candidate pixels is well exposed (levels 16…239) in
+    at least 2 frames (:func:`bracket_overlap`; a 3-frame ±3 EV AEB of a film-like curve) gets the
     3-parameter ``"subspace"`` fit (``1, ln z, ln(1 − z)``; :mod:`jaxgfx.hdr._subspace`)
     instead: its free table is under-determined there (issue 26, docs/hdr.md "Measured
     curves"). ``diagnostics["overlap"]`` and ``diagnostics["subspace_chosen"]`` ``(C,)``.

@@ -91,3 +91,31 @@ def test_subspace_unknown_option_names_the_option():
     ims, t = _gamma2_stack(np.float32)
     with pytest.raises(ValueError, match="reweight_passes"):
         hdr.recover_response(ims, t, method="subspace", reweight_passes=2)
+
+
+def test_bracket_overlap_counts_pixels_well_exposed_in_two_frames():
+    """Closed form on a 3-frame 2x3 stack: levels 16 and 239 count as well exposed, 15 and
+    240 do not; per channel."""
+    from jaxgfx.hdr._debevec import bracket_overlap
+
+    lv = np.asarray(
+        [
+            # frame 0, 1, 2 levels of the 6 pixels (channel 0)
+            [[16, 15, 100], [239, 240, 0]],
+            [[239, 100, 15], [100, 240, 255]],
+            [[255, 240, 240], [0, 100, 100]],
+        ],
+        np.float32,
+    )
+    z = np.stack([lv, np.full_like(lv, 128.0)], axis=-1) / 255.0  # channel 1: all inside
+    got = np.asarray(bracket_overlap(jnp.asarray(z)))
+    # pixel (0,0): 16, 239 -> yes; (0,1): 15, 100, 240 -> no; (0,2): 100, 15, 240 -> no;
+    # (1,0): 239, 100 -> yes; (1,1): 240, 240, 100 -> no; (1,2): 0, 255, 100 -> no
+    np.testing.assert_allclose(got, [2 / 6, 1.0], atol=1e-7)
+
+
+@pytest.mark.parametrize("bad", [-0.1, 1.5, True, "x"])
+def test_sparse_overlap_bad_input(bad):
+    ims, t = _gamma2_stack(np.float32)
+    with pytest.raises(ValueError, match="sparse_overlap"):
+        hdr.recover_response(ims, t, sparse_overlap=bad)
