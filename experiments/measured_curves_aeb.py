@@ -2,8 +2,8 @@
 weight and smoothness, and ``spline``, scored by the radiance error *and* by the
 leave-one-out self-check that the default uses to choose between its candidates.
 
-    python -m experiments.measured_curves_aeb [--spline] [--levels] [--subspace]
-        [--figure docs/images/hdr_subspace_aeb.png]
+    python -m experiments.measured_curves_aeb [--spline] [--levels] [--subspace] [--checks]
+        [--timing] [--overlap] [--figure docs/images/hdr_subspace_aeb.png]
 
 Stacks: ``experiments.measured_curves.measured_stacks`` (DoRF Ektachrome 320T curves, 96×96,
 AEB 3 frames ±3 EV and 5 frames 2 EV apart). For ``end_weight`` in {0, 0.05, 0.2} and ``lam``
@@ -13,7 +13,10 @@ channel-scale and the mean LOO error (levels, default merge); with ``--spline`` 
 ``--subspace``: ``method="subspace"`` for ``n_poly`` 0…4 (radiance error, LOO, bracket
 overlap) on every stack instead. ``--figure PATH``: the curve-space basis (``n_poly=2``) and,
 for the three AEB stacks, the default's curve, the free table (``sparse_overlap=0``) and
-OpenCV's against the measured truth.
+OpenCV's against the measured truth. ``--checks``: ``"subspace"`` on the real JPEG brackets
+and the analytic synthetic stacks (data its ``n_poly=0`` choice did not see). ``--timing``:
+the cost of the sparse-bracket rule, A/B in one process. ``--overlap``: the rule's statistic
+on every stack family (no fits).
 """
 
 from __future__ import annotations
@@ -113,6 +116,149 @@ def subspace_rows():
     return rows
 
 
+def checks():
+    """``method="subspace"`` on data its ``n_poly=0`` choice did not see: the real JPEG
+    brackets (LOO per held frame, levels; default and OpenCV in the same run) and the analytic
+    synthetic stacks of ``tests/hdr/test_response.py::test_debevec_beats_opencv`` (radiance
+    error and curve error)."""
+    import jax.numpy as jnp
+
+    from .measured_curves import opencv_debevec_merge
+    from .merge_weight import REAL_RATIOS
+    from .real_bracket import load, opencv_loo
+
+    rad = hdr.synthetic_radiance(jax.random.key(1), 64, 64, dynamic_range=1e4)
+
+    def stack(name):  # the stacks of tests/hdr/_stacks.py (64x64, 5 frames x4, 8-bit)
+        return hdr.make_bracketed_stack(
+            jax.random.key(2),
+            rad,
+            jnp.asarray((1.0, 4.0, 16.0, 64.0, 256.0)),
+            hdr.synthetic_response(name),
+            bits=8,
+            gain=1e-4,
+            read_sigma=1e-3,
+        )
+
+    def pf(r, ims, t):
+        return [round(float(v), 2) for v in np.asarray(hdr.leave_one_out(ims, t, r).per_frame)]
+
+    rows = []
+    for name, ratios in REAL_RATIOS.items():
+        ims, t = load(name), np.asarray(ratios)
+        row = {"stack": f"real {name}", "metric": "LOO per held frame (levels)"}
+        d = hdr.recover_response(ims, t)
+        row["well exposed in 2 frames"] = [round(float(v), 3) for v in d.diagnostics["overlap"]]
+        row["default"] = pf(d, ims, t)
+        for k in (0, 1, 2, 4):
+            row[f"subspace n_poly={k}"] = pf(
+                hdr.recover_response(ims, t, method="subspace", n_poly=k), ims, t
+            )
+        row["OpenCV"] = [round(float(v), 2) for v in np.asarray(opencv_loo(ims, t).per_frame)]
+        log(row)
+        rows.append(row)
+    for name in ("gamma2.2", "srgb", "filmic", "log"):
+        st = stack(name)
+        row = {"stack": f"synthetic {name}", "metric": "radiance error, curve error"}
+
+        def sc(r, st=st):
+            e = hdr.merge_radiance(st.images, st.exposure_times, r)
+            return (
+                round(float(hdr.radiance_error(e, st.radiance)), 4),
+                round(float(hdr.response_curve_error(r, st.response)), 4),
+            )
+
+        d = hdr.recover_response(st.images, st.exposure_times)
+        row["well exposed in 2 frames"] = [round(float(v), 3) for v in d.diagnostics["overlap"]]
+        row["default"] = sc(d)
+        for k in (0, 2):
+            r = hdr.recover_response(st.images, st.exposure_times, method="subspace", n_poly=k)
+            row[f"subspace n_poly={k}"] = sc(r)
+        cv_e = jnp.asarray(opencv_debevec_merge(st.images, st.exposure_times))
+        row["OpenCV"] = round(float(hdr.radiance_error(cv_e, st.radiance)), 4)
+        log(row)
+        rows.append(row)
+    return rows
+
+
+def overlaps():
+    """The sparse-bracket rule's statistic (:func:`jaxgfx.hdr._debevec.bracket_overlap`,
+    per channel, on the whole image) for every stack family of the tests and tables: the
+    measured-curve brackets, the real JPEG brackets, the JPEG-like stacks of
+    ``experiments.merge_weight`` and the analytic synthetic stacks (no fits)."""
+    import jax.numpy as jnp
+
+    from jaxgfx.hdr._debevec import bracket_overlap
+
+    from .merge_weight import JPEG_LIKE, REAL_RATIOS
+    from .real_bracket import load
+
+    def ov(ims):
+        z = jnp.asarray(np.asarray(ims), jnp.float32) / 255.0
+        return [round(float(v), 3) for v in bracket_overlap(z)]
+
+    out = {}
+    for cname, bname, st in measured_stacks():
+        out[f"measured {cname[17:]} {bname}"] = ov(st.images)
+    for name in REAL_RATIOS:
+        out[f"real {name}"] = ov(load(name))
+    rad = hdr.synthetic_radiance(jax.random.key(1), 96, 96, dynamic_range=1e4)
+    for label, (name, times, *shift) in JPEG_LIKE.items():
+        st = hdr.make_jpeg_stack(
+            jax.random.key(2), rad, jnp.asarray(times), name, max_shift=(shift or [0.0])[0]
+        )
+        out[f"JPEG-like {label}"] = ov(st.images)
+    rad = hdr.synthetic_radiance(jax.random.key(1), 64, 64, dynamic_range=1e4)
+    for name in ("gamma2.2", "srgb", "filmic", "log"):
+        st = hdr.make_bracketed_stack(
+            jax.random.key(2),
+            rad,
+            jnp.asarray((1.0, 4.0, 16.0, 64.0, 256.0)),
+            hdr.synthetic_response(name),
+            bits=8,
+            gain=1e-4,
+            read_sigma=1e-3,
+        )
+        out[f"synthetic {name}"] = ov(st.images)
+    log(out)
+    return out
+
+
+def timing():
+    """``recover_response`` with the sparse-bracket rule off (``sparse_overlap=0``, the code
+    path before it) and on (default), interleaved in one process on the green 96×96 AEB and
+    5-frame stacks: first call after ``jax.clear_caches()`` (compile) and the median of 4
+    steady calls, process CPU seconds and wall seconds, 2 repeats."""
+    import os
+    import time
+
+    def run(st, **o):
+        c0, w0 = time.process_time(), time.perf_counter()
+        r = hdr.recover_response(st.images, st.exposure_times, **o)
+        jax.block_until_ready(r.params)
+        return time.process_time() - c0, time.perf_counter() - w0
+
+    stacks = {b: s for c, b, s in measured_stacks() if "Green" in c}
+    out = {"load average": [round(v, 1) for v in os.getloadavg()]}
+    for _ in range(2):
+        for bname, st in stacks.items():
+            for label, o in (("rule off", {"sparse_overlap": 0.0}), ("default", {})):
+                jax.clear_caches()
+                first = run(st, **o)
+                steady = [run(st, **o) for _ in range(4)]
+                out.setdefault(f"{bname}, {label}", []).append(
+                    {
+                        "first call cpu s": round(first[0], 2),
+                        "first call wall s": round(first[1], 2),
+                        "steady cpu ms": round(1e3 * float(np.median([s[0] for s in steady])), 1),
+                        "steady wall ms": round(1e3 * float(np.median([s[1] for s in steady])), 1),
+                    }
+                )
+    out["load average after"] = [round(v, 1) for v in os.getloadavg()]
+    log(out)
+    return out
+
+
 def figure(path):
     import cv2
     import jax.numpy as jnp
@@ -166,6 +312,9 @@ def main(argv=None):
     ap.add_argument("--levels", action="store_true", help="only the red AEB per-level errors")
     ap.add_argument("--subspace", action="store_true", help="only method='subspace' by n_poly")
     ap.add_argument("--figure", default=None, help="only the basis / AEB curves figure")
+    ap.add_argument("--checks", action="store_true", help="only subspace on real/synthetic")
+    ap.add_argument("--timing", action="store_true", help="only the rule's cost, A/B")
+    ap.add_argument("--overlap", action="store_true", help="only the rule's statistic")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     if a.figure:
@@ -173,6 +322,15 @@ def main(argv=None):
         return
     if a.subspace:
         emit_json(subspace_rows(), a.json)
+        return
+    if a.checks:
+        emit_json(checks(), a.json)
+        return
+    if a.timing:
+        emit_json(timing(), a.json)
+        return
+    if a.overlap:
+        emit_json(overlaps(), a.json)
         return
     emit_json(levels() if a.levels else measure(spline=a.spline), a.json)
 

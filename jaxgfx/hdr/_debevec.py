@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 
 from .._checks import check_nonnegative
+from ._curve_space import response_basis
 from ._model import CameraResponse, resolve_anchor
 from ._sampling import level_index, monotone_repair, select_samples
 from .weighting import get_weighting
@@ -34,6 +35,7 @@ __all__ = [
     "debevec_samples",
     "data_residual_rms",
     "inverse_slope_weights",
+    "subspace_solve",
     "bracket_overlap",
     "SPARSE_OVERLAP",
     "WELL_EXPOSED",
@@ -115,6 +117,14 @@ def debevec_system(levels, weights, log_t, n_levels, lam, anchor_index):
     a = a + lam * smoothness_matrix(n_levels, dt)
     a = a.at[anchor_index, anchor_index].add(1.0)
     return a, b
+
+
+def subspace_solve(levels, weights, log_t, basis, lam, anchor_index):
+    """One channel: the coefficients ``c`` ``(K,)`` minimising Debevec–Malik's objective over
+    ``g = basis @ c`` (``basis`` ``(L, K)``)."""
+    n_levels = basis.shape[0]
+    a, b = debevec_system(levels, weights, log_t, n_levels, lam, anchor_index)
+    return jnp.linalg.solve(basis.T @ a @ basis, basis.T @ b)
 
 
 def inverse_slope_weights(g, anchor_index):
@@ -216,8 +226,6 @@ def bracket_overlap(z):
 def _sparse_subspace(z, g, w, lev, interior, valid, log_t, m, lam, threshold):
     """Replace the channels whose bracket overlap (:func:`bracket_overlap`) is below
     ``threshold`` by the ``"subspace"`` fit (``n_poly=0``, hat weights, no end weight)."""
-    from ._subspace import response_basis, subspace_solve
-
     n_lev = g.shape[1]
     zq = lev.astype(w.dtype) / (n_lev - 1)
     ws = jnp.where(interior, 1.0 - jnp.abs(2.0 * zq - 1.0), 0.0) * valid[..., None].astype(w.dtype)

@@ -25,49 +25,14 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from .._checks import check_nonnegative
-from ._debevec import data_residual_rms, debevec_samples, debevec_system, default_levels
+from ._curve_space import MAX_POLY, check_n_poly, response_basis
+from ._debevec import data_residual_rms, debevec_samples, default_levels, subspace_solve
 from ._model import CameraResponse, resolve_anchor
 from ._sampling import monotone_repair
 
 __all__ = ["recover_subspace", "response_basis", "MAX_POLY"]
-
-MAX_POLY = 8
-"""Largest ``n_poly`` (Legendre terms of :func:`response_basis`)."""
-
-
-def response_basis(n_levels: int, n_poly: int) -> np.ndarray:
-    """Orthonormal basis ``(n_levels, 3 + n_poly)`` (float64, NumPy) of the log-inverse
-    response space on uniform levels ``z_k = k / (L − 1)``: the span of
-    ``1, ln z, ln(1 − z), P_1(2z − 1) … P_K(2z − 1)``. ``z`` is clipped to
-    ``[0.5 / (L − 1), 1 − 0.5 / (L − 1)]`` so the first and last rows (black and clipped levels,
-    censored in every fit) are finite. Orthonormalised by a QR decomposition (same span)."""
-    z = np.linspace(0.0, 1.0, n_levels)
-    eps = 0.5 / (n_levels - 1)
-    zc = np.clip(z, eps, 1.0 - eps)
-    cols = [np.ones(n_levels), np.log(zc), np.log1p(-zc)]
-    x = 2.0 * z - 1.0
-    for k in range(1, n_poly + 1):
-        cols.append(np.polynomial.legendre.Legendre.basis(k)(x))
-    q, _ = np.linalg.qr(np.stack(cols, axis=1))
-    return q
-
-
-def _check_n_poly(n_poly):
-    if isinstance(n_poly, bool) or not isinstance(n_poly, (int, np.integer)):
-        raise ValueError(f"n_poly: expected an integer in 0…{MAX_POLY}, got {n_poly!r}")
-    if not 0 <= n_poly <= MAX_POLY:
-        raise ValueError(f"n_poly: expected an integer in 0…{MAX_POLY}, got {n_poly!r}")
-
-
-def subspace_solve(levels, weights, log_t, basis, lam, anchor_index):
-    """One channel: the coefficients ``c`` ``(K,)`` minimising Debevec–Malik's objective over
-    ``g = basis @ c`` (``basis`` ``(L, K)``)."""
-    n_levels = basis.shape[0]
-    a, b = debevec_system(levels, weights, log_t, n_levels, lam, anchor_index)
-    return jnp.linalg.solve(basis.T @ a @ basis, basis.T @ b)
 
 
 def recover_subspace(
@@ -101,7 +66,7 @@ def recover_subspace(
     """
     check_nonnegative(lam, "lam")
     check_nonnegative(end_weight, "end_weight")
-    _check_n_poly(n_poly)
+    check_n_poly(n_poly)
     anchor_z = resolve_anchor(anchor)
     n_lev = default_levels(code_max, n_levels)
     lev, w, _, _ = debevec_samples(z, key, n_samples, max_candidates, n_lev, weighting, end_weight)

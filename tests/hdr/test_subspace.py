@@ -35,7 +35,7 @@ def test_basis_is_orthonormal_and_spans_gamma_and_logit():
         assert np.max(np.abs(resid)) < 1e-10
 
 
-# slow: ~5 s on 2 cores (compile of the sampler and the solve in float64)
+# slow: ~5 s on 2 cores, 9 s under load (compile of the sampler and the solve, float64)
 @pytest.mark.slow
 def test_subspace_recovers_a_curve_in_the_span_exactly(x64):
     """No smoothness (``lam=0``: λ·g'' would pull the curve off ``2 ln z``); every level,
@@ -52,7 +52,7 @@ def test_subspace_recovers_a_curve_in_the_span_exactly(x64):
     assert r.diagnostics["coefficients"].shape == (1, 5)
 
 
-# slow: ~18 s on 2 cores (float64 compiles of the fit and of its gradient)
+# slow: ~15 s on 2 cores, 30 s under load (float64 compiles of the fit and its gradient)
 @pytest.mark.slow
 def test_subspace_gradient_in_exposure_times_matches_finite_differences(x64):
     """The table is linear in ``ln t`` through the normal equations: d table / d ln t_long
@@ -70,7 +70,7 @@ def test_subspace_gradient_in_exposure_times_matches_finite_differences(x64):
     assert abs(g_ad[1]) > 0.1
 
 
-# slow: ~8 s on 2 cores (two compiles: eager and jitted)
+# slow: ~8 s on 2 cores, 19 s under load (two compiles: eager and jitted)
 @pytest.mark.slow
 def test_subspace_under_jit_matches_eager():
     """``jax.jit`` of the public function (options static) gives the eager curve; float32."""
