@@ -34,6 +34,7 @@ from jaxgfx.render.scene.schema import (
     SCENE_KEYS,
     build_camera,
     envmap_image,
+    envmap_rotation,
     expect_keys,
     num,
     rgb,
@@ -293,7 +294,9 @@ def load_scene(
                 environment = ConstantEnvironment(rgb(ed["radiance"], f"{where}.radiance"))
             else:
                 environment = EnvironmentMap.create(
-                    envmap_image(ed, where, base_dir), ed.get("scale", 1.0)
+                    envmap_image(ed, where, base_dir),
+                    ed.get("scale", 1.0),
+                    envmap_rotation(ed, where),
                 )
     if not shapes:
         raise ValueError("shapes: the scene has no geometry")

@@ -49,7 +49,8 @@ Mapping of conventions (jaxgfx -> Mitsuba 3), each checked by ``tests/render/tes
   and clamps v, Mitsuba 3 at ``((i + .5) / W, j / (H - 1))`` (rows at the poles). The map is
   therefore re-gridded (:func:`envmap_for_mitsuba`: ``2H + 1`` rows = the jaxgfx texel rows and
   the midpoints between them, plus the clamped pole rows) so that Mitsuba's bilinear lookup
-  equals jaxgfx's exactly, and written as an EXR into ``work_dir``.
+  equals jaxgfx's exactly, and written as an EXR into ``work_dir``. A ``to_world`` rotation is
+  written as ``to_world`` (Mitsuba looks up ``to_world^-1 d``, jaxgfx ``to_world^T d``).
 * meshes: ``.obj`` / ``.ply`` files go to Mitsuba's ``obj`` / ``ply`` plugins (``face_normals``
   when the file has no vertex normals: jaxgfx then shades flat, Mitsuba would smooth);
   inline ``vertices`` / ``faces`` are written as a PLY into ``work_dir``; ``translate`` /
@@ -849,8 +850,13 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
                 path = os.path.join(work_dir(), f"envmap_{i}.exr")
                 write_exr(path, envmap_for_mitsuba(img))
                 scale = S.num(ed.get("scale", 1.0), f"{where}.scale")
-                out[key(ed, where, f"emitter_{i}")] = {"type": "envmap", "filename": path,
-                                                      "scale": float(scale)}  # fmt: skip
+                out[key(ed, where, f"emitter_{i}")] = env = {"type": "envmap", "filename": path,
+                                                            "scale": float(scale)}  # fmt: skip
+                rot = S.envmap_rotation(ed, where)
+                if rot is not None:  # Mitsuba looks up to_world^-1 d, as jaxgfx to_world^T d
+                    m = np.eye(4)
+                    m[:3, :3] = rot
+                    env["to_world"] = _transform(m, mi)
         else:  # "directional" / "spot" (check_choice above admits only S.EMITTER_TYPES)
             out[key(ed, where, f"emitter_{i}")] = _delta_light(ed, where, mi, base_dir, work_dir)
     return out
@@ -1222,8 +1228,11 @@ def scene_to_desc(scene) -> dict:
         desc["emitters"].append(named({"type": "constant", "radiance": _list(env.radiance)},
                                       "environment", 0))  # fmt: skip
     elif env is not None:
-        desc["emitters"].append(named({"type": "envmap", "image": np.asarray(env.image, np.float32),
-                                       "scale": float(env.scale)}, "environment", 0))  # fmt: skip
+        ed = {"type": "envmap", "image": np.asarray(env.image, np.float32),
+              "scale": float(env.scale)}  # fmt: skip
+        if env.to_world is not None:
+            ed["to_world"] = np.asarray(env.to_world, np.float64).tolist()
+        desc["emitters"].append(named(ed, "environment", 0))
     counts = {"directional": 0, "spot": 0, "projector": 0}
     for e in scene.delta_lights:  # directional, spot and projector lights, in their order
         if isinstance(e, DirectionalLight):

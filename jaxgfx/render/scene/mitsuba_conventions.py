@@ -98,7 +98,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("emitter", "area"): S + " (inside a shape; `radiance` an RGB or a bitmap / checkerboard)",
     ("emitter", "point"): S,
     ("emitter", "constant"): S,
-    ("emitter", "envmap"): S + " (no rotation)",
+    ("emitter", "envmap"): S + " (rotating `to_world`; no scale or shear)",
     ("emitter", "directional"): S,
     ("emitter", "spot"): S + " (a projected `texture` a bitmap)",
     ("emitter", "projector"): S + " (`irradiance` a colour or a bitmap; rigid `to_world`)",

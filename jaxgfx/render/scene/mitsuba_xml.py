@@ -60,7 +60,9 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
 * ``envmap``: same direction -> (u, v) map as jaxgfx (y up); Mitsuba places rows at
   ``v = j / (H - 1)``, jaxgfx at ``(j + 1/2) / H'``: the map is resampled to ``H' = 4 H`` rows
   with Mitsuba's linear interpolation along v (exact between Mitsuba's rows up to the
-  interpolation of the resampled grid, see :func:`envmap_from_mitsuba`).
+  interpolation of the resampled grid, see :func:`envmap_from_mitsuba`). ``to_world`` must be
+  a rotation (its translation is ignored, as Mitsuba does for directions): it becomes the
+  ``to_world`` of the envmap description; a scale or shear is refused.
 """
 
 from __future__ import annotations
@@ -1417,9 +1419,10 @@ def _emitter(obj: _Obj, doc, desc):
         )
         if path is None:
             raise ValueError(f"{obj.where}: missing parameter 'filename'")
-        m = p.transform("to_world")
-        if m is not None and not np.allclose(m, np.eye(4), atol=1e-9):
-            raise p.err("to_world", "rotated environment maps are not supported")
+        m = p.transform("to_world")  # a rotation (Mitsuba looks up to_world^-1 d)
+        if m is not None and not np.allclose(m[:3, :3].T @ m[:3, :3], np.eye(3), atol=1e-6):
+            raise p.err("to_world", "an environment map's to_world must be a rotation (no "
+                                    "scale or shear)")  # fmt: skip
         p.string("filter_type", "bilinear", ("bilinear",))
         try:
             img = io.read_any(path)
@@ -1429,6 +1432,8 @@ def _emitter(obj: _Obj, doc, desc):
             raise p.err("filename", f"expected an RGB image of at least 2x2, got {img.shape}")
         d = {"type": "envmap", "image": envmap_from_mitsuba(img),
              "scale": p.float("scale", 1.0)}  # fmt: skip
+        if m is not None and not np.allclose(m[:3, :3], np.eye(3), rtol=0, atol=1e-12):
+            d["to_world"] = m[:3, :3].tolist()
     elif t == "directional":
         direction = p.vec("direction")
         m = p.transform("to_world")

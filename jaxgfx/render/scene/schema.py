@@ -29,6 +29,7 @@ __all__ = [
     "num",
     "rgb",
     "envmap_image",
+    "envmap_rotation",
     "build_camera",
     "rectangle_from_desc",
     "mesh_from_desc",
@@ -48,8 +49,9 @@ lanczos; :func:`jaxgfx.render.film.make_filter` says which belong to which)."""
 
 def envmap_image(ed, where, base_dir=None) -> np.ndarray:
     """The lat-long image of an ``envmap`` emitter description (``file`` relative to
-    ``base_dir``, or an inline ``image``), validated to ``(H, W, >=3)``."""
-    expect_keys(ed, where, ("type",), ("file", "image", "scale", "id"))
+    ``base_dir``, or an inline ``image``), validated to ``(H, W, >=3)``. (Its optional
+    ``to_world``, a rotation, is read by :func:`envmap_rotation`.)"""
+    expect_keys(ed, where, ("type",), ("file", "image", "scale", "to_world", "id"))
     if "file" in ed:
         from jaxgfx import io
 
@@ -64,6 +66,18 @@ def envmap_image(ed, where, base_dir=None) -> np.ndarray:
     if img.ndim != 3 or img.shape[-1] < 3:
         raise ValueError(f"{where}.image: expected (H, W, 3), got shape {img.shape}")
     return img
+
+
+def envmap_rotation(ed, where):
+    """The ``to_world`` of an ``envmap`` description as a 3x3 rotation (``None`` without one or
+    for the identity): a 3x3 or 4x4 affine matrix whose linear part is orthogonal (its
+    translation is ignored: the map is at infinity); a scale or shear is refused naming
+    ``where.to_world``."""
+    from jaxgfx.render.emitters import EnvironmentMap
+
+    if "to_world" not in ed:
+        return None
+    return EnvironmentMap.check_to_world(ed["to_world"], f"{where}.to_world")
 
 
 def expect_keys(d, where, required=(), optional=()):
