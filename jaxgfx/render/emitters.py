@@ -20,6 +20,8 @@ Conventions follow Mitsuba 3:
   texture through a perspective frustum (``fov``): a white diffuse plane facing it at distance
   1 receives irradiance ``pi * scale * E(uv)`` everywhere in the frustum (the ``1 / cos^3``
   that makes a projected constant truly constant on the plane); a delta light.
+- ``DirectionalAreaLight``: Mitsuba's ``directionalarea``, a shape emitting ``radiance`` only
+  along its normal; seen by the particle tracer only (as in Mitsuba).
 - ``ConstantEnvironment``: radiance arriving from every direction.
 - ``EnvironmentMap``: latitude-longitude image, y-up, with Mitsuba's mapping
   ``u = atan2(d_x, -d_z) / (2 pi)`` (wrapped to [0, 1)), ``v = acos(d_y) / pi``; importance
@@ -57,6 +59,7 @@ from jaxgfx.render.sampling import Distribution2D
 __all__ = [
     "PointLights",
     "AreaLight",
+    "DirectionalAreaLight",
     "DirectionalLight",
     "SpotLight",
     "ProjectorLight",
@@ -456,6 +459,32 @@ class AreaLight(eqx.Module):
                     b = jnp.take(lum, jnp.minimum(idx + 1, n - 1), axis=axis)
                 lum = 0.75 * lum + 0.125 * (a + b)
         return Distribution2D(lum)
+
+
+class DirectionalAreaLight(eqx.Module):
+    """Mitsuba 3's ``directionalarea``: scene shape ``shape_index`` (sampled through ``shape``,
+    its untransformed geometry) emits ``radiance`` (RGB ``(3,)``) only along its geometric
+    normal, a delta distribution in direction. As in Mitsuba, nothing connects to it from the
+    camera side: a camera ray or a BSDF sample that hits the shape sees no emission, and light
+    sampling (next-event estimation) returns zero (:meth:`sample`; it still counts in the
+    uniform light choice, as Mitsuba's emitter sampling counts it). Only the particle tracer
+    (``ptracer``) emits from it: a point uniform by area and the ray along the normal there,
+    weight ``radiance * area`` (Mitsuba's ``sample_ray``). ``radiance`` is differentiable
+    (``emitters.directionalarea.I.radiance``)."""
+
+    radiance: jnp.ndarray
+    shape: eqx.Module
+    shape_index: int = eqx.field(static=True)
+
+    def __check_init__(self):  # also runs on Scene.replace (concrete values only)
+        check_nonnegative(self.radiance, "radiance")
+
+    def sample(self, p):
+        """Light sampling from points ``p``: zero radiance (a direction drawn towards the
+        light has probability 0 of being its normal); ``(wi, dist, Li)`` as the delta lights'."""
+        batch = p.shape[:-1]
+        wi = jnp.broadcast_to(jnp.asarray([0.0, 0.0, 1.0], p.dtype), batch + (3,))
+        return wi, jnp.ones(batch, p.dtype), jnp.zeros(batch + (3,), p.dtype)
 
 
 class ConstantEnvironment(eqx.Module):

@@ -13,6 +13,7 @@ from jaxgfx.render.bsdf import make_bsdf
 from jaxgfx.render.emitters import (
     AreaLight,
     ConstantEnvironment,
+    DirectionalAreaLight,
     DirectionalLight,
     EnvironmentMap,
     PointLights,
@@ -262,7 +263,7 @@ def load_scene(
             )
         elif kind == "projector":
             delta_lights.append(projector_from_desc(ed, where, base_dir))
-        elif kind == "area":
+        elif kind in ("area", "directionalarea"):
             expect_keys(ed, where, ("type", "shape", "radiance"), ("material", "id"))
             sk, shape = shape_from_desc(ed["shape"], f"{where}.shape", base_dir)
             shape_ident = _object_id(ed["shape"], f"{where}.shape", "shapes", seen_ids)
@@ -281,6 +282,12 @@ def load_scene(
                 object_ids.append((shape_ident, "shape", len(shapes) - 1, row, names[mi]))
             n_prims = shape.faces.shape[0] if sk == "mesh" else 1
             shape_mats.append(jnp.full((n_prims,), mi, jnp.int32))
+            if kind == "directionalarea":  # a delta light: no emission towards the camera
+                rad = rgb(ed["radiance"], f"{where}.radiance")
+                delta_lights.append(
+                    _prefixed(where, DirectionalAreaLight, rad, shape, len(shapes) - 1)
+                )
+                continue
             rad = emission_from_desc(
                 ed["radiance"], f"{where}.radiance", base_dir=base_dir, rgb=rgb
             )
@@ -347,6 +354,8 @@ def _object_id(d, where, namespace, seen):
 def _delta_kind(light) -> str:
     if isinstance(light, ProjectorLight):
         return "projector"
+    if isinstance(light, DirectionalAreaLight):
+        return "directionalarea"
     return "spot" if isinstance(light, SpotLight) else "directional"
 
 

@@ -810,16 +810,18 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
         if not isinstance(ed, Mapping) or "type" not in ed:
             raise ValueError(f"{where}: expected a mapping with a 'type' key")
         kind = check_choice(ed["type"], f"{where}.type", S.EMITTER_TYPES)
-        if kind == "area":
+        if kind in ("area", "directionalarea"):
             S.expect_keys(ed, where, ("type", "shape", "radiance"), ("material", "id"))
             if isinstance(ed["shape"], Mapping) and "material" in ed["shape"]:
                 raise ValueError(f"{where}.shape.material: put 'material' on the emitter")
             sh = _shape(ed["shape"], f"{where}.shape", base_dir, work_dir, mi)
             sh["bsdf"] = material_of(ed, where, black, ed["shape"]["type"])
-            sh["emitter"] = {
-                "type": "area",
-                "radiance": _emission(ed["radiance"], where, base_dir, work_dir, mi),
-            }
+            rad = (
+                _emission(ed["radiance"], where, base_dir, work_dir, mi)
+                if kind == "area"
+                else _rgb(S.rgb(ed["radiance"], f"{where}.radiance"))
+            )
+            sh["emitter"] = {"type": kind, "radiance": rad}
             # the shape (the top-level object) by its id, else by the emitter's
             shape_key = ed["shape"].get("id") if isinstance(ed["shape"], Mapping) else None
             top = key(ed["shape"] if shape_key else ed, where, f"emitter_{i}")
@@ -1090,7 +1092,12 @@ def scene_to_desc(scene) -> dict:
     Example: ``load_scene(scene_to_desc(load_scene(desc)))`` renders like ``desc``.
     """
     from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera, ThinLensCamera
-    from jaxgfx.render.emitters import ConstantEnvironment, DirectionalLight, ProjectorLight
+    from jaxgfx.render.emitters import (
+        ConstantEnvironment,
+        DirectionalAreaLight,
+        DirectionalLight,
+        ProjectorLight,
+    )
     from jaxgfx.render.film import (
         CatmullRomFilter,
         GaussianFilter,
@@ -1202,12 +1209,17 @@ def scene_to_desc(scene) -> dict:
                 for j, (d, n) in enumerate(shape_descs)]  # fmt: skip
 
     lit = {a.shape_index: (j, a) for j, a in enumerate(scene.area_lights)}
+    dlit = [e for e in scene.delta_lights if isinstance(e, DirectionalAreaLight)]
+    lit.update({a.shape_index: (j, a) for j, a in enumerate(dlit)})
     for i, (shape, mats) in enumerate(zip(scene.shapes, scene.shape_materials, strict=True)):
         if i in lit:
             j, light = lit[i]
-            for d, name in rows(one(shape, mats, f"emitters.area.{i}", True), i):
-                e = named({"type": "area", "shape": d, "radiance": _radiance_desc(light)},
-                          "area", j)  # fmt: skip
+            if isinstance(light, DirectionalAreaLight):
+                kind, rad = "directionalarea", _list(light.radiance)
+            else:
+                kind, rad = "area", _radiance_desc(light)
+            for d, name in rows(one(shape, mats, f"emitters.{kind}.{i}", True), i):
+                e = named({"type": kind, "shape": d, "radiance": rad}, kind, j)
                 if name != "jaxgfx_black":
                     e["material"] = name
                 desc["emitters"].append(e)
@@ -1235,6 +1247,8 @@ def scene_to_desc(scene) -> dict:
         desc["emitters"].append(named(ed, "environment", 0))
     counts = {"directional": 0, "spot": 0, "projector": 0}
     for e in scene.delta_lights:  # directional, spot and projector lights, in their order
+        if isinstance(e, DirectionalAreaLight):  # written with its shape, above
+            continue
         if isinstance(e, DirectionalLight):
             d = {"type": "directional", "direction": _list(e.direction),
                  "irradiance": _list(e.irradiance)}  # fmt: skip

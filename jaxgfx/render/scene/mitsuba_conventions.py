@@ -102,7 +102,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("emitter", "directional"): S,
     ("emitter", "spot"): S + " (a projected `texture` a bitmap)",
     ("emitter", "projector"): S + " (`irradiance` a colour or a bitmap; rigid `to_world`)",
-    ("emitter", "directionalarea"): "refused: not in jaxgfx",
+    ("emitter", "directionalarea"): S + " (RGB `radiance`; lit only by the ptracer, as in Mitsuba)",
     ("emitter", "sunsky"): "refused: not in jaxgfx",
     # sensors, films, filters, samplers
     ("sensor", "perspective"): S + " (rigid `to_world`)",
@@ -135,8 +135,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("integrator", "prb_projective"): "refused: not in jaxgfx",
     ("integrator", "volpath"): "refused: jaxgfx renders surfaces only",
     ("integrator", "volpathmis"): "refused: jaxgfx renders surfaces only",
-    ("integrator", "ptracer"): S + " (point, spot, directional, area, constant and envmap "
-    "emitters; hide_emitters)",
+    ("integrator", "ptracer"): S + " (point, spot, directional, area, directionalarea, "
+    "constant and envmap emitters; hide_emitters)",
     ("integrator", "aov"): "refused: not in jaxgfx",
     ("integrator", "stokes"): "refused: jaxgfx renders unpolarized RGB only",
 }

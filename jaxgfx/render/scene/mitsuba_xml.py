@@ -1313,11 +1313,13 @@ def _shape(obj: _Obj, doc, desc, ctx):
     if emitters:
         e = emitters[0]
         ep = _Params(e, doc)
-        if e.type != "area":
-            raise ValueError(f"{e.where}: only 'area' emitters can be attached to a shape")
-        rad = ep.color("radiance", [1.0] * 3, emission=True, texture=True)  # RGB or texture
+        if e.type not in ("area", "directionalarea"):
+            raise ValueError(f"{e.where}: only 'area' and 'directionalarea' emitters can be "
+                             "attached to a shape")  # fmt: skip
+        # directionalarea: an RGB radiance only (jaxgfx's DirectionalAreaLight)
+        rad = ep.color("radiance", [1.0] * 3, emission=True, texture=e.type == "area")
         ep.done()
-        ed = {"type": "area", "shape": sd, "radiance": rad, "material": mat}
+        ed = {"type": e.type, "shape": sd, "radiance": rad, "material": mat}
         _name_by_id(ed, e.id or obj.id)  # an unnamed area emitter goes by its shape's id
         _name_by_id(sd, obj.id)
         desc["emitters"].append(ed)

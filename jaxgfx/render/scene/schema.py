@@ -38,7 +38,8 @@ __all__ = [
 ]
 
 SHAPE_TYPES = ("sphere", "rectangle", "mesh", "sdf", "sdfgrid")
-EMITTER_TYPES = ("area", "point", "constant", "envmap", "directional", "spot", "projector")
+EMITTER_TYPES = ("area", "point", "constant", "envmap", "directional", "spot", "projector",
+                 "directionalarea")  # fmt: skip
 SCENE_KEYS = (("camera", "shapes"), ("materials", "emitters", "film"))
 """(required, optional) top-level keys of a scene description."""
 FILM_KEYS = ("filter", "stddev", "radius", "B", "C", "lobes")
