@@ -53,12 +53,19 @@ def test_rotation_about_y_by_whole_texels_is_a_column_roll(x64):
     img, k = _image(), 3
     rot = EnvironmentMap.create(img, 1.7, _rot_y(2 * math.pi * k / img.shape[1]))
     rolled = EnvironmentMap.create(np.roll(img, -k, axis=1), 1.7)
+    # the same program for both: the rolled map with an explicit identity rotation
+    rolled = eqx.tree_at(lambda e: e.to_world, rolled, jnp.eye(3), is_leaf=lambda x: x is None)
     d = _dirs(500)
-    ev = jax.jit(lambda e, d: e.eval(d))
-    pdf = jax.jit(lambda e, d: e.pdf(d))
-    np.testing.assert_allclose(ev(rot, d), rolled.eval(d), rtol=1e-10, atol=1e-12)
-    np.testing.assert_allclose(pdf(rot, d), rolled.pdf(d), rtol=1e-10)
+    f = jax.jit(lambda e, d: (e.eval(d), e.pdf(d)))
+    (ea, pa), (eb, pb) = f(rot, d), f(rolled, d)
+    np.testing.assert_allclose(ea, eb, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(pa, pb, rtol=1e-10)
     assert EnvironmentMap.create(img, 1.0, np.eye(4)).to_world is None
+
+
+def _pdf_eval(env, u):
+    wi = env.sample(u)[0]
+    return env.pdf(wi), env.eval(wi)
 
 
 def test_rotated_samples_are_consistent_and_unbiased(x64):
@@ -68,10 +75,10 @@ def test_rotated_samples_are_consistent_and_unbiased(x64):
     estimator."""
     r = _rot_axis([1.0, 1.0, 0.3], 70.0)
     env = EnvironmentMap.create(_image(seed=2), 2.0, r)
-    u = jax.random.uniform(jax.random.key(3), (200_000, 2), jnp.float64)
-    wi, pdf, li = jax.jit(lambda e, u: e.sample(u))(env, u)
-    np.testing.assert_allclose(pdf, env.pdf(wi), rtol=1e-6)
-    np.testing.assert_allclose(li, env.eval(wi), rtol=1e-6, atol=1e-12)
+    u = jax.random.uniform(jax.random.key(3), (50_000, 2), jnp.float64)
+    wi, pdf, li, pdf2, li2 = jax.jit(lambda e, u: (*e.sample(u), *_pdf_eval(e, u)))(env, u)
+    np.testing.assert_allclose(pdf, pdf2, rtol=1e-6)
+    np.testing.assert_allclose(li, li2, rtol=1e-6, atol=1e-12)
     np.testing.assert_allclose(jnp.linalg.norm(wi, axis=-1), 1.0, rtol=1e-12)
     for a in ([0.0, 1.0, 0.0], [0.6, -0.8, 0.0], [0.0, 0.0, -1.0]):
         f = np.asarray(jnp.maximum(wi @ jnp.asarray(a), 0.0) / pdf)
@@ -105,15 +112,14 @@ def _scene(to_world=None, image=None, w=6):
 
 def test_identity_rotation_lowers_to_the_same_program():
     """``to_world`` = identity is stored as none: the lowered program text is byte-identical to
-    the scene without ``to_world``; a real rotation changes it."""
+    the scene without ``to_world`` (a real rotation is kept)."""
 
     def text(s):
-        f = jax.jit(lambda s, k: render(s, k, spp=1, integrator="path", max_depth=2))
+        f = jax.jit(lambda s, k: render(s, k, spp=1, integrator="path", max_depth=1))
         return f.lower(s, jax.random.key(0)).as_text()
 
-    base = text(load_scene(_scene()))
-    assert text(load_scene(_scene(np.eye(4).tolist()))) == base
-    assert text(load_scene(_scene(_rot_y(0.5).tolist()))) != base
+    assert text(load_scene(_scene(np.eye(4).tolist()))) == text(load_scene(_scene()))
+    assert load_scene(_scene(_rot_y(0.5).tolist())).environment.to_world is not None
 
 
 @pytest.mark.slow  # ~25 s each measured under load 9 (2 compiles of a 6² render)
@@ -152,6 +158,7 @@ def _env_loss(x, key, env):
     return jnp.mean(li.sum(-1) * cos / pdf) + jnp.sum(e.eval(_dirs(16, 7).astype(x.dtype)))
 
 
+@pytest.mark.slow  # ~6 s process CPU measured under load 19 (two compiled FD programs)
 def test_emitter_texel_and_scale_gradients_match_finite_differences(x64):
     """Gradients of the rotated map's sampled radiance and lookup w.r.t. scale and its 2x4x3
     texels against central differences with the same keys in float64 (the sampling density

@@ -103,7 +103,7 @@ def load_scene(
         base_dir = base_dir or os.path.dirname(os.path.abspath(os.fspath(desc)))
         desc = read_yaml(desc)
     expect_keys(desc, "scene", *SCENE_KEYS)
-    camera = build_camera(desc["camera"])
+    camera = build_camera(desc["camera"], base_dir=base_dir)
     film = desc.get("film", {}) or {}
     expect_keys(film, "film", (), FILM_KEYS)
     fopts = {k: v for k, v in film.items() if k != "filter"}

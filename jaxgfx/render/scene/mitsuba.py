@@ -86,6 +86,7 @@ __all__ = [
     "to_mitsuba_dict",
     "scene_to_desc",
     "mitsuba_integrator",
+    "sensor_dict",
     "render_mitsuba",
     "envmap_for_mitsuba",
     "MITSUBA_INSTALL_HINT",
@@ -654,7 +655,11 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
     # -- sensor
     cam = desc["camera"]
     ortho = None
-    if isinstance(cam, Mapping) and "view_proj_inverse" in cam:
+    meter = cam.get("type") if isinstance(cam, Mapping) else None
+    if meter is not None:
+        S.build_camera(cam, base_dir=base_dir)  # validated as load_scene does
+        cam = {**cam, "width": 1, "height": 1}
+    elif isinstance(cam, Mapping) and "view_proj_inverse" in cam:
         S.build_camera(cam)  # validated as load_scene does
         ortho = orthographic_to_world(cam["view_proj_inverse"], cam["width"], cam["height"],
                                       DEFAULTS["near_clip"])  # fmt: skip
@@ -704,7 +709,16 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
             )
         film["rfilter"] = {"type": "gaussian", "stddev": float(rf.stddev)}
         film["sample_border"] = True
-    if ortho is not None:  # Mitsuba's default near_clip, where the rays start
+    meter_shape = None
+    if meter == "radiancemeter":
+        sensor = {"type": "radiancemeter", "origin": [float(x) for x in cam["origin"]],
+                  "direction": [float(x) for x in cam["direction"]]}  # fmt: skip
+    elif meter == "irradiancemeter":  # nested in its shape, made invisible (null BSDF): the
+        # meter's shape is not part of a jaxgfx scene's geometry unless listed in its shapes
+        sensor = {"type": "irradiancemeter"}
+        meter_shape = _shape(cam["shape"], "camera.shape", base_dir, work_dir, mi)
+        meter_shape["bsdf"] = {"type": "null"}
+    elif ortho is not None:  # Mitsuba's default near_clip, where the rays start
         sensor = {"type": "orthographic", "to_world": _transform(ortho, mi)}
     else:
         sensor = {
@@ -722,6 +736,9 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
     sensor["film"] = film
     sensor["sampler"] = {"type": "independent", "sample_count": 16}
     out: dict = {"type": "scene", "sensor": sensor}
+    if meter_shape is not None:
+        meter_shape["sensor"] = out.pop("sensor")
+        out["irradiance_meter"] = meter_shape
 
     # -- materials
     mats_desc = desc.get("materials", {}) or {}
@@ -1091,7 +1108,13 @@ def scene_to_desc(scene) -> dict:
 
     Example: ``load_scene(scene_to_desc(load_scene(desc)))`` renders like ``desc``.
     """
-    from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera, ThinLensCamera
+    from jaxgfx.render.camera import (
+        IrradianceMeter,
+        MatrixCamera,
+        PerspectiveCamera,
+        RadianceMeter,
+        ThinLensCamera,
+    )
     from jaxgfx.render.emitters import (
         ConstantEnvironment,
         DirectionalAreaLight,
@@ -1124,6 +1147,11 @@ def scene_to_desc(scene) -> dict:
         if isinstance(cam, ThinLensCamera):
             cam_d["aperture_radius"] = float(cam.aperture_radius)
             cam_d["focus_distance"] = float(cam.focus_distance)
+    elif isinstance(cam, RadianceMeter):
+        cam_d = {"type": "radiancemeter", "origin": _list(cam.origin),
+                 "direction": _list(cam.direction)}  # fmt: skip
+    elif isinstance(cam, IrradianceMeter):
+        cam_d = {"type": "irradiancemeter"}  # its shape: below, once `one` is defined
     else:  # pragma: no cover - a Scene holds one of the three
         raise NotImplementedError(f"camera: {type(cam).__name__} has no Mitsuba 3 mapping")
     desc = {
@@ -1191,6 +1219,13 @@ def scene_to_desc(scene) -> dict:
         else:
             raise NotImplementedError(f"{where}: {type(shape).__name__} has no Mitsuba 3 mapping")
         return [(d, names[int(k)]) for d, k in out] if keep else [(d, None) for d, _ in out]
+
+    if isinstance(cam, IrradianceMeter):
+        sh = cam.shape
+        n = sh.faces.shape[0] if isinstance(sh, TriangleMesh) else sh.centers.shape[0]
+        (cam_d["shape"], _), *more = one(sh, np.zeros(n, int), "camera", False)
+        if more:  # pragma: no cover - a sphere / rectangle batch of one or a mesh
+            raise NotImplementedError("camera.shape: one shape per irradiance meter")
 
     # ids (Scene.object_ids): (kind, index, row) -> id
     ids = {(k, i, r): ident for ident, k, i, r, _ in getattr(scene, "object_ids", ())}
@@ -1268,6 +1303,12 @@ def scene_to_desc(scene) -> dict:
     used |= {m.get("material") for d in desc["shapes"] for m in d.get("shapes", ())}
     desc["materials"] = {k: v for k, v in desc["materials"].items() if k in used}
     return desc
+
+
+def sensor_dict(d) -> dict:
+    """The sensor of a :func:`to_mitsuba_dict` result: top-level, or nested in the shape of an
+    irradiance meter."""
+    return d["sensor"] if "sensor" in d else d["irradiance_meter"]["sensor"]
 
 
 def mitsuba_integrator(
@@ -1355,7 +1396,7 @@ def render_mitsuba(
         wd = tmp.name if tmp is not None else work_dir
         d = to_mitsuba_dict(desc, base_dir=base_dir, work_dir=wd, mi=mi)
         d["integrator"] = integ
-        d["sensor"]["sampler"]["sample_count"] = int(spp)
+        sensor_dict(d)["sampler"]["sample_count"] = int(spp)
         scene = mi.load_dict(d)
     finally:
         if tmp is not None:

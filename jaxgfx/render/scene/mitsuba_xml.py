@@ -1170,7 +1170,8 @@ def _shape(obj: _Obj, doc, desc, ctx):
     kids = obj.children + [q.value for q in named]
     bsdfs = [c for c in kids if c.tag == "bsdf"]
     emitters = [c for c in kids if c.tag == "emitter"]
-    other = [c for c in obj.children if c.tag not in ("bsdf", "emitter")]
+    meters = [c for c in obj.children if c.tag == "sensor" and c.type == "irradiancemeter"]
+    other = [c for c in obj.children if c.tag not in ("bsdf", "emitter") and c not in meters]
     if other:
         c = other[0]
         raise ValueError(f"{c.node.at}: {obj.where}: nested <{c.tag} type={c.type!r}> is not "
@@ -1310,6 +1311,11 @@ def _shape(obj: _Obj, doc, desc, ctx):
                          "cylinder, sdfgrid)")  # fmt: skip
     p.done(children_ok=len(obj.children))
     ctx["bboxes"].append((bbox, obj))
+    if meters:  # the irradiance meter's shape (read_xml puts it into the camera)
+        if sd["type"] not in ("sphere", "rectangle", "mesh"):
+            raise ValueError(f"{meters[0].where}: an irradiancemeter on a {t} is not "
+                             "supported (sphere, rectangle or a mesh)")  # fmt: skip
+        ctx["meter_shape"] = {k: v for k, v in sd.items() if k != "id"}
     if emitters:
         e = emitters[0]
         ep = _Params(e, doc)
@@ -1562,9 +1568,10 @@ def _fov_x_or_y(p: _Params, width, height):
 
 def _sensor(obj: _Obj, doc, ctx) -> dict:
     p = _Params(obj, doc)
-    if obj.type not in ("perspective", "thinlens", "orthographic"):
+    ok = ("perspective", "thinlens", "orthographic", "radiancemeter", "irradiancemeter")
+    if obj.type not in ok:
         raise ValueError(f"{obj.where}: sensor plugin {obj.type!r} is not supported "
-                         "(perspective, thinlens, orthographic)")  # fmt: skip
+                         f"({', '.join(ok)})")  # fmt: skip
     films = [c for c in obj.children if c.tag == "film"]
     samplers = [c for c in obj.children if c.tag == "sampler"]
     for c in obj.children:
@@ -1635,6 +1642,8 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
         sp.done()
         if spp < 1:
             raise sp.err("sample_count", f"expected a positive integer, got {spp}")
+    if obj.type in ("radiancemeter", "irradiancemeter"):
+        return _meter(p, obj, films, samplers, width, height, film, spp)
     if obj.type == "orthographic":
         return _orthographic(p, obj, ctx, films, samplers, width, height, film, spp)
     fov, axis = _fov_x_or_y(p, width, height)
@@ -1670,6 +1679,41 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
         reach += lens[0] * max(1.0, abs(1.0 - near / lens[1]))
     ctx["clip"] = (o, near, far, reach, obj)
     return cam, film, spp
+
+
+def _meter(p: _Params, obj, films, samplers, width, height, film, spp):
+    """Mitsuba's ``radiancemeter`` (``origin`` + ``direction``, or ``to_world``: its origin
+    and +z, which must be a unit vector) and ``irradiancemeter`` (nested in a shape, which
+    :func:`_shape` gives it) -> ``{type: radiancemeter | irradiancemeter, ...}``; a 1 x 1 film
+    (Mitsuba refuses others for the radiance meter)."""
+    if (width, height) != (1, 1):
+        raise ValueError(f"{(films[0] if films else obj).where}: a {obj.type} needs a 1 x 1 "
+                         f"film, got {width} x {height}")  # fmt: skip
+    if len(films) > 1 or len(samplers) > 1:
+        raise ValueError(f"{obj.where}: expected at most one <film> and one <sampler>")
+    if obj.type == "irradiancemeter":
+        if "to_world" in obj.props:
+            raise p.err("to_world", "an irradiancemeter takes its shape's transform (as in "
+                                    "Mitsuba)")  # fmt: skip
+        p.done(children_ok=len(obj.children))
+        return {"type": "irradiancemeter"}, film, spp
+    m = p.transform("to_world")
+    origin, direction = p.vec("origin"), p.vec("direction")
+    if m is not None:  # to_world wins over origin / direction (as in Mitsuba)
+        z = m[:3, 2]
+        if not abs(float(np.linalg.norm(z)) - 1.0) < 1e-6:
+            raise p.err("to_world", "a to_world that scales the meter's +z axis is not "
+                                    "supported (Mitsuba does not normalise it)")  # fmt: skip
+        origin, direction = m[:3, 3].tolist(), z.tolist()
+    elif (origin is None) != (direction is None):
+        raise p.err("origin" if origin is None else "direction",
+                    "give both origin and direction (or to_world)")  # fmt: skip
+    origin = [0.0, 0.0, 0.0] if origin is None else list(origin)
+    direction = [0.0, 0.0, 1.0] if direction is None else list(direction)
+    if not np.linalg.norm(direction) > 0:
+        raise p.err("direction", "expected a nonzero vector")
+    p.done(children_ok=len(obj.children))
+    return {"type": "radiancemeter", "origin": origin, "direction": _unit(direction)}, film, spp
 
 
 def _thin_lens(p: _Params, far):
@@ -1841,6 +1885,7 @@ def read_xml(path, **params) -> XMLScene:
     desc: dict = {"materials": {}, "shapes": [], "emitters": []}
     ctx: dict = {"bboxes": []}
     sensors = [o for o in objs if o.tag == "sensor"]
+    sensors += [c for o in objs if o.tag == "shape" for c in o.children if c.tag == "sensor"]
     integ = [o for o in objs if o.tag == "integrator"]
     if not sensors:
         raise ValueError(f"{path}: the scene has no <sensor> (jaxgfx needs a camera)")
@@ -1877,6 +1922,8 @@ def read_xml(path, **params) -> XMLScene:
             raise ValueError(f"{o.where}: a top-level <{o.tag}> is not supported")
     if not desc["shapes"] and not any(e["type"] == "area" for e in desc["emitters"]):
         raise ValueError(f"{path}: the scene has no shapes")
+    if cam.get("type") == "irradiancemeter":
+        cam["shape"] = ctx["meter_shape"]
     _check_clip(ctx)
     if not desc["emitters"]:
         del desc["emitters"]
@@ -2026,7 +2073,7 @@ def save_scene(
     folder = os.path.dirname(path)
     files = os.path.splitext(path)[0] + "_files"
     d = M.to_mitsuba_dict(scene, base_dir=base_dir, work_dir=files, refs=True)
-    d["sensor"]["sampler"]["sample_count"] = int(spp)
+    M.sensor_dict(d)["sampler"]["sample_count"] = int(spp)
     d["integrator"] = integ
 
     def relative(x):
