@@ -75,7 +75,7 @@ def test_loads_as_a_delta_light_on_its_shape():
         load_scene({**_desc(), "emitters": [{**_desc()["emitters"][0], "direction": [0, 1, 0]}]})
 
 
-@pytest.mark.slow  # ~15 s measured under load 9 (2 compiles of a 6² render)
+@pytest.mark.slow  # ~6.5 s process CPU measured under load 19 (2 compiles of a 6² render)
 def test_particle_tracer_gives_the_collimated_beam_closed_form_and_path_sees_nothing():
     """The beam carries power ``L A`` through its cross-section ``A``: the floor's irradiance
     under it is ``L`` and its radiance ``rho L / pi`` in every pixel (the camera sees only lit
@@ -98,7 +98,7 @@ def _loss(x, key, scene):
     return jnp.mean(render(s, key, spp=2, integrator="ptracer", max_depth=2))
 
 
-@pytest.mark.slow  # ~20 s measured under load 9 (value+gradient, 6 perturbed renders)
+@pytest.mark.slow  # ~10 s process CPU, load 19 (value+gradient, 6 perturbed renders)
 def test_radiance_gradient_matches_finite_differences(x64):
     scene = load_scene(_desc(w=4))
     x = jnp.asarray(L, jnp.float64)
@@ -158,7 +158,7 @@ def test_xml_reads_and_writes_it(tmp_path):
 
 
 @pytest.mark.mitsuba
-@pytest.mark.slow  # ~TBD s measured (24², jaxgfx 8 x 64 spp, Mitsuba 8 x 64 spp, ptracer)
+@pytest.mark.slow  # ~5 s process CPU, load 19 (24², ptracer, 8 x 64 spp per renderer)
 def test_matches_mitsuba_same_run(tmp_path):
     """The beam lighting a diffuse floor and a rough-conductor sphere (ptracer, depth 3):
     jaxgfx against Mitsuba 3 (scalar_rgb) in the same run, channel z and 4x4-block z from the

@@ -122,7 +122,7 @@ def test_identity_rotation_lowers_to_the_same_program():
     assert load_scene(_scene(_rot_y(0.5).tolist())).environment.to_world is not None
 
 
-@pytest.mark.slow  # ~25 s each measured under load 9 (2 compiles of a 6² render)
+@pytest.mark.slow  # ~10-12 s process CPU each, measured under load 19 (2 compiles, 6² renders)
 @pytest.mark.parametrize("integrator", ["path", "ptracer"])
 def test_rotated_render_equals_the_rolled_image(integrator):
     """Path (envmap NEE + BSDF hits) and ptracer (environment emission) renders of the map
@@ -158,7 +158,7 @@ def _env_loss(x, key, env):
     return jnp.mean(li.sum(-1) * cos / pdf) + jnp.sum(e.eval(_dirs(16, 7).astype(x.dtype)))
 
 
-@pytest.mark.slow  # ~6 s process CPU measured under load 19 (two compiled FD programs)
+@pytest.mark.slow  # ~5.5 s process CPU measured under load 19 (two compiled FD programs)
 def test_emitter_texel_and_scale_gradients_match_finite_differences(x64):
     """Gradients of the rotated map's sampled radiance and lookup w.r.t. scale and its 2x4x3
     texels against central differences with the same keys in float64 (the sampling density
@@ -172,7 +172,7 @@ def test_emitter_texel_and_scale_gradients_match_finite_differences(x64):
     np.testing.assert_allclose(ad, fd, atol=1e-7 * np.abs(fd).max())
 
 
-@pytest.mark.slow  # ~33 s measured under load 9 (value+gradient and 2 x 25 perturbed renders)
+@pytest.mark.slow  # ~13 s process CPU, load 19 (value+gradient, 2 x 25 perturbed renders)
 def test_texel_and_scale_gradients_match_finite_differences(x64):
     """Reverse-mode gradients of a rotated map's render w.r.t. its scale and its 2x4x3 texels
     against central differences with the same keys (the render is linear in the texels for
@@ -236,7 +236,7 @@ _XML = """<scene version="3.0.0">
 
 
 @pytest.mark.mitsuba
-@pytest.mark.slow  # ~TBD s measured (32², jaxgfx 8 x 32 spp, Mitsuba 8 x 32 spp)
+@pytest.mark.slow  # ~10 s process CPU, load 19 (32², jaxgfx and Mitsuba 8 x 32 spp each)
 def test_rotated_museum_matches_mitsuba_same_run(tmp_path):
     """Mitsuba's museum HDRI turned by 70 degrees about (0.6, 0.8, 0) then 25 about z lighting a
     diffuse and a rough-conductor sphere (path, depth 3): jaxgfx's renders against Mitsuba 3's

@@ -68,7 +68,7 @@ def _sphere_light_scene(a=0.5, h=1.0, r=0.5):
     return _scene(meter, [light])
 
 
-@pytest.mark.slow  # ~25 s measured under load 9 (8 renders x 4096 samples)
+@pytest.mark.slow  # ~11 s process CPU measured under load 19 (8 renders x 4096 samples)
 def test_irradiance_meter_averages_over_its_surface():
     """A square meter of half-size ``a`` under a sphere light (radius ``R``, radiance ``L``,
     centre at height ``h > R`` above the square's centre): the irradiance at a point is
@@ -111,7 +111,7 @@ def _loss_irradiance(x, key, scene):
     return jnp.sum(render(s, key, spp=4, integrator="path", max_depth=1))
 
 
-@pytest.mark.slow  # ~30 s measured under load 9 (two value+gradient and 24 perturbed renders)
+@pytest.mark.slow  # ~8.4 s process CPU, load 19 (2 value+gradient, 24 perturbed renders)
 def test_meter_gradients_match_finite_differences(x64):
     """Radiance meter: ``origin`` and ``direction`` (the ``aov`` depth of its ray's hit on the
     floor, smooth in both); irradiance meter: its rectangle's edges (turning the meter turns
@@ -204,7 +204,7 @@ def test_xml_reads_and_writes_the_meters(tmp_path):
 
 
 @pytest.mark.mitsuba
-@pytest.mark.slow  # ~20 s each measured under load 9 (8 x 1024 / 4096 spp per renderer)
+@pytest.mark.slow  # ~6 / 14 s process CPU, load 19 (8 x 1024 / 4096 spp per renderer)
 @pytest.mark.parametrize("kind", ["radiancemeter", "irradiancemeter"])
 def test_meters_match_mitsuba_same_run(tmp_path, kind):
     """The radiance meter looking at the diffuse sphere / the irradiance meter on it, lit by a
