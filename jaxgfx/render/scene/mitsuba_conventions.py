@@ -137,7 +137,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("integrator", "volpathmis"): "refused: jaxgfx renders surfaces only",
     ("integrator", "ptracer"): S + " (point, spot, directional, area, directionalarea, "
     "constant and envmap emitters; hide_emitters)",
-    ("integrator", "aov"): "refused: not in jaxgfx",
+    ("integrator", "aov"): S + " (`aovs` of types albedo, depth, position, geo_normal, "
+    "sh_normal; no nested integrator)",
     ("integrator", "stokes"): "refused: jaxgfx renders unpolarized RGB only",
 }
 """``(tag, type)`` -> status of every Mitsuba 3 plugin the loader knows (tested against the

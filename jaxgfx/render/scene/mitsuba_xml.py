@@ -107,12 +107,13 @@ CYLINDER_SEGMENTS = 256
 class XMLScene:
     """A translated Mitsuba scene: ``desc`` (the jaxgfx scene description; every file path in
     it is absolute), the sampler's ``spp`` (``None`` without a sensor sampler), the jaxgfx
-    ``integrator`` name (``"path"``, ``"direct"`` or ``"ptracer"``), ``max_depth`` in the
+    ``integrator`` name (``"path"``, ``"direct"``, ``"ptracer"`` or ``"aov"``), ``max_depth`` in the
     common convention (``None``: Mitsuba's ``-1``, unbounded; jaxgfx needs a number),
     ``rr_depth``, ``files`` (every XML file read, in order), ``hide_emitters`` (``ptracer``
     only: pass it to ``ParticleTracer(hide_emitters=...)``), and the ``PathIntegrator`` options
     ``adjoint`` (``"replay"`` for Mitsuba's ``prb`` / ``prb_basic``, else ``"ad"``) and
-    ``strategy`` (``"bsdf"`` for ``prb_basic``, else ``"mis"``); :attr:`integrator_spec` is
+    ``strategy`` (``"bsdf"`` for ``prb_basic``, else ``"mis"``), the ``aov`` options ``aovs``
+    and ``near_clip`` (the sensor's; Mitsuba measures depth from it); :attr:`integrator_spec` is
     all of them as the mapping ``render(..., integrator=...)`` takes."""
 
     desc: dict
@@ -124,6 +125,8 @@ class XMLScene:
     hide_emitters: bool = False
     adjoint: str = "ad"
     strategy: str = "mis"
+    aovs: tuple = ()
+    near_clip: float = 0.0
 
     @property
     def integrator_spec(self) -> dict:
@@ -137,6 +140,8 @@ class XMLScene:
             out["rr_depth"] = self.rr_depth
         if self.integrator == "path":
             out.update(strategy=self.strategy, adjoint=self.adjoint)
+        if self.integrator == "aov":
+            out.update(aovs=self.aovs, near_clip=self.near_clip)
         return out
 
 
@@ -1779,6 +1784,30 @@ def _check_clip_ortho(ctx):
             )
 
 
+def _aov(p: _Params, obj):
+    """Mitsuba's ``aov`` with ``aovs="name:type,..."`` of the types jaxgfx's
+    :class:`~jaxgfx.render.integrators.AOVIntegrator` computes (``albedo``, ``depth``,
+    ``position``, ``geo_normal``, ``sh_normal``), channels in the given order; nested
+    integrators (Mitsuba's image channels before the AOVs) are refused."""
+    from jaxgfx.render.integrators.aov import AOV_TYPES
+
+    if obj.children:
+        raise ValueError(f"{obj.children[0].node.at}: {obj.where}: a nested integrator inside "
+                         "'aov' is not supported (AOVs only)")  # fmt: skip
+    spec = p.string("aovs", "")
+    types = []
+    for item in [x.strip() for x in spec.split(",") if x.strip()]:
+        name, _, kind = item.partition(":")
+        if not name or kind not in AOV_TYPES:
+            raise p.err("aovs", f"{item!r}: expected name:type with a type jaxgfx computes "
+                                f"({', '.join(AOV_TYPES)})")  # fmt: skip
+        types.append(kind)
+    if not types:
+        raise p.err("aovs", "expected at least one name:type")
+    p.done()
+    return "aov", None, 5, False, {"aovs": tuple(types)}
+
+
 def _integrator(obj: _Obj, doc):
     p = _Params(obj, doc)
     if obj.type == "moment":  # its first channels are the nested integrator's image
@@ -1786,9 +1815,11 @@ def _integrator(obj: _Obj, doc):
             raise ValueError(f"{obj.where}: expected exactly one nested <integrator>")
         p.done(children_ok=1)
         return _integrator(obj.children[0], doc)
+    if obj.type == "aov":
+        return _aov(p, obj)
     if obj.type not in ("path", "direct", "ptracer", "prb", "prb_basic"):
         raise ValueError(f"{obj.where}: integrator plugin {obj.type!r} is not supported "
-                         "(path, direct, ptracer, prb, prb_basic, moment)")  # fmt: skip
+                         "(path, direct, ptracer, prb, prb_basic, moment, aov)")  # fmt: skip
     hide = p.bool("hide_emitters", False)
     if hide and obj.type != "ptracer":
         raise p.err("hide_emitters", "hidden emitters are supported by 'ptracer' only")
@@ -1927,6 +1958,8 @@ def read_xml(path, **params) -> XMLScene:
     _check_clip(ctx)
     if not desc["emitters"]:
         del desc["emitters"]
+    if integrator == "aov" and "clip" in ctx:  # Mitsuba's depth: from the near plane
+        opts["near_clip"] = float(ctx["clip"][1])
     return XMLScene(desc, spp, integrator, depth, rr, tuple(doc.files), hide, **opts)
 
 
