@@ -7,6 +7,9 @@ Three generators (the first two as in lecture 4 of the course notes):
 - :class:`ThinLensCamera` — the same look-at camera with a thin lens (depth of field): rays
   start on a lens disk of radius ``aperture_radius`` and meet on the plane of focus at distance
   ``focus_distance`` along the viewing axis (Mitsuba 3's ``thinlens`` sensor).
+- :class:`RadianceMeter` / :class:`IrradianceMeter` — Mitsuba 3's ``radiancemeter`` and
+  ``irradiancemeter`` sensors: a 1 x 1 image measuring the radiance along one ray, or the
+  irradiance averaged over a shape's surface.
 - :class:`MatrixCamera` — from the inverse of a (view . projection) matrix, so that traced
   images line up exactly with a rasteriser using the same matrices (OpenGL NDC conventions:
   x, y in [-1, 1], y up, z = -1 on the near plane and +1 on the far plane).
@@ -25,6 +28,7 @@ exactly the rays and images they traced before the thin lens existed.
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar
 
 import equinox as eqx
@@ -33,9 +37,19 @@ import numpy as np
 
 from jaxgfx._checks import as_float_array, check_choice, check_nonnegative, check_positive
 from jaxgfx._math import safe_normalize
-from jaxgfx.render.sampling import square_to_uniform_disk_concentric
+from jaxgfx.render.geometry.area import sample_area
+from jaxgfx.render.geometry.frame import frame_from_normal, to_world
+from jaxgfx.render.geometry.ray import spawn_ray
+from jaxgfx.render.sampling import square_to_cosine_hemisphere, square_to_uniform_disk_concentric
 
-__all__ = ["PerspectiveCamera", "ThinLensCamera", "MatrixCamera", "look_at_basis"]
+__all__ = [
+    "PerspectiveCamera",
+    "ThinLensCamera",
+    "MatrixCamera",
+    "RadianceMeter",
+    "IrradianceMeter",
+    "look_at_basis",
+]
 
 
 def look_at_basis(origin, target, up):
@@ -292,6 +306,71 @@ class MatrixCamera(eqx.Module):
 
         near, far = unproject(-1.0), unproject(1.0)
         return near, safe_normalize(far - near)
+
+
+class RadianceMeter(eqx.Module):
+    """Mitsuba 3's ``radiancemeter``: a 1 x 1 image whose pixel is the radiance arriving at
+    ``origin`` along the ray ``origin + t direction`` (the limit of a perspective camera as
+    its field of view tends to 0: every pixel sample traces the same ray). ``origin`` and
+    ``direction`` (3,) are differentiable (a unit ``direction`` is stored).
+
+    Example: in a constant environment of radiance ``L`` with nothing in the way the image is
+    ``L``; looking at an area light of radiance ``L`` it is ``L``.
+    """
+
+    origin: jnp.ndarray
+    direction: jnp.ndarray
+    width: ClassVar[int] = 1
+    height: ClassVar[int] = 1
+    lens_uniforms: ClassVar[int] = 0
+
+    @classmethod
+    def create(cls, origin, direction):
+        """Validated constructor: finite ``origin`` and nonzero finite ``direction`` (3,)."""
+        o = as_float_array(origin, "origin")
+        d = as_float_array(direction, "direction")
+        for name, v in (("origin", o), ("direction", d)):
+            if v.shape != (3,) or not np.all(np.isfinite(np.asarray(v))):
+                raise ValueError(f"{name}: expected 3 finite numbers, got {np.asarray(v)!r}")
+        n = float(np.linalg.norm(np.asarray(d)))
+        if not n > 0:
+            raise ValueError("direction: expected a nonzero vector")
+        return cls(o, d / n)
+
+    def generate_ray(self, pixel):
+        """The meter's ray for every pixel sample ``pixel (..., 2)`` (the position is unused)."""
+        shape = jnp.shape(pixel)[:-1] + (3,)
+        d = safe_normalize(self.direction)
+        return jnp.broadcast_to(self.origin, shape), jnp.broadcast_to(d, shape)
+
+
+class IrradianceMeter(eqx.Module):
+    """Mitsuba 3's ``irradiancemeter``: a 1 x 1 image whose pixel is the irradiance
+    (W/m², the incident radiance times the cosine, integrated over the hemisphere of the
+    geometric normal) averaged over the surface of ``shape`` (Spheres / Rectangles /
+    TriangleMesh, the shape it is attached to, in world space). As Mitsuba's, each sample is
+    a point uniform by area (:func:`~jaxgfx.render.geometry.sample_area`) and a
+    cosine-weighted direction about its normal, weighted by ``pi`` (:attr:`ray_weight`, applied
+    by the renderer): ``E = pi E_cos[L]``. So in a constant environment of radiance ``L`` with
+    nothing in the way the image is ``pi L``. The shape's parameters are differentiable (the
+    sampled points move with it). The shape is not added to the scene's geometry by this
+    class; the XML loader adds it (Mitsuba's sensor shape is ordinary geometry too).
+    """
+
+    shape: eqx.Module
+    width: ClassVar[int] = 1
+    height: ClassVar[int] = 1
+    lens_uniforms: ClassVar[int] = 4  # a point on the shape (2), a direction (2)
+    ray_weight: ClassVar[float] = math.pi
+
+    def generate_ray(self, pixel, u):
+        """A ray from uniform numbers ``u (..., 4)``: point ``u[..., :2]``, cosine-weighted
+        direction ``u[..., 2:]`` about the normal there; the origin is offset off the surface
+        along the normal (as the integrators' secondary rays). ``pixel`` is unused."""
+        p, n, _ = sample_area(self.shape, u[..., :2])
+        d = to_world(frame_from_normal(n), square_to_cosine_hemisphere(u[..., 2:]))
+        o, d = spawn_ray(p, n, d)
+        return o, d
 
 
 def perspective_matrix(fov_y_deg, aspect, near, far):

@@ -20,6 +20,8 @@ Conventions follow Mitsuba 3:
   texture through a perspective frustum (``fov``): a white diffuse plane facing it at distance
   1 receives irradiance ``pi * scale * E(uv)`` everywhere in the frustum (the ``1 / cos^3``
   that makes a projected constant truly constant on the plane); a delta light.
+- ``DirectionalAreaLight``: Mitsuba's ``directionalarea``, a shape emitting ``radiance`` only
+  along its normal; seen by the particle tracer only (as in Mitsuba).
 - ``ConstantEnvironment``: radiance arriving from every direction.
 - ``EnvironmentMap``: latitude-longitude image, y-up, with Mitsuba's mapping
   ``u = atan2(d_x, -d_z) / (2 pi)`` (wrapped to [0, 1)), ``v = acos(d_y) / pi``; importance
@@ -35,6 +37,7 @@ import math
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgfx._checks import as_float_array, check_finite, check_nonnegative, is_concrete
 from jaxgfx._math import (
@@ -56,6 +59,7 @@ from jaxgfx.render.sampling import Distribution2D
 __all__ = [
     "PointLights",
     "AreaLight",
+    "DirectionalAreaLight",
     "DirectionalLight",
     "SpotLight",
     "ProjectorLight",
@@ -457,6 +461,32 @@ class AreaLight(eqx.Module):
         return Distribution2D(lum)
 
 
+class DirectionalAreaLight(eqx.Module):
+    """Mitsuba 3's ``directionalarea``: scene shape ``shape_index`` (sampled through ``shape``,
+    its untransformed geometry) emits ``radiance`` (RGB ``(3,)``) only along its geometric
+    normal, a delta distribution in direction. As in Mitsuba, nothing connects to it from the
+    camera side: a camera ray or a BSDF sample that hits the shape sees no emission, and light
+    sampling (next-event estimation) returns zero (:meth:`sample`; it still counts in the
+    uniform light choice, as Mitsuba's emitter sampling counts it). Only the particle tracer
+    (``ptracer``) emits from it: a point uniform by area and the ray along the normal there,
+    weight ``radiance * area`` (Mitsuba's ``sample_ray``). ``radiance`` is differentiable
+    (``emitters.directionalarea.I.radiance``)."""
+
+    radiance: jnp.ndarray
+    shape: eqx.Module
+    shape_index: int = eqx.field(static=True)
+
+    def __check_init__(self):  # also runs on Scene.replace (concrete values only)
+        check_nonnegative(self.radiance, "radiance")
+
+    def sample(self, p):
+        """Light sampling from points ``p``: zero radiance (a direction drawn towards the
+        light has probability 0 of being its normal); ``(wi, dist, Li)`` as the delta lights'."""
+        batch = p.shape[:-1]
+        wi = jnp.broadcast_to(jnp.asarray([0.0, 0.0, 1.0], p.dtype), batch + (3,))
+        return wi, jnp.ones(batch, p.dtype), jnp.zeros(batch + (3,), p.dtype)
+
+
 class ConstantEnvironment(eqx.Module):
     """Uniform radiance from all directions; sampled uniformly over the sphere."""
 
@@ -500,14 +530,43 @@ def latlong_to_direction(uv):
 
 
 class EnvironmentMap(eqx.Module):
-    """Lat-long environment ``image (H, W, 3)`` (linear radiance) times ``scale``."""
+    """Lat-long environment ``image (H, W, 3)`` (linear radiance) times ``scale``, optionally
+    turned by ``to_world`` (a 3x3 orthogonal matrix, Mitsuba's envmap ``to_world`` rotation):
+    a world direction ``d`` looks up the map at the local direction ``to_world^T d``, samples
+    are drawn in the local frame and turned out by ``to_world`` (the solid-angle density is
+    unchanged by a rotation). ``to_world`` is ``None`` for the identity (no extra operation in
+    the program: an unrotated map compiles as before); it carries no derivative."""
 
     image: jnp.ndarray
     scale: jnp.ndarray
     distribution: Distribution2D
+    to_world: jnp.ndarray | None = None
+
+    @staticmethod
+    def check_to_world(m, name="envmap.to_world"):
+        """The 3x3 rotation of an envmap ``to_world`` ``m`` (3x3 or 4x4 affine; a 4x4's
+        translation is ignored, as for any direction), ``None`` for ``None`` or the identity; a
+        non-orthogonal matrix (scale, shear) raises ``ValueError`` naming ``name``."""
+        if m is None:
+            return None
+        a = np.asarray(as_float_array(m, name), np.float64)
+        if a.shape == (4, 4):
+            if not np.allclose(a[3], [0, 0, 0, 1]):
+                raise ValueError(f"{name}: expected an affine 4x4 matrix (last row 0 0 0 1)")
+            a = a[:3, :3]
+        if a.shape != (3, 3) or not np.all(np.isfinite(a)):
+            raise ValueError(f"{name}: expected a finite 3x3 or 4x4 matrix, got shape {a.shape}")
+        if not np.allclose(a.T @ a, np.eye(3), atol=1e-6):
+            raise ValueError(f"{name}: expected a rotation (an orthogonal matrix); a scale or "
+                             "shear of an environment map is not supported")  # fmt: skip
+        return None if np.allclose(a, np.eye(3), rtol=0, atol=1e-12) else a
 
     @classmethod
-    def create(cls, image, scale=1.0):
+    def create(cls, image, scale=1.0, to_world=None):
+        """``to_world``: ``None``, or a 3x3 (or 4x4 affine; its translation is ignored, as for
+        any direction) orthogonal matrix; a scale or shear is refused (``ValueError`` naming
+        ``envmap.to_world``); the identity is stored as ``None``."""
+        rot = cls.check_to_world(to_world)
         img = as_float_array(image, "envmap.image")
         check_finite(img, "envmap.image")
         if img.ndim != 3 or img.shape[-1] < 3 or min(img.shape[:2]) < 2:
@@ -527,7 +586,19 @@ class EnvironmentMap(eqx.Module):
         down = jnp.concatenate([lum[1:], lum[-1:]], axis=0)
         lum = 0.75 * lum + 0.125 * (up + down)
         dist = Distribution2D(lum * jnp.sin(theta)[:, None])
-        return cls(img, jnp.asarray(scale, img.dtype), dist)
+        rot = None if rot is None else jnp.asarray(rot, img.dtype)
+        return cls(img, jnp.asarray(scale, img.dtype), dist, rot)
+
+    def _local(self, d):
+        """World direction -> the map's frame (``to_world^T d``; ``d`` itself without one)."""
+        if self.to_world is None:
+            return d
+        return d @ jax.lax.stop_gradient(self.to_world).astype(d.dtype)
+
+    def _world(self, d):
+        if self.to_world is None:
+            return d
+        return d @ jax.lax.stop_gradient(self.to_world).astype(d.dtype).T
 
     def _lookup(self, uv):
         # bilinear with wrap in u and clamp in v (texel centres at (i + 0.5) / n)
@@ -548,16 +619,19 @@ class EnvironmentMap(eqx.Module):
         return top * (1 - fy) + bot * fy
 
     def eval(self, d):
-        return self.scale * self._lookup(direction_to_latlong(d))
+        return self.scale * self._lookup(direction_to_latlong(self._local(d)))
 
     def sample(self, u):
         uv, pdf_uv = self.distribution.sample(u)
-        wi, st = latlong_to_direction(uv)
+        wl, st = latlong_to_direction(uv)
         pdf = safe_div(pdf_uv, 2.0 * math.pi * math.pi * st)
-        # piecewise-constant sampling density, bilinear radiance (exact pdf of the sampler)
-        return wi, pdf, self.eval(wi)
+        # piecewise-constant sampling density, bilinear radiance (exact pdf of the sampler);
+        # sampled in the map's frame, turned out by to_world (a rotation keeps the density)
+        wi = self._world(wl)
+        return wi, pdf, self.scale * self._lookup(direction_to_latlong(wl))
 
     def pdf(self, d):
+        d = self._local(d)
         uv = direction_to_latlong(d)
         st = safe_sqrt(1.0 - d[..., 1] ** 2)
         return safe_div(self.distribution.pdf(uv), 2.0 * math.pi * math.pi * st)

@@ -220,6 +220,8 @@ def render_partial(
     image up to the rounding of the differently compiled program, tests/render/test_layout.py).
     A filter with negative lobes (``mitchell``, ``catmullrom``, ``lanczos``) multiplies each
     sample's radiance by its signed weight (``film.pixel_samples(..., with_weights=True)``).
+    A camera with a ``ray_weight`` (:class:`~jaxgfx.render.camera.IrradianceMeter`: ``pi``)
+    multiplies the sum by it.
 
     ``rows``: ``None`` (all ``H`` rows) or global row indices ``(R,)`` (int32, may be traced;
     rows ``>= H`` are padding: rendered beyond the image with their own numbers). A row's
@@ -283,4 +285,7 @@ def render_partial(
     if getattr(integrator, "adjoint", "ad") == "replay" and REPLAY_KEEPS_RADIANCE:
         policy = jax.checkpoint_policies.save_only_these_names(REPLAY_RADIANCE_NAME)
     fn = k_passes if k > 1 else one_pass
-    return pass_scan(fn, passes, acc0, weights, per_step=k, policy=policy)
+    out = pass_scan(fn, passes, acc0, weights, per_step=k, policy=policy)
+    # a sensor whose rays carry a constant weight (IrradianceMeter: pi); others: unchanged
+    ray_weight = getattr(scene.camera, "ray_weight", None)
+    return out if ray_weight is None else out * jnp.asarray(ray_weight, dtype)

@@ -23,8 +23,10 @@ Conventions (Mitsuba 3 ``ptracer``):
   point drawn as the path tracer's light sampling draws it
   (:func:`~jaxgfx.render.integrators._common.sample_area_light`: by area, or by the texels
   of a bitmap radiance) and a cosine-weighted direction on their front side (weight
-  ``π L(uv) / pdf_area``, ``L(uv)`` the radiance there, textured or constant); each divided
-  by the selection probability.
+  ``π L(uv) / pdf_area``, ``L(uv)`` the radiance there, textured or constant),
+  ``directionalarea`` lights from a point uniform by area along the normal there (weight
+  ``L A``, Mitsuba's ``sample_ray``; never directly visible); each divided by the selection
+  probability.
 - Sensor: the pinhole's importance ``We = 1 / (A cos³θ)`` (``A`` the area of the image
   rectangle at unit distance) divided by the squared distance; the film holds the sum of the
   splats of ``W H spp`` light paths divided by ``spp``.
@@ -75,8 +77,15 @@ import jax.numpy as jnp
 from jaxgfx._math import max_last, safe_div, safe_sqrt, sum_last, take_rows
 from jaxgfx.render.bsdf.texture import lookup
 from jaxgfx.render.camera import PerspectiveCamera, look_at_basis
-from jaxgfx.render.emitters import AreaLight, DirectionalLight, ProjectorLight, SpotLight
+from jaxgfx.render.emitters import (
+    AreaLight,
+    DirectionalAreaLight,
+    DirectionalLight,
+    ProjectorLight,
+    SpotLight,
+)
 from jaxgfx.render.film import BoxFilter, GaussianFilter, TentFilter
+from jaxgfx.render.geometry import sample_area
 from jaxgfx.render.geometry.frame import frame_from_normal, to_world
 from jaxgfx.render.geometry.instance import Instances
 from jaxgfx.render.geometry.mesh import TriangleMesh
@@ -110,11 +119,11 @@ def check_light_tracing(scene) -> None:
         )
     for k, light in enumerate(scene.delta_lights):
         name = type(light).__name__
-        if type(light) not in (SpotLight, DirectionalLight, ProjectorLight):
+        if type(light) not in (SpotLight, DirectionalLight, ProjectorLight, DirectionalAreaLight):
             raise ValueError(
                 f"emitters: the 'ptracer' integrator does not trace {name} (delta_lights[{k}]): "
-                "point, spot, projector, directional, area and environment lights only; use "
-                "'path'"
+                "point, spot, projector, directional, directionalarea, area and environment "
+                "lights only; use 'path'"
             )
     for k, al in enumerate(scene.area_lights):
         if type(al) is not AreaLight or (not al.textured and jnp.shape(al.radiance) != (3,)):
@@ -292,6 +301,12 @@ def sample_emission(scene, u):
         w = le * (disk * safe_div(1.0, pdf))[..., None]
         cands.append((o, d, w))
     for light in scene.delta_lights:  # spot, projector, directional (check_light_tracing)
+        if type(light) is DirectionalAreaLight:  # along the normal at a point uniform by area
+            p, n, pdf_a = sample_area(light.shape, u_pos)
+            o, _ = C.spawn_ray(p, n, n)
+            w = light.radiance.astype(dtype) * safe_div(1.0, pdf_a)[..., None]
+            cands.append((o, n, w))
+            continue
         if type(light) is ProjectorLight:
             cands.append(_projector_emission(light, u_dir))
             continue

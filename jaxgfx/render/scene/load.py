@@ -13,6 +13,7 @@ from jaxgfx.render.bsdf import make_bsdf
 from jaxgfx.render.emitters import (
     AreaLight,
     ConstantEnvironment,
+    DirectionalAreaLight,
     DirectionalLight,
     EnvironmentMap,
     PointLights,
@@ -34,6 +35,7 @@ from jaxgfx.render.scene.schema import (
     SCENE_KEYS,
     build_camera,
     envmap_image,
+    envmap_rotation,
     expect_keys,
     num,
     rgb,
@@ -101,7 +103,7 @@ def load_scene(
         base_dir = base_dir or os.path.dirname(os.path.abspath(os.fspath(desc)))
         desc = read_yaml(desc)
     expect_keys(desc, "scene", *SCENE_KEYS)
-    camera = build_camera(desc["camera"])
+    camera = build_camera(desc["camera"], base_dir=base_dir)
     film = desc.get("film", {}) or {}
     expect_keys(film, "film", (), FILM_KEYS)
     fopts = {k: v for k, v in film.items() if k != "filter"}
@@ -261,7 +263,7 @@ def load_scene(
             )
         elif kind == "projector":
             delta_lights.append(projector_from_desc(ed, where, base_dir))
-        elif kind == "area":
+        elif kind in ("area", "directionalarea"):
             expect_keys(ed, where, ("type", "shape", "radiance"), ("material", "id"))
             sk, shape = shape_from_desc(ed["shape"], f"{where}.shape", base_dir)
             shape_ident = _object_id(ed["shape"], f"{where}.shape", "shapes", seen_ids)
@@ -280,6 +282,12 @@ def load_scene(
                 object_ids.append((shape_ident, "shape", len(shapes) - 1, row, names[mi]))
             n_prims = shape.faces.shape[0] if sk == "mesh" else 1
             shape_mats.append(jnp.full((n_prims,), mi, jnp.int32))
+            if kind == "directionalarea":  # a delta light: no emission towards the camera
+                rad = rgb(ed["radiance"], f"{where}.radiance")
+                delta_lights.append(
+                    _prefixed(where, DirectionalAreaLight, rad, shape, len(shapes) - 1)
+                )
+                continue
             rad = emission_from_desc(
                 ed["radiance"], f"{where}.radiance", base_dir=base_dir, rgb=rgb
             )
@@ -293,7 +301,9 @@ def load_scene(
                 environment = ConstantEnvironment(rgb(ed["radiance"], f"{where}.radiance"))
             else:
                 environment = EnvironmentMap.create(
-                    envmap_image(ed, where, base_dir), ed.get("scale", 1.0)
+                    envmap_image(ed, where, base_dir),
+                    ed.get("scale", 1.0),
+                    envmap_rotation(ed, where),
                 )
     if not shapes:
         raise ValueError("shapes: the scene has no geometry")
@@ -344,6 +354,8 @@ def _object_id(d, where, namespace, seen):
 def _delta_kind(light) -> str:
     if isinstance(light, ProjectorLight):
         return "projector"
+    if isinstance(light, DirectionalAreaLight):
+        return "directionalarea"
     return "spot" if isinstance(light, SpotLight) else "directional"
 
 

@@ -49,7 +49,8 @@ Mapping of conventions (jaxgfx -> Mitsuba 3), each checked by ``tests/render/tes
   and clamps v, Mitsuba 3 at ``((i + .5) / W, j / (H - 1))`` (rows at the poles). The map is
   therefore re-gridded (:func:`envmap_for_mitsuba`: ``2H + 1`` rows = the jaxgfx texel rows and
   the midpoints between them, plus the clamped pole rows) so that Mitsuba's bilinear lookup
-  equals jaxgfx's exactly, and written as an EXR into ``work_dir``.
+  equals jaxgfx's exactly, and written as an EXR into ``work_dir``. A ``to_world`` rotation is
+  written as ``to_world`` (Mitsuba looks up ``to_world^-1 d``, jaxgfx ``to_world^T d``).
 * meshes: ``.obj`` / ``.ply`` files go to Mitsuba's ``obj`` / ``ply`` plugins (``face_normals``
   when the file has no vertex normals: jaxgfx then shades flat, Mitsuba would smooth);
   inline ``vertices`` / ``faces`` are written as a PLY into ``work_dir``; ``translate`` /
@@ -85,6 +86,7 @@ __all__ = [
     "to_mitsuba_dict",
     "scene_to_desc",
     "mitsuba_integrator",
+    "sensor_dict",
     "render_mitsuba",
     "envmap_for_mitsuba",
     "MITSUBA_INSTALL_HINT",
@@ -653,7 +655,11 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
     # -- sensor
     cam = desc["camera"]
     ortho = None
-    if isinstance(cam, Mapping) and "view_proj_inverse" in cam:
+    meter = cam.get("type") if isinstance(cam, Mapping) else None
+    if meter is not None:
+        S.build_camera(cam, base_dir=base_dir)  # validated as load_scene does
+        cam = {**cam, "width": 1, "height": 1}
+    elif isinstance(cam, Mapping) and "view_proj_inverse" in cam:
         S.build_camera(cam)  # validated as load_scene does
         ortho = orthographic_to_world(cam["view_proj_inverse"], cam["width"], cam["height"],
                                       DEFAULTS["near_clip"])  # fmt: skip
@@ -703,7 +709,16 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
             )
         film["rfilter"] = {"type": "gaussian", "stddev": float(rf.stddev)}
         film["sample_border"] = True
-    if ortho is not None:  # Mitsuba's default near_clip, where the rays start
+    meter_shape = None
+    if meter == "radiancemeter":
+        sensor = {"type": "radiancemeter", "origin": [float(x) for x in cam["origin"]],
+                  "direction": [float(x) for x in cam["direction"]]}  # fmt: skip
+    elif meter == "irradiancemeter":  # nested in its shape, made invisible (null BSDF): the
+        # meter's shape is not part of a jaxgfx scene's geometry unless listed in its shapes
+        sensor = {"type": "irradiancemeter"}
+        meter_shape = _shape(cam["shape"], "camera.shape", base_dir, work_dir, mi)
+        meter_shape["bsdf"] = {"type": "null"}
+    elif ortho is not None:  # Mitsuba's default near_clip, where the rays start
         sensor = {"type": "orthographic", "to_world": _transform(ortho, mi)}
     else:
         sensor = {
@@ -721,6 +736,9 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
     sensor["film"] = film
     sensor["sampler"] = {"type": "independent", "sample_count": 16}
     out: dict = {"type": "scene", "sensor": sensor}
+    if meter_shape is not None:
+        meter_shape["sensor"] = out.pop("sensor")
+        out["irradiance_meter"] = meter_shape
 
     # -- materials
     mats_desc = desc.get("materials", {}) or {}
@@ -809,16 +827,18 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
         if not isinstance(ed, Mapping) or "type" not in ed:
             raise ValueError(f"{where}: expected a mapping with a 'type' key")
         kind = check_choice(ed["type"], f"{where}.type", S.EMITTER_TYPES)
-        if kind == "area":
+        if kind in ("area", "directionalarea"):
             S.expect_keys(ed, where, ("type", "shape", "radiance"), ("material", "id"))
             if isinstance(ed["shape"], Mapping) and "material" in ed["shape"]:
                 raise ValueError(f"{where}.shape.material: put 'material' on the emitter")
             sh = _shape(ed["shape"], f"{where}.shape", base_dir, work_dir, mi)
             sh["bsdf"] = material_of(ed, where, black, ed["shape"]["type"])
-            sh["emitter"] = {
-                "type": "area",
-                "radiance": _emission(ed["radiance"], where, base_dir, work_dir, mi),
-            }
+            rad = (
+                _emission(ed["radiance"], where, base_dir, work_dir, mi)
+                if kind == "area"
+                else _rgb(S.rgb(ed["radiance"], f"{where}.radiance"))
+            )
+            sh["emitter"] = {"type": kind, "radiance": rad}
             # the shape (the top-level object) by its id, else by the emitter's
             shape_key = ed["shape"].get("id") if isinstance(ed["shape"], Mapping) else None
             top = key(ed["shape"] if shape_key else ed, where, f"emitter_{i}")
@@ -849,8 +869,13 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
                 path = os.path.join(work_dir(), f"envmap_{i}.exr")
                 write_exr(path, envmap_for_mitsuba(img))
                 scale = S.num(ed.get("scale", 1.0), f"{where}.scale")
-                out[key(ed, where, f"emitter_{i}")] = {"type": "envmap", "filename": path,
-                                                      "scale": float(scale)}  # fmt: skip
+                out[key(ed, where, f"emitter_{i}")] = env = {"type": "envmap", "filename": path,
+                                                            "scale": float(scale)}  # fmt: skip
+                rot = S.envmap_rotation(ed, where)
+                if rot is not None:  # Mitsuba looks up to_world^-1 d, as jaxgfx to_world^T d
+                    m = np.eye(4)
+                    m[:3, :3] = rot
+                    env["to_world"] = _transform(m, mi)
         else:  # "directional" / "spot" (check_choice above admits only S.EMITTER_TYPES)
             out[key(ed, where, f"emitter_{i}")] = _delta_light(ed, where, mi, base_dir, work_dir)
     return out
@@ -1083,8 +1108,19 @@ def scene_to_desc(scene) -> dict:
 
     Example: ``load_scene(scene_to_desc(load_scene(desc)))`` renders like ``desc``.
     """
-    from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera, ThinLensCamera
-    from jaxgfx.render.emitters import ConstantEnvironment, DirectionalLight, ProjectorLight
+    from jaxgfx.render.camera import (
+        IrradianceMeter,
+        MatrixCamera,
+        PerspectiveCamera,
+        RadianceMeter,
+        ThinLensCamera,
+    )
+    from jaxgfx.render.emitters import (
+        ConstantEnvironment,
+        DirectionalAreaLight,
+        DirectionalLight,
+        ProjectorLight,
+    )
     from jaxgfx.render.film import (
         CatmullRomFilter,
         GaussianFilter,
@@ -1111,6 +1147,11 @@ def scene_to_desc(scene) -> dict:
         if isinstance(cam, ThinLensCamera):
             cam_d["aperture_radius"] = float(cam.aperture_radius)
             cam_d["focus_distance"] = float(cam.focus_distance)
+    elif isinstance(cam, RadianceMeter):
+        cam_d = {"type": "radiancemeter", "origin": _list(cam.origin),
+                 "direction": _list(cam.direction)}  # fmt: skip
+    elif isinstance(cam, IrradianceMeter):
+        cam_d = {"type": "irradiancemeter"}  # its shape: below, once `one` is defined
     else:  # pragma: no cover - a Scene holds one of the three
         raise NotImplementedError(f"camera: {type(cam).__name__} has no Mitsuba 3 mapping")
     desc = {
@@ -1179,6 +1220,13 @@ def scene_to_desc(scene) -> dict:
             raise NotImplementedError(f"{where}: {type(shape).__name__} has no Mitsuba 3 mapping")
         return [(d, names[int(k)]) for d, k in out] if keep else [(d, None) for d, _ in out]
 
+    if isinstance(cam, IrradianceMeter):
+        sh = cam.shape
+        n = sh.faces.shape[0] if isinstance(sh, TriangleMesh) else sh.centers.shape[0]
+        (cam_d["shape"], _), *more = one(sh, np.zeros(n, int), "camera", False)
+        if more:  # pragma: no cover - a sphere / rectangle batch of one or a mesh
+            raise NotImplementedError("camera.shape: one shape per irradiance meter")
+
     # ids (Scene.object_ids): (kind, index, row) -> id
     ids = {(k, i, r): ident for ident, k, i, r, _ in getattr(scene, "object_ids", ())}
 
@@ -1196,12 +1244,17 @@ def scene_to_desc(scene) -> dict:
                 for j, (d, n) in enumerate(shape_descs)]  # fmt: skip
 
     lit = {a.shape_index: (j, a) for j, a in enumerate(scene.area_lights)}
+    dlit = [e for e in scene.delta_lights if isinstance(e, DirectionalAreaLight)]
+    lit.update({a.shape_index: (j, a) for j, a in enumerate(dlit)})
     for i, (shape, mats) in enumerate(zip(scene.shapes, scene.shape_materials, strict=True)):
         if i in lit:
             j, light = lit[i]
-            for d, name in rows(one(shape, mats, f"emitters.area.{i}", True), i):
-                e = named({"type": "area", "shape": d, "radiance": _radiance_desc(light)},
-                          "area", j)  # fmt: skip
+            if isinstance(light, DirectionalAreaLight):
+                kind, rad = "directionalarea", _list(light.radiance)
+            else:
+                kind, rad = "area", _radiance_desc(light)
+            for d, name in rows(one(shape, mats, f"emitters.{kind}.{i}", True), i):
+                e = named({"type": kind, "shape": d, "radiance": rad}, kind, j)
                 if name != "jaxgfx_black":
                     e["material"] = name
                 desc["emitters"].append(e)
@@ -1222,10 +1275,15 @@ def scene_to_desc(scene) -> dict:
         desc["emitters"].append(named({"type": "constant", "radiance": _list(env.radiance)},
                                       "environment", 0))  # fmt: skip
     elif env is not None:
-        desc["emitters"].append(named({"type": "envmap", "image": np.asarray(env.image, np.float32),
-                                       "scale": float(env.scale)}, "environment", 0))  # fmt: skip
+        ed = {"type": "envmap", "image": np.asarray(env.image, np.float32),
+              "scale": float(env.scale)}  # fmt: skip
+        if env.to_world is not None:
+            ed["to_world"] = np.asarray(env.to_world, np.float64).tolist()
+        desc["emitters"].append(named(ed, "environment", 0))
     counts = {"directional": 0, "spot": 0, "projector": 0}
     for e in scene.delta_lights:  # directional, spot and projector lights, in their order
+        if isinstance(e, DirectionalAreaLight):  # written with its shape, above
+            continue
         if isinstance(e, DirectionalLight):
             d = {"type": "directional", "direction": _list(e.direction),
                  "irradiance": _list(e.irradiance)}  # fmt: skip
@@ -1245,6 +1303,12 @@ def scene_to_desc(scene) -> dict:
     used |= {m.get("material") for d in desc["shapes"] for m in d.get("shapes", ())}
     desc["materials"] = {k: v for k, v in desc["materials"].items() if k in used}
     return desc
+
+
+def sensor_dict(d) -> dict:
+    """The sensor of a :func:`to_mitsuba_dict` result: top-level, or nested in the shape of an
+    irradiance meter."""
+    return d["sensor"] if "sensor" in d else d["irradiance_meter"]["sensor"]
 
 
 def mitsuba_integrator(
@@ -1332,7 +1396,7 @@ def render_mitsuba(
         wd = tmp.name if tmp is not None else work_dir
         d = to_mitsuba_dict(desc, base_dir=base_dir, work_dir=wd, mi=mi)
         d["integrator"] = integ
-        d["sensor"]["sampler"]["sample_count"] = int(spp)
+        sensor_dict(d)["sampler"]["sample_count"] = int(spp)
         scene = mi.load_dict(d)
     finally:
         if tmp is not None:

@@ -98,18 +98,18 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("emitter", "area"): S + " (inside a shape; `radiance` an RGB or a bitmap / checkerboard)",
     ("emitter", "point"): S,
     ("emitter", "constant"): S,
-    ("emitter", "envmap"): S + " (no rotation)",
+    ("emitter", "envmap"): S + " (rotating `to_world`; no scale or shear)",
     ("emitter", "directional"): S,
     ("emitter", "spot"): S + " (a projected `texture` a bitmap)",
     ("emitter", "projector"): S + " (`irradiance` a colour or a bitmap; rigid `to_world`)",
-    ("emitter", "directionalarea"): "refused: not in jaxgfx",
+    ("emitter", "directionalarea"): S + " (RGB `radiance`; lit only by the ptracer, as in Mitsuba)",
     ("emitter", "sunsky"): "refused: not in jaxgfx",
     # sensors, films, filters, samplers
     ("sensor", "perspective"): S + " (rigid `to_world`)",
     ("sensor", "thinlens"): S + " (rigid `to_world`; `aperture_radius` required)",
     ("sensor", "orthographic"): S + " (as a matrix camera)",
-    ("sensor", "radiancemeter"): "refused: jaxgfx renders images only",
-    ("sensor", "irradiancemeter"): "refused: jaxgfx renders images only",
+    ("sensor", "radiancemeter"): S + " (a 1 x 1 film; `origin` + `direction` or `to_world`)",
+    ("sensor", "irradiancemeter"): S + " (a 1 x 1 film; on a sphere, rectangle or mesh)",
     ("sensor", "distant"): "refused: jaxgfx renders images only",
     ("sensor", "batch"): "refused: one sensor per scene",
     ("film", "hdrfilm"): S,
@@ -135,9 +135,10 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("integrator", "prb_projective"): "refused: not in jaxgfx",
     ("integrator", "volpath"): "refused: jaxgfx renders surfaces only",
     ("integrator", "volpathmis"): "refused: jaxgfx renders surfaces only",
-    ("integrator", "ptracer"): S + " (point, spot, directional, area, constant and envmap "
-    "emitters; hide_emitters)",
-    ("integrator", "aov"): "refused: not in jaxgfx",
+    ("integrator", "ptracer"): S + " (point, spot, directional, area, directionalarea, "
+    "constant and envmap emitters; hide_emitters)",
+    ("integrator", "aov"): S + " (`aovs` of types albedo, depth, position, geo_normal, "
+    "sh_normal; no nested integrator)",
     ("integrator", "stokes"): "refused: jaxgfx renders unpolarized RGB only",
 }
 """``(tag, type)`` -> status of every Mitsuba 3 plugin the loader knows (tested against the

@@ -60,7 +60,9 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
 * ``envmap``: same direction -> (u, v) map as jaxgfx (y up); Mitsuba places rows at
   ``v = j / (H - 1)``, jaxgfx at ``(j + 1/2) / H'``: the map is resampled to ``H' = 4 H`` rows
   with Mitsuba's linear interpolation along v (exact between Mitsuba's rows up to the
-  interpolation of the resampled grid, see :func:`envmap_from_mitsuba`).
+  interpolation of the resampled grid, see :func:`envmap_from_mitsuba`). ``to_world`` must be
+  a rotation (its translation is ignored, as Mitsuba does for directions): it becomes the
+  ``to_world`` of the envmap description; a scale or shear is refused.
 """
 
 from __future__ import annotations
@@ -105,12 +107,13 @@ CYLINDER_SEGMENTS = 256
 class XMLScene:
     """A translated Mitsuba scene: ``desc`` (the jaxgfx scene description; every file path in
     it is absolute), the sampler's ``spp`` (``None`` without a sensor sampler), the jaxgfx
-    ``integrator`` name (``"path"``, ``"direct"`` or ``"ptracer"``), ``max_depth`` in the
+    ``integrator`` name (``"path"``, ``"direct"``, ``"ptracer"`` or ``"aov"``), ``max_depth`` in the
     common convention (``None``: Mitsuba's ``-1``, unbounded; jaxgfx needs a number),
     ``rr_depth``, ``files`` (every XML file read, in order), ``hide_emitters`` (``ptracer``
     only: pass it to ``ParticleTracer(hide_emitters=...)``), and the ``PathIntegrator`` options
     ``adjoint`` (``"replay"`` for Mitsuba's ``prb`` / ``prb_basic``, else ``"ad"``) and
-    ``strategy`` (``"bsdf"`` for ``prb_basic``, else ``"mis"``); :attr:`integrator_spec` is
+    ``strategy`` (``"bsdf"`` for ``prb_basic``, else ``"mis"``), the ``aov`` options ``aovs``
+    and ``near_clip`` (the sensor's; Mitsuba measures depth from it); :attr:`integrator_spec` is
     all of them as the mapping ``render(..., integrator=...)`` takes."""
 
     desc: dict
@@ -122,6 +125,8 @@ class XMLScene:
     hide_emitters: bool = False
     adjoint: str = "ad"
     strategy: str = "mis"
+    aovs: tuple = ()
+    near_clip: float = 0.0
 
     @property
     def integrator_spec(self) -> dict:
@@ -135,6 +140,8 @@ class XMLScene:
             out["rr_depth"] = self.rr_depth
         if self.integrator == "path":
             out.update(strategy=self.strategy, adjoint=self.adjoint)
+        if self.integrator == "aov":
+            out.update(aovs=self.aovs, near_clip=self.near_clip)
         return out
 
 
@@ -1168,7 +1175,8 @@ def _shape(obj: _Obj, doc, desc, ctx):
     kids = obj.children + [q.value for q in named]
     bsdfs = [c for c in kids if c.tag == "bsdf"]
     emitters = [c for c in kids if c.tag == "emitter"]
-    other = [c for c in obj.children if c.tag not in ("bsdf", "emitter")]
+    meters = [c for c in obj.children if c.tag == "sensor" and c.type == "irradiancemeter"]
+    other = [c for c in obj.children if c.tag not in ("bsdf", "emitter") and c not in meters]
     if other:
         c = other[0]
         raise ValueError(f"{c.node.at}: {obj.where}: nested <{c.tag} type={c.type!r}> is not "
@@ -1308,14 +1316,21 @@ def _shape(obj: _Obj, doc, desc, ctx):
                          "cylinder, sdfgrid)")  # fmt: skip
     p.done(children_ok=len(obj.children))
     ctx["bboxes"].append((bbox, obj))
+    if meters:  # the irradiance meter's shape (read_xml puts it into the camera)
+        if sd["type"] not in ("sphere", "rectangle", "mesh"):
+            raise ValueError(f"{meters[0].where}: an irradiancemeter on a {t} is not "
+                             "supported (sphere, rectangle or a mesh)")  # fmt: skip
+        ctx["meter_shape"] = {k: v for k, v in sd.items() if k != "id"}
     if emitters:
         e = emitters[0]
         ep = _Params(e, doc)
-        if e.type != "area":
-            raise ValueError(f"{e.where}: only 'area' emitters can be attached to a shape")
-        rad = ep.color("radiance", [1.0] * 3, emission=True, texture=True)  # RGB or texture
+        if e.type not in ("area", "directionalarea"):
+            raise ValueError(f"{e.where}: only 'area' and 'directionalarea' emitters can be "
+                             "attached to a shape")  # fmt: skip
+        # directionalarea: an RGB radiance only (jaxgfx's DirectionalAreaLight)
+        rad = ep.color("radiance", [1.0] * 3, emission=True, texture=e.type == "area")
         ep.done()
-        ed = {"type": "area", "shape": sd, "radiance": rad, "material": mat}
+        ed = {"type": e.type, "shape": sd, "radiance": rad, "material": mat}
         _name_by_id(ed, e.id or obj.id)  # an unnamed area emitter goes by its shape's id
         _name_by_id(sd, obj.id)
         desc["emitters"].append(ed)
@@ -1417,9 +1432,10 @@ def _emitter(obj: _Obj, doc, desc):
         )
         if path is None:
             raise ValueError(f"{obj.where}: missing parameter 'filename'")
-        m = p.transform("to_world")
-        if m is not None and not np.allclose(m, np.eye(4), atol=1e-9):
-            raise p.err("to_world", "rotated environment maps are not supported")
+        m = p.transform("to_world")  # a rotation (Mitsuba looks up to_world^-1 d)
+        if m is not None and not np.allclose(m[:3, :3].T @ m[:3, :3], np.eye(3), atol=1e-6):
+            raise p.err("to_world", "an environment map's to_world must be a rotation (no "
+                                    "scale or shear)")  # fmt: skip
         p.string("filter_type", "bilinear", ("bilinear",))
         try:
             img = io.read_any(path)
@@ -1429,6 +1445,8 @@ def _emitter(obj: _Obj, doc, desc):
             raise p.err("filename", f"expected an RGB image of at least 2x2, got {img.shape}")
         d = {"type": "envmap", "image": envmap_from_mitsuba(img),
              "scale": p.float("scale", 1.0)}  # fmt: skip
+        if m is not None and not np.allclose(m[:3, :3], np.eye(3), rtol=0, atol=1e-12):
+            d["to_world"] = m[:3, :3].tolist()
     elif t == "directional":
         direction = p.vec("direction")
         m = p.transform("to_world")
@@ -1555,9 +1573,10 @@ def _fov_x_or_y(p: _Params, width, height):
 
 def _sensor(obj: _Obj, doc, ctx) -> dict:
     p = _Params(obj, doc)
-    if obj.type not in ("perspective", "thinlens", "orthographic"):
+    ok = ("perspective", "thinlens", "orthographic", "radiancemeter", "irradiancemeter")
+    if obj.type not in ok:
         raise ValueError(f"{obj.where}: sensor plugin {obj.type!r} is not supported "
-                         "(perspective, thinlens, orthographic)")  # fmt: skip
+                         f"({', '.join(ok)})")  # fmt: skip
     films = [c for c in obj.children if c.tag == "film"]
     samplers = [c for c in obj.children if c.tag == "sampler"]
     for c in obj.children:
@@ -1628,6 +1647,8 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
         sp.done()
         if spp < 1:
             raise sp.err("sample_count", f"expected a positive integer, got {spp}")
+    if obj.type in ("radiancemeter", "irradiancemeter"):
+        return _meter(p, obj, films, samplers, width, height, film, spp)
     if obj.type == "orthographic":
         return _orthographic(p, obj, ctx, films, samplers, width, height, film, spp)
     fov, axis = _fov_x_or_y(p, width, height)
@@ -1663,6 +1684,41 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
         reach += lens[0] * max(1.0, abs(1.0 - near / lens[1]))
     ctx["clip"] = (o, near, far, reach, obj)
     return cam, film, spp
+
+
+def _meter(p: _Params, obj, films, samplers, width, height, film, spp):
+    """Mitsuba's ``radiancemeter`` (``origin`` + ``direction``, or ``to_world``: its origin
+    and +z, which must be a unit vector) and ``irradiancemeter`` (nested in a shape, which
+    :func:`_shape` gives it) -> ``{type: radiancemeter | irradiancemeter, ...}``; a 1 x 1 film
+    (Mitsuba refuses others for the radiance meter)."""
+    if (width, height) != (1, 1):
+        raise ValueError(f"{(films[0] if films else obj).where}: a {obj.type} needs a 1 x 1 "
+                         f"film, got {width} x {height}")  # fmt: skip
+    if len(films) > 1 or len(samplers) > 1:
+        raise ValueError(f"{obj.where}: expected at most one <film> and one <sampler>")
+    if obj.type == "irradiancemeter":
+        if "to_world" in obj.props:
+            raise p.err("to_world", "an irradiancemeter takes its shape's transform (as in "
+                                    "Mitsuba)")  # fmt: skip
+        p.done(children_ok=len(obj.children))
+        return {"type": "irradiancemeter"}, film, spp
+    m = p.transform("to_world")
+    origin, direction = p.vec("origin"), p.vec("direction")
+    if m is not None:  # to_world wins over origin / direction (as in Mitsuba)
+        z = m[:3, 2]
+        if not abs(float(np.linalg.norm(z)) - 1.0) < 1e-6:
+            raise p.err("to_world", "a to_world that scales the meter's +z axis is not "
+                                    "supported (Mitsuba does not normalise it)")  # fmt: skip
+        origin, direction = m[:3, 3].tolist(), z.tolist()
+    elif (origin is None) != (direction is None):
+        raise p.err("origin" if origin is None else "direction",
+                    "give both origin and direction (or to_world)")  # fmt: skip
+    origin = [0.0, 0.0, 0.0] if origin is None else list(origin)
+    direction = [0.0, 0.0, 1.0] if direction is None else list(direction)
+    if not np.linalg.norm(direction) > 0:
+        raise p.err("direction", "expected a nonzero vector")
+    p.done(children_ok=len(obj.children))
+    return {"type": "radiancemeter", "origin": origin, "direction": _unit(direction)}, film, spp
 
 
 def _thin_lens(p: _Params, far):
@@ -1728,6 +1784,30 @@ def _check_clip_ortho(ctx):
             )
 
 
+def _aov(p: _Params, obj):
+    """Mitsuba's ``aov`` with ``aovs="name:type,..."`` of the types jaxgfx's
+    :class:`~jaxgfx.render.integrators.AOVIntegrator` computes (``albedo``, ``depth``,
+    ``position``, ``geo_normal``, ``sh_normal``), channels in the given order; nested
+    integrators (Mitsuba's image channels before the AOVs) are refused."""
+    from jaxgfx.render.integrators.aov import AOV_TYPES
+
+    if obj.children:
+        raise ValueError(f"{obj.children[0].node.at}: {obj.where}: a nested integrator inside "
+                         "'aov' is not supported (AOVs only)")  # fmt: skip
+    spec = p.string("aovs", "")
+    types = []
+    for item in [x.strip() for x in spec.split(",") if x.strip()]:
+        name, _, kind = item.partition(":")
+        if not name or kind not in AOV_TYPES:
+            raise p.err("aovs", f"{item!r}: expected name:type with a type jaxgfx computes "
+                                f"({', '.join(AOV_TYPES)})")  # fmt: skip
+        types.append(kind)
+    if not types:
+        raise p.err("aovs", "expected at least one name:type")
+    p.done()
+    return "aov", None, 5, False, {"aovs": tuple(types)}
+
+
 def _integrator(obj: _Obj, doc):
     p = _Params(obj, doc)
     if obj.type == "moment":  # its first channels are the nested integrator's image
@@ -1735,9 +1815,11 @@ def _integrator(obj: _Obj, doc):
             raise ValueError(f"{obj.where}: expected exactly one nested <integrator>")
         p.done(children_ok=1)
         return _integrator(obj.children[0], doc)
+    if obj.type == "aov":
+        return _aov(p, obj)
     if obj.type not in ("path", "direct", "ptracer", "prb", "prb_basic"):
         raise ValueError(f"{obj.where}: integrator plugin {obj.type!r} is not supported "
-                         "(path, direct, ptracer, prb, prb_basic, moment)")  # fmt: skip
+                         "(path, direct, ptracer, prb, prb_basic, moment, aov)")  # fmt: skip
     hide = p.bool("hide_emitters", False)
     if hide and obj.type != "ptracer":
         raise p.err("hide_emitters", "hidden emitters are supported by 'ptracer' only")
@@ -1834,6 +1916,7 @@ def read_xml(path, **params) -> XMLScene:
     desc: dict = {"materials": {}, "shapes": [], "emitters": []}
     ctx: dict = {"bboxes": []}
     sensors = [o for o in objs if o.tag == "sensor"]
+    sensors += [c for o in objs if o.tag == "shape" for c in o.children if c.tag == "sensor"]
     integ = [o for o in objs if o.tag == "integrator"]
     if not sensors:
         raise ValueError(f"{path}: the scene has no <sensor> (jaxgfx needs a camera)")
@@ -1870,9 +1953,13 @@ def read_xml(path, **params) -> XMLScene:
             raise ValueError(f"{o.where}: a top-level <{o.tag}> is not supported")
     if not desc["shapes"] and not any(e["type"] == "area" for e in desc["emitters"]):
         raise ValueError(f"{path}: the scene has no shapes")
+    if cam.get("type") == "irradiancemeter":
+        cam["shape"] = ctx["meter_shape"]
     _check_clip(ctx)
     if not desc["emitters"]:
         del desc["emitters"]
+    if integrator == "aov" and "clip" in ctx:  # Mitsuba's depth: from the near plane
+        opts["near_clip"] = float(ctx["clip"][1])
     return XMLScene(desc, spp, integrator, depth, rr, tuple(doc.files), hide, **opts)
 
 
@@ -2019,7 +2106,7 @@ def save_scene(
     folder = os.path.dirname(path)
     files = os.path.splitext(path)[0] + "_files"
     d = M.to_mitsuba_dict(scene, base_dir=base_dir, work_dir=files, refs=True)
-    d["sensor"]["sampler"]["sample_count"] = int(spp)
+    M.sensor_dict(d)["sampler"]["sample_count"] = int(spp)
     d["integrator"] = integ
 
     def relative(x):

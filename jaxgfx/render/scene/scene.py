@@ -170,10 +170,12 @@ def _listed_names(obj) -> list[str]:
 
 def _delta_kind(light) -> str:
     name = type(light).__name__
-    return {"SpotLight": "spot", "ProjectorLight": "projector"}.get(name, "directional")
+    return {"SpotLight": "spot", "ProjectorLight": "projector",
+            "DirectionalAreaLight": "directionalarea"}.get(name, "directional")  # fmt: skip
 
 
-EMITTER_KINDS = ("point", "area", "environment", "directional", "spot", "projector")
+EMITTER_KINDS = ("point", "area", "environment", "directional", "spot", "projector",
+                 "directionalarea")  # fmt: skip
 """The words after ``emitters.`` that name emitters by kind (not usable as ids)."""
 
 
@@ -311,7 +313,7 @@ class Scene(eqx.Module):
         elif (
             head == "emitters"
             and len(parts) >= 3
-            and parts[1] in ("directional", "spot", "projector")
+            and parts[1] in ("directional", "spot", "projector", "directionalarea")
         ):
             kinds = [i for i, e in enumerate(self.delta_lights) if _delta_kind(e) == parts[1]]
             i = kinds[_index(path, parts[2], len(kinds), f"a {parts[1]} light")]
@@ -325,7 +327,8 @@ class Scene(eqx.Module):
             raise ValueError(
                 f"{path}: expected materials.NAME.FIELD, camera.FIELD, emitters.point.FIELD, "
                 "emitters.area.I.FIELD, emitters.environment.FIELD, emitters.directional.I.FIELD, "
-                "emitters.spot.I.FIELD, emitters.projector.I.FIELD or shapes.I.FIELD"
+                "emitters.spot.I.FIELD, emitters.projector.I.FIELD, "
+                "emitters.directionalarea.I.FIELD or shapes.I.FIELD"
             )
         if not rest:
             raise ValueError(f"{path}: expected a field name after the object")
@@ -408,7 +411,7 @@ class Scene(eqx.Module):
             objs += by_id("area", i, "emitters", f"emitters.area.{i}", a)
         if self.environment is not None:
             objs += by_id("environment", 0, "emitters", "emitters.environment", self.environment)
-        counts = {"directional": 0, "spot": 0, "projector": 0}
+        counts = {"directional": 0, "spot": 0, "projector": 0, "directionalarea": 0}
         for e in self.delta_lights:
             k = _delta_kind(e)
             objs += by_id(k, counts[k], "emitters", f"emitters.{k}.{counts[k]}", e)

@@ -16,7 +16,13 @@ import numpy as np
 from jaxgfx._checks import as_float_array, check_choice, check_finite
 from jaxgfx._math import safe_normalize
 from jaxgfx.render.bsdf import rgb_param
-from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera, ThinLensCamera
+from jaxgfx.render.camera import (
+    IrradianceMeter,
+    MatrixCamera,
+    PerspectiveCamera,
+    RadianceMeter,
+    ThinLensCamera,
+)
 from jaxgfx.render.geometry import Rectangles, SDFShape, Spheres, TriangleMesh, sdf_from_dict
 from jaxgfx.render.geometry.frame import frame_from_normal
 
@@ -29,6 +35,7 @@ __all__ = [
     "num",
     "rgb",
     "envmap_image",
+    "envmap_rotation",
     "build_camera",
     "rectangle_from_desc",
     "mesh_from_desc",
@@ -37,7 +44,8 @@ __all__ = [
 ]
 
 SHAPE_TYPES = ("sphere", "rectangle", "mesh", "sdf", "sdfgrid")
-EMITTER_TYPES = ("area", "point", "constant", "envmap", "directional", "spot", "projector")
+EMITTER_TYPES = ("area", "point", "constant", "envmap", "directional", "spot", "projector",
+                 "directionalarea")  # fmt: skip
 SCENE_KEYS = (("camera", "shapes"), ("materials", "emitters", "film"))
 """(required, optional) top-level keys of a scene description."""
 FILM_KEYS = ("filter", "stddev", "radius", "B", "C", "lobes")
@@ -48,8 +56,9 @@ lanczos; :func:`jaxgfx.render.film.make_filter` says which belong to which)."""
 
 def envmap_image(ed, where, base_dir=None) -> np.ndarray:
     """The lat-long image of an ``envmap`` emitter description (``file`` relative to
-    ``base_dir``, or an inline ``image``), validated to ``(H, W, >=3)``."""
-    expect_keys(ed, where, ("type",), ("file", "image", "scale", "id"))
+    ``base_dir``, or an inline ``image``), validated to ``(H, W, >=3)``. (Its optional
+    ``to_world``, a rotation, is read by :func:`envmap_rotation`.)"""
+    expect_keys(ed, where, ("type",), ("file", "image", "scale", "to_world", "id"))
     if "file" in ed:
         from jaxgfx import io
 
@@ -64,6 +73,18 @@ def envmap_image(ed, where, base_dir=None) -> np.ndarray:
     if img.ndim != 3 or img.shape[-1] < 3:
         raise ValueError(f"{where}.image: expected (H, W, 3), got shape {img.shape}")
     return img
+
+
+def envmap_rotation(ed, where):
+    """The ``to_world`` of an ``envmap`` description as a 3x3 rotation (``None`` without one or
+    for the identity): a 3x3 or 4x4 affine matrix whose linear part is orthogonal (its
+    translation is ignored: the map is at infinity); a scale or shear is refused naming
+    ``where.to_world``."""
+    from jaxgfx.render.emitters import EnvironmentMap
+
+    if "to_world" not in ed:
+        return None
+    return EnvironmentMap.check_to_world(ed["to_world"], f"{where}.to_world")
 
 
 def expect_keys(d, where, required=(), optional=()):
@@ -104,13 +125,16 @@ def rgb(x, where):
     return a
 
 
-def build_camera(d, where="camera"):
+def build_camera(d, where="camera", base_dir=None):
     """The camera of a ``camera`` description; the constructors' errors (``width: ...``) are
-    prefixed with ``where`` (``camera.width: ...``)."""
+    prefixed with ``where`` (``camera.width: ...``). ``{type: radiancemeter, origin,
+    direction}`` and ``{type: irradiancemeter, shape}`` give the 1 x 1 meters
+    (:class:`~jaxgfx.render.camera.RadianceMeter`, :class:`~jaxgfx.render.camera.IrradianceMeter`;
+    a mesh shape's file relative to ``base_dir``)."""
     if not isinstance(d, Mapping):
         raise ValueError(f"{where}: expected a mapping, got {type(d).__name__}")
     try:
-        return _build_camera(d, where)
+        return _build_camera(d, where, base_dir)
     except (ValueError, TypeError) as e:
         message = str(e)
         if message.startswith(f"{where}.") or message.startswith(f"{where}:"):
@@ -118,7 +142,20 @@ def build_camera(d, where="camera"):
         raise type(e)(f"{where}.{message}") from None
 
 
-def _build_camera(d, where):
+def _build_camera(d, where, base_dir=None):
+    kind = d.get("type")
+    if kind is not None:  # the meters (Mitsuba's radiancemeter / irradiancemeter sensors)
+        check_choice(kind, f"{where}.type", ("radiancemeter", "irradiancemeter"))
+        if kind == "radiancemeter":
+            expect_keys(d, where, ("type", "origin", "direction"))
+            return RadianceMeter.create(vec(d["origin"], f"{where}.origin"),
+                                        vec(d["direction"], f"{where}.direction"))  # fmt: skip
+        expect_keys(d, where, ("type", "shape"))
+        sk, shape = shape_from_desc(d["shape"], f"{where}.shape", base_dir)
+        if sk not in ("sphere", "rectangle", "mesh"):
+            raise ValueError(f"{where}.shape: an irradiance meter needs a sphere, rectangle or "
+                             f"mesh (a surface with an area), got {sk!r}")  # fmt: skip
+        return IrradianceMeter(shape)
     if "view_proj_inverse" in d:
         expect_keys(d, where, ("view_proj_inverse", "width", "height"))
         return MatrixCamera.from_matrix(d["view_proj_inverse"], d["width"], d["height"])
