@@ -99,8 +99,8 @@ def test_transform_elements_compose_like_numpy(tmp_path):
 def test_rotate_about_an_arbitrary_axis_and_matrix_and_scale_value(tmp_path):
     # rotation by 120 degrees about (1, 1, 1) permutes the axes: x -> y -> z -> x
     perm = np.array([[0, 0, 1, 0], [1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 0, 1.0]])
-    got = mesh_to_world(tmp_path, '<rotate value="1, 1, 1" angle="120"/>')
-    np.testing.assert_allclose(got, perm, atol=1e-12)
+    got = mesh_to_world(tmp_path, '<rotate value="0.57735, 0.57735, 0.57735" angle="120"/>')
+    np.testing.assert_allclose(got, perm, atol=2e-5)
     mat = "1 2 0 4  0 1 0 5  0 0 3 6  0 0 0 1"
     got = mesh_to_world(tmp_path, f'<scale value="2"/><matrix value="{mat}"/>')
     want = np.array([[1, 2, 0, 4], [0, 1, 0, 5], [0, 0, 3, 6], [0, 0, 0, 1.0]]) @ np.diag(
@@ -109,6 +109,25 @@ def test_rotate_about_an_arbitrary_axis_and_matrix_and_scale_value(tmp_path):
     np.testing.assert_allclose(got, want, atol=1e-12)
     got = mesh_to_world(tmp_path, '<translate value="1 2 3"/><scale value="1, 2, 4"/>')
     np.testing.assert_allclose(got, np.diag([1, 2, 4, 1.0]) @ trans(1, 2, 3), atol=1e-12)
+
+
+def test_a_rotate_axis_of_another_length_is_refused_as_mitsuba_would_not_rotate(tmp_path):
+    # Mitsuba 3.9.1 does not normalise the axis: rotate((1, 1, 1), 120) is a matrix with entries
+    # 2.37 and 0.63 there (mi.ScalarTransform4f().rotate), not the axis permutation; an axis
+    # within 1e-3 of unit length is normalised (above), a longer one is refused with its line
+    p = write(
+        tmp_path,
+        scene_xml(
+            '<shape type="cube"><transform name="to_world">'
+            '<rotate value="1, 1, 1" angle="120"/></transform></shape>'
+        ),
+    )
+    with pytest.raises(ValueError, match=r"scene\.xml:\d+: .*rotation axis \(1\.0, 1\.0, 1\.0\) has "
+                       r"length 1\.73205, not 1: Mitsuba 3 does not normalise it"):
+        read_xml(p)
+    ok = write(tmp_path, scene_xml('<shape type="cube"><transform name="to_world">'
+                                   '<rotate x="1.0009" angle="30"/></transform></shape>'), "b.xml")
+    np.testing.assert_allclose(read_xml(ok).desc["shapes"][0]["to_world"], rot_x(30), atol=1e-12)
 
 
 def test_lookat_sensor_becomes_the_jaxgfx_camera(tmp_path):

@@ -205,6 +205,12 @@ def _floats(text, where, n=None):
     return vals
 
 
+# a <rotate> axis within this of unit length is normalised (an axis written with a few digits,
+# 0.577 0.577 0.577, differs from Mitsuba's unnormalised matrix by at most this, relatively);
+# a longer or shorter one is refused (Mitsuba 3.9's ``dr::rotate`` uses it as given)
+ROTATE_AXIS_TOL = 1e-3
+
+
 def _rot(axis, angle_deg):
     a = np.asarray(axis, np.float64)
     a = a / np.linalg.norm(a)
@@ -364,6 +370,13 @@ def _transform(doc, node) -> np.ndarray:
                 axis = _xyz(a, c, 0.0)
             if not np.linalg.norm(axis) > 0:
                 raise ValueError(f"{at}: the rotation axis is zero")
+            if abs(np.linalg.norm(axis) - 1.0) > ROTATE_AXIS_TOL:
+                raise ValueError(
+                    f"{at}: the rotation axis {tuple(float(v) for v in axis)} has length "
+                    f"{np.linalg.norm(axis):.6g}, not 1: Mitsuba 3 does not normalise it (its "
+                    "matrix is then not a rotation, and its normals use that matrix unchanged), "
+                    "so the scene would render differently there; give a unit axis"
+                )
             angle = _floats(a["angle"], f"{at} angle", (1,))[0]
             ops.append(("rotate", {"axis": axis, "angle": angle}))
         elif c.tag == "matrix":
