@@ -229,8 +229,30 @@ def _prior_specs(cfg: FitConfig, prep: Prepared):
     return tuple(priors), weights, scales
 
 
-def _initial(cfg: FitConfig, prep: Prepared):
-    """Initial parameters, bounds and camera arguments of :func:`jaxgfx.optim.fit`."""
+def bracket_start(cfg: FitConfig, prep: Prepared, target: Target):
+    """The starting curve of ``camera.response.init: bracket``: the response that
+    :func:`jaxgfx.hdr.recover_response` (``camera.response.init_method``) recovers from the
+    target photos of one view (:func:`~jaxgfx.pipelines.fit.targets.bracket_photos`) with
+    their relative exposures as times. Returns the response and a record for the report."""
+    from jaxgfx.hdr import recover_response
+
+    from .targets import bracket_photos
+
+    idx = bracket_photos(prep.exposures, prep.view_of)
+    codes = np.asarray(target.pixels)[idx]
+    dtype = np.uint16 if cfg.camera.bits > 8 else np.uint8
+    times = np.asarray(prep.exposures, np.float64)[idx]
+    resp = recover_response(codes.astype(dtype), times, method=cfg.camera.response.init_method)
+    view = 0 if prep.view_of is None else int(np.asarray(prep.view_of)[idx[0]])
+    record = {"from": "bracket", "method": cfg.camera.response.init_method,
+              "photos": [int(i) for i in idx], "view": view,
+              "exposures": [float(t) for t in times]}
+    return resp, record
+
+
+def _initial(cfg: FitConfig, prep: Prepared, target: Target | None = None):
+    """Initial parameters, bounds and camera arguments of :func:`jaxgfx.optim.fit`
+    (``target``: the photos, needed by ``camera.response.init: bracket`` only)."""
     import jax.numpy as jnp
 
     from jaxgfx.hdr import CameraResponse
@@ -264,6 +286,10 @@ def _initial(cfg: FitConfig, prep: Prepared):
         if kind == "free":
             if prep.fixed_response is not None:
                 start = prep.fixed_response
+            elif spec.init == "bracket":
+                if target is None:
+                    raise ValueError("camera.response.init: 'bracket' needs the target photos")
+                start, prep.curve_init = bracket_start(cfg, prep, target)
             elif isinstance(spec.init, str):
                 start = CameraResponse.analytic(spec.init, anchor="unit")
             else:
@@ -427,6 +453,8 @@ def _result(cfg: FitConfig, prep: Prepared, res, target_seconds, scene_params) -
             "gamma": plain(cp["gamma"]) if kind == "gamma" else None,
             "fitted": _fitted_camera_names(cam) + (["curve"] if kind == "free" else []),
         }
+        if prep.curve_init is not None:
+            camera_out["curve_init"] = prep.curve_init
         if cam.has_matrix:
             from .camera import white_preserving
 
@@ -599,7 +627,7 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
     target, _ = _target(cfg, prep)
     target_seconds = time.perf_counter() - t0
 
-    params, bounds, cam_args = _initial(cfg, prep)
+    params, bounds, cam_args = _initial(cfg, prep, target)
     if prep.ldr and cfg.camera.exposure.auto:
         from .camera import fit_level_table
 
