@@ -100,3 +100,36 @@ def test_bracket_init_recovers_a_known_curve_from_the_target_photos():
     assert _levels_error(srgb, truth) > 1.0
     with pytest.raises(ValueError, match="needs the target photos"):
         _initial(cfg, prep)
+
+
+def test_curve_lr_config_errors():
+    assert _cfg(camera={"response": dict(BRACKET, lr=0.2)}).camera.response.lr == 0.2
+    for bad in (0.0, -1.0, True, "x"):
+        with pytest.raises(ValueError, match=r"camera.response.lr: expected a positive number"):
+            _cfg(camera={"response": dict(BRACKET, lr=bad)})
+    with pytest.raises(ValueError, match=r"camera.response.lr: only a free-form curve"):
+        _cfg(camera={"response": {"model": "gamma", "fit": True, "lr": 0.1}})
+
+
+# slow: ~25 s CPU on 2 loaded cores (two 1-step fits compile the 8x8 fit step)
+@pytest.mark.slow
+def test_curve_lr_scales_the_curves_first_adam_step(tmp_path):
+    """camera.response.lr = 4 x optimizer.lr: the same starting loss, and Adam's first step,
+    ``lr · g / (|g| + eps)`` (±lr per coordinate with a gradient), moves the curve's
+    parameters 4x as far (read back from response.json: the curve is returned unscaled)."""
+    from jaxgfx.pipelines.fit import FitJob, run_fit
+
+    cam = {"response": {"model": "table", "fit": True, "init": "srgb", "channels": 3}}
+    runs = {}
+    for lr in (None, 0.2):
+        c = {"response": dict(cam["response"], **({"lr": lr} if lr else {}))}
+        cfg = _cfg(camera=c, optimizer={"name": "adam", "lr": 0.05, "steps": 1})
+        out = tmp_path / str(lr)
+        res = run_fit(FitJob(cfg, str(out)))
+        g = np.asarray(hdr.load_response(out / "response.json").params, np.float64)
+        runs[lr] = (res["loss"][0], np.log(np.expm1(np.diff(g, axis=0))))  # softplus^-1
+    assert runs[None][0] == pytest.approx(runs[0.2][0], rel=1e-5)
+    u0 = free_init(hdr.CameraResponse.analytic("srgb", anchor="unit"), 33, 3)
+    step = {lr: np.max(np.abs(runs[lr][1] - u0)) for lr in runs}
+    assert step[None] == pytest.approx(0.05, rel=0.01)
+    assert step[0.2] == pytest.approx(0.2, rel=0.01)

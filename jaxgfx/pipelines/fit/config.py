@@ -102,6 +102,9 @@ class ResponseSpec:
     channels: int = 1
     smoothness: float = 1e-3
     init_method: str = "debevec"  # init: bracket: the recovery method (hdr.RESPONSE_METHODS)
+    # the free-form curve's own learning rate (None: optimizer.lr): fitted as v, u = k v with
+    # k = lr / optimizer.lr (the params.X.lr scheme)
+    lr: float | None = None
 
     def __post_init__(self):
         check_choice(self.model, "camera.response.model", RESPONSE_MODELS)
@@ -139,6 +142,15 @@ class ResponseSpec:
                 check_choice(init, "camera.response.init", (*ANALYTIC_RESPONSES, "bracket"))
             elif not init > 0:
                 raise ValueError(f"camera.response.init: expected a gamma > 0, got {init}")
+        if self.lr is not None:
+            lr = self.lr
+            if isinstance(lr, bool) or not isinstance(lr, (int, float)) or not lr > 0:
+                raise ValueError(f"camera.response.lr: expected a positive number, got {lr!r}")
+            if self.model != "table":
+                raise ValueError(
+                    "camera.response.lr: only a free-form curve (model: table) has its own "
+                    f"learning rate; got model {self.model!r}"
+                )
         _positive_int(self.knots, "camera.response.knots")
         if self.knots < 4:
             raise ValueError(f"camera.response.knots: expected >= 4, got {self.knots}")

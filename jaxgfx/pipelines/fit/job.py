@@ -370,6 +370,15 @@ def _initial(cfg: FitConfig, prep: Prepared, target: Target | None = None):
     return params, bounds, cam_args
 
 
+def _curve_lr(cfg: FitConfig) -> float | None:
+    """``camera.response.lr / optimizer.lr`` of a free-form curve with its own learning rate,
+    else None."""
+    cam = cfg.camera
+    if cam is None or cam.response.lr is None or cam.response.curve_kind != "free":
+        return None
+    return float(cam.response.lr / cfg.optimizer.lr)
+
+
 def _static_bound(b):
     """A bound as an :class:`~jaxgfx.optim.Interval` field: None, a float when every element
     is equal (a texel grid's ``min: 0``), else nested tuples (hashable: the loss cache's key
@@ -647,6 +656,10 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
         e0 = auto_exposure(img, target.pixels, table, prep.exposures, float(2**bits - 1))
         lo = cfg.camera.exposure.min
         params["camera"]["exposure"] = jnp.asarray(max(e0, 1.01 * lo), jnp.float32)
+    k_curve = _curve_lr(cfg)
+    if k_curve is not None:  # fitted as v = u / k (the loss multiplies back)
+        params["camera"]["curve"] = params["camera"]["curve"] / k_curve
+        cam_args["curve_lr"] = jnp.asarray(k_curve, jnp.float32)
     priors, _, _ = _prior_specs(cfg, prep)
     scaled = _scaled_intervals(cfg, prep)
     masked = target.mask is not None
@@ -667,6 +680,9 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
         progress=cfg.progress,
         tol=o.tol,
     )
+    if k_curve is not None:
+        params["camera"]["curve"] = params["camera"]["curve"] * k_curve
+        res.params["camera"]["curve"] = k_curve * np.asarray(res.params["camera"]["curve"])
     if scaled and res.history is not None:  # fitted leaves of own-lr parameters -> values
         res.history["scene"] = _unscale(res.history["scene"], scaled)
     scene_after = _unscale(res.params["scene"], scaled)
