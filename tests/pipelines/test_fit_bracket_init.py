@@ -105,7 +105,7 @@ def test_bracket_init_recovers_a_known_curve_from_the_target_photos():
 def test_curve_lr_config_errors():
     assert _cfg(camera={"response": dict(BRACKET, lr=0.2)}).camera.response.lr == 0.2
     for bad in (0.0, -1.0, True, "x"):
-        with pytest.raises(ValueError, match=r"camera.response.lr: expected a positive number"):
+        with pytest.raises(ValueError, match=r"camera.response.lr: expected a (positive )?number"):
             _cfg(camera={"response": dict(BRACKET, lr=bad)})
     with pytest.raises(ValueError, match=r"camera.response.lr: only a free-form curve"):
         _cfg(camera={"response": {"model": "gamma", "fit": True, "lr": 0.1}})
