@@ -71,7 +71,7 @@ def test_bracket_init_config_and_target_errors(tmp_path):
         _cfg(camera={"response": dict(BRACKET, init_method="nope")})
 
 
-# slow: ~18 s CPU on 2 loaded cores (the 16x16 target render and Debevec's compile)
+# slow: ~23 s process CPU (load ~20 on 2 cores; the 16x16 target render, Debevec's compile)
 @pytest.mark.slow
 def test_bracket_init_recovers_a_known_curve_from_the_target_photos():
     """Three 8-bit photos (exposures 0.25, 1, 4) of the fit scene through the analytic
