@@ -71,7 +71,8 @@ def test_bracket_init_config_and_target_errors(tmp_path):
         _cfg(camera={"response": dict(BRACKET, init_method="nope")})
 
 
-# slow: ~23 s process CPU (load ~20 on 2 cores; the 16x16 target render, Debevec's compile)
+# slow: ~23 s process CPU, 115 s wall at load ~19 on 2 cores (the 16x16 target render, Debevec's
+# compile)
 @pytest.mark.slow
 def test_bracket_init_recovers_a_known_curve_from_the_target_photos():
     """Three 8-bit photos (exposures 0.25, 1, 4) of the fit scene through the analytic
@@ -111,7 +112,8 @@ def test_curve_lr_config_errors():
         _cfg(camera={"response": {"model": "gamma", "fit": True, "lr": 0.1}})
 
 
-# slow: ~25 s CPU on 2 loaded cores (two 1-step fits compile the 8x8 fit step)
+# slow: ~60 s process CPU, 311 s wall at load ~19 on 2 cores (two 1-step fits, each compiling
+# the 8x8 fit step: the curve_lr argument makes a second program)
 @pytest.mark.slow
 def test_curve_lr_scales_the_curves_first_adam_step(tmp_path):
     """camera.response.lr = 4 x optimizer.lr: the same starting loss, and Adam's first step,
