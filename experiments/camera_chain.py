@@ -13,8 +13,9 @@
    four cameras: ``true_camera`` (the true curve and exposure), ``calibrated`` (the response
    loaded from report.json with ``camera.response.from``, the exposure fitted),
    ``joint`` (a free-form monotone response and the exposure fitted with the materials; the
-   photos' exposure ratios given, as EXIF gives them), ``srgb`` (assumed sRGB, exposure
-   fitted).
+   photos' exposure ratios given, as EXIF gives them; ``fit.free_curve.init: bracket`` starts
+   the curve from the response recovered from the target photos themselves, recorded as
+   ``start_response_error``), ``srgb`` (assumed sRGB, exposure fitted).
 
 Writes ``summary.json`` (per variant: fitted values, errors, the response's error against the
 true curve over levels 10-245, seconds) and ``chain.png`` (parameter error against seconds),
