@@ -13,8 +13,9 @@
    four cameras: ``true_camera`` (the true curve and exposure), ``calibrated`` (the response
    loaded from report.json with ``camera.response.from``, the exposure fitted),
    ``joint`` (a free-form monotone response and the exposure fitted with the materials; the
-   photos' exposure ratios given, as EXIF gives them), ``srgb`` (assumed sRGB, exposure
-   fitted).
+   photos' exposure ratios given, as EXIF gives them; ``fit.free_curve.init: bracket`` starts
+   the curve from the response recovered from the target photos themselves, recorded as
+   ``start_response_error``), ``srgb`` (assumed sRGB, exposure fitted).
 
 Writes ``summary.json`` (per variant: fitted values, errors, the response's error against the
 true curve over levels 10-245, seconds) and ``chain.png`` (parameter error against seconds),
@@ -269,6 +270,24 @@ def response_errors(resp, truth) -> dict:
     }
 
 
+def start_curve(curve_init: dict, target: list, fc: dict):
+    """The free-form curve a ``camera.response.init: bracket`` fit started from: the
+    recovered response (``curve_init.method``) of the photos ``curve_init.photos`` of
+    ``target`` at their relative exposures, on the fit's knots (``free_init``)."""
+    import jax.numpy as jnp
+
+    from jaxgfx import hdr
+    from jaxgfx.io import read_image
+    from jaxgfx.pipelines.fit.camera import free_init, free_response
+
+    codes = np.stack([read_image(target[i]["file"])[..., :3] for i in curve_init["photos"]])
+    resp = hdr.recover_response(
+        codes, np.asarray(curve_init["exposures"]), method=curve_init["method"]
+    )
+    u = free_init(resp, int(fc.get("knots", 33)), int(fc.get("channels", 1)))
+    return free_response(jnp.asarray(u))
+
+
 def errors_vs_time(result: dict, truth: dict):
     """(seconds, alpha relative error, albedo max error) per step."""
     a = np.asarray(result["history"]["materials.metal.alpha"], np.float64)
@@ -334,6 +353,18 @@ def finish(summary: dict, results: dict, truth: dict, out: str, plot_it: bool = 
             "albedo_max_error": mean_sd([e["errors"]["materials.clay.reflectance"] for e in runs]),
             "response_max_ln": mean_sd([e["response_error"]["max_ln"] for e in runs]),
             "response_rms_ln": mean_sd([e["response_error"]["rms_ln"] for e in runs]),
+            **(
+                {
+                    "start_response_max_ln": mean_sd(
+                        [e["start_response_error"]["max_ln"] for e in runs]
+                    ),
+                    "start_response_rms_ln": mean_sd(
+                        [e["start_response_error"]["rms_ln"] for e in runs]
+                    ),
+                }
+                if all("start_response_error" in e for e in runs) and runs
+                else {}
+            ),
             "alpha": mean_sd([e["params"]["materials.metal.alpha"] for e in runs]),
             "albedo": [
                 mean_sd(c)
@@ -560,6 +591,10 @@ def main(argv=None) -> int:
             }
             resp = hdr.load_response(os.path.join(sd, f"fit_{v}", "response.json"), bits=8)
             entry["response_error"] = response_errors(resp, true_resp)
+            if (out["camera"] or {}).get("curve_init"):
+                entry["start_response_error"] = response_errors(
+                    start_curve(out["camera"]["curve_init"], target, fit["free_curve"]), true_resp
+                )
             summary["runs"][v].append(entry)
             print(v, json.dumps(entry), flush=True)
     finish(summary, results, fit["truth"], a.out, plot_it=not a.no_plot)

@@ -583,12 +583,14 @@ def _coverage(scene, cameras, keys=8):
     return out
 
 
-def mesh_case(tmp_path, seed, steps, size=24, n_tex=16, target_spp=64):
+def mesh_case(tmp_path, seed, steps, size=24, n_tex=16, target_spp=64, loss=None, one=True):
     """The hostile several-views case at small size: four ``size``² photos of the bumpy mesh
     (one per view, exposures :data:`MESH_EXPOSURES`, synthetic "camera" response, shot and read
     noise, JPEG 90 4:2:0; target ``seed``) written as PNG files and fitted as ``{file,
     exposure, view}`` photos through the fixed "camera" response; then view 0's photo alone.
-    Returns (truth, visible, hidden from view 0, four-view fit, one-view fit)."""
+    ``loss``: the fits' loss section (e.g. ``{jpeg_chroma: "4:2:0"}``); ``one=False`` skips
+    the one-view fit (None). Returns (truth, visible, hidden from view 0, four-view fit,
+    one-view fit)."""
     from jaxgfx.pipelines.fit.job import _target
 
     truth = _blocks(n_tex)
@@ -599,6 +601,7 @@ def mesh_case(tmp_path, seed, steps, size=24, n_tex=16, target_spp=64):
         "optimizer": {"name": "adam", "lr": 0.05, "lr_final": 0.005, "steps": steps},
         "render": {"spp": 4, "integrator": "direct", "max_depth": 2, "width": size, "height": size},
         "progress": False,
+        **({"loss": loss} if loss else {}),
     }
     camera = {
         "response": "camera",
@@ -635,10 +638,10 @@ def mesh_case(tmp_path, seed, steps, size=24, n_tex=16, target_spp=64):
     visible = cov.sum(0) >= 0.5
     hidden0 = visible & (cov[0] == 0)
     fits = []
-    for sel in (entries, entries[:1]):
+    for sel in (entries, entries[:1]) if one else (entries,):
         res = run_fit(FitJob.load({**base, "target": sel, "camera": camera}, None))
         fits.append(np.asarray(res["params"][MESH_TEX], np.float64))
-    return truth, visible, hidden0, fits[0], fits[1]
+    return truth, visible, hidden0, fits[0], fits[1] if one else None
 
 
 # slow: 43 s on 2 cores at load 4 (209 s at load 8.6; two fit programs compiled, a 4-view and

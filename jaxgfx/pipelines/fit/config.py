@@ -11,7 +11,7 @@ from typing import Any
 
 from jaxgfx._checks import check_choice
 from jaxgfx.config import load_config
-from jaxgfx.hdr import ANALYTIC_RESPONSES
+from jaxgfx.hdr import ANALYTIC_RESPONSES, RESPONSE_METHODS
 from jaxgfx.optim import LOSS_SPACES, LOSSES, OPTIMIZERS
 from jaxgfx.render.integrators import INTEGRATORS
 from jaxgfx.render.integrators.path import ADJOINTS
@@ -87,7 +87,10 @@ class ResponseSpec:
     monotone curve of ``knots`` knots and ``channels`` 1 or 3 curves, started from ``init`` —
     a gamma exponent, an analytic curve's name, or the ``from`` curve — with a
     ``smoothness`` prior on its second differences). A loaded curve with ``fit: true`` starts
-    a free-form fit."""
+    a free-form fit. ``init: bracket`` starts the free-form table from the curve that
+    :func:`jaxgfx.hdr.recover_response` (``init_method``, default Debevec) recovers from the
+    target photos themselves: photos of one view at several exposures (EXIF or given) are a
+    registered bracket."""
 
     model: str = "srgb"
     source: str | None = None
@@ -98,9 +101,26 @@ class ResponseSpec:
     knots: int = 33
     channels: int = 1
     smoothness: float = 1e-3
+    init_method: str = "debevec"  # init: bracket: the recovery method (hdr.RESPONSE_METHODS)
+    # the free-form curve's own learning rate (None: optimizer.lr): fitted as v, u = k v with
+    # k = lr / optimizer.lr (the params.X.lr scheme)
+    lr: float | None = None
 
     def __post_init__(self):
         check_choice(self.model, "camera.response.model", RESPONSE_MODELS)
+        if self.init == "bracket":
+            if self.source is not None:
+                raise ValueError(
+                    "camera.response.init: 'bracket' recovers the starting curve from the "
+                    "target photos; it cannot be combined with 'from' (a loaded curve)"
+                )
+            if self.model != "table":
+                raise ValueError(
+                    "camera.response.init: 'bracket' starts a free-form curve; expected "
+                    f"model: table (fit: true), got model {self.model!r}"
+                )
+            check_choice(self.init_method, "camera.response.init_method",
+                         tuple(RESPONSE_METHODS))
         if self.source is not None:
             if not isinstance(self.source, str) or not self.source:
                 raise ValueError(f"camera.response.from: expected a file path, got "
@@ -119,9 +139,18 @@ class ResponseSpec:
         if self.model == "table":
             init = self.init
             if isinstance(init, str):
-                check_choice(init, "camera.response.init", tuple(ANALYTIC_RESPONSES))
+                check_choice(init, "camera.response.init", (*ANALYTIC_RESPONSES, "bracket"))
             elif not init > 0:
                 raise ValueError(f"camera.response.init: expected a gamma > 0, got {init}")
+        if self.lr is not None:
+            lr = self.lr
+            if isinstance(lr, bool) or not isinstance(lr, (int, float)) or not lr > 0:
+                raise ValueError(f"camera.response.lr: expected a positive number, got {lr!r}")
+            if self.model != "table":
+                raise ValueError(
+                    "camera.response.lr: only a free-form curve (model: table) has its own "
+                    f"learning rate; got model {self.model!r}"
+                )
         _positive_int(self.knots, "camera.response.knots")
         if self.knots < 4:
             raise ValueError(f"camera.response.knots: expected >= 4, got {self.knots}")

@@ -229,8 +229,30 @@ def _prior_specs(cfg: FitConfig, prep: Prepared):
     return tuple(priors), weights, scales
 
 
-def _initial(cfg: FitConfig, prep: Prepared):
-    """Initial parameters, bounds and camera arguments of :func:`jaxgfx.optim.fit`."""
+def bracket_start(cfg: FitConfig, prep: Prepared, target: Target):
+    """The starting curve of ``camera.response.init: bracket``: the response that
+    :func:`jaxgfx.hdr.recover_response` (``camera.response.init_method``) recovers from the
+    target photos of one view (:func:`~jaxgfx.pipelines.fit.targets.bracket_photos`) with
+    their relative exposures as times. Returns the response and a record for the report."""
+    from jaxgfx.hdr import recover_response
+
+    from .targets import bracket_photos
+
+    idx = bracket_photos(prep.exposures, prep.view_of)
+    codes = np.asarray(target.pixels)[idx]
+    dtype = np.uint16 if cfg.camera.bits > 8 else np.uint8
+    times = np.asarray(prep.exposures, np.float64)[idx]
+    resp = recover_response(codes.astype(dtype), times, method=cfg.camera.response.init_method)
+    view = 0 if prep.view_of is None else int(np.asarray(prep.view_of)[idx[0]])
+    record = {"from": "bracket", "method": cfg.camera.response.init_method,
+              "photos": [int(i) for i in idx], "view": view,
+              "exposures": [float(t) for t in times]}
+    return resp, record
+
+
+def _initial(cfg: FitConfig, prep: Prepared, target: Target | None = None):
+    """Initial parameters, bounds and camera arguments of :func:`jaxgfx.optim.fit`
+    (``target``: the photos, needed by ``camera.response.init: bracket`` only)."""
     import jax.numpy as jnp
 
     from jaxgfx.hdr import CameraResponse
@@ -264,6 +286,10 @@ def _initial(cfg: FitConfig, prep: Prepared):
         if kind == "free":
             if prep.fixed_response is not None:
                 start = prep.fixed_response
+            elif spec.init == "bracket":
+                if target is None:
+                    raise ValueError("camera.response.init: 'bracket' needs the target photos")
+                start, prep.curve_init = bracket_start(cfg, prep, target)
             elif isinstance(spec.init, str):
                 start = CameraResponse.analytic(spec.init, anchor="unit")
             else:
@@ -342,6 +368,15 @@ def _initial(cfg: FitConfig, prep: Prepared):
         cam_args = {**(cam_args or {}), "views": stack_cameras(prep.views),
                     "view_of": jnp.asarray(prep.view_of, jnp.int32)}
     return params, bounds, cam_args
+
+
+def _curve_lr(cfg: FitConfig) -> float | None:
+    """``camera.response.lr / optimizer.lr`` of a free-form curve with its own learning rate,
+    else None."""
+    cam = cfg.camera
+    if cam is None or cam.response.lr is None or cam.response.curve_kind != "free":
+        return None
+    return float(cam.response.lr / cfg.optimizer.lr)
 
 
 def _static_bound(b):
@@ -427,6 +462,8 @@ def _result(cfg: FitConfig, prep: Prepared, res, target_seconds, scene_params) -
             "gamma": plain(cp["gamma"]) if kind == "gamma" else None,
             "fitted": _fitted_camera_names(cam) + (["curve"] if kind == "free" else []),
         }
+        if prep.curve_init is not None:
+            camera_out["curve_init"] = prep.curve_init
         if cam.has_matrix:
             from .camera import white_preserving
 
@@ -599,7 +636,7 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
     target, _ = _target(cfg, prep)
     target_seconds = time.perf_counter() - t0
 
-    params, bounds, cam_args = _initial(cfg, prep)
+    params, bounds, cam_args = _initial(cfg, prep, target)
     if prep.ldr and cfg.camera.exposure.auto:
         from .camera import fit_level_table
 
@@ -619,6 +656,10 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
         e0 = auto_exposure(img, target.pixels, table, prep.exposures, float(2**bits - 1))
         lo = cfg.camera.exposure.min
         params["camera"]["exposure"] = jnp.asarray(max(e0, 1.01 * lo), jnp.float32)
+    k_curve = _curve_lr(cfg)
+    if k_curve is not None:  # fitted as v = u / k (the loss multiplies back)
+        params["camera"]["curve"] = params["camera"]["curve"] / k_curve
+        cam_args["curve_lr"] = jnp.asarray(k_curve, jnp.float32)
     priors, _, _ = _prior_specs(cfg, prep)
     scaled = _scaled_intervals(cfg, prep)
     masked = target.mask is not None
@@ -639,6 +680,9 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
         progress=cfg.progress,
         tol=o.tol,
     )
+    if k_curve is not None:
+        params["camera"]["curve"] = params["camera"]["curve"] * k_curve
+        res.params["camera"]["curve"] = k_curve * np.asarray(res.params["camera"]["curve"])
     if scaled and res.history is not None:  # fitted leaves of own-lr parameters -> values
         res.history["scene"] = _unscale(res.history["scene"], scaled)
     scene_after = _unscale(res.params["scene"], scaled)

@@ -371,6 +371,9 @@ def make_loss(
 
     def loss(p, key, args):
         scene, target, cam_args = args
+        if ldr and "curve_lr" in cam_args:  # camera.response.lr: the curve fitted as u / k
+            u = cam_args["curve_lr"] * p["camera"]["curve"]
+            p = {**p, "camera": {**p["camera"], "curve": u}}
         table = fit_level_table(p["camera"], cam_args, bits, tone_op) if ldr else None
         if r.estimator == "correlated":
             value = per_image_loss(image(scene, p, key, r.spp, cam_args), target, p, cam_args,

@@ -31,6 +31,7 @@ __all__ = [
     "is_texel_grid",
     "check_synthetic_camera",
     "fixed_response_of",
+    "bracket_photos",
     "color_matrix_of",
     "scene_camera_desc",
     "build_view",
@@ -79,6 +80,7 @@ class Prepared:
     view_of: np.ndarray | None = None
     view_poses: list | None = None
     color_matrix: np.ndarray | None = None  # (3, 3) the camera's matrix (init or profile's)
+    curve_init: dict | None = None  # camera.response.init: bracket: how the curve started
 
     @property
     def n_targets(self) -> int:
@@ -490,6 +492,30 @@ def fixed_response_of(cfg: FitConfig, base: str | None, channels: int):
     return None
 
 
+def bracket_photos(exposures, view_of) -> np.ndarray:
+    """The indices of the photos that ``camera.response.init: bracket`` recovers the starting
+    curve from: those of the view with the most distinct exposures (ties: the first view).
+    ``ValueError`` naming ``camera.response.init`` when no view has photos at two distinct
+    exposures (one photo, or no exposure information: neither EXIF ``ExposureTime`` nor
+    ``target[i].exposure`` nor ``target.camera.exposures``)."""
+    ex = np.ones(1) if exposures is None else np.asarray(exposures, np.float64)
+    vo = np.zeros(ex.size, np.int64) if view_of is None else np.asarray(view_of, np.int64)
+    best, n_best = None, 1
+    for v in np.unique(vo):
+        n = np.unique(ex[vo == v]).size
+        if n > n_best:
+            best, n_best = v, n
+    if best is None:
+        raise ValueError(
+            "camera.response.init: 'bracket' recovers the starting curve from photos of one "
+            f"view at two or more distinct exposures; the {ex.size} photo(s) give "
+            f"{sorted(set(ex.tolist()))} (relative exposures) — give each photo's exposure "
+            "(target[i].exposure, EXIF ExposureTime or target.camera.exposures) or another "
+            "init"
+        )
+    return np.flatnonzero(vo == best)
+
+
 def prepare_fit(cfg: FitConfig, *, base_dir: str | None = None) -> Prepared:
     """Load the scene and the target and check parameters, bounds, the target's size, kind and
     content (no rendering).
@@ -629,6 +655,8 @@ def prepare_fit(cfg: FitConfig, *, base_dir: str | None = None) -> Prepared:
             raise ValueError("loss.jpeg_chroma: a grey target has no chroma")
         if cfg.camera.space != "linear":
             raise ValueError("loss.jpeg_chroma: only with camera.space: linear")
+    if ldr and cfg.camera.response.init == "bracket":
+        bracket_photos(exposures, view_of)  # raises when no view has a bracket
     matrix = None
     if ldr and cfg.camera.color_matrix is not None:
         if channels == 1:
