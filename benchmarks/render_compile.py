@@ -34,7 +34,9 @@ child before tracing):
   ``--images`` render compiled with them): ``opt_level_0/1/2``
   (``xla_backend_optimization_level``), ``no_expensive_passes``
   (``xla_llvm_disable_expensive_passes``), ``split_1`` / ``split_8``
-  (``xla_cpu_parallel_codegen_split_count``), ``fast_math`` (``xla_cpu_enable_fast_math``);
+  (``xla_cpu_parallel_codegen_split_count``), ``fast_math`` (``xla_cpu_enable_fast_math``),
+  ``no_fusion_emitters`` (``xla_cpu_use_fusion_emitters``), ``no_concurrency_scheduler``
+  (``xla_cpu_enable_concurrency_optimized_scheduler``);
   join with ``+``, alone or after a variant above (``default+opt_level_1``).
 
 Prints one JSON document (``machine`` block first; the load average is the other jobs').
@@ -68,6 +70,8 @@ COMPILER_VARIANTS = {
     "split_1": {"xla_cpu_parallel_codegen_split_count": 1},
     "split_8": {"xla_cpu_parallel_codegen_split_count": 8},
     "fast_math": {"xla_cpu_enable_fast_math": True},
+    "no_fusion_emitters": {"xla_cpu_use_fusion_emitters": False},
+    "no_concurrency_scheduler": {"xla_cpu_enable_concurrency_optimized_scheduler": False},
 }
 
 
