@@ -24,12 +24,17 @@ child before tracing):
 * ``scan_over_both_keys``: the two images from one render program in a ``lax.map`` over the
   two keys (XLA inlines the two calls of ``default``, so it compiles the forward twice; a
   measurement: the backward then runs over both scan steps).
+* ``reduce_sums``: ``sum_last`` / ``max_last`` (and so ``vdot``, ``safe_norm``) as
+  ``jnp.sum`` / ``jnp.max`` reductions instead of unrolled adds (re-checks the "a reduction
+  kernel per sum is 10x slower to run" of docs/performance.md on the fit's render).
 * ``forward_only``: the loss (both renders) jitted alone, no gradient, no Adam: the forward's
   share of the step's compile (``trace_s`` not separated: ``lower_s`` is trace + lower).
 * ``grad_ratio:forward``, ``grad_ratio:grad_ad``, ``grad_ratio:grad_replay``: not the fit
   step but issue 22's other compile target, ``jit(grad)`` against the forward render on the
   two-sphere scene (``configs/scenes/inverse.yaml``, path depth 4, 64², 64 spp; d mean / d α
-  by plain AD or path replay), each program compiled in its own process (``_grad_child``).
+  by plain AD or path replay), each program compiled in its own process (``_grad_child``);
+  ``+bounce_checkpoint_off`` / ``+bounce_checkpoint_no_cse`` set
+  ``_bounce.BOUNCE_CHECKPOINT`` (e.g. ``grad_ratio:grad_ad+bounce_checkpoint_off``).
 * XLA compile options (``lowered.compile(compiler_options=...)``, the warm step and the
   ``--images`` render compiled with them): ``opt_level_0/1/2``
   (``xla_backend_optimization_level``), ``no_expensive_passes``
@@ -59,6 +64,7 @@ VARIANTS = (
     "one_render_for_both_keys",
     "scan_over_both_keys",
     "forward_only",
+    "reduce_sums",
 )
 # XLA compile options (``lowered.compile(compiler_options=...)``), one per variant name; a
 # variant may join several names with ``+`` (e.g. ``opt_level_1+no_expensive_passes``)
@@ -78,7 +84,8 @@ COMPILER_VARIANTS = {
 def _jaxpr_census(fn, *args, top=10) -> dict:
     """Equations of ``jax.make_jaxpr(fn)(*args)`` (the fit's loss, forward only), every nested
     jaxpr flattened (a jitted function called twice counts twice), grouped by the innermost
-    ``jaxgfx`` function they were traced from and by primitive."""
+    ``jaxgfx`` function they were traced from (for the equations of a jitted library function
+    such as ``jnp.where``: the function that called it) and by primitive."""
     import collections
 
     import jax
@@ -95,19 +102,22 @@ def _jaxpr_census(fn, *args, top=10) -> dict:
                 elif isinstance(x, jcore.Jaxpr):
                     yield x
 
-    def walk(j):
+    def where(e, default):
+        for fr in siu.user_frames(e.source_info.traceback):
+            if "/jaxgfx/" in fr.file_name:
+                return fr.file_name.split("/jaxgfx/")[-1] + ":" + fr.function_name
+        return default
+
+    def walk(j, parent="?"):
+        # equations inside a jitted library function (jnp.where, jnp.cross, ...) carry no
+        # jaxgfx frame of their own: they count for the call site of that function
         for e in j.eqns:
             inner = list(subs(e))
             for sj in inner:
-                walk(sj)
+                walk(sj, where(e, parent))
             if inner:
                 continue
-            name = "?"
-            for fr in siu.user_frames(e.source_info.traceback):
-                if "/jaxgfx/" in fr.file_name:
-                    name = fr.file_name.split("/jaxgfx/")[-1] + ":" + fr.function_name
-                    break
-            by_fn[name] += 1
+            by_fn[where(e, parent)] += 1
             by_prim[e.primitive.name] += 1
 
     walk(jax.make_jaxpr(fn)(*args).jaxpr)
@@ -158,6 +168,7 @@ def _grad_child(kind: str, depth: int = 4, res: int = 64, spp: int = 64) -> dict
         "compile_s": w2 - w1, "compile_cpu_s": c2 - c1,
         "stablehlo_ops": sum(1 for ln in lowered.as_text().splitlines() if " = " in ln),
         "optimized_hlo_chars": len(compiled.as_text()),
+        "temp_MB": compiled.memory_analysis().temp_size_in_bytes / 2**20,
     }  # fmt: skip
 
 
@@ -202,6 +213,15 @@ def _child(config: str, variant: str, image_dir: str | None = None) -> dict:
             return jax.lax.stop_gradient(imgs[0]), imgs[1]
 
         OE._two_images = two_images
+    elif variant == "reduce_sums":
+        import jax.numpy as jnp
+
+        import jaxgfx._math as M
+
+        def reduce(op, x, keepdims):  # jnp.sum / jnp.max: one reduction per short sum
+            return (jnp.sum if op is jnp.add else jnp.max)(x, axis=-1, keepdims=keepdims)
+
+        M._unrolled_last = reduce
     elif variant not in ("default", "forward_only"):
         raise SystemExit(f"variant: expected one of {VARIANTS}, got {variant!r}")
 
@@ -306,7 +326,14 @@ def main(argv=None):
     if a.images:
         os.makedirs(a.images, exist_ok=True)
     if a.child and a.child.startswith("grad_ratio:"):
-        print(json.dumps(_grad_child(a.child.split(":", 1)[1])), flush=True)
+        kind, _, ckpt = a.child.split(":", 1)[1].partition("+bounce_checkpoint_")
+        if ckpt:  # e.g. grad_ratio:grad_ad+bounce_checkpoint_off (or _no_cse)
+            import jaxgfx.render.integrators._bounce as PI
+
+            PI.BOUNCE_CHECKPOINT = ckpt
+        row = _grad_child(kind)
+        row["variant"] = "grad_ratio:" + a.child.split(":", 1)[1]
+        print(json.dumps(row), flush=True)
         return
     if a.child:
         print(json.dumps(_child(a.config, a.child, a.images)), flush=True)
