@@ -638,6 +638,7 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
         bounds=bounds,
         progress=cfg.progress,
         tol=o.tol,
+        compiler_options=o.compiler_options(),
     )
     if scaled and res.history is not None:  # fitted leaves of own-lr parameters -> values
         res.history["scene"] = _unscale(res.history["scene"], scaled)
