@@ -42,7 +42,8 @@ FAST_COMPILE_OPTIONS: dict[str, bool | int] = {
 """XLA CPU compile options for :func:`fit`'s ``compiler_options`` (fit config
 ``optimizer.fast_compile: true``): measured on the ``configs/inverse_material.yaml`` step
 (``python -m benchmarks.render_compile``, docs/performance.md "Compile time, second pass"):
-about 1.6x less XLA compile time, the same step time, images equal within float32 rounding."""
+1.6-2.2x less XLA compile time (process CPU), the same step time, images equal within
+float32 rounding."""
 
 OPTIMIZERS: dict[str, Callable[..., optax.GradientTransformation]] = {
     "adam": optax.adam,
