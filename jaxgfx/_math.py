@@ -25,6 +25,7 @@ __all__ = [
     "sum_last",
     "max_last",
     "vdot",
+    "cross",
     "fusion_barrier",
     "sincos",
     "take_rows",
@@ -45,15 +46,25 @@ def sum_last(x, *, keepdims=False):
     XLA on CPU turns ``jnp.sum(v, -1)`` over a minor axis of length 3 into a separate reduction
     kernel that breaks loop fusion; the unrolled form fuses with its neighbours and is ~10x
     faster for ``(N, 3)`` vectors (measured: 47 ms -> 4.8 ms for 10 normalisations of 262k
-    vectors). Results equal ``jnp.sum`` up to summation order.
+    vectors). Results equal ``jnp.sum`` up to summation order (``x0 + x1 + x2``, left to
+    right). The components come from one ``split`` and the sum is squeezed once (4 primitives
+    for a length-3 axis instead of 8 with ``x[..., i]``: fewer equations to trace and lower).
     """
     n = x.shape[-1]
     if n > 4:
         return jnp.sum(x, axis=-1, keepdims=keepdims)
-    r = x[..., 0]
-    for i in range(1, n):
-        r = r + x[..., i]
-    return r[..., None] if keepdims else r
+    return _unrolled_last(jnp.add, x, keepdims)
+
+
+def _unrolled_last(op, x, keepdims):
+    if x.shape[-1] == 1:
+        r = x
+    else:
+        parts = jax.lax.split(x, (1,) * x.shape[-1], axis=x.ndim - 1)
+        r = parts[0]
+        for p in parts[1:]:
+            r = op(r, p)
+    return r if keepdims else jax.lax.squeeze(r, (x.ndim - 1,))
 
 
 def max_last(x, *, keepdims=False):
@@ -61,15 +72,25 @@ def max_last(x, *, keepdims=False):
     n = x.shape[-1]
     if n > 4:
         return jnp.max(x, axis=-1, keepdims=keepdims)
-    r = x[..., 0]
-    for i in range(1, n):
-        r = jnp.maximum(r, x[..., i])
-    return r[..., None] if keepdims else r
+    return _unrolled_last(jnp.maximum, x, keepdims)
 
 
 def vdot(a, b, *, keepdims=False):
     """Dot product over the last axis of broadcastable ``a, b (..., n)`` (fusion-friendly)."""
     return sum_last(a * b, keepdims=keepdims)
+
+
+def cross(a, b):
+    """Cross product of broadcastable ``a, b (..., 3)``: the products and differences of
+    ``jnp.cross`` (``a1 b2 - a2 b1``, ...) on components from one ``split`` per vector, joined by
+    one ``concatenate`` (12 primitives instead of ~30: ``jnp.cross`` takes six components with
+    slice + squeeze, stacks three and moves axes)."""
+    a, b = jnp.asarray(a), jnp.asarray(b)
+    if a.shape[-1] != 3 or b.shape[-1] != 3:
+        raise ValueError(f"cross: expected vectors of length 3, got {a.shape} and {b.shape}")
+    a0, a1, a2 = jax.lax.split(a, (1, 1, 1), axis=a.ndim - 1)
+    b0, b1, b2 = jax.lax.split(b, (1, 1, 1), axis=b.ndim - 1)
+    return jnp.concatenate([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def fusion_barrier(tree):
@@ -195,10 +216,8 @@ def sincos(x):
     z = r * r
     s = r + r * z * _horner(z, _SIN[key])
     c = 1.0 - 0.5 * z + z * z * _horner(z, _COS[key])
-    q = k.astype(jnp.int32) & 3
-    sin = jnp.where(q == 0, s, jnp.where(q == 1, c, jnp.where(q == 2, -s, -c)))
-    cos = jnp.where(q == 0, c, jnp.where(q == 1, -s, jnp.where(q == 2, -c, s)))
-    return sin, cos
+    q = k.astype(jnp.int32) & 3  # the quadrant, 0..3: one 4-way select per output
+    return jax.lax.select_n(q, s, c, -s, -c), jax.lax.select_n(q, c, -s, -c, s)
 
 
 @sincos.defjvp

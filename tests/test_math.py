@@ -167,6 +167,28 @@ def test_sum_max_last_and_vdot():
         )
 
 
+def test_sum_last_equals_left_to_right_adds_bitwise():
+    # the unrolled sum keeps the order x0 + x1 + x2 (+ x3): the renders do not change
+    x = jnp.asarray(np.random.default_rng(1).normal(size=(64, 3)), jnp.float32) * 1e3
+    ref = (x[:, 0] + x[:, 1]) + x[:, 2]
+    np.testing.assert_array_equal(jax.jit(_math.sum_last)(x), ref)
+    x4 = jnp.concatenate([x, x[:, :1] * 1e-3], -1)
+    np.testing.assert_array_equal(_math.max_last(x4), np.max(np.asarray(x4), -1))
+
+
+def test_cross_matches_numpy_jnp_and_grads(x64):
+    rng = np.random.default_rng(2)
+    a, b = rng.normal(size=(4, 5, 3)), rng.normal(size=(5, 3))  # broadcasting as jnp.cross
+    np.testing.assert_allclose(jax.jit(_math.cross)(a, b), np.cross(a, b), rtol=1e-14)
+    a32, b32 = jnp.asarray(a, jnp.float32), jnp.asarray(b, jnp.float32)
+    # the same products; only float32 rounding differs (whether a multiply-add is fused)
+    bound = 2 * np.finfo(np.float32).eps * np.abs(a[..., [1, 2, 0]] * b[..., [2, 0, 1]]).max()
+    np.testing.assert_allclose(_math.cross(a32, b32), jnp.cross(a32, b32), rtol=0, atol=bound)
+    check_grads(_math.cross, (jnp.asarray(a[0]), jnp.asarray(b)), order=1, modes=["rev"])
+    with pytest.raises(ValueError, match="cross: expected vectors of length 3"):
+        _math.cross(np.ones(2), np.ones(3))
+
+
 # 3.4 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)
 @pytest.mark.slow
 def test_fusion_barrier_is_identity_with_gradients(x64):
@@ -198,9 +220,7 @@ def test_fusion_barrier_keeps_boolean_leaves_materialised():
 
     hlo = jax.jit(f).lower(jnp.ones(8)).compile().as_text()
     assert "conditional(" in hlo
-    np.testing.assert_array_equal(
-        jax.jit(f)(jnp.asarray([0.0, 1.0, 3.0])), [False, True, False]
-    )
+    np.testing.assert_array_equal(jax.jit(f)(jnp.asarray([0.0, 1.0, 3.0])), [False, True, False])
 
 
 # 3.8 s on a quiet 2-core machine: make test-slow (the default run keeps its cheaper siblings)

@@ -8,6 +8,7 @@ This package never imports :mod:`jaxgfx.render`; losses that render are written 
 from ._estimators import decorrelated as decorrelated
 from ._estimators import decorrelated_loss as decorrelated_loss
 from ._estimators import decorrelated_residuals as decorrelated_residuals
+from ._loop import FAST_COMPILE_OPTIONS as FAST_COMPILE_OPTIONS
 from ._loop import LEAST_SQUARES_SOLVERS as LEAST_SQUARES_SOLVERS
 from ._loop import OPTIMIZERS as OPTIMIZERS
 from ._loop import FitResult as FitResult
@@ -34,6 +35,7 @@ __all__ = [
     "decorrelated_residuals",
     "FitResult",
     "OPTIMIZERS",
+    "FAST_COMPILE_OPTIONS",
     "least_squares_solve",
     "LeastSquaresSolution",
     "LEAST_SQUARES_SOLVERS",

@@ -7,7 +7,7 @@ import optax
 import pytest
 import scipy.optimize
 
-from jaxgfx.optim import fit, fit_least_squares
+from jaxgfx.optim import FAST_COMPILE_OPTIONS, fit, fit_least_squares
 
 
 def test_adam_quadratic_matches_closed_form(x64):
@@ -245,3 +245,21 @@ def test_learning_rate_schedule_on_the_host():
     np.testing.assert_allclose(
         float(res.params["x"]), 2.0 * np.prod([1 - r for r in rates]), rtol=1e-6
     )
+
+
+def test_compiler_options_reach_xla_and_fast_compile_fits_the_same():
+    def loss(p):
+        return jnp.sum((p["x"] - jnp.asarray([3.0, -1.0])) ** 2)
+
+    kw = dict(steps=40, learning_rate=0.1, progress=False)
+    ref = fit(loss, {"x": jnp.zeros(2)}, **kw)
+    fast = fit(loss, {"x": jnp.zeros(2)}, compiler_options=FAST_COMPILE_OPTIONS, **kw)
+    # the same Adam trajectory (float32 rounding apart), moving towards (3, -1)
+    np.testing.assert_allclose(fast.loss, ref.loss, rtol=1e-5)
+    np.testing.assert_allclose(fast.params["x"], ref.params["x"], rtol=1e-5)
+    assert fast.loss[-1] < 0.5 * fast.loss[0]
+    # the options are handed to XLA: a name it does not know is its error
+    with pytest.raises(Exception, match="xla_no_such_option"):
+        fit(loss, {"x": jnp.zeros(2)}, compiler_options={"xla_no_such_option": True}, **kw)
+    with pytest.raises(TypeError, match="compiler_options: expected a dict"):
+        fit(loss, {"x": jnp.zeros(2)}, compiler_options=[("a", 1)], **kw)

@@ -254,6 +254,7 @@ def test_a_parameter_driven_out_of_its_domain_is_named_before_any_preview():
         ({"target": {"synthetic": {}, "spp": 0}}, r"target.spp: expected a positive integer"),
         ({"optimizer": {"name": "lm"}}, r"optimizer.name: expected one of \('adam'"),
         ({"optimizer": {"lr": 0.01, "lr_final": 0.1}}, r"optimizer.lr_final: expected 0 < "),
+        ({"optimizer": {"fast_compile": "yes"}}, r"optimizer.fast_compile: expected true/false"),
         ({"params": {"materials.metal.alpha": {"init": "x"}}}, r"params.materials.metal.alpha"
          r".init: 'x'"),
         ({"seed": 1.5}, r"seed: expected an integer"),
@@ -272,3 +273,14 @@ def test_configs_built_in_python_are_validated_too():
 
     with pytest.raises(ValueError, match="optimizer.lr_final"):
         OptimizerConfig(lr=0.01, lr_final=0.1)
+
+
+def test_fast_compile_selects_the_fast_compile_options():
+    from jaxgfx.optim import FAST_COMPILE_OPTIONS
+    from jaxgfx.pipelines.fit import OptimizerConfig
+
+    with pytest.raises(ValueError, match="optimizer.fast_compile: expected true/false"):
+        OptimizerConfig(fast_compile=1)
+    assert OptimizerConfig().compiler_options() is None
+    opts = OptimizerConfig(fast_compile=True).compiler_options()
+    assert opts == FAST_COMPILE_OPTIONS and opts["xla_cpu_use_fusion_emitters"] is False

@@ -12,7 +12,7 @@ from typing import Any
 from jaxgfx._checks import check_choice
 from jaxgfx.config import load_config
 from jaxgfx.hdr import ANALYTIC_RESPONSES, RESPONSE_METHODS
-from jaxgfx.optim import LOSS_SPACES, LOSSES, OPTIMIZERS
+from jaxgfx.optim import FAST_COMPILE_OPTIONS, LOSS_SPACES, LOSSES, OPTIMIZERS
 from jaxgfx.render.integrators import INTEGRATORS
 from jaxgfx.render.integrators.path import ADJOINTS
 
@@ -416,9 +416,15 @@ class OptimizerConfig:
     steps: int = 200
     tol: float | None = None
     lr_final: float | None = None  # exponential decay from lr to lr_final over the steps
+    # compile the step with jaxgfx.optim.FAST_COMPILE_OPTIONS (docs/performance.md)
+    fast_compile: bool = False
 
     def __post_init__(self):
         check_choice(self.name, "optimizer.name", FIT_OPTIMIZERS)
+        if not isinstance(self.fast_compile, bool):
+            raise ValueError(
+                f"optimizer.fast_compile: expected true/false, got {self.fast_compile!r}"
+            )
         if not self.lr > 0:
             raise ValueError(f"optimizer.lr: expected a positive number, got {self.lr}")
         if self.lr_final is not None and not 0 < self.lr_final <= self.lr:
@@ -429,6 +435,10 @@ class OptimizerConfig:
         _positive_int(self.steps, "optimizer.steps")
         if self.tol is not None and not self.tol >= 0:
             raise ValueError(f"optimizer.tol: expected a number >= 0, got {self.tol}")
+
+    def compiler_options(self):
+        """XLA options for the fit step: :data:`jaxgfx.optim.FAST_COMPILE_OPTIONS` or None."""
+        return dict(FAST_COMPILE_OPTIONS) if self.fast_compile else None
 
     def schedule(self):
         """The learning rate: a number, or ``k -> lr · (lr_final / lr)^(k / (steps - 1))``."""

@@ -679,6 +679,7 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
         bounds=bounds,
         progress=cfg.progress,
         tol=o.tol,
+        compiler_options=o.compiler_options(),
     )
     if k_curve is not None:
         params["camera"]["curve"] = params["camera"]["curve"] * k_curve

@@ -10,6 +10,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from jaxgfx._math import (
+    cross,
     safe_arccos,
     safe_div,
     safe_normalize,
@@ -87,7 +88,7 @@ def sample_area(shape, u, *, with_uv: bool = False) -> tuple:
     elif isinstance(shape, Rectangles):
         eu, ev = take_rows(shape.edge_u, idx), take_rows(shape.edge_v, idx)
         p = take_rows(shape.centers, idx) + (u0 - 0.5)[..., None] * eu + (u1 - 0.5)[..., None] * ev
-        n = safe_normalize(jnp.cross(eu, ev))
+        n = safe_normalize(cross(eu, ev))
         if with_uv:  # rectangle_hit: p = c + (s - 1/2) e_u + (t - 1/2) e_v
             uv = jnp.stack([u0, u1], axis=-1)
     else:
@@ -98,9 +99,7 @@ def sample_area(shape, u, *, with_uv: bool = False) -> tuple:
         b2 = 1.0 - b0 - b1
         p = b0[..., None] * tri[..., 0, :] + b1[..., None] * tri[..., 1, :]
         p = p + b2[..., None] * tri[..., 2, :]
-        n = safe_normalize(
-            jnp.cross(tri[..., 1, :] - tri[..., 0, :], tri[..., 2, :] - tri[..., 0, :])
-        )
+        n = safe_normalize(cross(tri[..., 1, :] - tri[..., 0, :], tri[..., 2, :] - tri[..., 0, :]))
         if with_uv:  # mesh_hit: interpolated vertex uvs, else (b1, b2)
             if shape.uvs is not None:
                 tuv = shape.uvs[shape.faces[idx]]
@@ -131,7 +130,7 @@ def point_at_uv(shape, uv):
     """
     if isinstance(shape, Rectangles):
         c, eu, ev = shape.centers[0], shape.edge_u[0], shape.edge_v[0]
-        cr = jnp.cross(eu, ev)
+        cr = cross(eu, ev)
         p = c + (uv[..., :1] - 0.5) * eu + (uv[..., 1:2] - 0.5) * ev
         n = jnp.broadcast_to(safe_normalize(cr), p.shape)
         jac = jnp.broadcast_to(safe_sqrt(sum_last(cr * cr)), p.shape[:-1])

@@ -8,7 +8,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from jaxgfx._math import fusion_barrier, safe_div, safe_normalize, take_rows, vdot
+from jaxgfx._math import cross, fusion_barrier, safe_div, safe_normalize, take_rows, vdot
 from jaxgfx.render.geometry._points import as_points
 from jaxgfx.render.geometry.ray import Hit, hit_record
 
@@ -48,14 +48,14 @@ def rectangle_intersect(center, edge_u, edge_v, o, d, tmin=0.0, tmax=jnp.inf):
     ``t = inf`` where the ray misses, is parallel to the plane (no NaN), or the hit is outside
     ``(tmin, tmax)``. Edges are closed: ``s, u`` in [0, 1] count as hits.
     """
-    n = jnp.cross(edge_u, edge_v)
+    n = cross(edge_u, edge_v)
     denom = vdot(d, n)
     t = safe_div(vdot(center - o, n), denom, fill=jnp.inf)
     rel = o + jnp.where(jnp.isfinite(t), t, 0.0)[..., None] * d - center
     # Dual basis of (edge_u, edge_v) within the plane: s = rel.(edge_v x n)/|n|^2 + 1/2.
     nn = vdot(n, n)
-    s = safe_div(vdot(rel, jnp.cross(edge_v, n)), nn) + 0.5
-    u = safe_div(vdot(rel, jnp.cross(n, edge_u)), nn) + 0.5
+    s = safe_div(vdot(rel, cross(edge_v, n)), nn) + 0.5
+    u = safe_div(vdot(rel, cross(n, edge_u)), nn) + 0.5
     ok = (denom != 0) & (t > tmin) & (t < tmax) & (s >= 0) & (s <= 1) & (u >= 0) & (u <= 1)
     return jnp.where(ok, t, jnp.inf), s, u
 
@@ -68,6 +68,6 @@ def rectangle_hit(shape: Rectangles, pid, o, d, valid, prim_id, sid) -> Hit:
     valid = valid & jnp.isfinite(t)
     tt = jnp.where(valid, t, 0.0)
     p = c + (s - 0.5)[..., None] * eu + (u - 0.5)[..., None] * ev
-    ng = safe_normalize(jnp.cross(eu, ev)) * jnp.ones_like(p)
+    ng = safe_normalize(cross(eu, ev)) * jnp.ones_like(p)
     uv = jnp.stack([s, u], axis=-1)
     return hit_record(valid, tt, p, ng, ng, uv, prim_id, sid)
