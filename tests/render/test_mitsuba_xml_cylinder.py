@@ -56,7 +56,7 @@ def area(v, f):
 PLACED = """<shape type="cylinder">
   <point name="p0" x="0.5" y="-1" z="0.25"/><point name="p1" x="1.5" y="1" z="2.25"/>
   <float name="radius" value="0.4"/>
-  <transform name="to_world"><scale value="1.5"/><rotate x="1" y="1" angle="40"/>
+  <transform name="to_world"><scale value="1.5"/><rotate x="0.70710678" y="0.70710678" angle="40"/>
     <translate x="-1" y="2" z="0.5"/></transform>
 </shape>"""
 
