@@ -87,6 +87,12 @@ class PathIntegrator(Integrator):
     def random_shape(self):
         return (self.max_depth, N_RANDOM)
 
+    @property
+    def uniform_blocks(self) -> bool:
+        """Whether ``u`` may be a :class:`~jaxgfx.render.sampler.UniformBlocks` (path replay:
+        each bounce draws its numbers from the key, so memory does not grow with the depth)."""
+        return self.adjoint == "replay"
+
     def __call__(self, scene, o, d, u):
         return _radiance(self, scene, o, d, u, self.max_depth)
 
@@ -120,6 +126,12 @@ class DirectIntegrator(Integrator):
     @property
     def random_shape(self):
         return (self.max_depth, N_RANDOM)
+
+    @property
+    def uniform_blocks(self) -> bool:
+        """Whether ``u`` may be a :class:`~jaxgfx.render.sampler.UniformBlocks` (path replay:
+        each bounce draws its numbers from the key, so memory does not grow with the depth)."""
+        return self.adjoint == "replay"
 
     def __call__(self, scene, o, d, u):
         return _radiance(self, scene, o, d, u, 2)
