@@ -45,7 +45,7 @@ from jaxgfx._math import safe_div
 from jaxgfx.render.integrators import _bounce as P
 from jaxgfx.render.sampler import UniformBlocks
 
-__all__ = ["path_radiance_replay"]
+__all__ = ["path_radiance_replay", "replay_refusal"]
 
 _GEOMETRY = ("camera", "shapes", "emitter_shapes")
 
@@ -66,8 +66,12 @@ def _first_true(tree, prefix):
     return None
 
 
-def _check_perturbed(perturbed, scene):
-    """``ValueError`` naming the first differentiated leaf replay does not cover."""
+def replay_refusal(scene, perturbed) -> str | None:
+    """Why path replay cannot differentiate w.r.t. the leaves marked ``True`` in ``perturbed =
+    (scene mask, o, d)`` (a pytree of bools shaped like ``(scene, o, d)``; ``o``, ``d`` may be
+    plain bools), or ``None`` where it can: geometry and camera leaves, the camera rays, and the
+    parameters of materials whose delta lobe's direction can move with them. Used by the
+    custom VJP (which raises it) and by ``jaxgfx fit``'s ``render.adjoint: auto``."""
     p_scene, p_o, p_d = perturbed
     where = None
     for name in _GEOMETRY:
@@ -75,7 +79,7 @@ def _check_perturbed(perturbed, scene):
     if where is None and (p_o is True or p_d is True):
         where = "the camera rays (o, d)"
     if where is not None:
-        raise ValueError(
+        return (
             f"adjoint='replay': {where} is differentiated, but path replay covers only "
             "material, emitter, texture and environment parameters (hits are detached, as in "
             "Mitsuba 3's prb); use adjoint='ad' (PathIntegrator's default) for geometry and "
@@ -86,11 +90,19 @@ def _check_perturbed(perturbed, scene):
         where = _first_true(p_scene.materials[k], f"materials[{k}]")
         if moves_delta and where is not None:
             name = scene.material_names[k]
-            raise ValueError(
+            return (
                 f"adjoint='replay': {where} (material {name!r}, {type(m).__name__}) is "
                 "differentiated, but its delta lobe's direction can depend on it and replayed "
                 "directions carry no derivative; use adjoint='ad'"
             )
+    return None
+
+
+def _check_perturbed(perturbed, scene):
+    """``ValueError`` naming the first differentiated leaf replay does not cover."""
+    why = replay_refusal(scene, perturbed)
+    if why is not None:
+        raise ValueError(why)
 
 
 def _spec(scene, perturbed_scene):

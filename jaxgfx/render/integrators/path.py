@@ -20,7 +20,7 @@ from jaxgfx.render.integrators._bounce import (
     path_radiance,
 )
 from jaxgfx.render.integrators._replay import RADIANCE_NAME as REPLAY_RADIANCE_NAME
-from jaxgfx.render.integrators._replay import path_radiance_replay
+from jaxgfx.render.integrators._replay import path_radiance_replay, replay_refusal
 from jaxgfx.render.integrators.base import N_RANDOM, Integrator, check_depth
 
 __all__ = [
@@ -31,6 +31,7 @@ __all__ = [
     "STRATEGIES",
     "ADJOINTS",
     "REPLAY_RADIANCE_NAME",
+    "replay_refusal",
 ]
 
 
