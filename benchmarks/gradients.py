@@ -278,7 +278,7 @@ def _replay_program(scene, kind, depth, spp):
     return c, compile_s, c.memory_analysis().temp_size_in_bytes
 
 
-def replay_memory(*, res, spp, depths, spps, depth_spp=4):
+def replay_memory(*, res, spp, depths, spps, depth_spp=4, kinds=("grad_ad", "grad_replay")):
     """XLA's temporary buffer (MB) of ``jit(grad)`` by AD and by path replay vs path depth
     (at ``spp``) and vs spp (at depth ``depth_spp``); compile only."""
     from benchmarks._render_harness import load_gate
@@ -286,15 +286,17 @@ def replay_memory(*, res, spp, depths, spps, depth_spp=4):
     out = {"scene": "configs/scenes/inverse.yaml", "res": res, "spp": spp}
     out["load_before"] = load_gate(None)
     scene = load_scene(_with_res(read_yaml(INVERSE), res))
-    kinds = ("grad_ad", "grad_replay")
+    seen = {}
     for label, pts, arg in (("vs_depth", depths, "depth"), ("vs_spp", spps, "spp")):
         tab = {}
         for x in pts:
             depth, spp_ = (x, spp) if arg == "depth" else (depth_spp, x)
             for kind in kinds:
-                _, cs, temp = _replay_program(scene, kind, depth, spp_)
-                tab.setdefault(kind, {})[x] = round(temp / 2**20, 3)
-                _log("replay memory", arg, x, kind, tab[kind][x], f"compile {cs:.1f} s")
+                if (kind, depth, spp_) not in seen:
+                    _, cs, temp = _replay_program(scene, kind, depth, spp_)
+                    seen[kind, depth, spp_] = round(temp / 2**20, 3)
+                    _log("replay memory", kind, depth, spp_, seen[kind, depth, spp_], f"{cs:.1f} s")
+                tab.setdefault(kind, {})[x] = seen[kind, depth, spp_]
         out[f"temp_MB_{label}"] = tab
     out["load_after"] = load_gate(None)
     return out
@@ -360,6 +362,11 @@ def main(argv=None):
         help="comma-separated subset of speed,glossy,memory,stats,visibility,replay,replay_memory",
     )
     ap.add_argument(
+        "--replay-memory-kinds",
+        default="grad_ad,grad_replay",
+        help="replay_memory section: which programs (grad_ad, grad_replay, forward)",
+    )
+    ap.add_argument(
         "--replay-mem-spps",
         default="",
         help="replay section: also XLA's temporary buffer of jit(grad) at depth 4 for these "
@@ -413,6 +420,7 @@ def main(argv=None):
             spp=16,
             depths=[2, 4] if q else [2, 4, 8, 16],
             spps=[16, 64] if q else [16, 64, 256],
+            kinds=tuple(a.replay_memory_kinds.split(",")),
         )
     emit(result, a.out)
 

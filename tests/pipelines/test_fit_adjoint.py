@@ -85,3 +85,24 @@ def test_auto_choice_reaches_the_fit_step(monkeypatch, tmp_path):
     with pytest.raises(_Stop):
         run_fit(FitJob(cfg, None))
     assert seen == [{"type": "direct", "adjoint": "replay"}]
+
+
+# slow: two fits with their step compiles (direct light, 8x8, 4 spp, 3 steps); cost measured
+# in the comment below
+@pytest.mark.slow
+def test_auto_fit_reports_replay_and_follows_the_ad_fit():
+    """The same fit with ``adjoint: ad`` and ``auto`` (replay here): ``auto`` is recorded in
+    result.json as replay, and, with the same keys, its gradients are AD's up to float32
+    rounding, so the three Adam steps land on the same α (to 1e-4; a step is lr = 0.02)."""
+    direct = {**PATH, "integrator": "direct", "max_depth": 2}
+    outs = {
+        adj: run_fit(FitJob(fit_cfg(render={**direct, "adjoint": adj}), None))
+        for adj in ("ad", "auto")
+    }
+    assert outs["ad"]["adjoint"] == {"adjoint": "ad", "why": "render.adjoint"}
+    assert outs["auto"]["adjoint"]["adjoint"] == "replay"
+    assert outs["auto"]["config"]["render"]["adjoint"] == "auto"
+    a_ad = outs["ad"]["params"]["materials.metal.alpha"]
+    a_auto = outs["auto"]["params"]["materials.metal.alpha"]
+    assert abs(a_ad - 0.5) > 0.01  # the fit moved
+    assert abs(a_auto - a_ad) < 1e-4, (a_auto, a_ad)
