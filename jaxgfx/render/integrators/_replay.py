@@ -23,8 +23,10 @@ zero colour channel), ``L − L_≤j`` is 0 but the derivative is not: the forwa
 per channel, the light gathered after the path's first zero weight with that factor replaced
 by 1 (``Z``), and the replay adds ``w_j(θ) · Z`` at that vertex (Mitsuba 3's ``prb`` drops this
 term; detached AD keeps such paths alive and has it). The backward pass is one ``lax.scan``
-over bounces whose carry is the path state and the accumulated scene cotangent: memory does
-not grow with depth, and its cost is one forward replay plus the local VJPs.
+over bounces whose carry is the path state and the accumulated scene cotangent, and both passes
+draw each bounce's uniform numbers from the key inside their loop (``u`` a
+:class:`~jaxgfx.render.sampler.UniformBlocks`, as ``render`` passes it): memory does not grow
+with depth, and the backward pass costs one forward replay plus the local VJPs.
 
 Not covered (refused with a ``ValueError`` at trace time of ``jax.grad``, never silently
 zero): geometry and camera leaves (shapes, emitter shapes, camera, the rays ``o, d``); and
