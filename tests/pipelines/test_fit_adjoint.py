@@ -87,8 +87,7 @@ def test_auto_choice_reaches_the_fit_step(monkeypatch, tmp_path):
     assert seen == [{"type": "direct", "adjoint": "replay"}]
 
 
-# slow: two fits with their step compiles (direct light, 8x8, 4 spp, 3 steps); cost measured
-# in the comment below
+# slow: ~44 s at load ~3 (two fits with their step compiles: direct light, 8x8, 4 spp, 3 steps)
 @pytest.mark.slow
 def test_auto_fit_reports_replay_and_follows_the_ad_fit():
     """The same fit with ``adjoint: ad`` and ``auto`` (replay here): ``auto`` is recorded in
