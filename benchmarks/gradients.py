@@ -30,6 +30,10 @@
    call, ``block_until_ready``), lower + compile seconds of each program and XLA's temporary
    buffer (``memory_analysis().temp_size_in_bytes``) of the same compiled programs. The load
    average before and after is recorded (``_render_harness.load_gate``, not refused).
+7. Path replay memory (``--sections replay_memory``): XLA's temporary buffer of the same
+   ``jit(grad)`` programs (AD, replay) at 32² vs path depth 2, 4, 8, 16 (16 spp: one pass
+   step) and vs spp 16, 64, 256 (depth 4; 1, 1, 4 checkpointed pass steps of 64 passes);
+   compile only.
 
 Prints one JSON document (progress to stderr).
 """
@@ -244,40 +248,72 @@ def visibility(*, spp, n):
 INVERSE = os.path.join(ROOT, "configs", "scenes", "inverse.yaml")
 
 
-def replay(*, res, spp, depths, repeat, recompute_depths=(4,), mem_spps=()):
-    """Forward vs ``jit(grad)`` by AD and by path replay (section 6 of the module docstring)."""
+def _replay_program(scene, kind, depth, spp):
+    """``(compiled, compile_s, temp_bytes)`` of ``kind`` (``forward``, ``grad_ad``,
+    ``grad_replay``, ``grad_replay_recompute``) of the image mean w.r.t. the metal's α."""
     import time
 
     import jaxgfx.render.estimator as E
-    from benchmarks._render_harness import load_gate
     from jaxgfx.render.integrators import PathIntegrator
+
+    dyn, static = eqx.partition(scene, eqx.is_array)
+    alpha = scene.get("materials.metal.alpha")
+    path = "materials.metal.alpha"
+    adjoint = "ad" if kind in ("forward", "grad_ad") else "replay"
+    integ = PathIntegrator(max_depth=depth, adjoint=adjoint)
+
+    def image(a, dyn, k):
+        s = eqx.combine(dyn, static).replace(path, a)
+        return render(s, k, spp=spp, integrator=integ)
+
+    f = image if kind == "forward" else jax.grad(lambda a, dyn, k: jnp.mean(image(a, dyn, k)))
+    keep = E.REPLAY_KEEPS_RADIANCE
+    E.REPLAY_KEEPS_RADIANCE = kind != "grad_replay_recompute"
+    try:
+        t0 = time.perf_counter()
+        c = jax.jit(f).lower(alpha, dyn, jax.random.key(0)).compile()
+        compile_s = time.perf_counter() - t0
+    finally:
+        E.REPLAY_KEEPS_RADIANCE = keep
+    return c, compile_s, c.memory_analysis().temp_size_in_bytes
+
+
+def replay_memory(*, res, spp, depths, spps, depth_spp=4, kinds=("grad_ad", "grad_replay")):
+    """XLA's temporary buffer (MB) of ``jit(grad)`` by AD and by path replay vs path depth
+    (at ``spp``) and vs spp (at depth ``depth_spp``); compile only."""
+    from benchmarks._render_harness import load_gate
 
     out = {"scene": "configs/scenes/inverse.yaml", "res": res, "spp": spp}
     out["load_before"] = load_gate(None)
     scene = load_scene(_with_res(read_yaml(INVERSE), res))
-    dyn, static = eqx.partition(scene, eqx.is_array)
+    seen = {}
+    for label, pts, arg in (("vs_depth", depths, "depth"), ("vs_spp", spps, "spp")):
+        tab = {}
+        for x in pts:
+            depth, spp_ = (x, spp) if arg == "depth" else (depth_spp, x)
+            for kind in kinds:
+                if (kind, depth, spp_) not in seen:
+                    _, cs, temp = _replay_program(scene, kind, depth, spp_)
+                    seen[kind, depth, spp_] = round(temp / 2**20, 3)
+                    _log("replay memory", kind, depth, spp_, seen[kind, depth, spp_], f"{cs:.1f} s")
+                tab.setdefault(kind, {})[x] = seen[kind, depth, spp_]
+        out[f"temp_MB_{label}"] = tab
+    out["load_after"] = load_gate(None)
+    return out
+
+
+def replay(*, res, spp, depths, repeat, recompute_depths=(4,), mem_spps=()):
+    """Forward vs ``jit(grad)`` by AD and by path replay (section 6 of the module docstring)."""
+    from benchmarks._render_harness import load_gate
+
+    out = {"scene": "configs/scenes/inverse.yaml", "res": res, "spp": spp}
+    out["load_before"] = load_gate(None)
+    scene = load_scene(_with_res(read_yaml(INVERSE), res))
+    dyn, _ = eqx.partition(scene, eqx.is_array)
     alpha = scene.get("materials.metal.alpha")
-    path = "materials.metal.alpha"
 
     def program(kind, depth, spp_=spp):
-        adjoint = "ad" if kind in ("forward", "grad_ad") else "replay"
-        integ = PathIntegrator(max_depth=depth, adjoint=adjoint)
-
-        def image(a, dyn, k):
-            s = eqx.combine(dyn, static).replace(path, a)
-            return render(s, k, spp=spp_, integrator=integ)
-
-        f = image if kind == "forward" else jax.grad(lambda a, dyn, k: jnp.mean(image(a, dyn, k)))
-        keep = E.REPLAY_KEEPS_RADIANCE
-        E.REPLAY_KEEPS_RADIANCE = kind != "grad_replay_recompute"
-        try:
-            t0 = time.perf_counter()
-            c = jax.jit(f).lower(alpha, dyn, jax.random.key(0)).compile()
-            compile_s = time.perf_counter() - t0
-        finally:
-            E.REPLAY_KEEPS_RADIANCE = keep
-        temp = c.memory_analysis().temp_size_in_bytes
-        return c, compile_s, temp
+        return _replay_program(scene, kind, depth, spp_)
 
     counter = [0]
 
@@ -323,7 +359,12 @@ def main(argv=None):
     ap.add_argument(
         "--sections",
         default="speed,glossy,memory,stats,visibility",
-        help="comma-separated subset of speed,glossy,memory,stats,visibility,replay",
+        help="comma-separated subset of speed,glossy,memory,stats,visibility,replay,replay_memory",
+    )
+    ap.add_argument(
+        "--replay-memory-kinds",
+        default="grad_ad,grad_replay",
+        help="replay_memory section: which programs (grad_ad, grad_replay, forward)",
     )
     ap.add_argument(
         "--replay-mem-spps",
@@ -372,6 +413,14 @@ def main(argv=None):
             depths=[2, 4] if q else [2, 4, 8],
             repeat=3 if q else 5,
             mem_spps=tuple(int(x) for x in a.replay_mem_spps.split(",") if x),
+        )
+    if "replay_memory" in sections:
+        result["replay_memory"] = replay_memory(
+            res=32,
+            spp=16,
+            depths=[2, 4] if q else [2, 4, 8, 16],
+            spps=[16, 64] if q else [16, 64, 256],
+            kinds=tuple(a.replay_memory_kinds.split(",")),
         )
     emit(result, a.out)
 

@@ -21,7 +21,7 @@ from jaxgfx._math import fusion_barrier
 from jaxgfx.render.film import pixel_samples
 from jaxgfx.render.integrators import INTEGRATORS, SAMPLING, Integrator, make_integrator
 from jaxgfx.render.integrators.path import REPLAY_RADIANCE_NAME, STRATEGIES, PathIntegrator
-from jaxgfx.render.sampler import uniform
+from jaxgfx.render.sampler import uniform, uniform_blocks
 
 __all__ = ["render_partial", "resolve_integrator", "pass_scan", "passes_per_step"]
 
@@ -213,7 +213,9 @@ def render_partial(
     uniform numbers of shape ``(H, W, *integrator.random_shape)``; a camera with a lens
     (``camera.lens_uniforms > 0``) gets ``(H, W, lens_uniforms)`` more per pass from the camera
     key (:data:`LENS_STREAM`), other cameras none; pass ``s`` traces one ray per
-    pixel through camera sample ``s``; the passes run through :func:`pass_scan`,
+    pixel through camera sample ``s`` (an integrator whose ``uniform_blocks`` is true, path
+    replay, gets the same numbers as a :class:`~jaxgfx.render.sampler.UniformBlocks`, drawn
+    bounce by bounce); the passes run through :func:`pass_scan`,
     :func:`passes_per_step` ``(R W, P, rays_per_step)`` of them per scan step, stacked along the
     rows (``(k R, W)`` rays): a small image does not pay one step's overhead per pass, and
     every sample keeps its random numbers (``rays_per_step=None``: one pass per step; same
@@ -254,8 +256,13 @@ def render_partial(
         o, d = o.astype(dtype), d.astype(dtype)
         return fusion_barrier((o, d))  # measured 635 -> 518 ns/sample (direct, one core)
 
+    # a path-replay integrator takes its numbers as a UniformBlocks (the same numbers, drawn
+    # bounce by bounce inside its loops: its memory does not grow with the depth)
+    blocks = getattr(integrator, "uniform_blocks", False)
+    draw = uniform_blocks if blocks else uniform
+
     def numbers(s):
-        return uniform(jax.random.fold_in(ku, s), (h, w, *shape_u), dtype, rows=rows)
+        return draw(jax.random.fold_in(ku, s), (h, w, *shape_u), dtype, rows=rows)
 
     def lens(s):  # (R, W, n_lens): pass s's lens numbers of the rows, as `numbers`
         return uniform(jax.random.fold_in(kl, s), (h, w, n_lens), dtype, rows=rows)
@@ -273,7 +280,8 @@ def render_partial(
         o, d = rays(pxs, ul)
         u = None
         if shape_u is not None:
-            u = jax.vmap(numbers)(ss).reshape(k * r, w, *shape_u)
+            u = jax.vmap(numbers)(ss)
+            u = u.reshape(k * r, w) if blocks else u.reshape(k * r, w, *shape_u)
         out = integrator(scene, o, d, u).reshape(k, r, w, -1)
         return out if wt is None else out * jnp.moveaxis(wt[:, :, ss], 2, 0)[..., None]
 

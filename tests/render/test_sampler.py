@@ -3,9 +3,10 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from scipy import stats
 
-from jaxgfx.render.sampler import pcg_hash, uniform
+from jaxgfx.render.sampler import pcg_hash, uniform, uniform_blocks
 
 
 def _pcg_reference(v):
@@ -47,3 +48,23 @@ def test_uniform_keys_differ_and_are_reproducible(x64):
     assert np.abs(np.corrcoef(a, c)[0, 1]) < 4 / np.sqrt(1000)
     d = uniform(jax.random.key(0), (10, 10), jnp.float64)
     assert d.dtype == jnp.float64 and float(d.min()) >= 0 and float(d.max()) < 1
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_uniform_blocks_are_the_same_numbers(x64, dtype):
+    """Path replay's numbers drawn one bounce at a time (``UniformBlocks.block``) are bit for
+    bit ``uniform``'s array, for whole images, row subsets (with padding rows beyond the image)
+    and under ``jit`` with a traced block index; too few axes is an error naming ``shape``."""
+    key, shape = jax.random.key(5), (6, 5, 4, 7)
+    for rows in (None, jnp.array([0, 3, 7])):
+        want = np.asarray(uniform(key, shape, dtype, rows=rows))
+        ub = uniform_blocks(key, shape, dtype, rows=rows)
+        assert ub.shape == want.shape
+        np.testing.assert_array_equal(np.asarray(ub.array()), want)
+        got = jax.jit(lambda ub, i: ub.block(i))(ub, jnp.int32(2))
+        np.testing.assert_array_equal(np.asarray(got), want[..., 2, :])
+    flat = uniform_blocks(key, shape, dtype).reshape(30)
+    want = np.asarray(uniform(key, shape, dtype)).reshape(30, 4, 7)[:, 3]
+    np.testing.assert_array_equal(np.asarray(flat.block(3)), want)
+    with pytest.raises(ValueError, match="shape"):
+        uniform_blocks(key, (4, 7))

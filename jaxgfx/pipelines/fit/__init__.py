@@ -58,7 +58,10 @@ is curved: ``E f(Î) ≠ f(E Î)``). The render, the camera and the loss are one
 Monte Carlo gradients: ``render.estimator: independent`` (default) renders two half-spp images
 with independent keys and takes the primal from one and the adjoint from the other, so the
 gradient of a squared error is unbiased (with one image, ``E[∇(I - T)²]`` gains
-``∇ Var(I)``); ``correlated`` uses one image for both.
+``∇ Var(I)``); ``correlated`` uses one image for both. ``render.adjoint``: ``ad`` (default),
+``replay`` (path replay backpropagation) or ``auto`` (replay where every fitted parameter is
+one replay covers, :func:`~jaxgfx.pipelines.fit.job.choose_adjoint`; ``result.json``'s
+``"adjoint"`` records the choice).
 """
 
 from __future__ import annotations

@@ -408,6 +408,9 @@ class CameraConfig:
 # solvers (jaxgfx.optim.LEAST_SQUARES_SOLVERS) cannot use (they need a deterministic residual)
 FIT_OPTIMIZERS = tuple(OPTIMIZERS)
 
+FIT_ADJOINTS = (*ADJOINTS, "auto")
+"""``render.adjoint``: the integrators' adjoints and ``"auto"`` (the fit chooses)."""
+
 
 @dataclasses.dataclass(frozen=True)
 class OptimizerConfig:
@@ -457,15 +460,17 @@ class RenderConfig:
     height: int | None = None
     estimator: str = "independent"  # independent | correlated (see module doc)
     # how reverse mode differentiates the path / direct integrator: "ad" (JAX's reverse mode
-    # of the bounce loop) or "replay" (path replay backpropagation: material, texture and
-    # emitter parameters only; docs/render_gradients.md)
+    # of the bounce loop), "replay" (path replay backpropagation: material, texture and
+    # emitter parameters only; docs/render_gradients.md) or "auto" (replay where every fitted
+    # parameter is one replay covers and the integrator is path or direct, else ad; the
+    # choice is in result.json's "adjoint": jaxgfx.pipelines.fit.job.choose_adjoint)
     adjoint: str = "ad"
 
     def __post_init__(self):
         check_choice(self.estimator, "render.estimator", ESTIMATORS)
         check_choice(self.integrator, "render.integrator", tuple(INTEGRATORS))
-        check_choice(self.adjoint, "render.adjoint", ADJOINTS)
-        if self.adjoint != "ad" and self.integrator not in ("path", "direct"):
+        check_choice(self.adjoint, "render.adjoint", FIT_ADJOINTS)
+        if self.adjoint == "replay" and self.integrator not in ("path", "direct"):
             raise ValueError(
                 f"render.adjoint: {self.adjoint!r} needs integrator path or direct, got "
                 f"{self.integrator!r}"
@@ -481,8 +486,9 @@ class RenderConfig:
 
     @property
     def integrator_spec(self):
-        """What ``render(..., integrator=...)`` takes: the name, or ``{type, adjoint}``."""
-        if self.adjoint == "ad":
+        """What ``render(..., integrator=...)`` takes: the name, or ``{type, adjoint}``
+        (``"auto"`` not yet resolved: the name, whose renders have the same values)."""
+        if self.adjoint in ("ad", "auto"):
             return self.integrator
         return {"type": self.integrator, "adjoint": self.adjoint}
 

@@ -16,7 +16,7 @@ from .loss import cached_loss
 from .report import OUTPUT_NAMES, plain, srgb8, write_outputs
 from .targets import Prepared, Target, build_scene, prepare_fit
 
-__all__ = ["FitJob", "run_fit", "auto_exposure", "view_losses", "tile_views"]
+__all__ = ["FitJob", "run_fit", "auto_exposure", "view_losses", "tile_views", "choose_adjoint"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -76,6 +76,44 @@ def run_fit(job: FitJob) -> dict:
 
 
 # ------------------------------------------------------------------------------------ stages
+
+
+def _fitted_mask(scene, path, value):
+    """A tree of bools shaped like ``scene``: ``True`` at the leaves the parameter ``path``
+    changes (the leaves with a nonzero tangent when ``path`` moves; integer leaves ``False``)."""
+    import jax
+    import jax.tree_util as jtu
+
+    x = jax.numpy.asarray(value)
+
+    def leaves(v):
+        return jtu.tree_leaves(scene.replace(path, v))
+
+    _, tangents = jax.jvp(leaves, (x,), (jax.numpy.ones_like(x),))
+    flags = [t.dtype != jax.dtypes.float0 and bool(np.any(np.asarray(t) != 0)) for t in tangents]
+    return jtu.tree_unflatten(jtu.tree_structure(scene), flags)
+
+
+def choose_adjoint(cfg: FitConfig, prep: Prepared) -> dict:
+    """``{"adjoint": "ad" | "replay", "why": ...}``: ``render.adjoint`` as given, or for
+    ``"auto"`` path replay where the integrator is path or direct and every fitted scene
+    parameter is one replay differentiates (materials, emitters, textures, environment:
+    :func:`jaxgfx.render.integrators.replay_refusal`), AD otherwise (geometry, camera, the
+    ``eta`` of a smooth dielectric, ...), with the first parameter that ruled replay out."""
+    from jaxgfx.render.integrators import replay_refusal
+
+    r = cfg.render
+    if r.adjoint != "auto":
+        return {"adjoint": r.adjoint, "why": "render.adjoint"}
+    if r.integrator not in ("path", "direct"):
+        return {"adjoint": "ad", "why": f"auto: integrator {r.integrator!r} has no replay"}
+    for p in prep.paths:
+        mask = _fitted_mask(prep.scene, p, prep.init[p])
+        why = replay_refusal(prep.scene, (mask, False, False))
+        if why is not None:
+            return {"adjoint": "ad", "why": f"auto: params.{p}: {why}"}
+    return {"adjoint": "replay", "why": "auto: every fitted parameter is one replay covers"}
+
 
 
 def _render(cfg: FitConfig, scene, key, spp):
@@ -631,6 +669,11 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
 
     key = jax.random.key(cfg.seed)
     _k_target, k_fit, k_show = jax.random.split(key, 3)
+    given = cfg
+    adjoint = choose_adjoint(cfg, prep)
+    if cfg.render.adjoint != adjoint["adjoint"]:  # "auto", resolved
+        render_cfg = dataclasses.replace(cfg.render, adjoint=adjoint["adjoint"])
+        cfg = dataclasses.replace(cfg, render=render_cfg)
 
     t0 = time.perf_counter()
     target, _ = _target(cfg, prep)
@@ -688,7 +731,8 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
         res.history["scene"] = _unscale(res.history["scene"], scaled)
     scene_after = _unscale(res.params["scene"], scaled)
     _check_fitted(prep, scene_after, cfg)
-    out = _result(cfg, prep, res, target_seconds, scene_after)
+    out = _result(given, prep, res, target_seconds, scene_after)
+    out["adjoint"] = adjoint
     renders = None
     if prep.views is not None:  # each view's loss before and after (one render per view)
         spp = max(cfg.render.spp, 64)

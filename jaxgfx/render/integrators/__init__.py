@@ -24,6 +24,7 @@ from jaxgfx.render.integrators.base import Integrator as Integrator
 from jaxgfx.render.integrators.path import DirectIntegrator as DirectIntegrator
 from jaxgfx.render.integrators.path import PathIntegrator as PathIntegrator
 from jaxgfx.render.integrators.path import path_radiance as path_radiance
+from jaxgfx.render.integrators.path import replay_refusal as replay_refusal
 from jaxgfx.render.integrators.ptracer import ParticleTracer as ParticleTracer
 from jaxgfx.render.integrators.whitted import WhittedIntegrator as WhittedIntegrator
 from jaxgfx.render.integrators.whitted import whitted_radiance as whitted_radiance
@@ -85,5 +86,6 @@ __all__ = [
     "make_integrator",
     "aov",
     "path_radiance",
+    "replay_refusal",
     "whitted_radiance",
 ]

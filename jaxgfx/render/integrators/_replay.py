@@ -23,8 +23,10 @@ zero colour channel), ``L − L_≤j`` is 0 but the derivative is not: the forwa
 per channel, the light gathered after the path's first zero weight with that factor replaced
 by 1 (``Z``), and the replay adds ``w_j(θ) · Z`` at that vertex (Mitsuba 3's ``prb`` drops this
 term; detached AD keeps such paths alive and has it). The backward pass is one ``lax.scan``
-over bounces whose carry is the path state and the accumulated scene cotangent: memory does
-not grow with depth, and its cost is one forward replay plus the local VJPs.
+over bounces whose carry is the path state and the accumulated scene cotangent, and both passes
+draw each bounce's uniform numbers from the key inside their loop (``u`` a
+:class:`~jaxgfx.render.sampler.UniformBlocks`, as ``render`` passes it): memory does not grow
+with depth, and the backward pass costs one forward replay plus the local VJPs.
 
 Not covered (refused with a ``ValueError`` at trace time of ``jax.grad``, never silently
 zero): geometry and camera leaves (shapes, emitter shapes, camera, the rays ``o, d``); and
@@ -43,8 +45,9 @@ from jax.ad_checkpoint import checkpoint_name
 
 from jaxgfx._math import safe_div
 from jaxgfx.render.integrators import _bounce as P
+from jaxgfx.render.sampler import UniformBlocks
 
-__all__ = ["path_radiance_replay"]
+__all__ = ["path_radiance_replay", "replay_refusal"]
 
 _GEOMETRY = ("camera", "shapes", "emitter_shapes")
 
@@ -65,8 +68,12 @@ def _first_true(tree, prefix):
     return None
 
 
-def _check_perturbed(perturbed, scene):
-    """``ValueError`` naming the first differentiated leaf replay does not cover."""
+def replay_refusal(scene, perturbed) -> str | None:
+    """Why path replay cannot differentiate w.r.t. the leaves marked ``True`` in ``perturbed =
+    (scene mask, o, d)`` (a pytree of bools shaped like ``(scene, o, d)``; ``o``, ``d`` may be
+    plain bools), or ``None`` where it can: geometry and camera leaves, the camera rays, and the
+    parameters of materials whose delta lobe's direction can move with them. Used by the
+    custom VJP (which raises it) and by ``jaxgfx fit``'s ``render.adjoint: auto``."""
     p_scene, p_o, p_d = perturbed
     where = None
     for name in _GEOMETRY:
@@ -74,7 +81,7 @@ def _check_perturbed(perturbed, scene):
     if where is None and (p_o is True or p_d is True):
         where = "the camera rays (o, d)"
     if where is not None:
-        raise ValueError(
+        return (
             f"adjoint='replay': {where} is differentiated, but path replay covers only "
             "material, emitter, texture and environment parameters (hits are detached, as in "
             "Mitsuba 3's prb); use adjoint='ad' (PathIntegrator's default) for geometry and "
@@ -85,11 +92,19 @@ def _check_perturbed(perturbed, scene):
         where = _first_true(p_scene.materials[k], f"materials[{k}]")
         if moves_delta and where is not None:
             name = scene.material_names[k]
-            raise ValueError(
+            return (
                 f"adjoint='replay': {where} (material {name!r}, {type(m).__name__}) is "
                 "differentiated, but its delta lobe's direction can depend on it and replayed "
                 "directions carry no derivative; use adjoint='ad'"
             )
+    return None
+
+
+def _check_perturbed(perturbed, scene):
+    """``ValueError`` naming the first differentiated leaf replay does not cover."""
+    why = replay_refusal(scene, perturbed)
+    if why is not None:
+        raise ValueError(why)
 
 
 def _spec(scene, perturbed_scene):
@@ -99,38 +114,32 @@ def _spec(scene, perturbed_scene):
     return eqx.tree_at(_geometry, spec, replace=jtu.tree_map(lambda _: False, geo))
 
 
-def _forward(scene, o, d, u, max_depth, rr_depth, strategy, chunk):
-    return P.path_radiance(
-        scene,
-        o,
-        d,
-        u,
-        max_depth=max_depth,
-        rr_depth=rr_depth,
-        strategy=strategy,
-        sampling="detached",
-        chunk=chunk,
-    )
+def _numbers(u, i):
+    """Bounce ``i``'s uniform numbers ``(..., 7)`` (``i`` may be traced): drawn from the key
+    where ``u`` is a :class:`~jaxgfx.render.sampler.UniformBlocks` (what
+    :func:`~jaxgfx.render.estimator.render_partial` passes: nothing per bounce is stored), else
+    read from the array ``u (..., max_depth, 7)``."""
+    if isinstance(u, UniformBlocks):
+        return u.block(i)
+    return jax.lax.dynamic_index_in_dim(u, i, axis=u.ndim - 2, keepdims=False)
 
 
-@eqx.filter_custom_vjp
-def _replay(vjp_arg, u, max_depth, rr_depth, strategy, chunk):
-    scene, o, d = vjp_arg
-    return _forward(scene, o, d, u, max_depth, rr_depth, strategy, chunk)
-
-
-def _forward_with_zero_weights(scene, o, d, u, max_depth, rr_depth, strategy, chunk):
-    """``(L, Z)``: the radiance of :func:`_forward` (the same operations) and, per channel, the
-    radiance gathered after the path's first exactly-zero BSDF weight with that factor
-    replaced by 1 (0 where no weight was 0): the derivative of ``L`` w.r.t. that weight, which
-    ``(L − L_≤j) / w_j`` cannot recover (a black albedo or texel, a zero colour channel)."""
+def _trace(scene, o, d, u, max_depth, rr_depth, strategy, chunk, zero_weights):
+    """``L`` (``zero_weights=False``: the radiance of
+    :func:`~jaxgfx.render.integrators._bounce.path_radiance`, ``sampling="detached"``, by the
+    same operations) or ``(L, Z)``: also, per channel, the radiance gathered after the path's
+    first exactly-zero BSDF weight with that factor replaced by 1 (0 where no weight was 0):
+    the derivative of ``L`` w.r.t. that weight, which ``(L − L_≤j) / w_j`` cannot recover (a
+    black albedo or texel, a zero colour channel). Each bounce draws its own numbers
+    (:func:`_numbers`)."""
     chunk = P._use_chunk(chunk, o)
     bounce = P.make_bounce(rr_depth=rr_depth, strategy=strategy, sampling="detached", chunk=chunk)
 
-    def body(state, xs):
+    def body(state, depth):
         carry, bt, seen, Z = state
-        ub, depth = xs
-        nxt, _, weight, (unit, inv_q, shaded) = bounce(scene, carry, ub, depth)
+        nxt, _, weight, (unit, inv_q, shaded) = bounce(scene, carry, _numbers(u, depth), depth)
+        if not zero_weights:
+            return (nxt, bt, seen, Z), None
         Z = Z + jnp.where(seen, bt * unit, 0.0)
         first = (weight == 0) & ~seen & shaded[..., None]
         bt = bt * jnp.where(first, 1.0, weight) * inv_q[..., None]
@@ -142,19 +151,26 @@ def _forward_with_zero_weights(scene, o, d, u, max_depth, rr_depth, strategy, ch
     seen = jnp.zeros(bt.shape, bool)
     Z = jnp.zeros_like(bt)
     if max_depth > 1:
-        us = jnp.moveaxis(u[..., : max_depth - 1, :], -2, 0)
         state = (carry, bt, seen, Z)
-        (carry, bt, seen, Z), _ = jax.lax.scan(body, state, (us, jnp.arange(max_depth - 1)))
+        (carry, bt, seen, Z), _ = jax.lax.scan(body, state, jnp.arange(max_depth - 1))
     unit = P.last_emission(scene, carry, strategy=strategy, sampling="detached")
-    Z = Z + jnp.where(seen, bt * unit, 0.0)
-    return carry[3] + carry[2] * unit, Z
+    L = carry[3] + carry[2] * unit
+    if not zero_weights:
+        return L
+    return L, Z + jnp.where(seen, bt * unit, 0.0)
+
+
+@eqx.filter_custom_vjp
+def _replay(vjp_arg, u, max_depth, rr_depth, strategy, chunk):
+    scene, o, d = vjp_arg
+    return _trace(scene, o, d, u, max_depth, rr_depth, strategy, chunk, False)
 
 
 @_replay.def_fwd
 def _replay_fwd(perturbed, vjp_arg, u, max_depth, rr_depth, strategy, chunk):
     scene, o, d = vjp_arg
     _check_perturbed(perturbed, scene)
-    L, Z = _forward_with_zero_weights(scene, o, d, u, max_depth, rr_depth, strategy, chunk)
+    L, Z = _trace(scene, o, d, u, max_depth, rr_depth, strategy, chunk, True)
     L, Z = checkpoint_name((L, Z), RADIANCE_NAME)
     return L, (L, Z)
 
@@ -187,9 +203,9 @@ def _replay_bwd(res, dL, perturbed, vjp_arg, u, max_depth, rr_depth, strategy, c
         term = term + jnp.where(first, weight * Z, 0.0)
         return term, (nxt, seen | first)
 
-    def step(state, xs):
+    def step(state, depth):
         carry, seen, acc = state
-        ub, depth = xs
+        ub = _numbers(u, depth)
         _, vjp_fn, (nxt, seen) = jax.vjp(
             lambda th: local(th, carry, seen, ub, depth), theta, has_aux=True
         )
@@ -200,9 +216,8 @@ def _replay_bwd(res, dL, perturbed, vjp_arg, u, max_depth, rr_depth, strategy, c
     seen = jnp.zeros(carry[2].shape, bool)
     acc = jtu.tree_map(jnp.zeros_like, theta)
     if max_depth > 1:
-        us = jnp.moveaxis(u[..., : max_depth - 1, :], -2, 0)
         state = (carry, seen, acc)
-        (carry, seen, acc), _ = jax.lax.scan(step, state, (us, jnp.arange(max_depth - 1)))
+        (carry, seen, acc), _ = jax.lax.scan(step, state, jnp.arange(max_depth - 1))
 
     def last(th):
         s = eqx.combine(th, rest)
@@ -226,8 +241,11 @@ def path_radiance_replay(
     chunk: int | None = None,
 ):
     """:func:`~jaxgfx.render.integrators.path.path_radiance` with ``sampling="detached"``
-    whose reverse-mode derivative is computed by path replay (module docstring). Same values
-    (the same program); the gradient w.r.t. material, emitter, texture and environment leaves
+    whose reverse-mode derivative is computed by path replay (module docstring). ``u``: the
+    array ``(..., max_depth, 7)`` or the same numbers as a
+    :class:`~jaxgfx.render.sampler.UniformBlocks` (drawn per bounce in the forward pass and
+    again in the replay: nothing of size ``max_depth`` is kept). Same values (the same
+    bounces); the gradient w.r.t. material, emitter, texture and environment leaves
     equals the detached AD gradient on the same random numbers up to float rounding.
     """
     P._check_strategy(strategy)

@@ -20,7 +20,7 @@ from jaxgfx.render.integrators._bounce import (
     path_radiance,
 )
 from jaxgfx.render.integrators._replay import RADIANCE_NAME as REPLAY_RADIANCE_NAME
-from jaxgfx.render.integrators._replay import path_radiance_replay
+from jaxgfx.render.integrators._replay import path_radiance_replay, replay_refusal
 from jaxgfx.render.integrators.base import N_RANDOM, Integrator, check_depth
 
 __all__ = [
@@ -31,6 +31,7 @@ __all__ = [
     "STRATEGIES",
     "ADJOINTS",
     "REPLAY_RADIANCE_NAME",
+    "replay_refusal",
 ]
 
 
@@ -87,6 +88,12 @@ class PathIntegrator(Integrator):
     def random_shape(self):
         return (self.max_depth, N_RANDOM)
 
+    @property
+    def uniform_blocks(self) -> bool:
+        """Whether ``u`` may be a :class:`~jaxgfx.render.sampler.UniformBlocks` (path replay:
+        each bounce draws its numbers from the key, so memory does not grow with the depth)."""
+        return self.adjoint == "replay"
+
     def __call__(self, scene, o, d, u):
         return _radiance(self, scene, o, d, u, self.max_depth)
 
@@ -120,6 +127,12 @@ class DirectIntegrator(Integrator):
     @property
     def random_shape(self):
         return (self.max_depth, N_RANDOM)
+
+    @property
+    def uniform_blocks(self) -> bool:
+        """Whether ``u`` may be a :class:`~jaxgfx.render.sampler.UniformBlocks` (path replay:
+        each bounce draws its numbers from the key, so memory does not grow with the depth)."""
+        return self.adjoint == "replay"
 
     def __call__(self, scene, o, d, u):
         return _radiance(self, scene, o, d, u, 2)
