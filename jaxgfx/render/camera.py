@@ -10,6 +10,8 @@ Three generators (the first two as in lecture 4 of the course notes):
 - :class:`RadianceMeter` / :class:`IrradianceMeter` — Mitsuba 3's ``radiancemeter`` and
   ``irradiancemeter`` sensors: a 1 x 1 image measuring the radiance along one ray, or the
   irradiance averaged over a shape's surface.
+- :class:`BatchCamera` — Mitsuba 3's ``batch`` sensor: several cameras of one size rendered
+  side by side into one image (sub-image ``i`` is columns ``[i w, (i + 1) w)``).
 - :class:`MatrixCamera` — from the inverse of a (view . projection) matrix, so that traced
   images line up exactly with a rasteriser using the same matrices (OpenGL NDC conventions:
   x, y in [-1, 1], y up, z = -1 on the near plane and +1 on the far plane).
@@ -48,6 +50,7 @@ __all__ = [
     "MatrixCamera",
     "RadianceMeter",
     "IrradianceMeter",
+    "BatchCamera",
     "look_at_basis",
 ]
 
@@ -370,6 +373,77 @@ class IrradianceMeter(eqx.Module):
         p, n, _ = sample_area(self.shape, u[..., :2])
         d = to_world(frame_from_normal(n), square_to_cosine_hemisphere(u[..., 2:]))
         o, d = spawn_ray(p, n, d)
+        return o, d
+
+
+class BatchCamera(eqx.Module):
+    """Mitsuba 3's ``batch`` sensor: ``cameras`` (a tuple of :class:`PerspectiveCamera`,
+    :class:`ThinLensCamera` or :class:`MatrixCamera`, all ``w`` x ``h`` pixels) rendered side by
+    side into one ``K w`` x ``h`` image, in order: camera ``i`` fills columns
+    ``[i w, (i + 1) w)``. As Mitsuba's, a pixel sample at ``x`` belongs to the camera whose
+    columns hold ``x`` (clamped to the first / last camera beyond the image), which traces it
+    at ``x - i w`` of its own image: a reconstruction filter wider than a pixel mixes the
+    neighbouring cameras' rays into the columns at a seam, as Mitsuba's film does. The
+    cameras' parameters stay differentiable leaves (``camera.cameras.1.fov``).
+
+    ``lens_uniforms`` is the largest of the cameras' (a thin lens takes the first two of the
+    numbers drawn per ray). Every camera generates rays for every sample and each sample keeps
+    its own camera's (a select): ``K`` ray generations per sample, cheap next to tracing.
+
+    Example: two pinhole cameras of 4 x 4 make an 8 x 4 image; pixel ``(5.5, 2)`` is camera 1's
+    pixel ``(1.5, 2)``::
+
+        a = PerspectiveCamera.look_at([0, 0, 0], [0, 0, -1], [0, 1, 0], 60.0, 4, 4)
+        b = PerspectiveCamera.look_at([1, 0, 0], [1, 0, -1], [0, 1, 0], 60.0, 4, 4)
+        cam = BatchCamera.create([a, b])   # cam.width == 8
+        cam.generate_ray(jnp.array([5.5, 2.0]))   # == b.generate_ray(jnp.array([1.5, 2.0]))
+    """
+
+    cameras: tuple
+    width: int = eqx.field(static=True)
+    height: int = eqx.field(static=True)
+    lens_uniforms: int = eqx.field(static=True, default=0)
+
+    @classmethod
+    def create(cls, cameras):
+        """Validated constructor: one or more image cameras (not meters, not batches) of the
+        same width and height."""
+        cams = tuple(cameras)
+        if not cams:
+            raise ValueError("cameras: expected at least one camera")
+        kinds = (PerspectiveCamera, ThinLensCamera, MatrixCamera)
+        for i, c in enumerate(cams):
+            if not isinstance(c, kinds):
+                raise ValueError(
+                    f"cameras.{i}: a batch holds perspective, thin-lens or matrix cameras, got "
+                    f"{type(c).__name__}"
+                )
+            if (c.width, c.height) != (cams[0].width, cams[0].height):
+                raise ValueError(
+                    f"cameras.{i}: every camera of a batch has the same size, got "
+                    f"{c.width} x {c.height} and {cams[0].width} x {cams[0].height}"
+                )
+        n_lens = max(c.lens_uniforms for c in cams)
+        return cls(cams, len(cams) * cams[0].width, cams[0].height, n_lens)
+
+    def generate_ray(self, pixel, u_lens=None):
+        """Rays through continuous pixel positions ``pixel (..., 2)`` of the whole image;
+        ``u_lens (..., lens_uniforms)`` when ``lens_uniforms > 0``. Returns ``(o, d)``."""
+        pixel = jnp.asarray(pixel)
+        w = self.cameras[0].width
+        idx = jnp.clip(jnp.floor(pixel[..., 0] / w), 0, len(self.cameras) - 1)
+        o = d = None
+        for i, cam in enumerate(self.cameras):
+            local = pixel - jnp.asarray([i * w, 0], pixel.dtype)
+            if cam.lens_uniforms:
+                oi, di = cam.generate_ray(local, u_lens[..., : cam.lens_uniforms])
+            else:
+                oi, di = cam.generate_ray(local)
+            if o is None:
+                o, d = oi, di
+            else:
+                sel = (idx == i)[..., None]
+                o, d = jnp.where(sel, oi, o), jnp.where(sel, di, d)
         return o, d
 
 

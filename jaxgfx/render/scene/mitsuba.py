@@ -619,6 +619,33 @@ class _WorkDir:
 # public API
 
 
+def _image_sensor(cam, where, mi) -> dict:
+    """The Mitsuba sensor (without film and sampler) of a validated perspective, thin-lens or
+    affine matrix camera description: ``perspective`` / ``thinlens`` / ``orthographic``."""
+    if "view_proj_inverse" in cam:  # Mitsuba's default near_clip, where the rays start
+        ortho = orthographic_to_world(cam["view_proj_inverse"], cam["width"], cam["height"],
+                                      DEFAULTS["near_clip"])  # fmt: skip
+        if ortho is None:
+            raise NotImplementedError(
+                f"{where}.view_proj_inverse: a projective matrix camera has no Mitsuba sensor "
+                "(look-at cameras and affine matrix cameras, as `orthographic`, are exported)"
+            )
+        return {"type": "orthographic", "to_world": _transform(ortho, mi)}
+    sensor = {
+        "type": "perspective",
+        "fov": float(cam["fov"]),
+        "fov_axis": str(cam.get("fov_axis", "x")),
+        "to_world": _transform(
+            look_at_matrix(cam["origin"], cam["target"], cam.get("up", [0.0, 1.0, 0.0])), mi
+        ),
+    }
+    if "aperture_radius" in cam:  # a thin lens (validated: both keys)
+        sensor["type"] = "thinlens"
+        sensor["aperture_radius"] = float(cam["aperture_radius"])
+        sensor["focus_distance"] = float(cam["focus_distance"])
+    return sensor
+
+
 def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) -> dict:
     """Convert a jaxgfx scene description into a Mitsuba 3 ``load_dict`` dictionary.
 
@@ -654,20 +681,16 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
 
     # -- sensor
     cam = desc["camera"]
-    ortho = None
     meter = cam.get("type") if isinstance(cam, Mapping) else None
-    if meter is not None:
+    subs = None
+    if meter == "batch":  # each camera's sensor (Mitsuba sizes their films width / N x height)
+        bc = S.build_camera(cam)  # validated as load_scene does
+        subs = {f"sensor_{i}": _image_sensor(c, f"camera.cameras.{i}", mi)
+                for i, c in enumerate(cam["cameras"])}  # fmt: skip
+        cam = {"width": bc.width, "height": bc.height}
+    elif meter is not None:
         S.build_camera(cam, base_dir=base_dir)  # validated as load_scene does
         cam = {**cam, "width": 1, "height": 1}
-    elif isinstance(cam, Mapping) and "view_proj_inverse" in cam:
-        S.build_camera(cam)  # validated as load_scene does
-        ortho = orthographic_to_world(cam["view_proj_inverse"], cam["width"], cam["height"],
-                                      DEFAULTS["near_clip"])  # fmt: skip
-        if ortho is None:
-            raise NotImplementedError(
-                "camera.view_proj_inverse: a projective matrix camera has no Mitsuba sensor "
-                "(look-at cameras and affine matrix cameras, as `orthographic`, are exported)"
-            )
     else:
         # validate exactly as load_scene does (keys, fov range, resolution, degenerate look-at,
         # a thin lens's aperture and focus)
@@ -710,7 +733,9 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
         film["rfilter"] = {"type": "gaussian", "stddev": float(rf.stddev)}
         film["sample_border"] = True
     meter_shape = None
-    if meter == "radiancemeter":
+    if subs is not None:
+        sensor = {"type": "batch", **subs}
+    elif meter == "radiancemeter":
         sensor = {"type": "radiancemeter", "origin": [float(x) for x in cam["origin"]],
                   "direction": [float(x) for x in cam["direction"]]}  # fmt: skip
     elif meter == "irradiancemeter":  # nested in its shape, made invisible (null BSDF): the
@@ -718,21 +743,8 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
         sensor = {"type": "irradiancemeter"}
         meter_shape = _shape(cam["shape"], "camera.shape", base_dir, work_dir, mi)
         meter_shape["bsdf"] = {"type": "null"}
-    elif ortho is not None:  # Mitsuba's default near_clip, where the rays start
-        sensor = {"type": "orthographic", "to_world": _transform(ortho, mi)}
     else:
-        sensor = {
-            "type": "perspective",
-            "fov": float(cam["fov"]),
-            "fov_axis": str(cam.get("fov_axis", "x")),
-            "to_world": _transform(
-                look_at_matrix(cam["origin"], cam["target"], cam.get("up", [0.0, 1.0, 0.0])), mi
-            ),
-        }
-        if "aperture_radius" in cam:  # a thin lens (validated above: both keys)
-            sensor["type"] = "thinlens"
-            sensor["aperture_radius"] = float(cam["aperture_radius"])
-            sensor["focus_distance"] = float(cam["focus_distance"])
+        sensor = _image_sensor(cam, "camera", mi)
     sensor["film"] = film
     sensor["sampler"] = {"type": "independent", "sample_count": 16}
     out: dict = {"type": "scene", "sensor": sensor}
@@ -1109,6 +1121,7 @@ def scene_to_desc(scene) -> dict:
     Example: ``load_scene(scene_to_desc(load_scene(desc)))`` renders like ``desc``.
     """
     from jaxgfx.render.camera import (
+        BatchCamera,
         IrradianceMeter,
         MatrixCamera,
         PerspectiveCamera,
@@ -1136,17 +1149,23 @@ def scene_to_desc(scene) -> dict:
         TriangleMesh,
     )
 
-    cam = scene.camera
-    if isinstance(cam, MatrixCamera):
-        cam_d = {"view_proj_inverse": _list(cam.view_proj_inverse), "width": int(cam.width),
-                 "height": int(cam.height)}  # fmt: skip
-    elif isinstance(cam, (PerspectiveCamera, ThinLensCamera)):
+    def image_camera(cam):
+        if isinstance(cam, MatrixCamera):
+            return {"view_proj_inverse": _list(cam.view_proj_inverse), "width": int(cam.width),
+                    "height": int(cam.height)}  # fmt: skip
         cam_d = {"origin": _list(cam.origin), "target": _list(cam.target), "up": _list(cam.up),
                  "fov": float(cam.fov), "fov_axis": cam.fov_axis, "width": int(cam.width),
                  "height": int(cam.height)}  # fmt: skip
         if isinstance(cam, ThinLensCamera):
             cam_d["aperture_radius"] = float(cam.aperture_radius)
             cam_d["focus_distance"] = float(cam.focus_distance)
+        return cam_d
+
+    cam = scene.camera
+    if isinstance(cam, (MatrixCamera, PerspectiveCamera, ThinLensCamera)):
+        cam_d = image_camera(cam)
+    elif isinstance(cam, BatchCamera):
+        cam_d = {"type": "batch", "cameras": [image_camera(c) for c in cam.cameras]}
     elif isinstance(cam, RadianceMeter):
         cam_d = {"type": "radiancemeter", "origin": _list(cam.origin),
                  "direction": _list(cam.direction)}  # fmt: skip

@@ -111,7 +111,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("sensor", "radiancemeter"): S + " (a 1 x 1 film; `origin` + `direction` or `to_world`)",
     ("sensor", "irradiancemeter"): S + " (a 1 x 1 film; on a sphere, rectangle or mesh)",
     ("sensor", "distant"): "refused: jaxgfx renders images only",
-    ("sensor", "batch"): "refused: one sensor per scene",
+    ("sensor", "batch"): S + " (perspective, thin-lens and orthographic sensors side by side; "
+    "film width divisible by their number)",
     ("film", "hdrfilm"): S,
     ("film", "specfilm"): "refused: jaxgfx renders RGB only",
     ("rfilter", "box"): S,

@@ -1584,16 +1584,20 @@ def _fov_x_or_y(p: _Params, width, height):
     return fov, axis
 
 
-def _sensor(obj: _Obj, doc, ctx) -> dict:
+def _sensor(obj: _Obj, doc, ctx, size=None) -> dict:
+    """``(camera description, film, spp)`` of a ``<sensor>``. ``size``: ``(width, height)``
+    of a sub-sensor of a ``batch`` (which sets its film's size, as Mitsuba's batch does; its
+    own film, sampler and filter are read and ignored)."""
     p = _Params(obj, doc)
-    ok = ("perspective", "thinlens", "orthographic", "radiancemeter", "irradiancemeter")
-    if obj.type not in ok:
-        raise ValueError(f"{obj.where}: sensor plugin {obj.type!r} is not supported "
-                         f"({', '.join(ok)})")  # fmt: skip
+    ok = ("perspective", "thinlens", "orthographic", "radiancemeter", "irradiancemeter", "batch")
+    if obj.type not in ok or (size is not None and obj.type not in ok[:3]):
+        ok = ok if size is None else ok[:3]
+        raise ValueError(f"{obj.where}: sensor plugin {obj.type!r} is not supported"
+                         f"{' in a batch' if size else ''} ({', '.join(ok)})")  # fmt: skip
     films = [c for c in obj.children if c.tag == "film"]
     samplers = [c for c in obj.children if c.tag == "sampler"]
     for c in obj.children:
-        if c.tag not in ("film", "sampler"):
+        if c.tag not in ("film", "sampler") and not (obj.type == "batch" and c.tag == "sensor"):
             raise ValueError(f"{c.node.at}: {obj.where}: nested <{c.tag}> is not supported")
     width, height, film = DEFAULTS["film.width"], DEFAULTS["film.height"], {}
     if films:
@@ -1660,6 +1664,10 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
         sp.done()
         if spp < 1:
             raise sp.err("sample_count", f"expected a positive integer, got {spp}")
+    if obj.type == "batch":
+        return _batch(p, obj, doc, ctx, films, samplers, width, height, film, spp)
+    if size is not None:
+        width, height = size
     if obj.type in ("radiancemeter", "irradiancemeter"):
         return _meter(p, obj, films, samplers, width, height, film, spp)
     if obj.type == "orthographic":
@@ -1695,8 +1703,33 @@ def _sensor(obj: _Obj, doc, ctx) -> dict:
     if lens is not None:
         cam["aperture_radius"], cam["focus_distance"] = lens
         reach += lens[0] * max(1.0, abs(1.0 - near / lens[1]))
-    ctx["clip"] = (o, near, far, reach, obj)
+    ctx.setdefault("clip", []).append((o, near, far, reach, obj))
     return cam, film, spp
+
+
+def _batch(p: _Params, obj: _Obj, doc, ctx, films, samplers, width, height, film, spp):
+    """Mitsuba's ``batch`` sensor -> ``{type: batch, cameras: [...]}``: its nested perspective,
+    thin-lens and orthographic sensors in document order, each ``width / N`` x ``height`` (the
+    batch's film; a width that ``N`` does not divide is refused, as Mitsuba refuses it), with
+    the batch's film, filter and sampler."""
+    # the nested sensors in document order: unnamed ones are children, named ones properties
+    pos = {id(n): i for i, n in enumerate(obj.node.children)}
+    found = [(c.node, c) for c in obj.children if c.tag == "sensor"]
+    for q in obj.props.values():
+        if q.kind == "object" and q.value.tag == "sensor":
+            q.used = True
+            found.append((q.node, q.value))
+    subs = [c for _, c in sorted(found, key=lambda nc: pos.get(id(nc[0]), len(pos)))]
+    if not subs:
+        raise ValueError(f"{obj.where}: a batch sensor needs at least one nested <sensor>")
+    if width % len(subs):
+        raise ValueError(f"{(films[0] if films else obj).where}: a batch of {len(subs)} sensors "
+                         f"needs a film width divisible by {len(subs)}, got {width}")  # fmt: skip
+    if len(films) > 1 or len(samplers) > 1:
+        raise ValueError(f"{obj.where}: expected at most one <film> and one <sampler>")
+    cams = [_sensor(c, doc, ctx, size=(width // len(subs), height))[0] for c in subs]
+    p.done(children_ok=len(obj.children))
+    return {"type": "batch", "cameras": cams}, film, spp
 
 
 def _meter(p: _Params, obj, films, samplers, width, height, film, spp):
@@ -1773,7 +1806,7 @@ def _orthographic(p: _Params, obj: _Obj, ctx, films, samplers, width, height, fi
         raise ValueError(f"{obj.where}: expected at most one <film> and one <sampler>")
     p.done(children_ok=len(obj.children))
     vpi = orthographic_view_proj_inverse(m, near, width, height)
-    ctx["clip_ortho"] = (m, near, far, obj)
+    ctx.setdefault("clip_ortho", []).append((m, near, far, obj))
     return {"view_proj_inverse": vpi.tolist(), "width": width, "height": height}, film, spp
 
 
@@ -1782,19 +1815,19 @@ def _check_clip_ortho(ctx):
     plane point and end after ``far_clip - near_clip`` along the unit direction; each bounding
     box corner's distance along the ray through it (an affine function of the point, so the
     corners bound it) must not exceed that."""
-    m, near, far, sensor = ctx["clip_ortho"]
-    a = m[:3, :3]
-    d = a[:, 2] / np.linalg.norm(a[:, 2])
-    basis = np.stack([a[:, 0], a[:, 1], d], 1)
-    o = a @ np.array([0.0, 0.0, near]) + m[:3, 3]
-    for (lo, hi), obj in ctx["bboxes"]:
-        corners = np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1)
-        t = np.linalg.solve(basis, corners - o[:, None])[2]
-        if float(t.max()) > far - near:
-            raise ValueError(
-                f"{sensor.where}: far_clip={far}: {obj.where} reaches beyond it (Mitsuba clips "
-                "it, jaxgfx does not)"
-            )
+    for m, near, far, sensor in ctx["clip_ortho"]:  # one per sensor (several in a batch)
+        a = m[:3, :3]
+        d = a[:, 2] / np.linalg.norm(a[:, 2])
+        basis = np.stack([a[:, 0], a[:, 1], d], 1)
+        o = a @ np.array([0.0, 0.0, near]) + m[:3, 3]
+        for (lo, hi), obj in ctx["bboxes"]:
+            corners = np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1)
+            t = np.linalg.solve(basis, corners - o[:, None])[2]
+            if float(t.max()) > far - near:
+                raise ValueError(
+                    f"{sensor.where}: far_clip={far}: {obj.where} reaches beyond it (Mitsuba "
+                    "clips it, jaxgfx does not)"
+                )
 
 
 def _aov(p: _Params, obj):
@@ -1887,7 +1920,11 @@ def _check_clip(ctx):
         _check_clip_ortho(ctx)
     if "clip" not in ctx:
         return
-    o, near, far, reach, sensor = ctx["clip"]
+    for clip in ctx["clip"]:  # one per sensor (several in a batch)
+        _check_clip_one(ctx, *clip)
+
+
+def _check_clip_one(ctx, o, near, far, reach, sensor):
     for bbox, obj in ctx["bboxes"]:
         lo, hi = bbox
         dmin = float(np.linalg.norm(np.maximum(0.0, np.maximum(lo - o, o - hi))))
@@ -1972,7 +2009,11 @@ def read_xml(path, **params) -> XMLScene:
     if not desc["emitters"]:
         del desc["emitters"]
     if integrator == "aov" and "clip" in ctx:  # Mitsuba's depth: from the near plane
-        opts["near_clip"] = float(ctx["clip"][1])
+        nears = {float(c[1]) for c in ctx["clip"]}
+        if len(nears) > 1:
+            raise ValueError(f"{sensors[0].where}: an aov integrator needs one near_clip for "
+                             f"every sensor of the batch, got {sorted(nears)}")  # fmt: skip
+        opts["near_clip"] = nears.pop()
     return XMLScene(desc, spp, integrator, depth, rr, tuple(doc.files), hide, **opts)
 
 

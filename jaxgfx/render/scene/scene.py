@@ -212,7 +212,7 @@ class Scene(eqx.Module):
     (tuple of DirectionalLight / SpotLight / ProjectorLight).
     """
 
-    camera: PerspectiveCamera | ThinLensCamera | MatrixCamera
+    camera: PerspectiveCamera | ThinLensCamera | MatrixCamera  # or a meter / BatchCamera
     shapes: tuple
     shape_materials: tuple
     materials: tuple
@@ -293,6 +293,15 @@ class Scene(eqx.Module):
             idx = self.material_names.index(parts[1])
             getter = lambda s: s.materials[idx]  # noqa: E731
             rest = parts[2:]
+        elif (
+            head == "camera"
+            and len(parts) >= 3
+            and parts[1] == "cameras"
+            and hasattr(self.camera, "cameras")
+        ):  # a BatchCamera's camera I: camera.cameras.I.FIELD
+            i = _index(path, parts[2], len(self.camera.cameras), "a camera of the batch")
+            getter = lambda s: s.camera.cameras[i]  # noqa: E731
+            rest = parts[3:]
         elif head == "camera":
             getter = lambda s: s.camera  # noqa: E731
             rest = parts[1:]
@@ -401,7 +410,12 @@ class Scene(eqx.Module):
                 [(index_prefix, obj)] if unnamed else []
             )
 
-        objs = [("camera", self.camera)]
+        cams = getattr(self.camera, "cameras", None)  # a BatchCamera: each of its cameras
+        objs = (
+            [("camera", self.camera)]
+            if cams is None
+            else [(f"camera.cameras.{i}", c) for i, c in enumerate(cams)]
+        )
         named = zip(self.material_names, self.materials, strict=True)
         objs += [(f"materials.{n}", m) for n, m in named if not is_internal_name(n)]
         if self.point_lights is not None:

@@ -17,6 +17,7 @@ from jaxgfx._checks import as_float_array, check_choice, check_finite
 from jaxgfx._math import safe_normalize
 from jaxgfx.render.bsdf import rgb_param
 from jaxgfx.render.camera import (
+    BatchCamera,
     IrradianceMeter,
     MatrixCamera,
     PerspectiveCamera,
@@ -130,7 +131,8 @@ def build_camera(d, where="camera", base_dir=None):
     prefixed with ``where`` (``camera.width: ...``). ``{type: radiancemeter, origin,
     direction}`` and ``{type: irradiancemeter, shape}`` give the 1 x 1 meters
     (:class:`~jaxgfx.render.camera.RadianceMeter`, :class:`~jaxgfx.render.camera.IrradianceMeter`;
-    a mesh shape's file relative to ``base_dir``)."""
+    a mesh shape's file relative to ``base_dir``); ``{type: batch, cameras: [...]}`` a
+    :class:`~jaxgfx.render.camera.BatchCamera` of image cameras of one size, side by side."""
     if not isinstance(d, Mapping):
         raise ValueError(f"{where}: expected a mapping, got {type(d).__name__}")
     try:
@@ -144,8 +146,26 @@ def build_camera(d, where="camera", base_dir=None):
 
 def _build_camera(d, where, base_dir=None):
     kind = d.get("type")
+    if kind == "batch":  # Mitsuba's batch sensor: image cameras side by side
+        expect_keys(d, where, ("type", "cameras"))
+        subs = d["cameras"]
+        if not isinstance(subs, (list, tuple)) or not subs:
+            raise ValueError(f"{where}.cameras: expected a non-empty list of cameras")
+        cams = []
+        for i, c in enumerate(subs):
+            w = f"{where}.cameras.{i}"
+            if not isinstance(c, Mapping):
+                raise ValueError(f"{w}: expected a mapping, got {type(c).__name__}")
+            if c.get("type") is not None:
+                raise ValueError(f"{w}.type: a batch holds perspective, thin-lens and matrix "
+                                 f"cameras, got {c.get('type')!r}")  # fmt: skip
+            cams.append(build_camera(c, w))
+        try:
+            return BatchCamera.create(cams)
+        except ValueError as e:
+            raise ValueError(f"{where}.{e}") from None
     if kind is not None:  # the meters (Mitsuba's radiancemeter / irradiancemeter sensors)
-        check_choice(kind, f"{where}.type", ("radiancemeter", "irradiancemeter"))
+        check_choice(kind, f"{where}.type", ("radiancemeter", "irradiancemeter", "batch"))
         if kind == "radiancemeter":
             expect_keys(d, where, ("type", "origin", "direction"))
             return RadianceMeter.create(vec(d["origin"], f"{where}.origin"),
