@@ -10,6 +10,8 @@ Three generators (the first two as in lecture 4 of the course notes):
 - :class:`RadianceMeter` / :class:`IrradianceMeter` — Mitsuba 3's ``radiancemeter`` and
   ``irradiancemeter`` sensors: a 1 x 1 image measuring the radiance along one ray, or the
   irradiance averaged over a shape's surface.
+- :class:`DistantSensor` — Mitsuba 3's ``distant`` sensor: a 1 x 1 image of the radiance
+  leaving the scene along one direction, averaged over a target (a point, a shape or a disk).
 - :class:`BatchCamera` — Mitsuba 3's ``batch`` sensor: several cameras of one size rendered
   side by side into one image (sub-image ``i`` is columns ``[i w, (i + 1) w)``).
 - :class:`MatrixCamera` — from the inverse of a (view . projection) matrix, so that traced
@@ -51,6 +53,7 @@ __all__ = [
     "RadianceMeter",
     "IrradianceMeter",
     "BatchCamera",
+    "DistantSensor",
     "look_at_basis",
 ]
 
@@ -374,6 +377,76 @@ class IrradianceMeter(eqx.Module):
         d = to_world(frame_from_normal(n), square_to_cosine_hemisphere(u[..., 2:]))
         o, d = spawn_ray(p, n, d)
         return o, d
+
+
+class DistantSensor(eqx.Module):
+    """Mitsuba 3's ``distant`` sensor: a 1 x 1 image of the radiance travelling along the unit
+    ``direction`` (3,) through a target, averaged over the target. Every ray is
+    ``o + t direction`` with ``o = p - distance direction``: ``p`` the ``target`` point (3,)
+    (``shape`` and ``radius`` unused), or a point of ``shape`` uniform by area (a Spheres /
+    Rectangles / TriangleMesh that is only sampled, not scene geometry), or, with ``radius > 0``
+    and no shape, a point uniform on the disk of that radius about ``target`` perpendicular to
+    ``direction``; weight 1. ``distance`` must put ``o`` outside every shape in the way
+    (Mitsuba: twice the radius of the scene's bounding sphere; with no target it starts the
+    rays on the disk ``radius`` back from the sphere's centre). ``direction``, ``target``
+    and the shape's parameters are differentiable; ``lens_uniforms`` is 0 for a point and 2
+    for a shape or a disk (the point's numbers).
+
+    Example: a sensor looking down at a Lambertian plane of albedo ``rho`` lit by a
+    directional light of irradiance ``E`` at angle ``theta`` reads ``rho E cos(theta) / pi``.
+    """
+
+    direction: jnp.ndarray
+    target: jnp.ndarray
+    distance: jnp.ndarray
+    radius: jnp.ndarray
+    shape: eqx.Module | None = None
+    lens_uniforms: int = eqx.field(static=True, default=0)
+    width: ClassVar[int] = 1
+    height: ClassVar[int] = 1
+
+    @classmethod
+    def create(cls, direction, target=None, distance=None, *, shape=None, radius=0.0):
+        """Validated constructor: a nonzero finite ``direction`` (stored unit), a finite
+        ``target`` point (3,) (or ``None`` with a ``shape``), a finite ``distance > 0`` and a
+        finite ``radius >= 0`` (a disk about ``target``; not with a shape)."""
+        d = as_float_array(direction, "direction")
+        if d.shape != (3,) or not np.all(np.isfinite(np.asarray(d))):
+            raise ValueError(f"direction: expected 3 finite numbers, got {np.asarray(d)!r}")
+        n = float(np.linalg.norm(np.asarray(d)))
+        if not n > 0:
+            raise ValueError("direction: expected a nonzero vector")
+        if (target is None) == (shape is None):
+            raise ValueError("target: expected a point or a shape (one of them)")
+        t = jnp.zeros(3, d.dtype) if target is None else as_float_array(target, "target")
+        if t.shape != (3,) or not np.all(np.isfinite(np.asarray(t))):
+            raise ValueError(f"target: expected 3 finite numbers, got {np.asarray(t)!r}")
+        dist = as_float_array(distance, "distance")
+        if dist.shape != () or not (np.isfinite(float(dist)) and float(dist) > 0):
+            raise ValueError(f"distance: expected a finite number > 0, got {distance!r}")
+        r = as_float_array(radius, "radius")
+        if r.shape != () or not (np.isfinite(float(r)) and float(r) >= 0):
+            raise ValueError(f"radius: expected a finite number >= 0, got {radius!r}")
+        if shape is not None and float(r) != 0:
+            raise ValueError("radius: a disk target is a point target with a radius, not a shape")
+        n_u = 2 if (shape is not None or float(r) > 0) else 0
+        return cls(d / n, t, dist, r, shape, n_u)
+
+    def generate_ray(self, pixel, u=None):
+        """The rays of pixel samples ``pixel (..., 2)`` (unused) and, for a shape or disk
+        target, uniform numbers ``u (..., 2)``. Returns ``(o, d)`` of shapes (..., 3)."""
+        shape = jnp.shape(pixel)[:-1] + (3,)
+        d = safe_normalize(self.direction)
+        if self.shape is not None:
+            p, _, _ = sample_area(self.shape, u)
+        elif self.lens_uniforms:  # a disk about the target, perpendicular to d
+            disk = self.radius * square_to_uniform_disk_concentric(u)
+            zero = jnp.zeros_like(disk[..., :1])
+            p = self.target + to_world(frame_from_normal(d), jnp.concatenate([disk, zero], -1))
+        else:
+            p = self.target
+        o = p - self.distance * d
+        return jnp.broadcast_to(o, shape), jnp.broadcast_to(d, shape)
 
 
 class BatchCamera(eqx.Module):

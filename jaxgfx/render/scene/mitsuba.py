@@ -738,6 +738,13 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
     elif meter == "radiancemeter":
         sensor = {"type": "radiancemeter", "origin": [float(x) for x in cam["origin"]],
                   "direction": [float(x) for x in cam["direction"]]}  # fmt: skip
+    elif meter == "distant":  # Mitsuba sets the ray origins from the scene's bounds itself
+        sensor = {"type": "distant", "direction": [float(x) for x in cam["direction"]]}
+        if isinstance(cam["target"], Mapping):  # only sampled: not geometry, as in Mitsuba
+            sensor["target"] = _shape(cam["target"], "camera.target", base_dir, work_dir, mi)
+            sensor["target"].pop("bsdf", None)
+        elif not float(cam.get("radius", 0.0)) > 0:  # a disk: Mitsuba's bounding-sphere disk
+            sensor["target"] = [float(x) for x in cam["target"]]
     elif meter == "irradiancemeter":  # nested in its shape, made invisible (null BSDF): the
         # meter's shape is not part of a jaxgfx scene's geometry unless listed in its shapes
         sensor = {"type": "irradiancemeter"}
@@ -1122,6 +1129,7 @@ def scene_to_desc(scene) -> dict:
     """
     from jaxgfx.render.camera import (
         BatchCamera,
+        DistantSensor,
         IrradianceMeter,
         MatrixCamera,
         PerspectiveCamera,
@@ -1171,6 +1179,11 @@ def scene_to_desc(scene) -> dict:
                  "direction": _list(cam.direction)}  # fmt: skip
     elif isinstance(cam, IrradianceMeter):
         cam_d = {"type": "irradiancemeter"}  # its shape: below, once `one` is defined
+    elif isinstance(cam, DistantSensor):  # a shape target: below, once `one` is defined
+        cam_d = {"type": "distant", "direction": _list(cam.direction),
+                 "target": _list(cam.target), "distance": float(cam.distance)}  # fmt: skip
+        if cam.shape is None and cam.lens_uniforms:
+            cam_d["radius"] = float(cam.radius)
     else:  # pragma: no cover - a Scene holds one of the three
         raise NotImplementedError(f"camera: {type(cam).__name__} has no Mitsuba 3 mapping")
     desc = {
@@ -1239,6 +1252,12 @@ def scene_to_desc(scene) -> dict:
             raise NotImplementedError(f"{where}: {type(shape).__name__} has no Mitsuba 3 mapping")
         return [(d, names[int(k)]) for d, k in out] if keep else [(d, None) for d, _ in out]
 
+    if isinstance(cam, DistantSensor) and cam.shape is not None:
+        sh = cam.shape
+        n = sh.faces.shape[0] if isinstance(sh, TriangleMesh) else sh.centers.shape[0]
+        (cam_d["target"], _), *more = one(sh, np.zeros(n, int), "camera", False)
+        if more:  # pragma: no cover - a sphere / rectangle batch of one or a mesh
+            raise NotImplementedError("camera.target: one shape per distant sensor")
     if isinstance(cam, IrradianceMeter):
         sh = cam.shape
         n = sh.faces.shape[0] if isinstance(sh, TriangleMesh) else sh.centers.shape[0]

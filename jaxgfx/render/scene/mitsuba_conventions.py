@@ -110,7 +110,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("sensor", "orthographic"): S + " (as a matrix camera)",
     ("sensor", "radiancemeter"): S + " (a 1 x 1 film; `origin` + `direction` or `to_world`)",
     ("sensor", "irradiancemeter"): S + " (a 1 x 1 film; on a sphere, rectangle or mesh)",
-    ("sensor", "distant"): "refused: jaxgfx renders images only",
+    ("sensor", "distant"): S + " (a 1 x 1 film; `target` a point, a shape or none)",
     ("sensor", "batch"): S + " (perspective, thin-lens and orthographic sensors side by side; "
     "film width divisible by their number)",
     ("film", "hdrfilm"): S,

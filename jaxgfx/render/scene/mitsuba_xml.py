@@ -1589,7 +1589,8 @@ def _sensor(obj: _Obj, doc, ctx, size=None) -> dict:
     of a sub-sensor of a ``batch`` (which sets its film's size, as Mitsuba's batch does; its
     own film, sampler and filter are read and ignored)."""
     p = _Params(obj, doc)
-    ok = ("perspective", "thinlens", "orthographic", "radiancemeter", "irradiancemeter", "batch")
+    ok = ("perspective", "thinlens", "orthographic", "radiancemeter", "irradiancemeter", "batch",
+          "distant")  # fmt: skip
     if obj.type not in ok or (size is not None and obj.type not in ok[:3]):
         ok = ok if size is None else ok[:3]
         raise ValueError(f"{obj.where}: sensor plugin {obj.type!r} is not supported"
@@ -1670,6 +1671,8 @@ def _sensor(obj: _Obj, doc, ctx, size=None) -> dict:
         width, height = size
     if obj.type in ("radiancemeter", "irradiancemeter"):
         return _meter(p, obj, films, samplers, width, height, film, spp)
+    if obj.type == "distant":
+        return _distant(p, obj, doc, ctx, films, samplers, width, height, film, spp)
     if obj.type == "orthographic":
         return _orthographic(p, obj, ctx, films, samplers, width, height, film, spp)
     fov, axis = _fov_x_or_y(p, width, height)
@@ -1765,6 +1768,66 @@ def _meter(p: _Params, obj, films, samplers, width, height, film, spp):
         raise p.err("direction", "expected a nonzero vector")
     p.done(children_ok=len(obj.children))
     return {"type": "radiancemeter", "origin": origin, "direction": _unit(direction)}, film, spp
+
+
+def _distant(p: _Params, obj: _Obj, doc, ctx, films, samplers, width, height, film, spp):
+    """Mitsuba's ``distant`` sensor -> ``{type: distant, direction, target, distance,
+    radius?}``: ``direction`` (normalised) or ``to_world`` (its +z, which must be a unit
+    vector; both refused, as in Mitsuba; neither: +z); ``target`` a ``<point>``, a nested
+    shape (sphere, rectangle or mesh: only sampled, not scene geometry, as in Mitsuba) or none
+    (the disk across the scene's bounding sphere). The ray origins' ``distance`` (twice the
+    bounding sphere's radius, as Mitsuba's) and the disk are set by :func:`read_xml` once
+    every shape is read (:func:`_distant_bounds`). A 1 x 1 film."""
+    if (width, height) != (1, 1):
+        raise ValueError(f"{(films[0] if films else obj).where}: a distant sensor needs a 1 x 1 "
+                         f"film, got {width} x {height}")  # fmt: skip
+    if len(films) > 1 or len(samplers) > 1:
+        raise ValueError(f"{obj.where}: expected at most one <film> and one <sampler>")
+    m, direction = p.transform("to_world"), p.vec("direction")
+    if m is not None and direction is not None:
+        raise p.err("direction", "give direction or to_world, not both (as Mitsuba)")
+    if m is not None:
+        z = m[:3, 2]
+        if not abs(float(np.linalg.norm(z)) - 1.0) < 1e-6:
+            raise p.err("to_world", "a to_world that scales the sensor's +z axis is not "
+                                    "supported (Mitsuba does not normalise it)")  # fmt: skip
+        direction = z.tolist()
+    direction = [0.0, 0.0, 1.0] if direction is None else list(direction)
+    if not np.linalg.norm(direction) > 0:
+        raise p.err("direction", "expected a nonzero vector")
+    cam = {"type": "distant", "direction": _unit(direction)}
+    tp = obj.props.get("target")
+    if tp is not None and tp.kind == "object":
+        tp.used = True
+        if tp.value.tag != "shape":
+            raise p.err("target", f"expected a point or a shape, got {tp.value.where}")
+        scratch: dict = {"materials": {}, "shapes": [], "emitters": []}
+        _shape(tp.value, doc, scratch, {"bboxes": []})
+        sd = scratch["shapes"][0] if scratch["shapes"] else None
+        if sd is None or sd["type"] not in ("sphere", "rectangle", "mesh") or scratch["emitters"]:
+            raise ValueError(f"{tp.value.where}: a distant sensor's target is a sphere, "
+                             "rectangle or mesh without an emitter")  # fmt: skip
+        cam["target"] = {k: v for k, v in sd.items() if k not in ("id", "material")}
+    elif tp is not None:
+        cam["target"] = p.vec("target")
+    p.done(children_ok=len(obj.children))
+    ctx["distant"] = cam
+    return cam, film, spp
+
+
+def _distant_bounds(ctx):
+    """Complete the distant sensor's description from the scene's bounding sphere (Mitsuba's
+    ``scene.bbox().bounding_sphere()``, its radius enlarged by 1e-4 relative): rays start
+    ``2 R`` back from a point or shape target; without a target they start on the disk of
+    radius ``R`` about the centre, ``R`` back (so they cross the whole sphere)."""
+    cam = ctx["distant"]
+    lo = np.min([b[0] for b, _ in ctx["bboxes"]], axis=0)
+    hi = np.max([b[1] for b, _ in ctx["bboxes"]], axis=0)
+    r = max(0.5 * float(np.linalg.norm(hi - lo)) * (1 + 1e-4), 1e-4)
+    if "target" in cam:
+        cam["distance"] = 2 * r
+    else:
+        cam.update(target=(0.5 * (lo + hi)).tolist(), distance=r, radius=r)
 
 
 def _thin_lens(p: _Params, far):
@@ -2005,6 +2068,8 @@ def read_xml(path, **params) -> XMLScene:
         raise ValueError(f"{path}: the scene has no shapes")
     if cam.get("type") == "irradiancemeter":
         cam["shape"] = ctx["meter_shape"]
+    if cam.get("type") == "distant":
+        _distant_bounds(ctx)
     _check_clip(ctx)
     if not desc["emitters"]:
         del desc["emitters"]
@@ -2057,7 +2122,8 @@ def _xml_object(tag, d, indent, name=None, ident=None) -> list[str]:
             tags = [t for (t, ty) in PLUGINS if ty == v["type"]]
             if not tags:  # pragma: no cover - the exporter writes known plugins only
                 raise ValueError(f"{k}: plugin {v['type']!r} has no XML tag")
-            nested_name = k if tags[0] == "texture" else None
+            # a texture and a distant sensor's target shape are named parameters
+            nested_name = k if tags[0] == "texture" or k == "target" else None
             body += _xml_object(tags[0], v, indent + 1, name=nested_name)
         elif isinstance(v, bool):
             body.append(f'{q}<boolean name={_xml_attr(k)} value="{str(v).lower()}"/>')

@@ -18,6 +18,7 @@ from jaxgfx._math import safe_normalize
 from jaxgfx.render.bsdf import rgb_param
 from jaxgfx.render.camera import (
     BatchCamera,
+    DistantSensor,
     IrradianceMeter,
     MatrixCamera,
     PerspectiveCamera,
@@ -132,7 +133,9 @@ def build_camera(d, where="camera", base_dir=None):
     direction}`` and ``{type: irradiancemeter, shape}`` give the 1 x 1 meters
     (:class:`~jaxgfx.render.camera.RadianceMeter`, :class:`~jaxgfx.render.camera.IrradianceMeter`;
     a mesh shape's file relative to ``base_dir``); ``{type: batch, cameras: [...]}`` a
-    :class:`~jaxgfx.render.camera.BatchCamera` of image cameras of one size, side by side."""
+    :class:`~jaxgfx.render.camera.BatchCamera` of image cameras of one size, side by side;
+    ``{type: distant, direction, target, distance, radius?}`` a
+    :class:`~jaxgfx.render.camera.DistantSensor` (``target`` a point or a shape)."""
     if not isinstance(d, Mapping):
         raise ValueError(f"{where}: expected a mapping, got {type(d).__name__}")
     try:
@@ -164,8 +167,24 @@ def _build_camera(d, where, base_dir=None):
             return BatchCamera.create(cams)
         except ValueError as e:
             raise ValueError(f"{where}.{e}") from None
+    if kind == "distant":  # Mitsuba's distant sensor: a point, disk or shape target
+        expect_keys(d, where, ("type", "direction", "target", "distance"), ("radius",))
+        tgt, shape = d["target"], None
+        if isinstance(tgt, Mapping):
+            sk, shape = shape_from_desc(tgt, f"{where}.target", base_dir)
+            if sk not in ("sphere", "rectangle", "mesh"):
+                raise ValueError(f"{where}.target: a distant sensor's target shape is a "
+                                 f"sphere, rectangle or mesh, got {sk!r}")  # fmt: skip
+            tgt = None
+        else:
+            tgt = vec(tgt, f"{where}.target")
+        radius = num(d.get("radius", 0.0), f"{where}.radius")
+        return DistantSensor.create(vec(d["direction"], f"{where}.direction"), tgt,
+                                    num(d["distance"], f"{where}.distance"), shape=shape,
+                                    radius=radius)  # fmt: skip
     if kind is not None:  # the meters (Mitsuba's radiancemeter / irradiancemeter sensors)
-        check_choice(kind, f"{where}.type", ("radiancemeter", "irradiancemeter", "batch"))
+        check_choice(kind, f"{where}.type",
+                     ("radiancemeter", "irradiancemeter", "batch", "distant"))  # fmt: skip
         if kind == "radiancemeter":
             expect_keys(d, where, ("type", "origin", "direction"))
             return RadianceMeter.create(vec(d["origin"], f"{where}.origin"),
