@@ -72,7 +72,7 @@ def test_batch_rays_are_the_sub_cameras_rays():
 _R = jax.jit(lambda s, k: render(s, k, spp=64, integrator="path", max_depth=2))
 
 
-@pytest.mark.slow  # ~6 s process CPU under load 2 (3 compiles, 3 x 4 renders of 96 pixels)
+@pytest.mark.slow  # slow: ~8 s on 2 cores, load 4.6 (2 compiles, 3 x 4 renders of 96 pixels)
 def test_batch_render_is_the_single_renders_side_by_side():
     """The batch's image against the two single-camera images concatenated: not the same
     random numbers (the sample layout is the whole image's), so per pixel and channel
@@ -130,7 +130,7 @@ def _depth_loss(x, key, scene):
     return jnp.sum(render(s, key, spp=1, integrator="aov"))
 
 
-@pytest.mark.slow  # ~5.7 s process CPU under load 4 (aov value + gradient, 16 perturbed renders)
+@pytest.mark.slow  # slow: ~7 s on 2 cores, load 4.6 (aov value + gradient, 16 perturbed renders)
 def test_batch_render_gradients_match_finite_differences(x64):
     """AD against central differences (same keys) of camera 1's ``origin`` and ``fov``
     through a batch render (float64; the floor and sphere fill both sub-images)."""
@@ -238,7 +238,7 @@ def test_xml_reads_and_writes_the_batch(tmp_path):
 
 
 @pytest.mark.mitsuba
-@pytest.mark.slow  # ~25 s process CPU under load 2 (8 renders x 256 spp per renderer)
+@pytest.mark.slow  # slow: ~8 s on 2 cores, load 4.6 (8 + 16 Mitsuba and 8 jaxgfx renders x 256 spp)
 def test_batch_matches_mitsuba_same_run(tmp_path):
     """The three-sensor batch (perspective, thin lens, orthographic; 24 x 8, box filter, path
     depth 3): mean of 8 jaxgfx renders against 8 Mitsuba 3 (scalar_rgb) renders of the same

@@ -54,7 +54,7 @@ def test_distant_sensor_reads_a_constant_environment():
     np.testing.assert_allclose(_R(s, jax.random.key(0)), [[lv]], rtol=1e-6)
 
 
-@pytest.mark.slow  # ~3.5 s process CPU under load 4 (2 compiled renders)
+@pytest.mark.slow  # slow: ~3 s on 2 cores, load 3.8 (2 compiled renders)
 def test_distant_sensor_shape_and_disk_targets_read_the_plane():
     """A rectangle target on the lit plane and a disk target about a point of it (every ray
     hits the uniformly lit plane) read ``rho E cos(theta) / pi`` too (float32 rounding)."""
@@ -95,7 +95,7 @@ def test_distant_sensor_gradients_match_finite_differences(x64):
     np.testing.assert_allclose(ad, fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
 
 
-@pytest.mark.slow  # ~2.5 s process CPU under load 4 (value + gradient, 6 perturbed renders)
+@pytest.mark.slow  # slow: ~2.5 s on 2 cores, load 3.8 (value + gradient, 6 perturbed renders)
 def test_distant_sensor_shape_target_gradients_match_finite_differences(x64):
     """The same through a rectangle target's centre (its sampled points move with it)."""
     s = _scene({"type": "distant", "direction": _D, "distance": 5,
@@ -190,7 +190,7 @@ def test_xml_reads_and_writes_the_distant_sensor(tmp_path):
 
 
 @pytest.mark.mitsuba
-@pytest.mark.slow  # ~10 s process CPU under load 4 (3 targets x 8 renders x 1024 spp each)
+@pytest.mark.slow  # slow: ~5 s each on 2 cores, load 3.8 (3 x 8 renders x 1024 spp, 1 pixel)
 @pytest.mark.parametrize("kind", list(_TARGETS))
 def test_distant_sensor_matches_mitsuba_same_run(tmp_path, kind):
     """A point on the floor (lit by a sphere light and a constant environment, partly
