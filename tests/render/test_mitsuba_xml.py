@@ -363,8 +363,10 @@ def test_emitters_and_integrator(tmp_path):
     pt, const, area = x.desc["emitters"]
     assert pt == {"type": "point", "position": [0.0, 0.0, 10.0], "intensity": [100.0] * 3}
     assert const == {"type": "constant", "radiance": [0.5] * 3}
-    # an emitter shape without a BSDF gets Mitsuba's default (diffuse 0.5), not jaxgfx's black
-    assert area["material"] == "mitsuba_default" and area["radiance"] == [2.0] * 3
+    # an emitter shape without a BSDF gets Mitsuba's default for emitters, a black diffuse
+    # (mi.traverse of such a rectangle: bsdf.reflectance.value 0.0; 0.5 without the emitter)
+    assert area["material"] == "mitsuba_default_emitter" and area["radiance"] == [2.0] * 3
+    assert x.desc["materials"]["mitsuba_default_emitter"]["reflectance"] == [0.0] * 3
     assert area["shape"] == {"type": "rectangle", "center": [0.0, 0.0, 0.0],
                              "edge_u": [2.0, 0.0, 0.0], "edge_v": [0.0, 2.0, 0.0]}  # fmt: skip
     x = read_xml(write(tmp_path, scene_xml(SPHERE + '<integrator type="path"/>')))

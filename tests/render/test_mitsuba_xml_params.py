@@ -43,7 +43,7 @@ def test_parameters_list_every_leaf_with_xml_ids_as_names(xml):
     scene = load_scene(xml)
     got = {p.path: (p.shape, p.bounds) for p in scene.parameters()}
     inf = float("inf")
-    want = {  # written out from the XML above (Mitsuba's default grey BSDF is not named)
+    want = {  # written out from the XML above (the light gets Mitsuba's default black BSDF of an emitter)
         "camera.origin": ((3,), (-inf, inf)),
         "camera.target": ((3,), (-inf, inf)),
         "camera.up": ((3,), (-inf, inf)),
@@ -54,7 +54,7 @@ def test_parameters_list_every_leaf_with_xml_ids_as_names(xml):
         "materials.brass.eta": ((3,), (0.0, inf)),
         "materials.brass.k": ((3,), (0.0, inf)),
         "materials.red_paint.reflectance": ((3,), (0.0, 1.0)),
-        "materials.mitsuba_default.reflectance": ((3,), (0.0, 1.0)),
+        "materials.mitsuba_default_emitter.reflectance": ((3,), (0.0, 1.0)),
         "emitters.area.0.radiance": ((3,), (0.0, inf)),
         "emitters.environment.radiance": ((3,), (0.0, inf)),
         "shapes.0.centers": ((1, 3), (-inf, inf)),

@@ -1200,6 +1200,12 @@ def _shape(obj: _Obj, doc, desc, ctx):
         raise p.err("flip_normals", "flipped normals are not supported")
     if bsdfs:
         mat = _bsdf(bsdfs[0], doc, desc)
+    elif emitters:  # Mitsuba's default BSDF of an emitting shape: a black (one-sided) diffuse
+        mat = "mitsuba_default_emitter"
+        rho = [0.0, 0.0, 0.0]
+        desc["materials"].setdefault(
+            mat, {"type": "diffuse", "reflectance": rho, "one_sided": True}
+        )
     else:  # Mitsuba's default BSDF: a (one-sided) diffuse
         mat = "mitsuba_default"
         rho = [DEFAULTS["diffuse.reflectance"]] * 3
