@@ -43,7 +43,8 @@ def test_parameters_list_every_leaf_with_xml_ids_as_names(xml):
     scene = load_scene(xml)
     got = {p.path: (p.shape, p.bounds) for p in scene.parameters()}
     inf = float("inf")
-    want = {  # written out from the XML above (the light gets Mitsuba's default black BSDF of an emitter)
+    # written out from the XML above (the light gets Mitsuba's default black BSDF of an emitter)
+    want = {
         "camera.origin": ((3,), (-inf, inf)),
         "camera.target": ((3,), (-inf, inf)),
         "camera.up": ((3,), (-inf, inf)),
