@@ -134,3 +134,26 @@ def example_scene(width=16, *, floor=0.5, metal=1.0, full=True) -> dict:
     desc["materials"]["floor"]["reflectance"] = [floor] * 3
     desc["materials"]["metal"]["reflectance"] = metal
     return desc
+
+
+def sensor_test_xml(sensors: str = "", meter: str = "") -> str:
+    """The Mitsuba XML scene of the sensor tests (meters, batch, distant): the ``<sensor>``
+    elements ``sensors``, path depth 3, a constant environment, a 6 x 6 diffuse floor in
+    ``y = 0``, an emitting sphere (black diffuse, Mitsuba's BSDF of an emitter without one) and
+    a diffuse sphere holding ``meter`` (an irradiance meter's ``<sensor>``)."""
+    return f"""<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="3"/></integrator>
+    {sensors}
+    <emitter type="constant"><rgb name="radiance" value="0.2, 0.3, 0.4"/></emitter>
+    <shape type="rectangle">
+        <transform name="to_world"><scale value="3"/><rotate x="1" angle="-90"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.5"/></bsdf>
+    </shape>
+    <shape type="sphere"><point name="center" value="0.3, 1.6, 0.2"/>
+        <float name="radius" value="0.4"/>
+        <bsdf type="diffuse"><float name="reflectance" value="0"/></bsdf>
+        <emitter type="area"><rgb name="radiance" value="4, 3, 2"/></emitter></shape>
+    <shape type="sphere"><point name="center" value="0, 0.5, 0"/><float name="radius" value="0.3"/>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.7"/></bsdf>{meter}</shape>
+</scene>
+"""

@@ -16,6 +16,7 @@ from jaxgfx.render import render
 from jaxgfx.render.camera import BatchCamera, MatrixCamera, PerspectiveCamera, ThinLensCamera
 from jaxgfx.render.scene import load_scene
 from jaxgfx.testing import ad_fd_per_key
+from tests.render._scenes import sensor_test_xml
 
 _A = {"origin": [0, 1.5, 4], "target": [0, 0.4, 0], "fov": 45, "width": 4, "height": 3}
 _B = {"origin": [2.5, 3, 0.5], "target": [0, 0, 0], "fov": 70, "width": 4, "height": 3}
@@ -158,9 +159,7 @@ def test_bad_batches_are_refused_naming_the_field():
         _batch(_A, {**_B, "fov": 190})
 
 
-_XML = """<scene version="3.0.0">
-    <integrator type="path"><integer name="max_depth" value="3"/></integrator>
-    <sensor type="batch">
+_SENSOR = """<sensor type="batch">
         <sensor type="perspective" name="first">
             <float name="fov" value="45"/>
             <transform name="to_world">
@@ -183,23 +182,11 @@ _XML = """<scene version="3.0.0">
             <integer name="height" value="8"/><rfilter type="box"/></film>
         <sampler type="independent"><integer name="sample_count" value="{spp}"/></sampler>
     </sensor>
-    <emitter type="constant"><rgb name="radiance" value="0.2, 0.3, 0.4"/></emitter>
-    <shape type="rectangle">
-        <transform name="to_world"><scale value="3"/><rotate x="1" angle="-90"/></transform>
-        <bsdf type="diffuse"><rgb name="reflectance" value="0.5"/></bsdf>
-    </shape>
-    <shape type="sphere"><point name="center" value="0.3, 1.6, 0.2"/>
-        <float name="radius" value="0.4"/>
-        <bsdf type="diffuse"><float name="reflectance" value="0"/></bsdf>
-        <emitter type="area"><rgb name="radiance" value="4, 3, 2"/></emitter></shape>
-    <shape type="sphere"><point name="center" value="0, 0.5, 0"/><float name="radius" value="0.3"/>
-        <bsdf type="diffuse"><rgb name="reflectance" value="0.7"/></bsdf></shape>
-</scene>
 """
 
 
 def _xml(w=24, spp=16, extra=""):
-    return _XML.format(w=w, spp=spp, extra=extra)
+    return sensor_test_xml(_SENSOR.format(w=w, spp=spp, extra=extra))
 
 
 def test_xml_reads_and_writes_the_batch(tmp_path):

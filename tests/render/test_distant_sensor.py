@@ -15,6 +15,7 @@ from jaxgfx.render import render
 from jaxgfx.render.camera import DistantSensor
 from jaxgfx.render.scene import load_scene
 from jaxgfx.testing import ad_fd_per_key
+from tests.render._scenes import sensor_test_xml
 
 RHO, E, THETA = 0.6, 2.0, math.radians(30)
 _PLANE = {"type": "rectangle", "center": [0, 0, 0], "normal": [0, 1, 0], "size": [4, 4],
@@ -119,26 +120,12 @@ def test_bad_distant_sensors_are_refused_naming_the_field():
                                                    "radius": 1}}})  # fmt: skip
 
 
-_XML = """<scene version="3.0.0">
-    <integrator type="path"><integer name="max_depth" value="3"/></integrator>
-    <sensor type="distant">
+_SENSOR = """<sensor type="distant">
         <vector name="direction" value="-0.3, -1, -0.2"/>{target}
         <film type="hdrfilm"><integer name="width" value="{w}"/>
             <integer name="height" value="1"/><rfilter type="box"/></film>
         <sampler type="independent"><integer name="sample_count" value="{spp}"/></sampler>
     </sensor>
-    <emitter type="constant"><rgb name="radiance" value="0.2, 0.3, 0.4"/></emitter>
-    <shape type="rectangle">
-        <transform name="to_world"><scale value="3"/><rotate x="1" angle="-90"/></transform>
-        <bsdf type="diffuse"><rgb name="reflectance" value="0.5"/></bsdf>
-    </shape>
-    <shape type="sphere"><point name="center" value="0.3, 1.6, 0.2"/>
-        <float name="radius" value="0.4"/>
-        <bsdf type="diffuse"><float name="reflectance" value="0"/></bsdf>
-        <emitter type="area"><rgb name="radiance" value="4, 3, 2"/></emitter></shape>
-    <shape type="sphere"><point name="center" value="0, 0.5, 0"/><float name="radius" value="0.3"/>
-        <bsdf type="diffuse"><rgb name="reflectance" value="0.7"/></bsdf></shape>
-</scene>
 """
 _TARGETS = {
     "point": '<point name="target" value="1.0, 0.0, 0.8"/>',
@@ -149,7 +136,7 @@ _TARGETS = {
 
 
 def _xml(kind, w=1, spp=64):
-    return _XML.format(target=_TARGETS[kind], w=w, spp=spp)
+    return sensor_test_xml(_SENSOR.format(target=_TARGETS[kind], w=w, spp=spp))
 
 
 def test_xml_reads_and_writes_the_distant_sensor(tmp_path):

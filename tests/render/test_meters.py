@@ -15,6 +15,7 @@ from jaxgfx.render import render
 from jaxgfx.render.camera import IrradianceMeter, RadianceMeter
 from jaxgfx.render.scene import load_scene
 from jaxgfx.testing import ad_fd_per_key
+from tests.render._scenes import sensor_test_xml
 
 L = [1.0, 2.0, 3.0]
 
@@ -152,21 +153,6 @@ def test_bad_meters_are_refused_naming_the_field():
         _scene({"type": "fisheye"})
 
 
-_XML = """<scene version="3.0.0">
-    <integrator type="path"><integer name="max_depth" value="3"/></integrator>
-    {sensor}
-    <emitter type="constant"><rgb name="radiance" value="0.2, 0.3, 0.4"/></emitter>
-    <shape type="rectangle">
-        <transform name="to_world"><scale value="3"/><rotate x="1" angle="-90"/></transform>
-        <bsdf type="diffuse"><rgb name="reflectance" value="0.5"/></bsdf>
-    </shape>
-    <shape type="sphere"><point name="center" value="0.3, 1.6, 0.2"/>
-        <float name="radius" value="0.4"/>
-        <emitter type="area"><rgb name="radiance" value="4, 3, 2"/></emitter></shape>
-    <shape type="sphere"><point name="center" value="0, 0.5, 0"/><float name="radius" value="0.3"/>
-        <bsdf type="diffuse"><rgb name="reflectance" value="0.7"/></bsdf>{meter}</shape>
-</scene>
-"""
 _FILM = """<film type="hdrfilm"><integer name="width" value="{w}"/>
     <integer name="height" value="1"/><rfilter type="box"/></film>
     <sampler type="independent"><integer name="sample_count" value="{spp}"/></sampler>"""
@@ -178,8 +164,8 @@ _IRRADIANCE = '<sensor type="irradiancemeter">{film}</sensor>'
 def _xml(kind, w=1, spp=64):
     film = _FILM.format(w=w, spp=spp)
     if kind == "radiancemeter":
-        return _XML.format(sensor=_RADIANCE.format(film=film), meter="")
-    return _XML.format(sensor="", meter=_IRRADIANCE.format(film=film))
+        return sensor_test_xml(_RADIANCE.format(film=film))
+    return sensor_test_xml(meter=_IRRADIANCE.format(film=film))
 
 
 def test_xml_reads_and_writes_the_meters(tmp_path):
