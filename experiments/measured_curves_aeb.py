@@ -116,6 +116,23 @@ def subspace_rows():
     return rows
 
 
+def analytic_stack(name):
+    """The analytic stacks of ``tests/hdr/_stacks.py`` (64x64, 5 frames x4 apart, 8-bit, gain
+    1e-4, read sigma 1e-3) through ``hdr.synthetic_response(name)``."""
+    import jax.numpy as jnp
+
+    rad = hdr.synthetic_radiance(jax.random.key(1), 64, 64, dynamic_range=1e4)
+    return hdr.make_bracketed_stack(
+        jax.random.key(2),
+        rad,
+        jnp.asarray((1.0, 4.0, 16.0, 64.0, 256.0)),
+        hdr.synthetic_response(name),
+        bits=8,
+        gain=1e-4,
+        read_sigma=1e-3,
+    )
+
+
 def checks():
     """``method="subspace"`` on data its ``n_poly=0`` choice did not see: the real JPEG
     brackets (LOO per held frame, levels; default and OpenCV in the same run) and the analytic
@@ -126,19 +143,6 @@ def checks():
     from .measured_curves import opencv_debevec_merge
     from .merge_weight import REAL_RATIOS
     from .real_bracket import load, opencv_loo
-
-    rad = hdr.synthetic_radiance(jax.random.key(1), 64, 64, dynamic_range=1e4)
-
-    def stack(name):  # the stacks of tests/hdr/_stacks.py (64x64, 5 frames x4, 8-bit)
-        return hdr.make_bracketed_stack(
-            jax.random.key(2),
-            rad,
-            jnp.asarray((1.0, 4.0, 16.0, 64.0, 256.0)),
-            hdr.synthetic_response(name),
-            bits=8,
-            gain=1e-4,
-            read_sigma=1e-3,
-        )
 
     def pf(r, ims, t):
         return [round(float(v), 2) for v in np.asarray(hdr.leave_one_out(ims, t, r).per_frame)]
@@ -158,7 +162,7 @@ def checks():
         log(row)
         rows.append(row)
     for name in ("gamma2.2", "srgb", "filmic", "log"):
-        st = stack(name)
+        st = analytic_stack(name)
         row = {"stack": f"synthetic {name}", "metric": "radiance error, curve error"}
 
         def sc(r, st=st):
@@ -208,18 +212,8 @@ def overlaps():
             jax.random.key(2), rad, jnp.asarray(times), name, max_shift=(shift or [0.0])[0]
         )
         out[f"JPEG-like {label}"] = ov(st.images)
-    rad = hdr.synthetic_radiance(jax.random.key(1), 64, 64, dynamic_range=1e4)
     for name in ("gamma2.2", "srgb", "filmic", "log"):
-        st = hdr.make_bracketed_stack(
-            jax.random.key(2),
-            rad,
-            jnp.asarray((1.0, 4.0, 16.0, 64.0, 256.0)),
-            hdr.synthetic_response(name),
-            bits=8,
-            gain=1e-4,
-            read_sigma=1e-3,
-        )
-        out[f"synthetic {name}"] = ov(st.images)
+        out[f"synthetic {name}"] = ov(analytic_stack(name).images)
     log(out)
     return out
 
