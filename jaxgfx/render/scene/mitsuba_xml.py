@@ -1741,16 +1741,32 @@ def _batch(p: _Params, obj: _Obj, doc, ctx, films, samplers, width, height, film
     return {"type": "batch", "cameras": cams}, film, spp
 
 
+def _one_pixel_film(obj, films, samplers, width, height, what):
+    """Refuse a film other than 1 x 1 for ``what`` (a meter, a distant sensor) and more than
+    one film or sampler, naming the film's (or the sensor's) file and line."""
+    if (width, height) != (1, 1):
+        raise ValueError(f"{(films[0] if films else obj).where}: {what} needs a 1 x 1 "
+                         f"film, got {width} x {height}")  # fmt: skip
+    if len(films) > 1 or len(samplers) > 1:
+        raise ValueError(f"{obj.where}: expected at most one <film> and one <sampler>")
+
+
+def _unit_z(p: _Params, m, what):
+    """The +z axis of the sensor's ``to_world`` ``m`` (a list), which must be a unit vector
+    (Mitsuba does not normalise it; ``what`` names the sensor in the error)."""
+    z = m[:3, 2]
+    if not abs(float(np.linalg.norm(z)) - 1.0) < 1e-6:
+        raise p.err("to_world", f"a to_world that scales the {what}'s +z axis is not "
+                                "supported (Mitsuba does not normalise it)")  # fmt: skip
+    return z.tolist()
+
+
 def _meter(p: _Params, obj, films, samplers, width, height, film, spp):
     """Mitsuba's ``radiancemeter`` (``origin`` + ``direction``, or ``to_world``: its origin
     and +z, which must be a unit vector) and ``irradiancemeter`` (nested in a shape, which
     :func:`_shape` gives it) -> ``{type: radiancemeter | irradiancemeter, ...}``; a 1 x 1 film
     (Mitsuba refuses others for the radiance meter)."""
-    if (width, height) != (1, 1):
-        raise ValueError(f"{(films[0] if films else obj).where}: a {obj.type} needs a 1 x 1 "
-                         f"film, got {width} x {height}")  # fmt: skip
-    if len(films) > 1 or len(samplers) > 1:
-        raise ValueError(f"{obj.where}: expected at most one <film> and one <sampler>")
+    _one_pixel_film(obj, films, samplers, width, height, f"a {obj.type}")
     if obj.type == "irradiancemeter":
         if "to_world" in obj.props:
             raise p.err("to_world", "an irradiancemeter takes its shape's transform (as in "
@@ -1760,11 +1776,7 @@ def _meter(p: _Params, obj, films, samplers, width, height, film, spp):
     m = p.transform("to_world")
     origin, direction = p.vec("origin"), p.vec("direction")
     if m is not None:  # to_world wins over origin / direction (as in Mitsuba)
-        z = m[:3, 2]
-        if not abs(float(np.linalg.norm(z)) - 1.0) < 1e-6:
-            raise p.err("to_world", "a to_world that scales the meter's +z axis is not "
-                                    "supported (Mitsuba does not normalise it)")  # fmt: skip
-        origin, direction = m[:3, 3].tolist(), z.tolist()
+        origin, direction = m[:3, 3].tolist(), _unit_z(p, m, "meter")
     elif (origin is None) != (direction is None):
         raise p.err("origin" if origin is None else "direction",
                     "give both origin and direction (or to_world)")  # fmt: skip
@@ -1784,20 +1796,12 @@ def _distant(p: _Params, obj: _Obj, doc, ctx, films, samplers, width, height, fi
     (the disk across the scene's bounding sphere). The ray origins' ``distance`` (twice the
     bounding sphere's radius, as Mitsuba's) and the disk are set by :func:`read_xml` once
     every shape is read (:func:`_distant_bounds`). A 1 x 1 film."""
-    if (width, height) != (1, 1):
-        raise ValueError(f"{(films[0] if films else obj).where}: a distant sensor needs a 1 x 1 "
-                         f"film, got {width} x {height}")  # fmt: skip
-    if len(films) > 1 or len(samplers) > 1:
-        raise ValueError(f"{obj.where}: expected at most one <film> and one <sampler>")
+    _one_pixel_film(obj, films, samplers, width, height, "a distant sensor")
     m, direction = p.transform("to_world"), p.vec("direction")
     if m is not None and direction is not None:
         raise p.err("direction", "give direction or to_world, not both (as Mitsuba)")
     if m is not None:
-        z = m[:3, 2]
-        if not abs(float(np.linalg.norm(z)) - 1.0) < 1e-6:
-            raise p.err("to_world", "a to_world that scales the sensor's +z axis is not "
-                                    "supported (Mitsuba does not normalise it)")  # fmt: skip
-        direction = z.tolist()
+        direction = _unit_z(p, m, "sensor")
     direction = [0.0, 0.0, 1.0] if direction is None else list(direction)
     if not np.linalg.norm(direction) > 0:
         raise p.err("direction", "expected a nonzero vector")
