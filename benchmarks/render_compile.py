@@ -15,7 +15,8 @@ child before tracing):
 
 * ``default``: the code as it is.
 * ``checkpointed``: a pass scan of one step and a bounce loop of one bounce checkpointed
-  anyway (``estimator.CHECKPOINT_ONE_STEP``, ``_bounce.CHECKPOINT_ONE_BOUNCE``; before issue 22).
+  anyway (``estimator.CHECKPOINT_ONE_STEP``, ``_bounce.BOUNCE_CHECKPOINT = "always"``; before
+  issue 22).
 * ``one_pass_per_step``: ``render_partial`` with one sample pass per scan step (the layout
   before issue 22).
 * ``one_render_for_both_keys``: the decorrelated loss's two images (``optim._estimators``)
@@ -196,7 +197,7 @@ def _child(config: str, variant: str, image_dir: str | None = None) -> dict:
         import jaxgfx.render.integrators._bounce as PI
 
         E.CHECKPOINT_ONE_STEP = True
-        PI.CHECKPOINT_ONE_BOUNCE = True
+        PI.BOUNCE_CHECKPOINT = "always"
     elif variant == "one_render_for_both_keys":
         import jaxgfx.optim._estimators as OE
 

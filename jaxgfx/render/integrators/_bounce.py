@@ -38,10 +38,10 @@ ADJOINTS = ("ad", "replay")
 (path replay backpropagation, :mod:`~jaxgfx.render.integrators._replay`: material, emitter,
 texture and environment parameters only, memory flat in depth)."""
 
-CHECKPOINT_ONE_BOUNCE = False  # True: checkpoint a bounce loop of one bounce too (A/B switch)
-# A/B switch for benchmarks.render_compile's grad_ratio rows: "on" (checkpoint each bounce),
-# "off" (no bounce checkpoint: the pass checkpoint of estimator.pass_scan then keeps every
-# bounce's intermediates of one pass), "no_cse" (``prevent_cse=False``, safe inside a scan)
+# A/B switch for benchmarks.render_compile: "on" (checkpoint each bounce of a loop of two or
+# more bounces), "always" (a loop of one bounce too: the "checkpointed" variant, as before
+# issue 22), "off" (no bounce checkpoint: the pass checkpoint of estimator.pass_scan then keeps
+# every bounce's intermediates of one pass), "no_cse" (``prevent_cse=False``, safe inside a scan)
 BOUNCE_CHECKPOINT = "on"
 
 
@@ -281,7 +281,7 @@ def path_radiance(
         # docs/render_gradients.md: same gradient, same time per gradient, faster compile)
         # (one bounce, e.g. direct light: the checkpoint would keep the same intermediates and
         # only add a recomputation to compile; issue 22)
-        if BOUNCE_CHECKPOINT != "off" and (max_depth > 2 or CHECKPOINT_ONE_BOUNCE):
+        if BOUNCE_CHECKPOINT != "off" and (max_depth > 2 or BOUNCE_CHECKPOINT == "always"):
             body = jax.checkpoint(body, prevent_cse=BOUNCE_CHECKPOINT != "no_cse")
         carry, _ = jax.lax.scan(body, carry, (us, jnp.arange(max_depth - 1)))
     # last vertex: emission only
