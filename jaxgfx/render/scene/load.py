@@ -21,7 +21,15 @@ from jaxgfx.render.emitters import (
     SpotLight,
 )
 from jaxgfx.render.film import make_filter
-from jaxgfx.render.geometry import Instances, Rectangles, SDFGridShape, SDFShape, Spheres, area
+from jaxgfx.render.geometry import (
+    Instances,
+    LinearCurves,
+    Rectangles,
+    SDFGridShape,
+    SDFShape,
+    Spheres,
+    area,
+)
 from jaxgfx.render.scene._lights import SPOT_TEXTURE_KEYS, projector_from_desc, spot_texture
 from jaxgfx.render.scene._materials import (
     check_one_sided,
@@ -194,7 +202,7 @@ def load_scene(
                    None if k == "mesh" else pos, mat)
                   for ident, k, pos, mat in shape_ids]  # fmt: skip
     for m, mi in meshes:
-        if isinstance(m, (SDFShape, SDFGridShape, Instances)):  # one primitive each
+        if isinstance(m, (SDFShape, SDFGridShape, Instances, LinearCurves)):  # one material
             shapes.append(m)
             shape_mats.append(jnp.full((1,), mi, jnp.int32))
             continue

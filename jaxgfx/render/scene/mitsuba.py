@@ -513,6 +513,23 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
         m[:3, :3] = np.asarray(d["frame"], np.float64) * r
         m[:3, 3] = c
         return {"type": "sphere", "to_world": _transform(m, mi)}
+    if kind == "linearcurve":  # Mitsuba's curve text file (written for inline curves)
+        S.shape_from_desc(d, where, base_dir)  # validated as load_scene does
+        if "filename" in d:
+            path = os.fspath(d["filename"])
+            if not os.path.isabs(path) and base_dir:
+                path = os.path.join(base_dir, path)
+            path = os.path.abspath(path)
+        else:
+            name = re.sub(r"[^A-Za-z0-9]+", "_", where).strip("_")
+            path = os.path.join(work_dir(), f"{name}.txt")
+            from jaxgfx.render.geometry import write_curves
+
+            write_curves(path, d["curves"])
+        out = {"type": "linearcurve", "filename": path}
+        if "to_world" in d:
+            out["to_world"] = _transform(np.asarray(d["to_world"], np.float64), mi)
+        return out
     if kind == "sdfgrid":  # Mitsuba's sdfgrid: a .vol file (written for inline values)
         from jaxgfx.render.geometry import write_vol
 
@@ -1151,6 +1168,7 @@ def scene_to_desc(scene) -> dict:
     )
     from jaxgfx.render.geometry import (
         Instances,
+        LinearCurves,
         Rectangles,
         SDFGridShape,
         Spheres,
@@ -1225,6 +1243,10 @@ def scene_to_desc(scene) -> dict:
                 if shape.frames is not None:
                     d["frame"] = _list(shape.frames[j])
                 out.append((d, mats[j]))
+        elif isinstance(shape, LinearCurves):
+            from jaxgfx.render.geometry import curve_lists
+
+            out.append(({"type": "linearcurve", "curves": curve_lists(shape)}, mats[0]))
         elif isinstance(shape, SDFGridShape):
             out.append(({"type": "sdfgrid", "values": _list(shape.grid.values),
                          "normals": shape.normals}, mats[0]))  # fmt: skip
