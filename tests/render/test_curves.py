@@ -34,80 +34,78 @@ def test_round_cone_hits_match_closed_forms(x64):
     """A tube of radius 0.2 along x from 0 to 1 (one segment) and a cone 0.3 -> 0.1 (apex
     beyond b): side hits at the closed-form t (the tangent cone's slant), caps as balls, the
     far side and rays from inside culled, uv (around, along)."""
-    tube = LinearCurves([[0.0, 0, 0, 0.2], [1.0, 0, 0, 0.2]])
-    o = [[0.25, 0, -1], [1.1, 0, -1], [-0.1, 0, -1], [0.5, 0, 0], [0.5, 0.5, -1], [0.5, 0, 1]]
-    d = [[0, 0, 1]] * 5 + [[0, 0, -1]]
-    h = _hit(tube, o, d)
+    # one shape, two curves: the tube at y = 0, the cone (0.3 -> 0.1) at y = 10
+    shape = LinearCurves(
+        [[0.0, 0, 0, 0.2], [1.0, 0, 0, 0.2], [0.0, 10, 0, 0.3], [1.0, 10, 0, 0.1]], [0, 2]
+    )
+    x = 0.5
+    o = [[0.25, 0, -1], [1.1, 0, -1], [-0.1, 0, -1], [0.5, 0, 0], [0.5, 0.5, -1], [0.5, 0, 1],
+         [x, 10, -2]]  # fmt: skip
+    d = [[0, 0, 1]] * 5 + [[0, 0, -1], [0, 0, 1]]
+    h = _hit(shape, o, d)
     t = np.asarray(h.t)
     cap = 1 - math.sqrt(0.2**2 - 0.1**2)
     np.testing.assert_allclose(t[[0, 1, 2, 5]], [0.8, cap, cap, 0.8], rtol=1e-12)
     assert not np.any(np.asarray(h.valid)[[3, 4]])  # from inside: culled; beside: a miss
     np.testing.assert_allclose(np.asarray(h.ng)[0], [0, 0, -1], atol=1e-12)
     np.testing.assert_allclose(np.asarray(h.ng)[1], [0.5, 0, -math.sqrt(0.75)], atol=1e-12)
-    # u: the -z side is atan2(n·e_rot, n·e_rad) = atan2(-1, 0) -> 3/4 (e_rot = +z, e_rad = +y)
-    np.testing.assert_allclose(
-        np.asarray(h.uv)[[0, 1, 2, 5]],
-        [[0.75, 0.25], [0.75, 1], [0.75, 0], [0.25, 0.5]],
-        atol=1e-12,
-    )
-    # a cone: ra = 0.3 at a, rb = 0.1 at b = (1, 0, 0); sin(half angle) = 0.2 / 1
-    cone = LinearCurves([[0.0, 0, 0, 0.3], [1.0, 0, 0, 0.1]])
-    x = 0.5
-    h = _hit(cone, [[x, 0, -2]], [[0, 0, 1]])
-    # the envelope in the xz half-plane is the common tangent line of the two circles: points
-    # at distance ρ from the axis with ρ cos α + x sin α = 0.3 (its normal form; sin α =
+    # u: the -z side is atan2(n·e_rot, n·e_rad) = atan2(-1, 0) -> 3/4 (e_rot = +z, e_rad = +y);
+    # v = (s + segment) / 2 segments
+    np.testing.assert_allclose(np.asarray(h.uv)[[0, 1, 2, 5]],
+                               [[0.75, 0.125], [0.75, 0.5], [0.75, 0], [0.25, 0.25]],
+                               atol=1e-12)  # fmt: skip
+    # the cone's envelope in the xz half-plane is the common tangent line of the two circles:
+    # points at distance ρ from the axis with ρ cos α + x sin α = 0.3 (its normal form; sin α =
     # (r_a - r_b) / |b - a| = 0.2), its normal (sin α, 0, -cos α)
     sa, ca = 0.2, math.sqrt(0.96)
     rho = (0.3 - x * sa) / ca
-    np.testing.assert_allclose(float(h.t[0]), 2 - rho, rtol=1e-12)
-    np.testing.assert_allclose(np.asarray(h.ng)[0], [sa, 0, -ca], atol=1e-12)
+    np.testing.assert_allclose(t[6], 2 - rho, rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(h.ng)[6], [sa, 0, -ca], atol=1e-12)
 
 
-def test_hard_cases_are_finite_and_as_documented(x64):
-    """Rays along the axis hit the start cap (Mitsuba 3.9.1 / Embree misses exactly axial
-    rays: a documented difference); a radius of 0 at an end is a pointed cone; a zero-length
-    segment is not hit and its successor draws no start ball (as Mitsuba); one ball inside
-    the other is the big ball; a spawned ray leaving the surface does not re-hit it; tangent
-    (grazing) rays. Values and the gradients of t, n and uv w.r.t. the control points are
-    finite in all of them. One shape: each case's curve 10 units apart in y."""
-    cases = [  # (curve, ray origin, direction, t or None: no hit, or nan: either)
-        ([[0.0, 0, 0, 0.2], [1.0, 0, 0, 0.2]], [-1.0, 0, 0], [1.0, 0, 0], 0.8),  # axial
-        ([[0.0, 0, 0, 0.3], [0.5, 0, 0, 0.0]], [0.3, 0, -1], [0, 0, 1.0], 0.85),  # to apex
-        ([[0.0, 0, 0, 0.3], [0.5, 0, 0, 0.0]], [1.0, 0, 0], [-1.0, 0, 0], 0.5),  # at the apex
-        ([[0.0, 0, 0, 0.5], [0.1, 0, 0, 0.1]], [-1.0, 0, 0], [1.0, 0, 0], 0.5),  # nested balls
-        ([[0.0, 0, 0, 0.2], [1.0, 0, 0, 0.2]], [0.5, 0.2, -1], [0, 0, 1.0], np.nan),  # grazing
-        ([[0.0, 0, 0, 0.2], [1.0, 0, 0, 0.2]], [0.5, 0, -0.2 - 1e-9], _unit([0.3, 0, -1]), None),
-        ([[0.0, 0, 0, 0.2], [1.0, 0, 0, 0.2]], [0.5, 0, -0.2 + 1e-9], _unit([0.3, 0, -1]), None),
-        # zero-length segment then a cone: nothing at the joint ball, the cone's side is hit
-        ([[0.0, 0, 0, 0.3], [0.0, 0, 0, 0.3], [0.5, 0, 0, 0.0]], [0.0, 0, -1], [0, 0, 1.0], None),
-        ([[0.0, 0, 0, 0.3], [0.0, 0, 0, 0.3], [0.5, 0, 0, 0.0]], [0.3, 0, -1], [0, 0, 1.0], 0.85),
-    ]
+_HARD = [  # (curve, ray origin, direction, t or None: no hit, or nan: either)
+    ([[0.0, 0, 0, 0.2], [1.0, 0, 0, 0.2]], [-1.0, 0, 0], [1.0, 0, 0], 0.8),  # axial
+    ([[0.0, 0, 0, 0.3], [0.5, 0, 0, 0.0]], [0.3, 0, -1], [0, 0, 1.0], 0.85),  # to apex
+    ([[0.0, 0, 0, 0.3], [0.5, 0, 0, 0.0]], [1.0, 0, 0], [-1.0, 0, 0], 0.5),  # at the apex
+    ([[0.0, 0, 0, 0.5], [0.1, 0, 0, 0.1]], [-1.0, 0, 0], [1.0, 0, 0], 0.5),  # nested balls
+    ([[0.0, 0, 0, 0.2], [1.0, 0, 0, 0.2]], [0.5, 0.2, -1], [0, 0, 1.0], np.nan),  # grazing
+    ([[0.0, 0, 0, 0.2], [1.0, 0, 0, 0.2]], [0.5, 0, -0.2 - 1e-9], _unit([0.3, 0, -1]), None),
+    ([[0.0, 0, 0, 0.2], [1.0, 0, 0, 0.2]], [0.5, 0, -0.2 + 1e-9], _unit([0.3, 0, -1]), None),
+    # zero-length segment then a cone: nothing at the joint ball, the cone's side is hit
+    ([[0.0, 0, 0, 0.3], [0.0, 0, 0, 0.3], [0.5, 0, 0, 0.0]], [0.0, 0, -1], [0, 0, 1.0], None),
+    ([[0.0, 0, 0, 0.3], [0.0, 0, 0, 0.3], [0.5, 0, 0, 0.0]], [0.3, 0, -1], [0, 0, 1.0], 0.85),
+]
+
+
+def _hard_scene():
+    """One shape holding each hard case's curve, 10 units apart in y, and its rays."""
     pts, segs, o, d = [], [], [], []
-    for k, (c, ok, dk, _) in enumerate(cases):
+    for k, (c, ok, dk, _) in enumerate(_HARD):
         c = np.asarray(c, np.float64) + [0, 10 * k, 0, 0]
         segs += [len(pts) + i for i in range(len(c) - 1)]
         pts += c.tolist()
         o.append(np.add(ok, [0, 10 * k, 0]))
         d.append(dk)
-    pts = jnp.asarray(pts)
-    shape = LinearCurves(pts, segs)
+    return LinearCurves(jnp.asarray(pts), segs), jnp.asarray(o), jnp.asarray(d)
+
+
+def test_hard_cases_are_as_documented(x64):
+    """Rays along the axis hit the start cap (Mitsuba 3.9.1 / Embree misses exactly axial
+    rays: a documented difference); a radius of 0 at an end is a pointed cone, hit at its
+    apex; a zero-length segment is not hit and its successor draws no start ball (as
+    Mitsuba); one ball inside the other is the big ball; a spawned ray leaving the surface
+    does not re-hit it; tangent (grazing) rays give a finite record either way."""
+    shape, o, d = _hard_scene()
     h = _hit(shape, o, d)
-    for k, (*_, t_ref) in enumerate(cases):
+    for k, (*_, t_ref) in enumerate(_HARD):
         if t_ref is None:
             assert not bool(h.valid[k]), k
         elif not np.isnan(t_ref):
             assert bool(h.valid[k]), k
             np.testing.assert_allclose(float(h.t[k]), t_ref, rtol=1e-9, err_msg=str(k))
-    assert int(h.prim_id[8]) == len(segs) - 1  # the cone after the zero-length segment
-    o, d = jnp.asarray(o), jnp.asarray(d)
-
-    def f(p):
-        hk = eqx_replace(shape, p).hit(h.prim_id, o, d, h.valid)
-        return jnp.sum(hk.t * hk.valid) + jnp.sum(hk.ng) + jnp.sum(hk.uv)
-
-    g = jax.jit(jax.grad(f))(pts)
-    assert np.all(np.isfinite(np.asarray(g)))
-    assert np.abs(np.asarray(g)).max() > 0.1
+    assert int(h.prim_id[8]) == shape.segment_count - 1  # the cone after the zero-length one
+    for x in (h.t[h.valid], h.ng, h.uv):
+        assert np.all(np.isfinite(np.asarray(x)))
 
 
 def test_curve_file_format_and_errors(tmp_path):
@@ -158,8 +156,9 @@ def test_bvh_finds_the_brute_force_nearest_segment(x64):
     t, k = jax.jit(lambda o, d: shape.closest_t(o, d))(o, d)
     a, b = pts[np.array(segs)], pts[np.array(segs) + 1]
     cap = np.asarray(shape.start_cap)
-    tb, _ = round_cone_entry(a[:, :3], a[:, 3], b[:, :3], b[:, 3], o[:, None], d[:, None], cap)
-    tb = np.where(np.asarray(tb) > 0, np.asarray(tb), np.inf)
+    brute = jax.jit(lambda o, d: round_cone_entry(a[:, :3], a[:, 3], b[:, :3], b[:, 3], o, d, cap))
+    tb = np.asarray(brute(o[:, None], d[:, None])[0])
+    tb = np.where(tb > 0, tb, np.inf)
     ref = tb.min(1)
     assert np.isfinite(ref).sum() > 50
     np.testing.assert_array_equal(np.isfinite(np.asarray(t)), np.isfinite(ref))
@@ -168,9 +167,11 @@ def test_bvh_finds_the_brute_force_nearest_segment(x64):
     np.testing.assert_array_equal(np.asarray(k)[f], tb.argmin(1)[f])
 
 
+@pytest.mark.slow  # slow: ~8 s CPU at load 11 on 2 cores (float64 compiles of hit and its grad)
 def test_hit_record_gradients_match_finite_differences(x64):
     """d(t, n, uv) of a hit on the side, at the joint ball and on an end cap w.r.t. all control
-    point coordinates and radii, reverse mode against central differences (float64)."""
+    point coordinates and radii, reverse mode against central differences (float64); finite
+    gradients at the hard cases."""
     pts0 = jnp.asarray([[0.0, 0, 0, 0.3], [1.0, 0.4, 0.1, 0.2], [1.8, 0.2, 0.0, 0.25]])
     shape = LinearCurves(pts0)
     o = jnp.asarray([[0.5, 0.25, -2], [1.05, 0.45, -2], [-0.35, 0.05, -2]], jnp.float64)
@@ -184,9 +185,19 @@ def test_hit_record_gradients_match_finite_differences(x64):
         h = s.hit(h0.prim_id, o, d, h0.valid)
         return jnp.sum(w * jnp.concatenate([h.t[:, None], h.ng, h.uv], -1))
 
-    ok, g_ad, g_fd = check_grads_fd(f, pts0, eps=1e-6, rtol=1e-6, atol=1e-8)
+    ok, g_ad, g_fd = check_grads_fd(f, pts0, eps=1e-6, rtol=1e-6, atol=1e-8, jit=True)
     assert ok, (g_ad, g_fd)
     assert np.abs(g_ad).max() > 0.1
+    # the hard cases of test_hard_cases_are_as_documented: finite gradients of t, n, uv
+    shape, o, d = _hard_scene()
+    h = shape.intersect(o, d)
+
+    def g(p):
+        hk = eqx_replace(shape, p).hit(h.prim_id, o, d, h.valid)
+        return jnp.sum(hk.t * hk.valid) + jnp.sum(hk.ng) + jnp.sum(hk.uv)
+
+    gr = np.asarray(jax.jit(jax.grad(g))(shape.points))
+    assert np.all(np.isfinite(gr)) and np.abs(gr).max() > 0.1
 
 
 def eqx_replace(shape, points):
@@ -195,6 +206,7 @@ def eqx_replace(shape, points):
     return eqx.tree_at(lambda s: s.points, shape, points)
 
 
+@pytest.mark.slow  # slow: ~3.6 s CPU at load 11 on 2 cores (two float64 traversal compiles)
 def test_tangents_match_the_surface_parametrisation(x64):
     """dp/du and dp/dv (Mitsuba 3's newer convention; 3.9.1 leaves them zero) against the
     points of the surface at (u ± ε, v) and (u, v ± ε): nearby rays aimed through
@@ -203,21 +215,26 @@ def test_tangents_match_the_surface_parametrisation(x64):
     shape = LinearCurves([[0.0, 0, 0, 0.3], [1.0, 0.4, 0.1, 0.2], [1.8, 0.2, 0.0, 0.25]])
     o = jnp.asarray([[0.5, 0.25, -2], [1.4, 0.3, -2]], jnp.float64)
     d = jnp.asarray([[0, 0, 1.0]] * 2)
-    h = shape.intersect(o, d)
-    du, dv = surface_tangents([shape], h)
     eps = 1e-6
-    for tan in (du, dv):
-        h2 = shape.intersect(o + eps * tan, d)
-        fd = (np.asarray(h2.p) - np.asarray(h.p)) / eps
+
+    @jax.jit
+    def run(o, d):
+        h = shape.intersect(o, d)
+        du, dv = surface_tangents([shape], h)
+        o3 = jnp.stack([o, o + eps * du, o + eps * dv])
+        h3 = shape.intersect(o3, jnp.broadcast_to(d, o3.shape))
+        return h3.p, h3.uv, h.ng, du, dv
+
+    p3, uv3, n, du, dv = (np.asarray(x) for x in run(o, d))
+    for k, tp in ((1, du), (2, dv)):
+        fd = (p3[k] - p3[0]) / eps
         # the re-hit moves along d to the surface: compare the tangential parts
-        n = np.asarray(h.ng)
-        tp = np.asarray(tan)
         fd_t = fd - (fd * n).sum(-1, keepdims=True) * n
         tp_t = tp - (tp * n).sum(-1, keepdims=True) * n
         np.testing.assert_allclose(fd_t, tp_t, atol=1e-4 * np.abs(tp).max())
-    # uv moves as the tangents say: du / dp along dp/du is 1
-    h2 = shape.intersect(o + eps * du, d)
-    np.testing.assert_allclose((np.asarray(h2.uv) - np.asarray(h.uv))[:, 0] / eps, 1, rtol=1e-3)
+    # uv moves as the tangents say: du / dp along dp/du is 1, along dp/dv 0
+    np.testing.assert_allclose((uv3[1] - uv3[0]) / eps, [[1, 0]] * 2, atol=2e-3)
+    np.testing.assert_allclose((uv3[2] - uv3[0]) / eps, [[0, 1]] * 2, atol=2e-3)
 
 
 def test_scene_dict_xml_and_writer(tmp_path):
@@ -299,6 +316,7 @@ def _curve_render_mean(x, key, scene):
     return jnp.mean(render(s, key, spp=2, integrator="direct"))
 
 
+@pytest.mark.slow  # slow: ~21 s at load 5-10 on 2 cores (float64 compile of a render and its grad)
 def test_material_on_a_curve_differentiates_as_usual(x64):
     """d(mean image)/d(red, green reflectance) of a 6×6 direct render of a diffuse curve under a
     point light, reverse mode against central differences with the same keys (float64)."""
