@@ -269,6 +269,10 @@ def test_scene_dict_xml_and_writer(tmp_path):
         load_scene({**base, "shapes": [{"type": "linearcurve", "material": "m"}]})
     with pytest.raises(ValueError, match=r"shapes\[0\]\.curves\[0\]: expected at least two"):
         load_scene({**base, "shapes": [{"type": "linearcurve", "curves": [[[0, 0, 0, 1]]]}]})
+    inst = {"type": "instances", "to_world": [np.eye(4).tolist()],
+            "shapes": [{"type": "linearcurve", "filename": "c.txt", "material": "m"}]}  # fmt: skip
+    with pytest.raises(ValueError, match=r"shapes\[0\]\.shapes\[0\]: instanced linear curves"):
+        load_scene({**base, "shapes": [inst]}, base_dir=str(tmp_path))
     with pytest.raises(ValueError, match="visibility: edge sampling does not cover"):
         render(sc, jax.random.key(0), spp=1, integrator="direct", visibility="edge")
     sensor = (
