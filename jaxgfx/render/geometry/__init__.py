@@ -16,6 +16,7 @@ from jaxgfx.render.geometry import accel as accel
 from jaxgfx.render.geometry.area import area as area
 from jaxgfx.render.geometry.area import primitive_areas as primitive_areas
 from jaxgfx.render.geometry.area import sample_area as sample_area
+from jaxgfx.render.geometry.curves import BSplineCurves as BSplineCurves
 from jaxgfx.render.geometry.curves import LinearCurves as LinearCurves
 from jaxgfx.render.geometry.curves import curve_lists as curve_lists
 from jaxgfx.render.geometry.curves import read_curves as read_curves
@@ -83,6 +84,7 @@ __all__ = [
     "TriangleMesh",
     "Instances",
     "LinearCurves",
+    "BSplineCurves",
     "read_curves",
     "write_curves",
     "curve_lists",

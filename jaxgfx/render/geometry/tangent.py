@@ -86,8 +86,8 @@ def surface_tangents(shapes, hit):
 
 
 def _count(shape):
-    if hasattr(shape, "segment_count"):
-        return shape.segment_count
+    if hasattr(shape, "primitive_count"):
+        return shape.primitive_count
     if hasattr(shape, "mesh") and not hasattr(shape, "hit"):
         shape = shape.mesh
     if isinstance(shape, TriangleMesh):

@@ -22,6 +22,7 @@ from jaxgfx.render.emitters import (
 )
 from jaxgfx.render.film import make_filter
 from jaxgfx.render.geometry import (
+    BSplineCurves,
     Instances,
     LinearCurves,
     Rectangles,
@@ -202,7 +203,8 @@ def load_scene(
                    None if k == "mesh" else pos, mat)
                   for ident, k, pos, mat in shape_ids]  # fmt: skip
     for m, mi in meshes:
-        if isinstance(m, (SDFShape, SDFGridShape, Instances, LinearCurves)):  # one material
+        one_material = (SDFShape, SDFGridShape, Instances, LinearCurves, BSplineCurves)
+        if isinstance(m, one_material):
             shapes.append(m)
             shape_mats.append(jnp.full((1,), mi, jnp.int32))
             continue

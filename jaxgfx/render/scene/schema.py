@@ -45,7 +45,8 @@ __all__ = [
     "MESH_SOURCES",
 ]
 
-SHAPE_TYPES = ("sphere", "rectangle", "mesh", "sdf", "sdfgrid", "linearcurve")
+SHAPE_TYPES = ("sphere", "rectangle", "mesh", "sdf", "sdfgrid", "linearcurve",
+               "bsplinecurve")  # fmt: skip
 EMITTER_TYPES = ("area", "point", "constant", "envmap", "directional", "spot", "projector",
                  "directionalarea")  # fmt: skip
 SCENE_KEYS = (("camera", "shapes"), ("materials", "emitters", "film"))
@@ -439,7 +440,7 @@ def shape_from_desc(d, where, base_dir):
         return "mesh", mesh_from_desc(d, where, base_dir)
     if kind == "sdfgrid":
         return "sdf", sdfgrid_from_desc(d, where, base_dir)
-    if kind == "linearcurve":
+    if kind in ("linearcurve", "bsplinecurve"):
         return "sdf", linearcurve_from_desc(d, where, base_dir)
     # "sdf"
     expect_keys(d, where, ("type", "expr"), (*common, "max_steps", "eps"))
@@ -486,10 +487,14 @@ def sdfgrid_from_desc(d, where, base_dir):
 
 
 def linearcurve_points(d, where, base_dir):
-    """``(points (N, 4), starts)`` of a ``linearcurve`` description: ``filename`` (Mitsuba's
-    curve text file) or ``curves`` (a list of curves, each a list of ``[x, y, z, radius]``, at
-    least two), ``to_world`` applied to the positions (not the radii, as in Mitsuba)."""
+    """``(points (N, 4), starts)`` of a ``linearcurve`` / ``bsplinecurve`` description:
+    ``filename`` (Mitsuba's curve text file) or ``curves`` (a list of curves, each a list of
+    ``[x, y, z, radius]``, at least two points for linear curves, four for B-splines),
+    ``to_world`` applied to the positions (not the radii, as in Mitsuba)."""
     from jaxgfx.render.geometry import read_curves
+
+    spline = d.get("type") == "bsplinecurve"
+    need = 4 if spline else 2
 
     expect_keys(d, where, ("type",), ("material", "id", "filename", "curves", "to_world"))
     if ("filename" in d) == ("curves" in d):
@@ -500,7 +505,8 @@ def linearcurve_points(d, where, base_dir):
             raise ValueError(f"{where}.filename: expected a path string, got {path!r}")
         path = path if os.path.isabs(path) else os.path.join(base_dir or ".", path)
         try:
-            pts, starts = read_curves(path)
+            pts, starts = read_curves(path, min_points=need,
+                                      kind="B-spline" if spline else "linear")  # fmt: skip
         except (OSError, ValueError) as e:
             raise ValueError(f"{where}.filename: {e}") from None
     else:
@@ -510,9 +516,9 @@ def linearcurve_points(d, where, base_dir):
         pts, starts = [], []
         for i, c in enumerate(curves):
             c = np.asarray(as_float_array(c, f"{where}.curves[{i}]"), np.float64)
-            if c.ndim != 2 or c.shape[1] != 4 or c.shape[0] < 2:
-                raise ValueError(f"{where}.curves[{i}]: expected at least two [x, y, z, radius] "
-                                 f"control points, got shape {c.shape}")  # fmt: skip
+            if c.ndim != 2 or c.shape[1] != 4 or c.shape[0] < need:
+                raise ValueError(f"{where}.curves[{i}]: expected at least {need} [x, y, z, "
+                                 f"radius] control points, got shape {c.shape}")  # fmt: skip
             if not np.all(np.isfinite(c)) or np.any(c[:, 3] < 0):
                 raise ValueError(f"{where}.curves[{i}]: expected finite points and radii >= 0")
             starts.append(sum(len(p) for p in pts))
@@ -527,11 +533,14 @@ def linearcurve_points(d, where, base_dir):
 
 
 def linearcurve_from_desc(d, where, base_dir):
-    """A :class:`~jaxgfx.render.geometry.LinearCurves` from ``{type: linearcurve, filename |
-    curves, to_world}`` (:func:`linearcurve_points`)."""
-    from jaxgfx.render.geometry import LinearCurves
+    """A :class:`~jaxgfx.render.geometry.LinearCurves` (or, for ``type: bsplinecurve``, a
+    :class:`~jaxgfx.render.geometry.BSplineCurves`) from ``{type, filename | curves,
+    to_world}`` (:func:`linearcurve_points`)."""
+    from jaxgfx.render.geometry import BSplineCurves, LinearCurves
 
     pts, starts = linearcurve_points(d, where, base_dir)
     ends = [*starts[1:], len(pts)]
-    segs = [i for s, e in zip(starts, ends, strict=True) for i in range(s, e - 1)]
-    return LinearCurves(jnp.asarray(pts), segs)
+    spline = d.get("type") == "bsplinecurve"
+    span = 3 if spline else 1
+    segs = [i for s, e in zip(starts, ends, strict=True) for i in range(s, e - span)]
+    return (BSplineCurves if spline else LinearCurves)(jnp.asarray(pts), segs)
