@@ -4,9 +4,9 @@ One file per algorithm: ``ray`` (rays, :class:`Hit` records, robust spawning), `
 (orthonormal shading frames), ``sphere``, ``rectangle``, ``mesh`` (:class:`TriangleMesh`),
 ``triangle_moller_trumbore`` (Möller & Trumbore 1997), ``triangle_unit`` (affine map to the unit
 triangle), ``intersect`` (closest hit / any hit over shapes and scenes), ``instance``
-(instancing), ``curves`` (Mitsuba's linear curves), ``area`` (areas and uniform area sampling
-for area lights), ``sdf`` (signed distance functions), ``sdfgrid`` (SDF grids, ``.vol``
-files), ``sphere_tracing`` (Hart 1996; :class:`SDFShape`), ``mesh_io`` (OBJ / PLY,
+(instancing), ``curves`` (Mitsuba's linear and B-spline curves), ``area`` (areas and uniform
+area sampling for area lights), ``sdf`` (signed distance functions), ``sdfgrid`` (SDF grids,
+``.vol`` files), ``sphere_tracing`` (Hart 1996; :class:`SDFShape`), ``mesh_io`` (OBJ / PLY,
 procedural meshes) and ``accel/`` (``bvh_sah``, ``grid_dda``, ``kdtree_sah``).
 See docs/render_geometry.md.
 """

@@ -1,7 +1,8 @@
 # ruff: noqa: F722  (jaxtyping shape strings)
-"""Linear curves (Mitsuba 3's ``linearcurve`` shape): :class:`LinearCurves`, tubes swept by a
-sphere whose centre and radius vary linearly between consecutive control points, and the
-curve text file format (:func:`read_curves`).
+"""Curves: :class:`LinearCurves` (Mitsuba 3's ``linearcurve`` shape), tubes swept by a sphere
+whose centre and radius vary linearly between consecutive control points,
+:class:`BSplineCurves` (``bsplinecurve``; its own docstring), and the curve text file format
+(:func:`read_curves`).
 
 Conventions (Mitsuba 3's ``linearcurve`` plugin documentation and its 3.9.1 behaviour,
 measured in ``tests/render/test_curves.py``):
