@@ -437,7 +437,9 @@ def render_against_mitsuba(tmp_path, kind):
 
 @pytest.mark.mitsuba
 def test_render_matches_mitsuba_in_the_same_run(tmp_path):
-    """:func:`render_against_mitsuba` with linear curves."""
+    """:func:`render_against_mitsuba` with linear curves. Sensitivity (measured once with the
+    jaxgfx scene's radii 5 % too large): z_mean down to -20.7, block z RMS 3.8, 77 % of the
+    blocks within |z| 3.5 (B-splines: -14.2, 2.4, 90 %): rejected."""
     pytest.importorskip("mitsuba")
     c = render_against_mitsuba(tmp_path, "linearcurve")
     # measured: z_mean (1.60, 1.34, 0.78), z RMS 0.82, all blocks |z| < 3.5, rel. RMSE 0.42 %
