@@ -167,7 +167,7 @@ def test_bvh_finds_the_brute_force_nearest_segment(x64):
     np.testing.assert_array_equal(np.asarray(k)[f], tb.argmin(1)[f])
 
 
-@pytest.mark.slow  # slow: ~8 s CPU at load 11 on 2 cores (float64 compiles of hit and its grad)
+@pytest.mark.slow  # slow: 27 s wall at load 10 on 2 cores (float64 compiles of hit and grad)
 def test_hit_record_gradients_match_finite_differences(x64):
     """d(t, n, uv) of a hit on the side, at the joint ball and on an end cap w.r.t. all control
     point coordinates and radii, reverse mode against central differences (float64); finite
@@ -206,7 +206,7 @@ def eqx_replace(shape, points):
     return eqx.tree_at(lambda s: s.points, shape, points)
 
 
-@pytest.mark.slow  # slow: ~3.6 s CPU at load 11 on 2 cores (two float64 traversal compiles)
+@pytest.mark.slow  # slow: 8.6 s wall at load 10 on 2 cores (two float64 traversal compiles)
 def test_tangents_match_the_surface_parametrisation(x64):
     """dp/du and dp/dv (Mitsuba 3's newer convention; 3.9.1 leaves them zero) against the
     points of the surface at (u ± ε, v) and (u, v ± ε): nearby rays aimed through
@@ -265,6 +265,9 @@ def test_scene_dict_xml_and_writer(tmp_path):
         (shape,) = sc.shapes
         assert isinstance(shape, LinearCurves)
     np.testing.assert_allclose(np.asarray(shape.points)[1], [2, 0, 0, 0.2], rtol=1e-6)
+    assert [p.path for p in sc.parameters() if p.path.startswith("shapes")] == ["shapes.0.points"]
+    moved = sc.replace("shapes.0.points", sc.get("shapes.0.points") * 1.5)
+    assert np.allclose(np.asarray(moved.shapes[0].points), 1.5 * np.asarray(shape.points))
     with pytest.raises(ValueError, match=r"shapes\[0\]: give exactly one of"):
         load_scene({**base, "shapes": [{"type": "linearcurve", "material": "m"}]})
     with pytest.raises(ValueError, match=r"shapes\[0\]\.curves\[0\]: expected at least 2 "):
@@ -320,7 +323,7 @@ def _curve_render_mean(x, key, scene):
     return jnp.mean(render(s, key, spp=2, integrator="direct"))
 
 
-@pytest.mark.slow  # slow: ~21 s at load 5-10 on 2 cores (float64 compile of a render and its grad)
+@pytest.mark.slow  # slow: 19 s wall at load 10 on 2 cores (float64 compile of a render, its grad)
 def test_material_on_a_curve_differentiates_as_usual(x64):
     """d(mean image)/d(red, green reflectance) of a 6×6 direct render of a diffuse curve under a
     point light, reverse mode against central differences with the same keys (float64)."""

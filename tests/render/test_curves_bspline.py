@@ -87,7 +87,7 @@ def _dense_reference(P, o, d, n=2001):
     return best
 
 
-@pytest.mark.slow  # slow: ~6.5 s CPU at load 11 on 2 cores (float64 compile, NumPy reference)
+@pytest.mark.slow  # slow: 13 s wall at load 10 on 2 cores (float64 compile, NumPy reference)
 def test_hits_on_bent_curves_match_a_dense_sampling_solver(x64):
     """Three bent curves (random walks, radii 0.02-0.1), 100 rays aimed near points of the
     curves: hit/miss and t of the Newton solver (12 steps from the inflated chord cones)
@@ -120,7 +120,7 @@ def test_hits_on_bent_curves_match_a_dense_sampling_solver(x64):
     assert np.all(ref[v][~same] < t[~same])  # only inner-sheet crossings before jaxgfx's
 
 
-@pytest.mark.slow  # slow: ~16 s CPU at load 11 on 2 cores (float64 compiles of hit, its grad)
+@pytest.mark.slow  # slow: 43 s wall at load 10 on 2 cores (float64 compiles of hit, its grad)
 def test_hit_record_gradients_match_finite_differences(x64):
     """d(t, n, uv) of three hits on a bent segment w.r.t. its 4 control points and radii
     (reverse mode through the record's live Newton step) against central differences of the
@@ -164,6 +164,7 @@ def test_scene_dict_xml_and_writer(tmp_path):
                                          "material": "m"}]}, base_dir=str(tmp_path))  # fmt: skip
     (shape,) = sc.shapes
     assert isinstance(shape, BSplineCurves)
+    assert [p.path for p in sc.parameters() if p.path.startswith("shapes")] == ["shapes.0.points"]
     np.testing.assert_array_equal(np.asarray(shape.segments), [0, 1, 5, 6])
     with pytest.raises(ValueError, match=r"shapes\[0\]\.curves\[0\]: expected at least 4"):
         load_scene({**base, "shapes": [{"type": "bsplinecurve",

@@ -192,13 +192,13 @@ def _box_bvh(lo, hi, max_leaf, dtype):
 
 
 def _bvh_trace(acc, leaf, o, d, tmin, tmax):
-    """Nearest ``(t, primitive)`` of ONE ray: a stack traversal of the BVH ``acc.bounds``,
+    """Nearest ``(t, primitive)`` of ONE ray: a stack traversal of the BVH ``acc._bounds``,
     ``offset``, ``count``, ``prims`` (:func:`_box_bvh`) whose leaves test their
     ``acc.max_leaf`` primitive slots with ``leaf(idx, o, d) -> t (max_leaf,)``."""
     inv = safe_inv(d)
     ks = jnp.arange(acc.max_leaf)
     zero_i = jnp.int32(0)
-    _, _, hit0 = slab(acc.bounds[0, 0], acc.bounds[0, 1], o, inv, tmin, tmax)
+    _, _, hit0 = slab(acc._bounds[0, 0], acc._bounds[0, 1], o, inv, tmin, tmax)
     sn = jnp.zeros(STACK_SIZE, jnp.int32)
     st = jnp.zeros(STACK_SIZE, o.dtype)
     s0 = (zero_i, tmin, zero_i, sn, st, tmax, jnp.int32(-1), ~hit0)
@@ -216,7 +216,7 @@ def _bvh_trace(acc, leaf, o, d, tmin, tmax):
         best = jnp.where(leaf_better, t[j], best)
         bprim = jnp.where(leaf_better, idx[j], bprim)
         left, right = node + 1, off
-        bl = acc.bounds[jnp.stack([left, right])]
+        bl = acc._bounds[jnp.stack([left, right])]
         ctn, _, chit = slab(bl[:, 0], bl[:, 1], o, inv, tmin, best)
         inner = ~is_leaf & ~skip
         hl, hr = inner & chit[0], inner & chit[1]
@@ -244,9 +244,11 @@ class LinearCurves(eqx.Module):
 
     ``points (N, 4)``: control points ``x, y, z, radius`` of all curves (differentiable
     leaves); ``segments (K,)``: index of each segment's first point (the segment joins points
-    ``i`` and ``i + 1``); ``bvh``: a BVH over the segments' boxes, built on the host by the
-    constructor (its boxes are those of the points given; re-create the shape after moving
-    points by more than the gradient step of an optimisation). See the module docstring.
+    ``i`` and ``i + 1``); ``_bounds``, ``offset``, ``count``, ``prims``: a BVH over the
+    segments' boxes, built on the host by the constructor (its boxes are those of the points
+    given; re-create the shape after moving points by more than the gradient step of an
+    optimisation; private, so ``Scene.parameters()`` lists only ``points``). See the module
+    docstring.
 
     Example: ``LinearCurves([[-1, 0, 0, .1], [1, 0, 0, .1]])`` (one curve) and the ray from
     ``(0, 0, -1)`` along ``+z`` hits at ``t = 0.9`` with ``uv = (0.75, 0.5)``.
@@ -255,7 +257,7 @@ class LinearCurves(eqx.Module):
     points: Float[Array, "N 4"]
     segments: Int[Array, " K"]
     start_cap: Bool[Array, " K"]
-    bounds: Float[Array, "M 2 3"]
+    _bounds: Float[Array, "M 2 3"]
     offset: Int[Array, " M"]
     count: Int[Array, " M"]
     prims: Int[Array, " K"]
@@ -283,7 +285,7 @@ class LinearCurves(eqx.Module):
         a, b = pn[seg], pn[seg + 1]
         lo = np.minimum(a[:, :3] - a[:, 3:], b[:, :3] - b[:, 3:])
         hi = np.maximum(a[:, :3] + a[:, 3:], b[:, :3] + b[:, 3:])
-        self.bounds, self.offset, self.count, self.prims = _box_bvh(lo, hi, max_leaf, p.dtype)
+        self._bounds, self.offset, self.count, self.prims = _box_bvh(lo, hi, max_leaf, p.dtype)
         self.max_leaf = max_leaf
 
     @property
@@ -450,8 +452,8 @@ class BSplineCurves(eqx.Module):
 
     points: Float[Array, "N 4"]
     segments: Int[Array, " K"]
-    inflate: Float[Array, " P"]
-    bounds: Float[Array, "M 2 3"]
+    _inflate: Float[Array, " P"]
+    _bounds: Float[Array, "M 2 3"]
     offset: Int[Array, " M"]
     count: Int[Array, " M"]
     prims: Int[Array, " P"]
@@ -482,12 +484,12 @@ class BSplineCurves(eqx.Module):
         lin = cv[:, :, :1] * (1 - f[:, None]) + cv[:, :, -1:] * f[:, None]
         dev = np.linalg.norm(cv[..., :3] - lin[..., :3], axis=-1) + np.abs(cv[..., 3] - lin[..., 3])
         delta = 1.5 * dev.max(-1) + 1e-6 * (1 + np.abs(pn[:, :3]).max())
-        self.inflate = jnp.asarray(delta.reshape(-1), p.dtype)
+        self._inflate = jnp.asarray(delta.reshape(-1), p.dtype)
         a, b = cv[:, :, 0], cv[:, :, -1]
         ra, rb = (a[..., 3] + delta)[..., None], (b[..., 3] + delta)[..., None]
         lo = np.minimum(a[..., :3] - ra, b[..., :3] - rb).reshape(-1, 3)
         hi = np.maximum(a[..., :3] + ra, b[..., :3] + rb).reshape(-1, 3)
-        self.bounds, self.offset, self.count, self.prims = _box_bvh(lo, hi, max_leaf, p.dtype)
+        self._bounds, self.offset, self.count, self.prims = _box_bvh(lo, hi, max_leaf, p.dtype)
 
     @property
     def segment_count(self) -> int:
@@ -508,7 +510,7 @@ class BSplineCurves(eqx.Module):
         j = (piece % self.pieces).astype(o.dtype)
         v0, v1 = j / self.pieces, (j + 1) / self.pieces
         ca, cb = _bspline(P, v0)[0], _bspline(P, v1)[0]
-        delta = self.inflate[piece]
+        delta = self._inflate[piece]
         t0, s0 = round_cone_entry(ca[..., :3], ca[..., 3] + delta, cb[..., :3], cb[..., 3] + delta,
                                   o, d)  # fmt: skip
         cand = jnp.isfinite(t0)
