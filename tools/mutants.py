@@ -383,4 +383,41 @@ MUTANTS = [
         ],
         "why": "a range limit dropped (intensity 100 gave a black image, commit ea6698c)",
     },
+    # ------------------------------------------------------------------ curves
+    {
+        "name": "render.curves.start_ball_always",
+        "file": "jaxgfx/render/geometry/curves.py",
+        "old": "self.start_cap = jnp.asarray(~np.isin(seg - 1, seg))",
+        "new": "self.start_cap = jnp.asarray(np.ones(seg.size, bool))",
+        "tests": ["tests/render/test_curves.py::test_hard_cases_are_as_documented"],
+        "why": "Embree's joint rule dropped (a zero-length segment's successor draws its ball)",
+    },
+    {
+        "name": "render.curves.zero_length_drawn",
+        "file": "jaxgfx/render/geometry/curves.py",
+        "old": "better = on & (L2 > 0) & (dd >= 0) & (t < best)",
+        "new": "better = on & (dd >= 0) & (t < best)",
+        "tests": ["tests/render/test_curves.py::test_hard_cases_are_as_documented"],
+        "why": "a zero-length segment drawn as its ball (Mitsuba 3.9.1 draws nothing)",
+    },
+    {
+        "name": "render.curves.radius_scaled_by_to_world",
+        "file": "jaxgfx/render/scene/schema.py",
+        "old": "pts = np.concatenate([pts[:, :3] @ m[:3, :3].T + m[:3, 3], pts[:, 3:]], 1)",
+        "new": "pts = np.concatenate([pts[:, :3] @ m[:3, :3].T + m[:3, 3], "
+        "pts[:, 3:] * abs(np.linalg.det(m[:3, :3])) ** (1 / 3)], 1)",
+        "tests": ["tests/render/test_curves.py::test_scene_dict_xml_and_writer"],
+        "why": "Mitsuba leaves the radii of curves unscaled by to_world",
+    },
+    {
+        "name": "render.curves.bspline_sphere_envelope",
+        "file": "jaxgfx/render/geometry/curves.py",
+        "old": "    g1 = sum_last(q * dc)\n",
+        "new": "    g1 = sum_last(q * dc) + r * dr\n",
+        "tests": [
+            "tests/render/test_curves_bspline.py::"
+            "test_straight_bspline_is_a_tube_of_perpendicular_circles"
+        ],
+        "why": "the envelope of spheres instead of Embree's sweep of perpendicular circles",
+    },
 ]

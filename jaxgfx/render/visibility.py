@@ -45,6 +45,7 @@ from jaxgfx._math import safe_div, safe_normalize, safe_sqrt, sum_last
 from jaxgfx.render.camera import PerspectiveCamera, look_at_basis
 from jaxgfx.render.estimator import pass_scan
 from jaxgfx.render.film import BoxFilter
+from jaxgfx.render.geometry.curves import BSplineCurves, LinearCurves
 from jaxgfx.render.geometry.frame import to_local
 from jaxgfx.render.geometry.mesh import TriangleMesh
 from jaxgfx.render.geometry.ray import spawn_ray
@@ -92,6 +93,12 @@ def check_visibility(visibility, scene, integrator) -> None:
     if not isinstance(scene.camera, PerspectiveCamera):
         name = type(scene.camera).__name__
         raise TypeError(f"visibility: edge sampling needs a PerspectiveCamera, got {name}")
+    if any(isinstance(s, (LinearCurves, BSplineCurves)) for s in scene.shapes):
+        raise ValueError(
+            "visibility: edge sampling does not cover the silhouettes of curves "
+            "(LinearCurves, BSplineCurves): render without visibility='edge' (the gradients of "
+            "curve control points then lack the boundary term; material gradients are exact)"
+        )
     rf = scene.rfilter
     if rf is not None and not (isinstance(rf, BoxFilter) and rf.radius == 0.5):
         raise ValueError(f"visibility: edge sampling needs the box filter of radius 0.5, got {rf}")

@@ -4,10 +4,10 @@ One file per algorithm: ``ray`` (rays, :class:`Hit` records, robust spawning), `
 (orthonormal shading frames), ``sphere``, ``rectangle``, ``mesh`` (:class:`TriangleMesh`),
 ``triangle_moller_trumbore`` (Möller & Trumbore 1997), ``triangle_unit`` (affine map to the unit
 triangle), ``intersect`` (closest hit / any hit over shapes and scenes), ``instance``
-(instancing), ``area`` (areas and uniform area sampling for area lights), ``sdf`` (signed
-distance functions), ``sdfgrid`` (SDF grids, ``.vol`` files), ``sphere_tracing`` (Hart
-1996; :class:`SDFShape`), ``mesh_io`` (OBJ / PLY, procedural meshes) and ``accel/``
-(``bvh_sah``, ``grid_dda``, ``kdtree_sah``).
+(instancing), ``curves`` (Mitsuba's linear and B-spline curves), ``area`` (areas and uniform
+area sampling for area lights), ``sdf`` (signed distance functions), ``sdfgrid`` (SDF grids,
+``.vol`` files), ``sphere_tracing`` (Hart 1996; :class:`SDFShape`), ``mesh_io`` (OBJ / PLY,
+procedural meshes) and ``accel/`` (``bvh_sah``, ``grid_dda``, ``kdtree_sah``).
 See docs/render_geometry.md.
 """
 
@@ -16,6 +16,11 @@ from jaxgfx.render.geometry import accel as accel
 from jaxgfx.render.geometry.area import area as area
 from jaxgfx.render.geometry.area import primitive_areas as primitive_areas
 from jaxgfx.render.geometry.area import sample_area as sample_area
+from jaxgfx.render.geometry.curves import BSplineCurves as BSplineCurves
+from jaxgfx.render.geometry.curves import LinearCurves as LinearCurves
+from jaxgfx.render.geometry.curves import curve_lists as curve_lists
+from jaxgfx.render.geometry.curves import read_curves as read_curves
+from jaxgfx.render.geometry.curves import write_curves as write_curves
 from jaxgfx.render.geometry.instance import Instances as Instances
 from jaxgfx.render.geometry.intersect import closest_t as closest_t
 from jaxgfx.render.geometry.intersect import intersect as intersect
@@ -78,6 +83,11 @@ __all__ = [
     "Rectangles",
     "TriangleMesh",
     "Instances",
+    "LinearCurves",
+    "BSplineCurves",
+    "read_curves",
+    "write_curves",
+    "curve_lists",
     "TRIANGLE_INTERSECTORS",
     "sphere_intersect",
     "rectangle_intersect",

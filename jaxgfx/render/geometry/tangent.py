@@ -11,6 +11,7 @@ parameterisations are those of the hit's ``uv`` (Mitsuba 3's for each shape):
 * spheres (``uv = (φ/2π, θ/π)``): ``dp/du = 2π r (-n_y, n_x, 0)``,
   ``dp/dv = π r (n_z cos φ, n_z sin φ, -sin θ)`` (``n`` in the sphere's local frame, the
   results rotated back by its ``frames``);
+* shapes with a ``tangents(prim_id, p, ng)`` method (linear curves): theirs;
 * anything else (SDF shapes, custom shapes), degenerate UV triangles and misses: zero vectors;
   consumers then fall back to an arbitrary tangent.
 """
@@ -31,6 +32,8 @@ def shape_tangents(shape, pid, p, ng):
     """``(dp/du, dp/dv)`` (..., 3) on primitive ``pid (...)`` of one shape at points ``p``
     with geometric normals ``ng``; zeros for shapes without a known parameterisation."""
     zero = jnp.zeros_like(p)
+    if hasattr(shape, "tangents"):
+        return shape.tangents(pid, p, ng)
     if hasattr(shape, "mesh") and not hasattr(shape, "hit"):
         shape = shape.mesh
     if isinstance(shape, Rectangles):
@@ -83,6 +86,8 @@ def surface_tangents(shapes, hit):
 
 
 def _count(shape):
+    if hasattr(shape, "primitive_count"):
+        return shape.primitive_count
     if hasattr(shape, "mesh") and not hasattr(shape, "hit"):
         shape = shape.mesh
     if isinstance(shape, TriangleMesh):

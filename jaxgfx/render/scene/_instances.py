@@ -40,6 +40,9 @@ def instances_from_desc(d, where, base_dir, material_index, build_mesh):
         w = f"{where}.shapes[{j}]"
         if isinstance(sd, Mapping) and sd.get("type") == "instances":
             raise ValueError(f"{w}: nested instancing is not supported (as in Mitsuba 3)")
+        if isinstance(sd, Mapping) and sd.get("type") in ("linearcurve", "bsplinecurve"):
+            raise ValueError(f"{w}: instanced curves are not supported (place the curves "
+                             "with their own to_world)")  # fmt: skip
         kind, shape = shape_from_desc(sd, w, base_dir)
         m = to_world
         if isinstance(shape, Instances):  # an sdfgrid with its own to_world: compose

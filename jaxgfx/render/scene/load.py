@@ -21,7 +21,16 @@ from jaxgfx.render.emitters import (
     SpotLight,
 )
 from jaxgfx.render.film import make_filter
-from jaxgfx.render.geometry import Instances, Rectangles, SDFGridShape, SDFShape, Spheres, area
+from jaxgfx.render.geometry import (
+    BSplineCurves,
+    Instances,
+    LinearCurves,
+    Rectangles,
+    SDFGridShape,
+    SDFShape,
+    Spheres,
+    area,
+)
 from jaxgfx.render.scene._lights import SPOT_TEXTURE_KEYS, projector_from_desc, spot_texture
 from jaxgfx.render.scene._materials import (
     check_one_sided,
@@ -194,7 +203,8 @@ def load_scene(
                    None if k == "mesh" else pos, mat)
                   for ident, k, pos, mat in shape_ids]  # fmt: skip
     for m, mi in meshes:
-        if isinstance(m, (SDFShape, SDFGridShape, Instances)):  # one primitive each
+        one_material = (SDFShape, SDFGridShape, Instances, LinearCurves, BSplineCurves)
+        if isinstance(m, one_material):
             shapes.append(m)
             shape_mats.append(jnp.full((1,), mi, jnp.int32))
             continue

@@ -513,6 +513,23 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
         m[:3, :3] = np.asarray(d["frame"], np.float64) * r
         m[:3, 3] = c
         return {"type": "sphere", "to_world": _transform(m, mi)}
+    if kind in ("linearcurve", "bsplinecurve"):  # a curve text file (written for inline curves)
+        S.shape_from_desc(d, where, base_dir)  # validated as load_scene does
+        if "filename" in d:
+            path = os.fspath(d["filename"])
+            if not os.path.isabs(path) and base_dir:
+                path = os.path.join(base_dir, path)
+            path = os.path.abspath(path)
+        else:
+            name = re.sub(r"[^A-Za-z0-9]+", "_", where).strip("_")
+            path = os.path.join(work_dir(), f"{name}.txt")
+            from jaxgfx.render.geometry import write_curves
+
+            write_curves(path, d["curves"])
+        out = {"type": kind, "filename": path}
+        if "to_world" in d:
+            out["to_world"] = _transform(np.asarray(d["to_world"], np.float64), mi)
+        return out
     if kind == "sdfgrid":  # Mitsuba's sdfgrid: a .vol file (written for inline values)
         from jaxgfx.render.geometry import write_vol
 
@@ -1150,7 +1167,9 @@ def scene_to_desc(scene) -> dict:
         TentFilter,
     )
     from jaxgfx.render.geometry import (
+        BSplineCurves,
         Instances,
+        LinearCurves,
         Rectangles,
         SDFGridShape,
         Spheres,
@@ -1225,6 +1244,11 @@ def scene_to_desc(scene) -> dict:
                 if shape.frames is not None:
                     d["frame"] = _list(shape.frames[j])
                 out.append((d, mats[j]))
+        elif isinstance(shape, (LinearCurves, BSplineCurves)):
+            from jaxgfx.render.geometry import curve_lists
+
+            kind = "linearcurve" if isinstance(shape, LinearCurves) else "bsplinecurve"
+            out.append(({"type": kind, "curves": curve_lists(shape)}, mats[0]))
         elif isinstance(shape, SDFGridShape):
             out.append(({"type": "sdfgrid", "values": _list(shape.grid.values),
                          "normals": shape.normals}, mats[0]))  # fmt: skip

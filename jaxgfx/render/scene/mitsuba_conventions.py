@@ -63,8 +63,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("shape", "shapegroup"): S + " (meshes and analytic shapes; no emitters, no nesting)",
     ("shape", "instance"): S + " (any invertible affine to_world)",
     ("shape", "sdfgrid"): S + " (`filename`, `normals`; exact per-voxel intersection)",
-    ("shape", "bsplinecurve"): "refused: no curves in jaxgfx",
-    ("shape", "linearcurve"): "refused: no curves in jaxgfx",
+    ("shape", "bsplinecurve"): S + " (`filename`, `to_world`; circle sweep, Newton-refined)",
+    ("shape", "linearcurve"): S + " (`filename`, `to_world`; exact round cones, culled backs)",
     ("shape", "ellipsoids"): "refused: no ellipsoids in jaxgfx",
     # BSDFs
     ("bsdf", "diffuse"): S,

@@ -1329,10 +1329,31 @@ def _shape(obj: _Obj, doc, desc, ctx):
             sd["to_world"] = m.tolist()
         c = np.array([[x, y, z, 1.0] for x in (0, 1) for y in (0, 1) for z in (0, 1)]) @ m.T
         bbox = np.stack([c[:, :3].min(0), c[:, :3].max(0)])
+    elif t in ("linearcurve", "bsplinecurve"):  # control points read now for file/line errors
+        from jaxgfx.render.geometry import read_curves
+
+        if emitters:
+            raise ValueError(f"{obj.where}: a {t} cannot be an area emitter (Mitsuba's "
+                             "curves have no area sampling)")  # fmt: skip
+        fname = p.string("filename")
+        if fname is None:
+            raise ValueError(f"{obj.where}: missing parameter 'filename'")
+        path = doc.resolve(fname, obj.props["filename"].node, obj.label)
+        try:
+            spline = t == "bsplinecurve"
+            pts, _ = read_curves(path, min_points=4 if spline else 2,
+                                 kind="B-spline" if spline else "linear")  # fmt: skip
+        except (OSError, ValueError) as e:
+            raise p.err("filename", str(e)) from None
+        sd = {"type": t, "filename": os.path.abspath(path)}
+        if not np.allclose(m, np.eye(4)):
+            sd["to_world"] = m.tolist()
+        c = pts[:, :3] @ m[:3, :3].T + m[:3, 3]
+        bbox = np.stack([(c - pts[:, 3:]).min(0), (c + pts[:, 3:]).max(0)])
     else:
         raise ValueError(f"{obj.where}: shape plugin {t!r} is not supported "
                          "(obj, ply, serialized, sphere, rectangle, cube, disk, "
-                         "cylinder, sdfgrid)")  # fmt: skip
+                         "cylinder, sdfgrid, linearcurve, bsplinecurve)")  # fmt: skip
     p.done(children_ok=len(obj.children))
     ctx["bboxes"].append((bbox, obj))
     if meters:  # the irradiance meter's shape (read_xml puts it into the camera)

@@ -45,7 +45,8 @@ __all__ = [
     "MESH_SOURCES",
 ]
 
-SHAPE_TYPES = ("sphere", "rectangle", "mesh", "sdf", "sdfgrid")
+SHAPE_TYPES = ("sphere", "rectangle", "mesh", "sdf", "sdfgrid", "linearcurve",
+               "bsplinecurve")  # fmt: skip
 EMITTER_TYPES = ("area", "point", "constant", "envmap", "directional", "spot", "projector",
                  "directionalarea")  # fmt: skip
 SCENE_KEYS = (("camera", "shapes"), ("materials", "emitters", "film"))
@@ -439,6 +440,8 @@ def shape_from_desc(d, where, base_dir):
         return "mesh", mesh_from_desc(d, where, base_dir)
     if kind == "sdfgrid":
         return "sdf", sdfgrid_from_desc(d, where, base_dir)
+    if kind in ("linearcurve", "bsplinecurve"):
+        return "sdf", linearcurve_from_desc(d, where, base_dir)
     # "sdf"
     expect_keys(d, where, ("type", "expr"), (*common, "max_steps", "eps"))
     expr = d["expr"]
@@ -481,3 +484,63 @@ def sdfgrid_from_desc(d, where, base_dir):
     m = check_instance_transforms(as_float_array(d["to_world"], f"{where}.to_world"),
                                   f"{where}.to_world")  # fmt: skip
     return Instances(shape, m)
+
+
+def linearcurve_points(d, where, base_dir):
+    """``(points (N, 4), starts)`` of a ``linearcurve`` / ``bsplinecurve`` description:
+    ``filename`` (Mitsuba's curve text file) or ``curves`` (a list of curves, each a list of
+    ``[x, y, z, radius]``, at least two points for linear curves, four for B-splines),
+    ``to_world`` applied to the positions (not the radii, as in Mitsuba)."""
+    from jaxgfx.render.geometry import read_curves
+
+    spline = d.get("type") == "bsplinecurve"
+    need = 4 if spline else 2
+
+    expect_keys(d, where, ("type",), ("material", "id", "filename", "curves", "to_world"))
+    if ("filename" in d) == ("curves" in d):
+        raise ValueError(f"{where}: give exactly one of 'filename' and 'curves'")
+    if "filename" in d:
+        path = d["filename"]
+        if not isinstance(path, str):
+            raise ValueError(f"{where}.filename: expected a path string, got {path!r}")
+        path = path if os.path.isabs(path) else os.path.join(base_dir or ".", path)
+        try:
+            pts, starts = read_curves(path, min_points=need,
+                                      kind="B-spline" if spline else "linear")  # fmt: skip
+        except (OSError, ValueError) as e:
+            raise ValueError(f"{where}.filename: {e}") from None
+    else:
+        curves = d["curves"]
+        if not isinstance(curves, (list, tuple)) or not curves:
+            raise ValueError(f"{where}.curves: expected a non-empty list of curves")
+        pts, starts = [], []
+        for i, c in enumerate(curves):
+            c = np.asarray(as_float_array(c, f"{where}.curves[{i}]"), np.float64)
+            if c.ndim != 2 or c.shape[1] != 4 or c.shape[0] < need:
+                raise ValueError(f"{where}.curves[{i}]: expected at least {need} [x, y, z, "
+                                 f"radius] control points, got shape {c.shape}")  # fmt: skip
+            if not np.all(np.isfinite(c)) or np.any(c[:, 3] < 0):
+                raise ValueError(f"{where}.curves[{i}]: expected finite points and radii >= 0")
+            starts.append(sum(len(p) for p in pts))
+            pts.append(c)
+        pts = np.concatenate(pts)
+    if "to_world" in d:
+        m = np.asarray(as_float_array(d["to_world"], f"{where}.to_world"), np.float64)
+        if m.shape != (4, 4) or not np.all(np.isfinite(m)) or not np.allclose(m[3], [0, 0, 0, 1]):
+            raise ValueError(f"{where}.to_world: expected a finite 4x4 affine matrix")
+        pts = np.concatenate([pts[:, :3] @ m[:3, :3].T + m[:3, 3], pts[:, 3:]], 1)
+    return pts, starts
+
+
+def linearcurve_from_desc(d, where, base_dir):
+    """A :class:`~jaxgfx.render.geometry.LinearCurves` (or, for ``type: bsplinecurve``, a
+    :class:`~jaxgfx.render.geometry.BSplineCurves`) from ``{type, filename | curves,
+    to_world}`` (:func:`linearcurve_points`)."""
+    from jaxgfx.render.geometry import BSplineCurves, LinearCurves
+
+    pts, starts = linearcurve_points(d, where, base_dir)
+    ends = [*starts[1:], len(pts)]
+    spline = d.get("type") == "bsplinecurve"
+    span = 3 if spline else 1
+    segs = [i for s, e in zip(starts, ends, strict=True) for i in range(s, e - span)]
+    return (BSplineCurves if spline else LinearCurves)(jnp.asarray(pts), segs)
