@@ -1116,7 +1116,11 @@ def _bsdf_desc(m, where) -> dict:
         out.update({k: _list(getattr(m, k)) for k in optional if getattr(m, k) is not None})
         return {**out, **{k: getattr(m, k) for k in rates}}
     if isinstance(m, B.Hair):
-        out = {"type": "hair", "eta": _list(m.eta), **{k: _list(getattr(m, k)) for k in HAIR_SCALARS}}
+        out = {
+            "type": "hair",
+            "eta": _list(m.eta),
+            **{k: _list(getattr(m, k)) for k in HAIR_SCALARS},
+        }
         if m.sigma_a is None:
             return {**out, "eumelanin": _list(m.eumelanin), "pheomelanin": _list(m.pheomelanin)}
         return {**out, "sigma_a": _list(m.sigma_a), "scale": _list(m.scale)}
