@@ -28,6 +28,7 @@ def _fibre_dir(sin_theta, phi):
 
 
 _ev = jax.jit(lambda b, wo, wi: (b.eval(wo, wi), b.pdf(wo, wi)))
+_mp = jax.jit(H._longitudinal)
 _smp = jax.jit(lambda b, wo, u1, u2: b.sample(wo, u1, u2))
 
 CASES = [  # (β_m, β_n, α°, η, wo): roughness, tilt, IOR and view (h = -wo_x / |wo_xz|)
@@ -56,6 +57,7 @@ def test_white_furnace_uniform_sphere(x64, bm, bn, alpha, eta, wo):
     assert se < 0.01 and abs(mean - 1) < 4 * se, (mean, se)
 
 
+@pytest.mark.slow  # slow: ~4 s CPU, 10 s wall on 2 cores at load 11 (compiles the sampler)
 def test_absorption_loses_energy_as_the_attenuation_says(x64):
     """With absorption the albedo is ``Σ_p A_p`` < 1 (the lobes M_p, N_p integrate to 1), and
     the sampler's weight is exactly ``Σ A_p / Σ lum(A_p) · lum`` ... i.e. its mean equals the
@@ -74,6 +76,7 @@ def test_absorption_loses_energy_as_the_attenuation_says(x64):
     assert np.all(np.abs(w.mean(0) - total) < 4 * se + 1e-12), (w.mean(0), total, se)
 
 
+@pytest.mark.slow  # slow: ~6 s CPU, 15 s wall on 2 cores at load 11 (first case; the others 0.3 s)
 @pytest.mark.parametrize("bm, bn, alpha, eta, wo", CASES)
 def test_chi2_sampling_matches_pdf(bm, bn, alpha, eta, wo):
     b = Hair(eumelanin=0.3, pheomelanin=0.2, longitudinal_roughness=bm,
@@ -93,6 +96,7 @@ def test_chi2_sampling_matches_pdf(bm, bn, alpha, eta, wo):
     assert abs(d["pdf_integral"] - 1) < 2e-3
 
 
+@pytest.mark.slow  # slow: ~4 s CPU, 10 s wall on 2 cores at load 11 (compiles the sampler)
 def test_sample_pdf_and_weight_equal_eval_over_pdf(x64):
     b = Hair(eumelanin=0.8, pheomelanin=0.5, longitudinal_roughness=0.25, scale_tilt=3.0)
     wo = jnp.asarray(_unit(4096, 3))
@@ -119,8 +123,7 @@ def test_longitudinal_lobe_is_deons_normalised_density(x64):
     for v in (1e-4, 0.01, 0.1, 0.5, 2.0):
         for th_o in (-1.2, -0.3, 0.0, 0.7, 1.5):
             th = 0.5 * math.pi * xg
-            m = np.asarray(H._longitudinal(math.sin(th_o), math.cos(th_o), np.sin(th),
-                                           np.cos(th), v))  # fmt: skip
+            m = np.asarray(_mp(math.sin(th_o), math.cos(th_o), np.sin(th), np.cos(th), v))
             total = 2 * math.pi * np.sum(0.5 * math.pi * wg * m * np.cos(th))
             tol = 1e-6 if v >= 0.01 else 2e-3  # 400 nodes resolve a lobe of width 0.01 only
             assert abs(total - 1) < tol, (v, th_o, total)
@@ -139,8 +142,8 @@ def test_reciprocity_holds_for_the_lobe_shapes_only(x64):
     pairs even at α = 0."""
     a, c = _unit(256, 6), _unit(256, 7)
     sa, ca, sc, cc = a[:, 1], np.sqrt(1 - a[:, 1] ** 2), c[:, 1], np.sqrt(1 - c[:, 1] ** 2)
-    m1 = np.asarray(H._longitudinal(sa, ca, sc, cc, 0.05))
-    m2 = np.asarray(H._longitudinal(sc, cc, sa, ca, 0.05))
+    m1 = np.asarray(_mp(sa, ca, sc, cc, 0.05))
+    m2 = np.asarray(_mp(sc, cc, sa, ca, 0.05))
     np.testing.assert_allclose(m1, m2, rtol=1e-12)
     b = Hair(sigma_a=0.2, scale_tilt=0.0)
     f1 = np.asarray(_ev(b, jnp.asarray(a), jnp.asarray(c))[0])[:, 1]
@@ -165,6 +168,7 @@ def test_melanin_gives_published_sigma_a_and_colours():
 PARAMS = ("longitudinal_roughness", "azimuthal_roughness", "scale_tilt", "eta")
 
 
+@pytest.mark.slow  # slow: ~5 s CPU, 13 s wall each on 2 cores at load 11 (two compiles)
 @pytest.mark.parametrize("pigment", [False, True])
 def test_gradients_match_finite_differences(x64, pigment):
     """d/dθ of a weighted sum of ``eval`` over 64 direction pairs, θ = (β_m, β_n, α, η,
@@ -212,7 +216,7 @@ def _hard_loss(x, wo):
     return jnp.sum(b.eval(w, wis)) + jnp.sum(b.pdf(w, wis)) + jnp.sum(s.weight) + jnp.sum(s.pdf)
 
 
-@pytest.mark.slow  # slow: ~20 s on 2 cores at load 11 (one compile of the sampler's gradient)
+@pytest.mark.slow  # slow: ~9 s CPU, 22 s wall on 2 cores at load 11 (the sampler's gradient)
 def test_hard_cases_values_and_gradients_finite(x64):
     """β_m = β_n = 0.01 (κ ≈ 1e4, a logistic of scale 0.002), σ_a = 0, 50 and 1000, grazing
     h = ±1, views along the fibre axis (sin θ = ±1, where h is undefined: 0 as Mitsuba) and
@@ -226,6 +230,7 @@ def test_hard_cases_values_and_gradients_finite(x64):
     assert np.all(np.isfinite(np.asarray(v))) and np.all(np.isfinite(np.asarray(d)))
 
 
+@pytest.mark.slow  # slow: ~2.5 s CPU, 6 s wall on 2 cores at load 11
 def test_sampling_with_extreme_uniforms_is_finite(x64):
     b = Hair(longitudinal_roughness=0.01, azimuthal_roughness=0.01)
     u = jnp.asarray([0.0, 1.0 - 1e-16, 0.5])
