@@ -122,6 +122,16 @@ emitters:
 """
 
 
+def test_dict_scene_refuses_textured_hair():
+    bad = {"type": "hair", "sigma_a": {"type": "checkerboard", "color0": 0.1, "color1": 0.9}}
+    desc = {"camera": {"origin": [0, 0, 4], "target": [0, 0, 0], "fov": 30, "width": 4,
+                       "height": 4}, "materials": {"fur": bad},
+            "shapes": [{"type": "sphere", "center": [0, 0, 0], "radius": 1, "material": "fur"}],
+            "emitters": [{"type": "point", "position": [2, 2, 3], "intensity": 1.0}]}  # fmt: skip
+    with pytest.raises(ValueError, match="materials.fur: sigma_a: 'hair' parameters cannot be textures"):
+        load_scene(desc)
+
+
 @pytest.mark.slow  # slow: ~8 s CPU, 21 s wall on 2 cores at load 11 (compiles a render)
 def test_yaml_scene_renders_under_jit(tmp_path):
     p = tmp_path / "s.yaml"
