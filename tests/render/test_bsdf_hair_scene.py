@@ -128,7 +128,7 @@ def test_dict_scene_refuses_textured_hair():
                        "height": 4}, "materials": {"fur": bad},
             "shapes": [{"type": "sphere", "center": [0, 0, 0], "radius": 1, "material": "fur"}],
             "emitters": [{"type": "point", "position": [2, 2, 3], "intensity": 1.0}]}  # fmt: skip
-    with pytest.raises(ValueError, match="materials.fur: sigma_a: 'hair' parameters cannot be textures"):
+    with pytest.raises(ValueError, match="fur: sigma_a: 'hair' parameters cannot be textures"):
         load_scene(desc)
 
 
