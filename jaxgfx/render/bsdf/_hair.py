@@ -261,8 +261,9 @@ class Hair(BSDF):
         # transmission angles: longitudinal θ_t and azimuthal γ_t (Bravais' modified index)
         sin_t = sin_o / eta
         cos_t = safe_sqrt(1.0 - sin_t * sin_t)
-        eta_p = safe_div(safe_sqrt(eta * eta - sin_o * sin_o), cos_o, fill=jnp.inf)
-        sin_gt = jnp.clip(safe_div(h, eta_p), -1.0, 1.0)
+        # sin γ_t = h / η' with η' = sqrt(η² - sin² θ_o) / cos θ_o (no division by cos θ_o:
+        # finite along the fibre axis; the root is >= sqrt(η² - 1) > 0)
+        sin_gt = jnp.clip(h * cos_o / jnp.sqrt(eta * eta - sin_o * sin_o), -1.0, 1.0)
         cos_gt = safe_sqrt(1.0 - sin_gt * sin_gt)
         gamma_t = jnp.arcsin(sin_gt)
         length = safe_div(2.0 * cos_gt, cos_t)
