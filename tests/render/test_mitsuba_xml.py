@@ -453,10 +453,10 @@ def test_disk_is_a_fan_of_256_triangles(tmp_path):
             "<shape type='sdfgrid'>: missing parameter 'filename'",
         ),  # fmt: skip
         (
-            '<bsdf type="hair" id="p"/>',
+            '<bsdf type="measured" id="p"/>',
             10,
-            "<bsdf type='hair' id='p'>: bsdf plugin 'hair' is not supported (no hair BSDF in "
-            "jaxgfx)",
+            "<bsdf type='measured' id='p'>: bsdf plugin 'measured' is not supported (no measured "
+            "BSDFs in jaxgfx)",
         ),  # fmt: skip
         (
             '<emitter type="sunsky"/>',

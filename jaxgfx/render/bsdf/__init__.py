@@ -18,6 +18,7 @@ from jaxgfx.render.bsdf._blend import BlendBSDF as BlendBSDF
 from jaxgfx.render.bsdf._conductor import Mirror as Mirror
 from jaxgfx.render.bsdf._dielectric import SmoothDielectric as SmoothDielectric
 from jaxgfx.render.bsdf._diffuse import Diffuse as Diffuse
+from jaxgfx.render.bsdf._hair import Hair as Hair
 from jaxgfx.render.bsdf._mask import Mask as Mask
 from jaxgfx.render.bsdf._mask import Null as Null
 from jaxgfx.render.bsdf._normalmap import BumpMap as BumpMap
@@ -36,6 +37,7 @@ __all__ = [
     "BSDF",
     "BSDFSample",
     "Diffuse",
+    "Hair",
     "Mirror",
     "Phong",
     "Principled",
@@ -75,6 +77,7 @@ BSDF_TYPES = {
     "principledthin": PrincipledThin,
     "normalmap": NormalMap,
     "bumpmap": BumpMap,
+    "hair": Hair,
 }
 
 

@@ -23,6 +23,8 @@ _FLIP = (1.0, 1.0, -1.0)
 
 def _as_bsdf(x, name):
     # description dicts are built by make_bsdf (bsdf/__init__.py), which owns the registry
+    if getattr(x, "needs_tangents", False):  # hair: its frame is the hit's, not nestable
+        raise TypeError(f"{name}: a {type(x).__name__} BSDF cannot be nested (top level only)")
     if isinstance(x, BSDF):
         return x
     raise TypeError(f"{name}: expected a BSDF, got {type(x).__name__}")

@@ -56,6 +56,8 @@ class Mask(BSDF):
             raise ValueError("bsdf: missing nested BSDF")
         if not isinstance(bsdf, BSDF):
             raise TypeError(f"bsdf: expected a BSDF, got {type(bsdf).__name__}")
+        if getattr(bsdf, "needs_tangents", False):  # hair: its frame is the hit's
+            raise TypeError(f"bsdf: a {type(bsdf).__name__} BSDF cannot be nested (top level only)")
         self.bsdf = bsdf
         self.opacity = opacity
 

@@ -42,6 +42,8 @@ def material_from_desc(desc, *, where="material", base_dir=None):
     ]
     if not tex_keys:
         return make_bsdf(desc)
+    if getattr(BSDF_TYPES.get(desc.get("type")), "needs_tangents", False):  # hair
+        raise ValueError(f"{pre}{tex_keys[0]}: {desc['type']!r} parameters cannot be textures")
     plain = dict(desc)
     for k in tex_keys:
         plain[k] = 0.5

@@ -386,6 +386,13 @@ def _mitsuba_bsdf(m, where) -> dict:
                "bsdf": _twosided(_mitsuba_bsdf(m.bsdf, f"{where}.bsdf"))}  # fmt: skip
     elif kind == "null":
         out = {"type": kind}
+    elif kind == "hair":
+        out = {"type": kind, "int_ior": _float(m.eta), "ext_ior": 1.0,
+               **{k: _float(getattr(m, k)) for k in HAIR_SCALARS}}  # fmt: skip
+        if m.sigma_a is None:
+            out.update(eumelanin=_float(m.eumelanin), pheomelanin=_float(m.pheomelanin))
+        else:
+            out.update(sigma_a=_rgb(m.sigma_a), scale=_float(m.scale))
     elif kind in ("principled", "principledthin"):
         out = _principled_keys(m, where)
     else:
@@ -394,6 +401,7 @@ def _mitsuba_bsdf(m, where) -> dict:
 
 
 _MAP_KEYS = {"normalmap": "normalmap", "bumpmap": "height"}
+HAIR_SCALARS = ("longitudinal_roughness", "azimuthal_roughness", "scale_tilt")
 _MAP_FLAGS = ("flip_invalid_normals", "use_shadowing_function")
 
 
@@ -1124,6 +1132,15 @@ def _bsdf_desc(m, where) -> dict:
         out.update({k: _list(getattr(m, k)) for k in weights})
         out.update({k: _list(getattr(m, k)) for k in optional if getattr(m, k) is not None})
         return {**out, **{k: getattr(m, k) for k in rates}}
+    if isinstance(m, B.Hair):
+        out = {
+            "type": "hair",
+            "eta": _list(m.eta),
+            **{k: _list(getattr(m, k)) for k in HAIR_SCALARS},
+        }
+        if m.sigma_a is None:
+            return {**out, "eumelanin": _list(m.eumelanin), "pheomelanin": _list(m.pheomelanin)}
+        return {**out, "sigma_a": _list(m.sigma_a), "scale": _list(m.scale)}
     if isinstance(m, B.SmoothDielectric):
         return {"type": "dielectric", "eta": _list(m.eta),
                 "specular_reflectance": _list(m.specular_reflectance),

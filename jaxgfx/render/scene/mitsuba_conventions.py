@@ -87,7 +87,7 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("bsdf", "retarder"): "refused: no polarized BSDFs in jaxgfx",
     ("bsdf", "measured"): "refused: no measured BSDFs in jaxgfx",
     ("bsdf", "null"): S + " (`Null`: a mask of opacity 0; not nested)",
-    ("bsdf", "hair"): "refused: no hair BSDF in jaxgfx",
+    ("bsdf", "hair"): S + " (`sigma_a` an RGB or a number, not a texture; not nested)",
     # textures
     ("texture", "bitmap"): S + " (`to_uv` an affine uv map)",
     ("texture", "checkerboard"): S + " (`to_uv` a uniform scale)",
@@ -171,6 +171,7 @@ BSDF_TO_MITSUBA = {
     "Null": "null",
     "Principled": "principled",
     "PrincipledThin": "principledthin",
+    "Hair": "hair",
 }
 """jaxgfx BSDF class -> Mitsuba plugin (``Phong`` has none)."""
 
@@ -198,6 +199,12 @@ DEFAULTS = {
     "principledthin.eta": 1.5,
     "conductor.material": "none",
     "blendbsdf.weight": 0.5,
+    "hair.roughness": 0.3,
+    "hair.scale_tilt": 2.0,
+    "hair.int_ior": "amber",
+    "hair.ext_ior": "air",
+    "hair.eumelanin": 1.3,
+    "hair.pheomelanin": 0.2,
     "spot.cutoff_angle": 20.0,
     "spot.beam_width_fraction": 0.75,
     "directional.direction": (0.0, 0.0, 1.0),

@@ -842,6 +842,38 @@ def _principled(p: _Params) -> dict:
     return m
 
 
+def _hair(p: _Params) -> dict:
+    """``hair`` (Chiang et al. 2016): Mitsuba's names and defaults; ``sigma_a`` (an RGB or a
+    number, no texture, times ``scale``) or the melanin concentrations, not both (as Mitsuba);
+    ``eta = int_ior / ext_ior`` (amber / air); roughnesses in (0, 1]. Mitsuba reads ``scale``
+    with the concentrations too and ignores it; so does this."""
+    d = DEFAULTS
+    m = {"type": "hair"}
+    for k in ("longitudinal_roughness", "azimuthal_roughness"):
+        m[k] = p.float(k, d["hair.roughness"])
+        if not 0.0 < m[k] <= 1.0:
+            raise p.err(k, f"expected a value in (0, 1], got {m[k]}")
+    m["scale_tilt"] = p.float("scale_tilt", d["hair.scale_tilt"])
+    m["eta"] = _ior_ratio(p, d["hair.int_ior"], d["hair.ext_ior"])
+    if not m["eta"] > 1.0:
+        raise p.err("int_ior", f"expected int_ior / ext_ior > 1, got {m['eta']}")
+    sigma = p.color("sigma_a")
+    eu, ph = p.float("eumelanin"), p.float("pheomelanin")
+    scale = p.float("scale", 1.0)
+    if sigma is not None and (eu is not None or ph is not None):
+        raise p.err("sigma_a", "give either sigma_a or eumelanin / pheomelanin, not both "
+                               "(as Mitsuba)")  # fmt: skip
+    if sigma is not None:
+        if min(sigma) < 0 or scale < 0:
+            raise p.err("sigma_a", f"expected values >= 0, got {sigma} x {scale}")
+        return {**m, "sigma_a": sigma, "scale": scale}
+    eu = d["hair.eumelanin"] if eu is None else eu
+    ph = d["hair.pheomelanin"] if ph is None else ph
+    if eu < 0 or ph < 0:
+        raise p.err("eumelanin" if eu < 0 else "pheomelanin", "expected a value >= 0")
+    return {**m, "eumelanin": eu, "pheomelanin": ph}
+
+
 def _anisotropy(p: _Params, m: dict) -> None:
     """``anisotropic`` (a number in [0, 1] or a texture) into ``m`` unless absent or 0
     (Mitsuba's ``get_flag``: the isotropic program)."""
@@ -958,6 +990,11 @@ def _bsdf_dict(obj: _Obj, doc, *, nested=False, in_map=False) -> dict:
         m = _dpdu_frame(_principled(p), obj, nested, in_map)
     elif t == "principledthin":
         m = _dpdu_frame(_principledthin(p), obj, nested, in_map)
+    elif t == "hair":
+        if nested or in_map:
+            raise ValueError(f"{obj.where}: a hair BSDF nested in another BSDF is not supported "
+                             "(it shades in the hit's dp/du frame)")  # fmt: skip
+        m = _hair(p)
     elif t == "mask":
         if nested:
             raise ValueError(f"{obj.where}: a mask nested in a blendbsdf or mask is not supported")
