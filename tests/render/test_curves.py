@@ -396,11 +396,15 @@ def test_ray_intersections_match_mitsuba_linearcurve(tmp_path, x64):
     np.testing.assert_allclose(np.asarray(h.uv)[v, 1], ref["uv"][v, 1], atol=1e-5)
 
 
-def render_against_mitsuba(tmp_path, kind):
-    """A 32×24 direct render of three diffuse curves (``kind``: linearcurve or bsplinecurve,
-    the same 6 control points each) under a constant emitter and a point light, read from XML:
-    jaxgfx at 64 spp against the mean of 8 Mitsuba 3.9.1 renders of 64 spp, the per-sample
-    variance from the spread of those renders; block-wise z as test_mitsuba_xml_render.py."""
+DIFFUSE_XML = '<bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.45, 0.2"/></bsdf>'
+
+
+def render_against_mitsuba(tmp_path, kind, bsdf=DIFFUSE_XML, integrator="direct"):
+    """A 32×24 render of three curves (``kind``: linearcurve or bsplinecurve, the same 6
+    control points each; ``bsdf`` their material, diffuse by default) under a constant emitter
+    and a point light, read from XML: jaxgfx at 64 spp against the mean of 8 Mitsuba 3.9.1
+    renders of 64 spp, the per-sample variance from the spread of those renders; block-wise z
+    as test_mitsuba_xml_render.py."""
     from jaxgfx.render import render
     from jaxgfx.render.scene import load_scene
     from jaxgfx.render.scene.mitsuba import render_mitsuba
@@ -414,23 +418,26 @@ def render_against_mitsuba(tmp_path, kind):
         p = np.c_[-1.2 + 1.2 * k + 0.3 * np.sin(4 * s + k), -1 + 2 * s, 0.3 * np.cos(3 * s)]
         curves.append(np.c_[p, 0.12 + 0.1 * rng.random((6, 1))])
     write_curves(tmp_path / "h.txt", curves)
+    depth = '<integer name="max_depth" value="4"/>' if integrator == "path" else ""
     (tmp_path / "s.xml").write_text(f"""<scene version="3.0.0">
-  <integrator type="direct"/>
+  <integrator type="{integrator}">{depth}</integrator>
   <sensor type="perspective"><float name="fov" value="45"/>
     <transform name="to_world"><lookat origin="0, 0, -4" target="0, 0, 0" up="0, 1, 0"/></transform>
     <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="24"/>
       <rfilter type="box"/></film></sensor>
   <shape type="{kind}"><string name="filename" value="h.txt"/>
-    <bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.45, 0.2"/></bsdf></shape>
+    {bsdf}</shape>
   <emitter type="constant"><rgb name="radiance" value="0.5"/></emitter>
   <emitter type="point"><point name="position" x="2" y="2" z="-3"/>
     <rgb name="intensity" value="10"/></emitter>
 </scene>""")
     x = read_xml(str(tmp_path / "s.xml"))
     spp = 64
-    img = render(load_scene(x.desc), jax.random.key(3), spp=spp, integrator="direct")
+    spec = x.integrator_spec
+    img = render(load_scene(x.desc), jax.random.key(3), spp=spp, integrator=spec)
     img = np.asarray(img, np.float64)
-    ms = np.stack([render_mitsuba(x.desc, spp=spp, integrator="direct", seed=s)
+    opts = {"max_depth": x.max_depth, "rr_depth": x.rr_depth} if x.max_depth else {}
+    ms = np.stack([render_mitsuba(x.desc, spp=spp, integrator=x.integrator, seed=s, **opts)
                    for s in range(8)]).astype(np.float64)  # fmt: skip
     ref = ms.mean(0)
     c = compare(img, ref, ms.var(0, ddof=1) * spp, spp)
