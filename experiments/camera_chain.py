@@ -282,7 +282,10 @@ def start_curve(curve_init: dict, target: list, fc: dict):
 
     codes = np.stack([read_image(target[i]["file"])[..., :3] for i in curve_init["photos"]])
     resp = hdr.recover_response(
-        codes, np.asarray(curve_init["exposures"]), method=curve_init["method"]
+        codes,
+        np.asarray(curve_init["exposures"]),
+        method=curve_init["method"],
+        **curve_init.get("options", {}),
     )
     u = free_init(resp, int(fc.get("knots", 33)), int(fc.get("channels", 1)))
     return free_response(jnp.asarray(u))
@@ -433,7 +436,8 @@ def main(argv=None) -> int:
     p.add_argument(
         "--free-curve",
         default=None,
-        help="override fit.free_curve keys, e.g. init=1.6,smoothness=0.01",
+        help="override fit.free_curve keys, e.g. init=1.6,smoothness=0.01 or "
+        "init_method=subspace,init_options.n_poly=1",
     )
     p.add_argument(
         "--edge-mask",
@@ -495,7 +499,12 @@ def main(argv=None) -> int:
                 v = float(v) if "." in v else int(v)
             except ValueError:
                 pass
-            fit["free_curve"] = dict(fit["free_curve"], **{k: v})
+            fc = fit["free_curve"] = dict(fit["free_curve"])
+            if "." in k:  # a nested key, e.g. init_options.n_poly=1
+                k, sub = k.split(".", 1)
+                fc[k] = dict(fc.get(k) or {}, **{sub: v})
+            else:
+                fc[k] = v
     if a.edge_mask is not None:
         fit["edge_mask"] = (
             None

@@ -75,10 +75,10 @@ def _plane(tmp_path, texture, size):
     return str(path)
 
 
-def _blocks(n, seed=3):
+def _blocks(n, seed=3, blocks=4):
     rng = np.random.default_rng(seed)
-    b = rng.uniform(0.1, 0.9, (4, 4, 3))
-    return np.kron(b, np.ones((n // 4, n // 4, 1)))
+    b = rng.uniform(0.1, 0.9, (blocks, blocks, 3))
+    return np.kron(b, np.ones((n // blocks, n // blocks, 1)))
 
 
 def _views_cfg(**over):
@@ -583,17 +583,20 @@ def _coverage(scene, cameras, keys=8):
     return out
 
 
-def mesh_case(tmp_path, seed, steps, size=24, n_tex=16, target_spp=64, loss=None, one=True):
+def mesh_case(
+    tmp_path, seed, steps, size=24, n_tex=16, target_spp=64, loss=None, one=True, blocks=4
+):
     """The hostile several-views case at small size: four ``size``² photos of the bumpy mesh
     (one per view, exposures :data:`MESH_EXPOSURES`, synthetic "camera" response, shot and read
     noise, JPEG 90 4:2:0; target ``seed``) written as PNG files and fitted as ``{file,
     exposure, view}`` photos through the fixed "camera" response; then view 0's photo alone.
     ``loss``: the fits' loss section (e.g. ``{jpeg_chroma: "4:2:0"}``); ``one=False`` skips
-    the one-view fit (None). Returns (truth, visible, hidden from view 0, four-view fit,
-    one-view fit)."""
+    the one-view fit (None); ``blocks``: the truth's uniform colour blocks per side
+    (:func:`_blocks`). Returns (truth, visible, hidden from view 0, four-view fit, one-view
+    fit)."""
     from jaxgfx.pipelines.fit.job import _target
 
-    truth = _blocks(n_tex)
+    truth = _blocks(n_tex, blocks=blocks)
     scene = _mesh_scene(tmp_path, truth)
     base = {
         "scene": scene,
