@@ -200,3 +200,17 @@ def test_curve_start_prior_value_jit_and_gradient(x64):
     ok, g_ad, g_fd = check_grads_fd(f, u1 + 0.1, eps=1e-6, rtol=1e-6, atol=1e-9, jit=True)
     assert ok, np.max(np.abs(g_ad - g_fd))
     assert np.all(np.isfinite(np.asarray(jax.grad(f)(jnp.full_like(u0, -30.0)))))
+
+
+def test_the_camera_chain_configs_free_curve_is_a_valid_response():
+    """configs/camera_chain.yaml's ``fit.free_curve`` (the joint camera of
+    experiments/camera_chain.py) loads as a ``camera.response`` section, options checked."""
+    import os
+
+    from jaxgfx.config import read_yaml
+
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    fc = read_yaml(os.path.join(root, "configs", "camera_chain.yaml"))["fit"]["free_curve"]
+    r = _cfg(camera={"response": {"model": "table", "fit": True, **fc}}).camera.response
+    assert (r.init, r.init_method, r.init_options) == ("bracket", "subspace", {"n_poly": 1})
+    assert r.knots == 65 and r.start_prior == 0.1 and r.lr == 0.2
