@@ -90,7 +90,9 @@ class ResponseSpec:
     a free-form fit. ``init: bracket`` starts the free-form table from the curve that
     :func:`jaxgfx.hdr.recover_response` (``init_method``, default Debevec) recovers from the
     target photos themselves: photos of one view at several exposures (EXIF or given) are a
-    registered bracket."""
+    registered bracket; ``init_options`` are the method's options. ``start_prior`` keeps a
+    free-form curve near its start, most where the photos hold few pixels
+    (:func:`jaxgfx.pipelines.fit.job.start_prior_args`)."""
 
     model: str = "srgb"
     source: str | None = None
