@@ -282,10 +282,44 @@ def start_curve(curve_init: dict, target: list, fc: dict):
 
     codes = np.stack([read_image(target[i]["file"])[..., :3] for i in curve_init["photos"]])
     resp = hdr.recover_response(
-        codes, np.asarray(curve_init["exposures"]), method=curve_init["method"]
+        codes,
+        np.asarray(curve_init["exposures"]),
+        method=curve_init["method"],
+        **curve_init.get("options", {}),
     )
     u = free_init(resp, int(fc.get("knots", 33)), int(fc.get("channels", 1)))
     return free_response(jnp.asarray(u))
+
+
+def compare_starts(specs: str, target: list, truth, knots: int) -> list:
+    """The response each recovery method gives from the target photos at their relative
+    exposures (what ``camera.response.init: bracket`` would start from), against the truth
+    over levels 10-245: as recovered and on ``knots`` free-curve knots (``free_init``).
+    ``specs``: ``;``-separated ``method`` or ``method:option=value,...`` (e.g.
+    ``debevec;subspace:n_poly=1``)."""
+    import jax.numpy as jnp
+
+    from jaxgfx import hdr
+    from jaxgfx.io import read_image
+    from jaxgfx.pipelines.fit.camera import free_init, free_response
+
+    codes = np.stack([read_image(t["file"])[..., :3] for t in target])
+    times = np.asarray([t["exposure"] for t in target], np.float64)
+    rows = []
+    for spec in specs.split(";"):
+        method, _, opts = spec.partition(":")
+        options = {k: int(v) if v.isdigit() else float(v) for k, v in
+                   (kv.split("=") for kv in opts.split(",") if kv)}  # fmt: skip
+        resp = hdr.recover_response(codes, times, method=method, **options)
+        on_knots = free_response(jnp.asarray(free_init(resp, knots, 3)))
+        rows.append(
+            {
+                "spec": spec,
+                "recovered": response_errors(resp, truth),
+                "on_knots": response_errors(on_knots, truth),
+            }
+        )
+    return rows
 
 
 def errors_vs_time(result: dict, truth: dict):
@@ -433,7 +467,8 @@ def main(argv=None) -> int:
     p.add_argument(
         "--free-curve",
         default=None,
-        help="override fit.free_curve keys, e.g. init=1.6,smoothness=0.01",
+        help="override fit.free_curve keys, e.g. init=1.6,smoothness=0.01 or "
+        "init_method=subspace,init_options.n_poly=1",
     )
     p.add_argument(
         "--edge-mask",
@@ -459,6 +494,12 @@ def main(argv=None) -> int:
         default=None,
         choices=("bound", "unmeasured"),
         help="override fit.clipped (camera.clipped of every fit)",
+    )
+    p.add_argument(
+        "--starts",
+        default=None,
+        help="also compare the curves recovery methods give from each seed's photos, e.g. "
+        "'debevec;subspace:n_poly=1' (--variants none: only that)",
     )
     p.add_argument("--no-plot", action="store_true")
     p.add_argument(
@@ -495,7 +536,12 @@ def main(argv=None) -> int:
                 v = float(v) if "." in v else int(v)
             except ValueError:
                 pass
-            fit["free_curve"] = dict(fit["free_curve"], **{k: v})
+            fc = fit["free_curve"] = dict(fit["free_curve"])
+            if "." in k:  # a nested key, e.g. init_options.n_poly=1
+                k, sub = k.split(".", 1)
+                fc[k] = dict(fc.get(k) or {}, **{sub: v})
+            else:
+                fc[k] = v
     if a.edge_mask is not None:
         fit["edge_mask"] = (
             None
@@ -522,6 +568,7 @@ def main(argv=None) -> int:
         hdr.save_response(os.path.join(a.out, "true_response.json"), true_resp)
     )
     variants = a.variants.split(",") if a.variants else base.get("variants", VARIANTS)
+    variants = [] if variants == ["none"] else variants
     summary = {
         "curve": cal["curve"],
         "targets": renderer,
@@ -551,6 +598,12 @@ def main(argv=None) -> int:
         target = photos(
             img, fit["camera"], true_resp, seed, os.path.join(sd, "photos"), fit.get("edge_mask")
         )
+        if a.starts:
+            knots = int(fit["free_curve"].get("knots", 33))
+            rows = compare_starts(a.starts, target, true_resp, knots)
+            summary.setdefault("starts", []).append({"seed": seed, "knots": knots, "rows": rows})
+            for r in rows:
+                print("seed", seed, "start", json.dumps(r), flush=True)
         for v in variants:
             cfg = {
                 "scene": fit["scene"],

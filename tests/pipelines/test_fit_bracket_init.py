@@ -135,3 +135,82 @@ def test_curve_lr_scales_the_curves_first_adam_step(tmp_path):
     step = {lr: np.max(np.abs(runs[lr][1] - u0)) for lr in runs}
     assert step[None] == pytest.approx(0.05, rel=0.01)
     assert step[0.2] == pytest.approx(0.2, rel=0.01)
+
+
+def test_init_options_and_start_prior_config_errors():
+    """``init_options`` (the bracket's recovery options) and ``start_prior`` (the weight that
+    keeps the free curve near its start): checked before anything renders, naming the key."""
+    sub = dict(BRACKET, init_method="subspace", init_options={"n_poly": 1}, start_prior=1.0)
+    r = _cfg(camera={"response": sub}).camera.response
+    assert r.init_options == {"n_poly": 1} and r.start_prior == 1.0
+    with pytest.raises(
+        ValueError,
+        match=r"camera.response.init_options: method 'subspace' has "
+        r"no option 'nope'",
+    ):
+        _cfg(camera={"response": dict(sub, init_options={"nope": 1})})
+    with pytest.raises(ValueError, match=r"camera.response.init_options: expected a mapping"):
+        _cfg(camera={"response": dict(sub, init_options=[1])})
+    with pytest.raises(
+        ValueError,
+        match=r"camera.response.init_options: .* expected init: "
+        r"bracket",
+    ):
+        _cfg(camera={"response": {"model": "table", "fit": True, "init_options": {"lam": 1}}})
+    for bad in (-1.0, True, "x", float("nan")):
+        with pytest.raises(ValueError, match=r"camera.response.start_prior: expected a number"):
+            _cfg(camera={"response": dict(BRACKET, start_prior=bad)})
+    with pytest.raises(ValueError, match=r"camera.response.start_prior: only a free-form"):
+        _cfg(camera={"response": {"model": "gamma", "fit": True, "start_prior": 1.0}})
+
+
+def test_knot_counts_counts_the_measured_codes_nearest_each_knot():
+    from jaxgfx.pipelines.fit.job import knot_counts
+
+    # 5 knots over codes 0..255 (spacing 63.75): code 0 (black) and codes >= 245 (clipped)
+    # are not counted; 31 -> knot 0, 32 -> knot 1, 128 -> knot 2, 240 -> knot 4
+    codes = np.array([[0, 31, 32, 128, 240, 245, 255]] * 2, np.uint8).T  # (7, 2)
+    n = knot_counts(codes, 5, 245)
+    np.testing.assert_array_equal(n[:, 0], [1, 1, 1, 0, 1])
+    np.testing.assert_array_equal(n[:, 1], n[:, 0])
+
+
+def test_curve_start_prior_value_jit_and_gradient(x64):
+    """The prior is ``mean_k Σ_c w_kc (g_kc − g0_kc)²`` over the knots of the free curve
+    (closed form for a curve moved at its first parameter only), jitted, and its gradient
+    in the curve's parameters matches central differences in float64."""
+    import jax
+
+    from jaxgfx.pipelines.fit.loss import curve_start_prior
+    from jaxgfx.testing import check_grads_fd
+
+    u0 = jnp.asarray(
+        free_init(hdr.CameraResponse.analytic("srgb", anchor="unit"), 5, 3), jnp.float64
+    )
+    g0 = free_response(u0).params
+    w = jnp.asarray(np.random.default_rng(0).uniform(0.5, 100.0, g0.shape))
+    prior = {"g0": g0, "w": w}
+    f = jax.jit(lambda u: curve_start_prior({"curve": u}, prior))
+    assert float(f(u0)) == 0.0
+    # moving u[0, c] by d changes only knot 0: ln x_0 = -sum_j softplus(u_j)
+    d = 0.3
+    u1 = u0.at[0, 1].add(d)
+    dg = float(jax.nn.softplus(u0[0, 1] + d) - jax.nn.softplus(u0[0, 1]))
+    assert float(f(u1)) == pytest.approx(float(w[0, 1]) * dg**2 / g0.shape[0], rel=1e-12)
+    ok, g_ad, g_fd = check_grads_fd(f, u1 + 0.1, eps=1e-6, rtol=1e-6, atol=1e-9, jit=True)
+    assert ok, np.max(np.abs(g_ad - g_fd))
+    assert np.all(np.isfinite(np.asarray(jax.grad(f)(jnp.full_like(u0, -30.0)))))
+
+
+def test_the_camera_chain_configs_free_curve_is_a_valid_response():
+    """configs/camera_chain.yaml's ``fit.free_curve`` (the joint camera of
+    experiments/camera_chain.py) loads as a ``camera.response`` section, options checked."""
+    import os
+
+    from jaxgfx.config import read_yaml
+
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    fc = read_yaml(os.path.join(root, "configs", "camera_chain.yaml"))["fit"]["free_curve"]
+    r = _cfg(camera={"response": {"model": "table", "fit": True, **fc}}).camera.response
+    assert (r.init, r.init_method, r.init_options) == ("bracket", "subspace", {"n_poly": 1})
+    assert r.knots == 65 and r.start_prior == 0.1 and r.lr == 0.2

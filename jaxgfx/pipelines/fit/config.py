@@ -11,7 +11,7 @@ from typing import Any
 
 from jaxgfx._checks import check_choice
 from jaxgfx.config import load_config
-from jaxgfx.hdr import ANALYTIC_RESPONSES, RESPONSE_METHODS
+from jaxgfx.hdr import ANALYTIC_RESPONSES, RESPONSE_METHODS, check_response_options
 from jaxgfx.optim import FAST_COMPILE_OPTIONS, LOSS_SPACES, LOSSES, OPTIMIZERS
 from jaxgfx.render.integrators import INTEGRATORS
 from jaxgfx.render.integrators.path import ADJOINTS
@@ -90,7 +90,9 @@ class ResponseSpec:
     a free-form fit. ``init: bracket`` starts the free-form table from the curve that
     :func:`jaxgfx.hdr.recover_response` (``init_method``, default Debevec) recovers from the
     target photos themselves: photos of one view at several exposures (EXIF or given) are a
-    registered bracket."""
+    registered bracket; ``init_options`` are the method's options. ``start_prior`` keeps a
+    free-form curve near its start, most where the photos hold few pixels
+    (:func:`jaxgfx.pipelines.fit.job.start_prior_args`)."""
 
     model: str = "srgb"
     source: str | None = None
@@ -102,9 +104,16 @@ class ResponseSpec:
     channels: int = 1
     smoothness: float = 1e-3
     init_method: str = "debevec"  # init: bracket: the recovery method (hdr.RESPONSE_METHODS)
+    # init: bracket: the method's options (hdr.recover_response keywords, e.g. subspace's
+    # n_poly); checked with hdr.check_response_options before anything renders
+    init_options: dict | None = None
     # the free-form curve's own learning rate (None: optimizer.lr): fitted as v, u = k v with
     # k = lr / optimizer.lr (the params.X.lr scheme)
     lr: float | None = None
+    # a prior that keeps the free-form curve near its start where the photos hold few pixels:
+    # weight x mean over knots of w_k (ln x_k - ln x0_k)^2, w_k = 1 / (n_k / n_mean + 0.01)
+    # (n_k: the photos' pixels nearest knot k; 0: none, the program of before)
+    start_prior: float = 0.0
 
     def __post_init__(self):
         check_choice(self.model, "camera.response.model", RESPONSE_MODELS)
@@ -121,6 +130,14 @@ class ResponseSpec:
                 )
             check_choice(self.init_method, "camera.response.init_method",
                          tuple(RESPONSE_METHODS))
+        if self.init_options is not None:
+            if self.init != "bracket":
+                raise ValueError(
+                    "camera.response.init_options: options of the bracket's recovery method; "
+                    f"expected init: bracket, got init {self.init!r}"
+                )
+            check_response_options(self.init_method, self.init_options,
+                                   name="camera.response.init_options")
         if self.source is not None:
             if not isinstance(self.source, str) or not self.source:
                 raise ValueError(f"camera.response.from: expected a file path, got "
@@ -151,6 +168,14 @@ class ResponseSpec:
                     "camera.response.lr: only a free-form curve (model: table) has its own "
                     f"learning rate; got model {self.model!r}"
                 )
+        sp = self.start_prior
+        if isinstance(sp, bool) or not isinstance(sp, (int, float)) or not sp >= 0:
+            raise ValueError(f"camera.response.start_prior: expected a number >= 0, got {sp!r}")
+        if sp and self.model != "table":
+            raise ValueError(
+                "camera.response.start_prior: only a free-form curve (model: table, fit: true) "
+                f"has a start to stay near; got model {self.model!r}"
+            )
         _positive_int(self.knots, "camera.response.knots")
         if self.knots < 4:
             raise ValueError(f"camera.response.knots: expected >= 4, got {self.knots}")

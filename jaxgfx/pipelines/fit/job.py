@@ -269,7 +269,8 @@ def _prior_specs(cfg: FitConfig, prep: Prepared):
 
 def bracket_start(cfg: FitConfig, prep: Prepared, target: Target):
     """The starting curve of ``camera.response.init: bracket``: the response that
-    :func:`jaxgfx.hdr.recover_response` (``camera.response.init_method``) recovers from the
+    :func:`jaxgfx.hdr.recover_response` (``camera.response.init_method`` with its
+    ``init_options``) recovers from the
     target photos of one view (:func:`~jaxgfx.pipelines.fit.targets.bracket_photos`) with
     their relative exposures as times. Returns the response and a record for the report."""
     from jaxgfx.hdr import recover_response
@@ -280,9 +281,12 @@ def bracket_start(cfg: FitConfig, prep: Prepared, target: Target):
     codes = np.asarray(target.pixels)[idx]
     dtype = np.uint16 if cfg.camera.bits > 8 else np.uint8
     times = np.asarray(prep.exposures, np.float64)[idx]
-    resp = recover_response(codes.astype(dtype), times, method=cfg.camera.response.init_method)
+    spec = cfg.camera.response
+    options = dict(spec.init_options or {})
+    resp = recover_response(codes.astype(dtype), times, method=spec.init_method, **options)
     view = 0 if prep.view_of is None else int(np.asarray(prep.view_of)[idx[0]])
-    record = {"from": "bracket", "method": cfg.camera.response.init_method,
+    record = {"from": "bracket", "method": spec.init_method,
+              **({"options": options} if options else {}),
               "photos": [int(i) for i in idx], "view": view,
               "exposures": [float(t) for t in times]}
     return resp, record
@@ -384,6 +388,9 @@ def _initial(cfg: FitConfig, prep: Prepared, target: Target | None = None):
         }
         # the picture style: present only when configured (a config without it keeps the
         # parameter tree, hence the program, it had before)
+        if kind == "free" and spec.start_prior and target is not None:
+            cam_args["curve_prior"] = start_prior_args(spec, curve0, target, cam_args,
+                                                       2**bits - 1)
         if cam.has_matrix:
             params["camera"]["color_matrix"] = jnp.asarray(prep.color_matrix, jnp.float32)
             bounds["camera"]["color_matrix"] = None
@@ -406,6 +413,37 @@ def _initial(cfg: FitConfig, prep: Prepared, target: Target | None = None):
         cam_args = {**(cam_args or {}), "views": stack_cameras(prep.views),
                     "view_of": jnp.asarray(prep.view_of, jnp.int32)}
     return params, bounds, cam_args
+
+
+def knot_counts(codes, knots: int, clip_code: int, code_max: int = 255) -> np.ndarray:
+    """``(knots, C)``: the pixels of the photos ``codes`` ``(..., C)`` whose code is nearest
+    each of the free curve's ``knots`` uniform knots, per channel; black (0) and clipped
+    (``>= clip_code``) codes measure no level and are left out."""
+    c = np.asarray(codes).reshape(-1, np.shape(codes)[-1]).astype(np.int64)
+    k = np.rint(c * (knots - 1) / code_max).astype(np.int64)
+    ok = (c > 0) & (c < clip_code)
+    return np.stack(
+        [np.bincount(k[ok[:, j], j], minlength=knots)[:knots] for j in range(c.shape[1])], 1
+    ).astype(np.float64)
+
+
+def start_prior_args(spec, curve0, target: Target, cam_args, code_max: int = 255) -> dict:
+    """``camera_args["curve_prior"]`` of ``camera.response.start_prior``: the start's ``ln x``
+    knots ``g0`` ``(K, C)`` and the per-knot weights ``start_prior · w_k``, ``w_k = 1 / (n_k /
+    n̄ + 0.01)`` (:func:`knot_counts` of the target photos, ``n̄`` their mean over the knots:
+    ~1 where the photos hold an average count, up to 100 where they hold none)."""
+    import jax.numpy as jnp
+
+    from .camera import free_response
+
+    g0 = np.asarray(free_response(jnp.asarray(curve0)).params, np.float64)
+    n = knot_counts(np.asarray(target.pixels)[..., :3], spec.knots,
+                    int(np.asarray(cam_args["clip_code"])), code_max)
+    if g0.shape[1] == 1:
+        n = n.sum(axis=1, keepdims=True)
+    w = 1.0 / (n / np.maximum(n.mean(axis=0, keepdims=True), 1.0) + 0.01)
+    return {"g0": jnp.asarray(g0, jnp.float32),
+            "w": jnp.asarray(float(spec.start_prior) * w, jnp.float32)}
 
 
 def _curve_lr(cfg: FitConfig) -> float | None:

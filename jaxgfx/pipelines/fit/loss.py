@@ -27,6 +27,7 @@ __all__ = [
     "photo_gains",
     "texture_prior",
     "curve_smoothness",
+    "curve_start_prior",
 ]
 
 
@@ -243,6 +244,16 @@ def curve_smoothness(cam_p):
     return jnp.mean(d2 * d2)
 
 
+def curve_start_prior(cam_p, prior):
+    """``mean_k Σ_c w_kc (ln x_kc − g0_kc)²``: the free-form curve's distance from its start
+    ``prior["g0"]`` ``(K, C)``, weighted per knot by ``prior["w"]`` (``camera.response.
+    start_prior``: heavier where the photos hold few pixels)."""
+    from .camera import free_response
+
+    g = free_response(cam_p["curve"]).params
+    return jnp.mean(jnp.sum(prior["w"] * (g - prior["g0"]) ** 2, axis=-1))
+
+
 VIEW_BATCHING = ("vmap", "loop")
 """How the fit step renders several views: ``vmap`` (one batched render over the stacked
 cameras, one trace) or ``loop`` (one render per view in a Python loop: the render is traced
@@ -389,6 +400,8 @@ def make_loss(
             value = value + cam_args["priors"][path][prior] * texture_prior(vals[path], prior)
         if ldr:
             value = value + cam_args["smoothness"] * curve_smoothness(p["camera"])
+            if "curve_prior" in cam_args:  # camera.response.start_prior (absent: no term)
+                value = value + curve_start_prior(p["camera"], cam_args["curve_prior"])
         return value
 
     return loss
