@@ -53,7 +53,9 @@ SLOW = {
     ("docs/render_gradients.md", 'visibility="edge"'): "182 s: edge-sampled gradient",
     ("docs/render_gradients.md", 'adjoint="replay")   #'): "25 s: a 64-spp path gradient by replay",
     ("docs/inverse.md", "fit(loss"): "106 s: 100 Adam steps through the renderer",
-    ("docs/inverse.md", "fit_least_squares(residuals"): "260 s: LM through a 512-spp render",
+    # 128 spp since 2026-12-05: 68 s of process CPU against 111 s at 512 spp (one process,
+    # load ~9); was 260 s of wall at load 7-8 and 127 s in the last slow run at 512 spp
+    ("docs/inverse.md", "fit_least_squares(residuals"): "68 s CPU: LM through a 128-spp render",
 }
 
 
