@@ -40,8 +40,13 @@ _FENCE = re.compile(r"^([ \t]*)```([\w-]*)\s*$")
 # average 7-8) from a cold compilation cache; nearly all of it is XLA compiling the renderer
 # and its gradient. The default run keeps README.md's library block (8 s; 24 s at that load:
 # blur, its gradient, a synthetic stack, Debevec, merge) and docs/tonemap.md's (3 s; 8 s).
+# The README block, docs/render.md's first block and docs/render_gradients.md's first block make
+# the same calls (example scene, 64-spp path render at depth 3, gradient of the mean w.r.t. the
+# metal's alpha at 4 spp), so one worker compiles those programs once (2026-12-05: the three
+# blocks 82 s of process CPU in one process, against 141 s when they used 16 / 64 / 16 spp;
+# measured side by side at load 7-11).
 SLOW = {
-    ("README.md", "R.load_scene("): "120 s: path tracer at 16 spp and its gradient",
+    ("README.md", "R.load_scene("): "120 s: path tracer at 64 spp and its gradient",
     ("docs/render.md", "img = render(scene, jax.random.key(0), spp=64"): "54 s: path + grad",
     # the same path program as the block above: 3 s after it in one process
     ("docs/render.md", "PathIntegrator(max_depth=3"): "two 64-spp path renders",
