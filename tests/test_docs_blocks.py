@@ -50,6 +50,7 @@ SLOW = {
     ("docs/render.md", "img = render(scene, jax.random.key(0), spp=64"): "54 s: path + grad",
     # the same path program as the block above: 3 s after it in one process
     ("docs/render.md", "PathIntegrator(max_depth=3"): "two 64-spp path renders",
+    # 64 / 4 spp since 2026-12-05: 41 s of process CPU against 50 s at 256 / 16 spp (load ~6)
     ("docs/render.md", "render_sharded"): "132 s: sharded render and its gradient",
     # eager scene building: ~40 tiny XLA compilations (rectangle, projector, spot) at load 12
     ("docs/render.md", 'load_scene("projector.yaml")'): "6 s: load_scene + one jitted sample",
