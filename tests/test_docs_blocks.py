@@ -40,11 +40,17 @@ _FENCE = re.compile(r"^([ \t]*)```([\w-]*)\s*$")
 # average 7-8) from a cold compilation cache; nearly all of it is XLA compiling the renderer
 # and its gradient. The default run keeps README.md's library block (8 s; 24 s at that load:
 # blur, its gradient, a synthetic stack, Debevec, merge) and docs/tonemap.md's (3 s; 8 s).
+# The README block, docs/render.md's first block and docs/render_gradients.md's first block make
+# the same calls (example scene, 64-spp path render at depth 3, gradient of the mean w.r.t. the
+# metal's alpha at 4 spp), so one worker compiles those programs once (2026-12-05: the three
+# blocks 82 s of process CPU in one process, against 141 s when they used 16 / 64 / 16 spp;
+# measured side by side at load 7-11).
 SLOW = {
-    ("README.md", "R.load_scene("): "120 s: path tracer at 16 spp and its gradient",
+    ("README.md", "R.load_scene("): "120 s: path tracer at 64 spp and its gradient",
     ("docs/render.md", "img = render(scene, jax.random.key(0), spp=64"): "54 s: path + grad",
     # the same path program as the block above: 3 s after it in one process
     ("docs/render.md", "PathIntegrator(max_depth=3"): "two 64-spp path renders",
+    # 64 / 4 spp since 2026-12-05: 41 s of process CPU against 50 s at 256 / 16 spp (load ~6)
     ("docs/render.md", "render_sharded"): "132 s: sharded render and its gradient",
     # eager scene building: ~40 tiny XLA compilations (rectangle, projector, spot) at load 12
     ("docs/render.md", 'load_scene("projector.yaml")'): "6 s: load_scene + one jitted sample",
@@ -53,7 +59,9 @@ SLOW = {
     ("docs/render_gradients.md", 'visibility="edge"'): "182 s: edge-sampled gradient",
     ("docs/render_gradients.md", 'adjoint="replay")   #'): "25 s: a 64-spp path gradient by replay",
     ("docs/inverse.md", "fit(loss"): "106 s: 100 Adam steps through the renderer",
-    ("docs/inverse.md", "fit_least_squares(residuals"): "260 s: LM through a 512-spp render",
+    # 128 spp since 2026-12-05: 68 s of process CPU against 111 s at 512 spp (one process,
+    # load ~9); was 260 s of wall at load 7-8 and 127 s in the last slow run at 512 spp
+    ("docs/inverse.md", "fit_least_squares(residuals"): "68 s CPU: LM through a 128-spp render",
 }
 
 

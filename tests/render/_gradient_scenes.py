@@ -14,6 +14,7 @@ estimated from the keys.
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -238,6 +239,37 @@ def ad_fd(
     return ad_fd_per_key(_loss, x0, keys, h, args=(scene, bases, opts))
 
 
+@eqx.filter_jit
+def _fd_values(xs, keys, scene, bases, opts):
+    """``_loss`` at each row of ``xs`` for each key, ``(N, K)``: forward renders only."""
+    per_key = jax.vmap(lambda x, k: _loss(x, k, scene, bases, opts), in_axes=(None, 0))
+    return jax.lax.map(lambda x: per_key(x, keys), xs)
+
+
+def fd_only(desc, params, *, spp, keys, integrator, max_depth=3, seed=0):
+    """Per key, the same-key central differences of :func:`run` (step ``H``, the step taken in
+    float32) WITHOUT the gradient: ``(K, P)``. :func:`jaxgfx.testing.ad_fd_per_key` always
+    pays for the reverse-mode gradient too (3 of the 5 forward-render units of a one-parameter
+    call, measured); this is for extra FD-only samples of a reference (a program of its own,
+    forward only)."""
+    scene = make_scene(desc)
+    bases = resolve(scene, params)
+    ks = jax.random.split(jax.random.key(seed), keys)
+    opts = (
+        ("spp", spp),
+        ("integrator", integrator),
+        ("max_depth", max_depth),
+        ("strategy", "mis"),
+        ("sampling", "detached"),
+    )
+    n = len(bases)
+    e = np.float32(H) * np.eye(n, dtype=np.float32)
+    xs = np.concatenate([1 + e, 1 - e]).astype(np.float32)  # +h rows, then -h rows
+    step = np.diagonal(xs[:n] - xs[n:]).astype(np.float64)
+    v = np.asarray(_fd_values(jnp.asarray(xs), ks, scene, bases, opts), np.float64)
+    return ((v[:n] - v[n:]) / step[:, None]).T
+
+
 def summary(vals, ad, fd):
     ad, fd = np.asarray(ad, np.float64), np.asarray(fd, np.float64)
     k = ad.shape[0]
@@ -266,11 +298,12 @@ def is_smooth(path):
     return not any(k in path for k in SAMPLING_DEPENDENT)
 
 
-def run(desc, params, *, spp, keys, integrator, max_depth=3, sampling="detached", seed=0):
+def ad_fd_raw(desc, params, *, spp, keys, integrator, max_depth=3, sampling="detached", seed=0):
+    """Per key ``(values (K,), ad (K, P), fd (K, P))`` of :func:`ad_fd` at step ``H``."""
     scene = make_scene(desc)
     bases = resolve(scene, params)
     ks = jax.random.split(jax.random.key(seed), keys)
-    out = ad_fd(
+    return ad_fd(
         scene,
         bases,
         ks,
@@ -279,6 +312,20 @@ def run(desc, params, *, spp, keys, integrator, max_depth=3, sampling="detached"
         integrator=integrator,
         max_depth=max_depth,
         sampling=sampling,
+    )
+
+
+def run(desc, params, *, spp, keys, integrator, max_depth=3, sampling="detached", seed=0):
+    """:func:`summary` of :func:`ad_fd_raw`."""
+    out = ad_fd_raw(
+        desc,
+        params,
+        spp=spp,
+        keys=keys,
+        integrator=integrator,
+        max_depth=max_depth,
+        sampling=sampling,
+        seed=seed,
     )
     return summary(*out)
 
