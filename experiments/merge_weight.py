@@ -58,6 +58,10 @@ def real_rows(**fit):
         ims, t = load(name), np.asarray(ratios)
         r = hdr.recover_response(ims, t, **fit)
         row = {"stack": f"real {name}", "metric": "LOO per held frame (levels)"}
+        row["self-check candidates (LOO on the candidate grid)"] = _r(
+            r.diagnostics["loo_candidates"]
+        )
+        row["prior chosen"] = bool(r.diagnostics["prior_chosen"])
         for k, o in WEIGHTS.items():
             row[k] = _r(hdr.leave_one_out(ims, t, r, **o).per_frame)
         row["OpenCV"] = _r(opencv_loo(ims, t).per_frame)
@@ -91,6 +95,7 @@ def jpeg_rows(**fit):
         )
         r = hdr.recover_response(st.images, st.exposure_times, **fit)
         row = {"stack": f"JPEG-like {label}", "metric": "LOO mean (levels)"}
+        row["prior chosen"] = bool(r.diagnostics["prior_chosen"])
         for k, o in WEIGHTS.items():
             row[k] = _r(hdr.leave_one_out(st.images, st.exposure_times, r, **o).mean_abs_error)
         row["OpenCV"] = _r(opencv_loo(st.images, st.exposure_times).mean_abs_error)
