@@ -192,10 +192,13 @@ def _select_by_loo(z, t, candidates, m, anchor_z):
             time_power=2.0,
         ).mean_abs_error
 
-    errs = jnp.stack([loo(g) for g, _ in candidates])
+    gs = jnp.stack([g for g, _ in candidates])
+    # one loop over the candidates, not K independent LOO loops in the program: with three
+    # the XLA CPU runtime intermittently hung (every thread in a futex wait) on 256x256 stacks
+    errs = jax.lax.map(loo, gs)
     errs = jnp.where(jnp.isnan(errs), jnp.inf, errs)
     k = jnp.argmin(errs)
-    g = jnp.stack([g for g, _ in candidates])[k]
+    g = gs[k]
     w = jnp.stack([w for _, w in candidates])[k]
     return g, w, k, errs
 
@@ -368,7 +371,12 @@ def recover_debevec(
         base = interior.astype(w.dtype) * valid[..., None].astype(w.dtype)
         cands = [(g, w), _inverse_slope_fit(g, lev, base, solve, m, reweight_passes)]
         if smooth_prior == "auto":
-            cands.append(_inverse_slope_fit(g, lev, base, solve_prior, m, reweight_passes))
+            # started from the plain inverse-slope fit: a data dependency, so the two chains of
+            # solves run one after the other (run side by side, the XLA CPU runtime hung
+            # intermittently, every thread in a futex wait, on 256x256 real brackets)
+            cands.append(
+                _inverse_slope_fit(cands[1][0], lev, base, solve_prior, m, reweight_passes)
+            )
         g, w, k, errs = _select_by_loo(z, t, cands, m, anchor_z)
         extra = {
             "loo_candidates": errs,
