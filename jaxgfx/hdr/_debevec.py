@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 
 from .._checks import check_choice, check_nonnegative
+from .._math import spd_solve_small
 from ._curve_space import response_basis
 from ._model import CameraResponse, resolve_anchor
 from ._sampling import level_index, monotone_repair, select_samples
@@ -140,7 +141,10 @@ def subspace_solve(levels, weights, log_t, basis, lam, anchor_index):
     ``g = basis @ c`` (``basis`` ``(L, K)``)."""
     n_levels = basis.shape[0]
     a, b = debevec_system(levels, weights, log_t, n_levels, lam, anchor_index)
-    return jnp.linalg.solve(basis.T @ a @ basis, basis.T @ b)
+    # no LAPACK call (spd_solve_small): in recover_debevec this small solve is independent of
+    # the table's LAPACK solves, and two independent LAPACK calls in one program hung the XLA
+    # CPU runtime intermittently (issue 26)
+    return spd_solve_small(basis.T @ a @ basis, basis.T @ b)
 
 
 def inverse_slope_weights(g, anchor_index):
