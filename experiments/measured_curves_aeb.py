@@ -3,7 +3,8 @@ weight and smoothness, and ``spline``, scored by the radiance error *and* by the
 leave-one-out self-check that the default uses to choose between its candidates.
 
     python -m experiments.measured_curves_aeb [--spline] [--levels] [--subspace] [--checks]
-        [--timing] [--overlap] [--figure docs/images/hdr_subspace_aeb.png]
+        [--timing] [--timing-prior] [--overlap] [--prior]
+        [--figure docs/images/hdr_subspace_aeb.png]
 
 Stacks: ``experiments.measured_curves.measured_stacks`` (DoRF Ektachrome 320T curves, 96×96,
 AEB 3 frames ±3 EV and 5 frames 2 EV apart). For ``end_weight`` in {0, 0.05, 0.2} and ``lam``
@@ -15,8 +16,9 @@ overlap) on every stack instead. ``--figure PATH``: the curve-space basis (``n_p
 for the three AEB stacks, the default's curve, the free table (``sparse_overlap=0``) and
 OpenCV's against the measured truth. ``--checks``: ``"subspace"`` on the real JPEG brackets
 and the analytic synthetic stacks (data its ``n_poly=0`` choice did not see). ``--timing``:
-the cost of the sparse-bracket rule, A/B in one process. ``--overlap``: the rule's statistic
-on every stack family (no fits).
+the cost of the sparse-bracket rule, A/B in one process (``--timing-prior``: of the smoothness
+prior's candidate). ``--overlap``: the rule's statistic on every stack family (no fits).
+``--prior``: the curve-space smoothness prior on the 5-frame brackets (:func:`prior_rows`).
 """
 
 from __future__ import annotations
@@ -218,11 +220,68 @@ def overlaps():
     return out
 
 
-def timing():
+def prior_rows():
+    """The smoothness prior on the 5-frame brackets (issue 26's red row): for
+    ``smooth_prior`` "none" (the default before), "auto" (default) and "subspace", the
+    radiance error, the self-check's LOO candidates and whether the prior'd fit was chosen;
+    the ``lam`` sweep without the prior (the rejected alternative: lowering λ); OpenCV; and
+    the red curve's per-level error (ln, after the median offset over levels 30-224, every 15
+    levels from 5) for "none", "auto" and OpenCV."""
+    import jax.numpy as jnp
+
+    from .measured_curves import opencv_debevec_merge
+
+    rows = []
+    lv = jnp.broadcast_to(jnp.linspace(0, 1, 256)[:, None], (256, 3))
+    for cname, bname, st in measured_stacks():
+        if "5 frames" not in bname:
+            continue
+        row = {"curve": cname[17:], "bracket": bname}
+        gt = np.log(np.asarray(st.response.to_linear_normalized(lv)))[:, 0]
+        fits = {}
+        for sp in ("none", "auto", "subspace"):
+            r = hdr.recover_response(st.images, st.exposure_times, smooth_prior=sp)
+            fits[sp] = r
+            row[f"smooth_prior={sp}: |d ln E|, LOO"] = _score(st, r)
+            row[f"smooth_prior={sp}: LOO candidates"] = [
+                round(float(v), 3) for v in np.asarray(r.diagnostics["loo_candidates"])
+            ]
+            row[f"smooth_prior={sp}: prior chosen"] = bool(r.diagnostics["prior_chosen"])
+        for lam in (3e-7, 3e-6):
+            r = hdr.recover_response(st.images, st.exposure_times, smooth_prior="none", lam=lam)
+            row[f"none, lam {lam:g}: |d ln E|, LOO candidates"] = [
+                _score(st, r)[0],
+                [round(float(v), 3) for v in np.asarray(r.diagnostics["loo_candidates"])],
+            ]
+        e_cv = opencv_debevec_merge(st.images, st.exposure_times)
+        row["OpenCV |d ln E|"] = round(
+            float(hdr.radiance_error(jnp.asarray(e_cv), st.radiance, per_channel=True)), 3
+        )
+        if "Red" in cname:
+            import cv2
+
+            bgr = [np.ascontiguousarray(np.asarray(im)[..., ::-1]) for im in st.images]
+            t32 = np.asarray(st.exposure_times, np.float32)
+            crv = cv2.createCalibrateDebevec().process(bgr, t32)
+            tab = np.log(np.maximum(crv[:, 0, ::-1].astype(np.float64), 1e-30))
+            cv = hdr.CameraResponse(jnp.asarray(tab, jnp.float32), "table", "opencv", 255.0, 0.5)
+            row["levels"] = list(range(5, 251, 15))
+            for name, r in (("none", fits["none"]), ("auto", fits["auto"]), ("OpenCV", cv)):
+                err = np.log(np.asarray(r.to_linear_normalized(lv)))[:, 0] - gt
+                err -= np.median(err[30:225])
+                row[f"per-level error {name}"] = [round(float(v), 3) for v in err[5:251:15]]
+        log(row)
+        rows.append(row)
+    return rows
+
+
+def timing(what="rule"):
     """``recover_response`` with the sparse-bracket rule off (``sparse_overlap=0``, the code
-    path before it) and on (default), interleaved in one process on the green 96×96 AEB and
-    5-frame stacks: first call after ``jax.clear_caches()`` (compile) and the median of 4
-    steady calls, process CPU seconds and wall seconds, 2 repeats."""
+    path before it) and on (default) — or, with ``what="prior"``, with ``smooth_prior="none"``
+    (the code path before the prior candidate) and the default —, interleaved in one process
+    on the green 96×96 AEB and 5-frame stacks: first call after ``jax.clear_caches()``
+    (compile) and the median of 4 steady calls, process CPU seconds and wall seconds, 2
+    repeats."""
     import os
     import time
 
@@ -236,7 +295,11 @@ def timing():
     out = {"load average": [round(v, 1) for v in os.getloadavg()]}
     for _ in range(2):
         for bname, st in stacks.items():
-            for label, o in (("rule off", {"sparse_overlap": 0.0}), ("default", {})):
+            ab = {
+                "rule": ("rule off", {"sparse_overlap": 0.0}),
+                "prior": ("prior off", {"smooth_prior": "none"}),
+            }
+            for label, o in (ab[what], ("default", {})):
                 jax.clear_caches()
                 first = run(st, **o)
                 steady = [run(st, **o) for _ in range(4)]
@@ -309,6 +372,8 @@ def main(argv=None):
     ap.add_argument("--checks", action="store_true", help="only subspace on real/synthetic")
     ap.add_argument("--timing", action="store_true", help="only the rule's cost, A/B")
     ap.add_argument("--overlap", action="store_true", help="only the rule's statistic")
+    ap.add_argument("--prior", action="store_true", help="only the smoothness prior, 5 frames")
+    ap.add_argument("--timing-prior", action="store_true", help="only the prior's cost, A/B")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     if a.figure:
@@ -320,8 +385,11 @@ def main(argv=None):
     if a.checks:
         emit_json(checks(), a.json)
         return
-    if a.timing:
-        emit_json(timing(), a.json)
+    if a.timing or a.timing_prior:
+        emit_json(timing("prior" if a.timing_prior else "rule"), a.json)
+        return
+    if a.prior:
+        emit_json(prior_rows(), a.json)
         return
     if a.overlap:
         emit_json(overlaps(), a.json)

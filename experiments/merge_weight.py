@@ -12,6 +12,8 @@ Same curve per stack (jaxgfx's default ``recover_response``), merged with each w
 * the JPEG-like synthetic stacks of issue 16 (``tests/hdr/test_selfcheck.py``): LOO, OpenCV.
 
 ``--middle``: flowers' held-out middle frame per level band (:func:`middle_frame`).
+``--samples``: the real brackets by pixel-sample count (:func:`sample_rows`); with ``--only
+jpeg`` / ``--only measured`` also those stacks' rows with ``n_samples=16384``.
 
 Prints JSON rows ``{"stack", "metric", <weighting>: value, ..., "OpenCV": value}``.
 """
@@ -58,6 +60,10 @@ def real_rows(**fit):
         ims, t = load(name), np.asarray(ratios)
         r = hdr.recover_response(ims, t, **fit)
         row = {"stack": f"real {name}", "metric": "LOO per held frame (levels)"}
+        row["self-check candidates (LOO on the candidate grid)"] = _r(
+            r.diagnostics["loo_candidates"]
+        )
+        row["prior chosen"] = bool(r.diagnostics["prior_chosen"])
         for k, o in WEIGHTS.items():
             row[k] = _r(hdr.leave_one_out(ims, t, r, **o).per_frame)
         row["OpenCV"] = _r(opencv_loo(ims, t).per_frame)
@@ -81,6 +87,30 @@ def measured_rows(**fit):
     return rows
 
 
+def sample_rows():
+    """Issue 26's flowers middle frame: the real brackets' LOO per held frame with the
+    default ``recover_response`` and with more pixel samples — ``n_samples=16384`` (up to 512
+    per intensity bin: every candidate of a 256x256 crop's 128x128 grid in the sparse bins,
+    textured ones included) and the same count taken as the flattest quarter of a 4x larger
+    grid (``max_candidates=65536``) — with OpenCV in the same run; ``slope`` merge."""
+    fits = {
+        "default (n_samples 4096)": {},
+        "n_samples 16384": {"n_samples": 16384},
+        "n_samples 16384, max_candidates 65536": {"n_samples": 16384, "max_candidates": 65536},
+    }
+    rows = []
+    for name, ratios in REAL_RATIOS.items():
+        ims, t = load(name), np.asarray(ratios)
+        row = {"stack": f"real {name}", "metric": "LOO per held frame (levels)"}
+        for k, o in fits.items():
+            r = hdr.recover_response(ims, t, **o)
+            row[k] = _r(hdr.leave_one_out(ims, t, r).per_frame)
+        row["OpenCV"] = _r(opencv_loo(ims, t).per_frame)
+        log(row)
+        rows.append(row)
+    return rows
+
+
 def jpeg_rows(**fit):
 
     rows = []
@@ -91,6 +121,7 @@ def jpeg_rows(**fit):
         )
         r = hdr.recover_response(st.images, st.exposure_times, **fit)
         row = {"stack": f"JPEG-like {label}", "metric": "LOO mean (levels)"}
+        row["prior chosen"] = bool(r.diagnostics["prior_chosen"])
         for k, o in WEIGHTS.items():
             row[k] = _r(hdr.leave_one_out(st.images, st.exposure_times, r, **o).mean_abs_error)
         row["OpenCV"] = _r(opencv_loo(st.images, st.exposure_times).mean_abs_error)
@@ -157,7 +188,7 @@ def middle_frame(name="flowers"):
     row["count by band"] = [int(np.sum(keep & (band == b))) for b in range(len(edges) - 1)]
     d = hdr.recover_response(ims, t)
     row["overlap"] = _r(np.asarray(d.diagnostics["overlap"]))
-    fits = {"default": d}
+    fits = {"default": d, "n_samples=16384": hdr.recover_response(ims, t, n_samples=16384)}
     for npoly in (0, 2):
         fits[f"subspace n_poly={npoly}"] = hdr.recover_response(
             ims, t, method="subspace", n_poly=npoly
@@ -184,7 +215,16 @@ def main(argv=None):
     ap.add_argument(
         "--middle", action="store_true", help="only flowers' held middle frame, per level"
     )
+    ap.add_argument(
+        "--samples", action="store_true", help="only the real brackets by pixel-sample count"
+    )
     a = ap.parse_args(argv)
+    if a.samples:
+        rows = sample_rows()
+        if a.only in ("measured", "jpeg"):  # the other stacks with n_samples=16384
+            rows += (measured_rows if a.only == "measured" else jpeg_rows)(n_samples=16384)
+        emit_json(rows, a.json)
+        return
     if a.middle:
         emit_json(middle_frame(), a.json)
         return

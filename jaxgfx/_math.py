@@ -29,6 +29,7 @@ __all__ = [
     "fusion_barrier",
     "sincos",
     "take_rows",
+    "spd_solve_small",
 ]
 
 
@@ -302,3 +303,35 @@ def safe_atan2(y, x):
     x_safe = jnp.where(origin, 1.0, x)
     y_safe = jnp.where(origin, 0.0, y)
     return jnp.where(origin, 0.0, jnp.arctan2(y_safe, x_safe))
+
+
+def spd_solve_small(a, b):
+    """Solve ``a x = b`` for a small symmetric positive definite ``a`` ``(K, K)`` (``K`` static,
+    up to ~12) and ``b`` ``(K,)`` by an unrolled Cholesky factorisation: elementwise XLA ops,
+    no LAPACK custom call. Two LAPACK calls that are independent in one XLA CPU program may run
+    side by side on the 2-thread pool, and that was seen to deadlock (every thread in a futex
+    wait: the instanced queries' batched ``inv``, issue 24; the Debevec self-check's candidate
+    fits, issue 26), so programs that need a small solve beside a large one use this.
+    Pivots are floored at the smallest normal number (a singular ``a`` gives large, finite
+    values, not NaN)."""
+    k = a.shape[-1]
+    if a.shape != (k, k) or b.shape != (k,):
+        raise ValueError(f"a, b: expected shapes (K, K) and (K,), got {a.shape} and {b.shape}")
+    tiny = jnp.finfo(a.dtype).tiny
+    low = [[None] * k for _ in range(k)]
+    for j in range(k):
+        s = a[j, j] - sum((low[j][p] * low[j][p] for p in range(j)), jnp.zeros((), a.dtype))
+        d = jnp.sqrt(jnp.maximum(s, tiny))
+        low[j][j] = d
+        for i in range(j + 1, k):
+            acc = sum((low[i][p] * low[j][p] for p in range(j)), jnp.zeros((), a.dtype))
+            low[i][j] = (a[i, j] - acc) / d
+    y = []
+    for i in range(k):
+        acc = sum((low[i][p] * y[p] for p in range(i)), jnp.zeros((), a.dtype))
+        y.append((b[i] - acc) / low[i][i])
+    x = [None] * k
+    for i in reversed(range(k)):
+        acc = sum((low[p][i] * x[p] for p in range(i + 1, k)), jnp.zeros((), a.dtype))
+        x[i] = (y[i] - acc) / low[i][i]
+    return jnp.stack(x)

@@ -5,7 +5,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from .._checks import check_nonnegative
+from .._checks import check_choice, check_nonnegative
+from .._math import spd_solve_small
 from ._curve_space import response_basis
 from ._model import CameraResponse, resolve_anchor
 from ._sampling import level_index, monotone_repair, select_samples
@@ -23,6 +24,14 @@ table loses to OpenCV and the subspace fit wins); 0.10–0.99 on every other bra
 tests (5-frame measured, real JPEG, JPEG-like and analytic synthetic stacks), where the free
 table is kept."""
 
+SMOOTH_PRIORS = ("auto", "subspace", "none")
+"""Values of ``smooth_prior`` of ``"debevec"``: what the smoothness term pulls the table
+towards. ``"none"``: a straight line, ``λ S(g)`` (Debevec & Malik's term); ``"subspace"``:
+the channel's 3-parameter curve-space fit ``g_sub`` (:mod:`jaxgfx.hdr._subspace`,
+``n_poly=0``), ``λ S(g − g_sub)``, in every fit; ``"auto"`` (default): the inverse-slope fit
+with the ``"subspace"`` prior is a third candidate of the leave-one-out choice (with
+``reweight_passes > 0``; the end-weighted fit and the plain inverse-slope fit keep ``"none"``)."""
+
 WELL_EXPOSED = (16.0 / 255.0, 239.0 / 255.0)
 """Normalised level range counted as well exposed by :func:`bracket_overlap` (1/16 of the
 range from black and from clipping)."""
@@ -39,6 +48,7 @@ __all__ = [
     "bracket_overlap",
     "SPARSE_OVERLAP",
     "WELL_EXPOSED",
+    "SMOOTH_PRIORS",
 ]
 
 
@@ -72,11 +82,18 @@ def smoothness_matrix(n_levels, dtype):
     return jnp.asarray((d2.T * rw[None, :]) @ d2, dtype)
 
 
-def debevec_solve(levels, weights, log_t, n_levels, lam, anchor_index):
-    """Solve Debevec–Malik's system for one channel (:func:`debevec_system`), ``g`` ``(L,)``."""
+def debevec_solve(levels, weights, log_t, n_levels, lam, anchor_index, prior=None):
+    """Solve Debevec–Malik's system for one channel (:func:`debevec_system`), ``g`` ``(L,)``.
+
+    ``prior`` ``(L,)`` (optional): the smoothness term penalises the curvature of ``g − prior``
+    instead of ``g`` (``λ S(g − prior)``), so a curved prior's shape is not smoothed away; the
+    ridge below then pulls towards the prior too."""
     a, b = debevec_system(levels, weights, log_t, n_levels, lam, anchor_index)
     # a 1e-7 relative ridge: levels no pixel reaches have no equation but the smoothness
-    a = a + jnp.eye(n_levels, dtype=a.dtype) * (1e-7 * jnp.mean(jnp.diag(a)))
+    ridge = 1e-7 * jnp.mean(jnp.diag(a))
+    if prior is not None:
+        b = b + lam * (smoothness_matrix(n_levels, a.dtype) @ prior) + ridge * prior
+    a = a + jnp.eye(n_levels, dtype=a.dtype) * ridge
     return jnp.linalg.solve(a, b)
 
 
@@ -124,7 +141,10 @@ def subspace_solve(levels, weights, log_t, basis, lam, anchor_index):
     ``g = basis @ c`` (``basis`` ``(L, K)``)."""
     n_levels = basis.shape[0]
     a, b = debevec_system(levels, weights, log_t, n_levels, lam, anchor_index)
-    return jnp.linalg.solve(basis.T @ a @ basis, basis.T @ b)
+    # no LAPACK call (spd_solve_small): in recover_debevec this small solve is independent of
+    # the table's LAPACK solves, and two independent LAPACK calls in one program hung the XLA
+    # CPU runtime intermittently (issue 26)
+    return spd_solve_small(basis.T @ a @ basis, basis.T @ b)
 
 
 def inverse_slope_weights(g, anchor_index):
@@ -142,13 +162,9 @@ def inverse_slope_weights(g, anchor_index):
     return jnp.minimum(ref / sl, 1.0)
 
 
-def _select_by_loo(z, t, g0, w0, lev, interior, valid, solve, m, code_max, anchor_z, passes):
-    """The alternative inverse-slope-weighted fit and the choice between it and ``g0`` by the
-    leave-one-out re-exposure error on the sampled candidate grid (see recover_debevec)."""
-    from .merge import SLOPE_NOISE_RATIO
-    from .selfcheck import LOO_BANDS, _loo_jit
-
-    base = interior.astype(w0.dtype) * valid[..., None].astype(w0.dtype)
+def _inverse_slope_fit(g0, lev, base, solve, m, passes):
+    """``passes`` refits with :func:`inverse_slope_weights` of the previous curve, from
+    ``g0``: ``(g, w)``."""
     g1 = g0
     for _ in range(passes):
         f = inverse_slope_weights(g1, m)
@@ -156,6 +172,15 @@ def _select_by_loo(z, t, g0, w0, lev, interior, valid, solve, m, code_max, ancho
             f[:, None, :], lev.reshape(lev.shape[0], 1, -1), axis=2
         ).reshape(lev.shape)
         g1 = solve(lev, w1)
+    return g1, w1
+
+
+def _select_by_loo(z, t, candidates, m, anchor_z):
+    """Of the candidate fits ``[(g, w), ...]`` the one with the smallest leave-one-out
+    re-exposure error (default merge) on the sampled candidate grid ``z``: ``(g, w, index,
+    errors)``."""
+    from .merge import SLOPE_NOISE_RATIO
+    from .selfcheck import LOO_BANDS, _loo_jit
 
     def loo(g):
         r = CameraResponse(monotone_repair(g.T, m), "table", "debevec", 1.0, anchor_z)
@@ -171,12 +196,15 @@ def _select_by_loo(z, t, g0, w0, lev, interior, valid, solve, m, code_max, ancho
             time_power=2.0,
         ).mean_abs_error
 
-    errs = jnp.stack([loo(g0), loo(g1)])
+    gs = jnp.stack([g for g, _ in candidates])
+    # one loop over the candidates, not K independent LOO loops in the program: with three
+    # the XLA CPU runtime intermittently hung (every thread in a futex wait) on 256x256 stacks
+    errs = jax.lax.map(loo, gs)
     errs = jnp.where(jnp.isnan(errs), jnp.inf, errs)
-    pick = errs[1] < errs[0]
-    g = jnp.where(pick, g1, g0)
-    w = jnp.where(pick, w1, w0)
-    return g, w, {"loo_candidates": errs, "inverse_slope_chosen": pick}
+    k = jnp.argmin(errs)
+    g = gs[k]
+    w = jnp.stack([w for _, w in candidates])[k]
+    return g, w, k, errs
 
 
 def debevec_samples(z, key, n_samples, max_candidates, n_lev, weighting, end_weight):
@@ -223,17 +251,22 @@ def bracket_overlap(z):
     return jnp.mean((jnp.sum(inside, axis=0) >= 2).astype(z.dtype), axis=(0, 1))
 
 
-def _sparse_subspace(z, g, w, lev, interior, valid, log_t, m, lam, threshold):
-    """Replace the channels whose bracket overlap (:func:`bracket_overlap`) is below
-    ``threshold`` by the ``"subspace"`` fit (``n_poly=0``, hat weights, no end weight)."""
-    n_lev = g.shape[1]
-    zq = lev.astype(w.dtype) / (n_lev - 1)
-    ws = jnp.where(interior, 1.0 - jnp.abs(2.0 * zq - 1.0), 0.0) * valid[..., None].astype(w.dtype)
-    basis = jnp.asarray(response_basis(n_lev, 0), w.dtype)
+def _subspace_fit(lev, interior, valid, log_t, m, lam, n_lev, dtype):
+    """The ``"subspace"`` fit (``n_poly=0``, hat weights, no end weight) of every channel:
+    ``(g_sub, ws)``, the table ``(C, L)`` and its data weights ``(C, P, N)``."""
+    zq = lev.astype(dtype) / (n_lev - 1)
+    ws = jnp.where(interior, 1.0 - jnp.abs(2.0 * zq - 1.0), 0.0) * valid[..., None].astype(dtype)
+    basis = jnp.asarray(response_basis(n_lev, 0), dtype)
     c = jax.vmap(lambda lv, ww: subspace_solve(lv, ww, log_t, basis, lam, m))(lev, ws)
+    return c @ basis.T, ws
+
+
+def _sparse_subspace(z, g, w, g_sub, ws, threshold):
+    """Replace the channels whose bracket overlap (:func:`bracket_overlap`) is below
+    ``threshold`` by the ``"subspace"`` fit ``g_sub`` (weights ``ws``)."""
     ov = bracket_overlap(z)
     pick = ov < threshold  # (C,)
-    g = jnp.where(pick[:, None], c @ basis.T, g)
+    g = jnp.where(pick[:, None], g_sub, g)
     w = jnp.where(pick[:, None, None], ws, w)
     return g, w, {"overlap": ov, "subspace_chosen": pick}
 
@@ -253,6 +286,7 @@ def recover_debevec(
     max_candidates: int = None,
     reweight_passes: int = 3,
     sparse_overlap: float = SPARSE_OVERLAP,
+    smooth_prior: str = "auto",
 ):
     """Debevec & Malik (1997) response recovery (method ``"debevec"``).
 
@@ -294,6 +328,15 @@ def recover_debevec(
     3-parameter ``"subspace"`` fit (``1, ln z, ln(1 − z)``; :mod:`jaxgfx.hdr._subspace`)
     instead: its free table is under-determined there (issue 26, docs/hdr.md "Measured
     curves"). ``diagnostics["overlap"]`` and ``diagnostics["subspace_chosen"]`` ``(C,)``.
+    ``smooth_prior`` (:data:`SMOOTH_PRIORS`, default ``"auto"``): with ``"auto"`` and
+    ``reweight_passes > 0`` the self-check has a third candidate, the inverse-slope fit whose
+    smoothness term is ``λ S(g − g_sub)`` (:func:`debevec_solve` with ``prior``), ``g_sub``
+    the channel's 3-parameter ``"subspace"`` fit: Debevec's ``λ S(g)`` pulls a film curve's
+    steep toe and flat shoulder towards a straight line and left a ±0.04 ln mid-tone wave on
+    the red 5-frame measured bracket (radiance error 0.023 vs OpenCV 0.019; 0.016 with the
+    prior). ``diagnostics["loo_candidates"]`` is then ``(3,)`` and
+    ``diagnostics["prior_chosen"]`` says whether the prior'd fit was returned. ``"none"``:
+    the two candidates of before; ``"subspace"``: the prior in every fit.
     """
     check_nonnegative(lam, "lam")
     check_nonnegative(end_weight, "end_weight")
@@ -307,6 +350,7 @@ def recover_debevec(
         or not (0 <= reweight_passes <= 10)
     ):
         raise ValueError(f"reweight_passes: expected an integer in 0…10, got {reweight_passes!r}")
+    check_choice(smooth_prior, "smooth_prior", SMOOTH_PRIORS)
     anchor_z = resolve_anchor(anchor)
     n_lev = default_levels(code_max, n_levels)
     lev, w, interior, valid = debevec_samples(
@@ -314,17 +358,39 @@ def recover_debevec(
     )
     log_t = jnp.log(t)
     m = (n_lev - 1) // 2
-    solve = jax.vmap(lambda lv, ww: debevec_solve(lv, ww, log_t, n_lev, lam, m))
+    g_sub = ws = None
+    if sparse_overlap > 0 or smooth_prior != "none":
+        g_sub, ws = _subspace_fit(lev, interior, valid, log_t, m, lam, n_lev, w.dtype)
+    if g_sub is not None:
+        vsolve = jax.vmap(lambda lv, ww, gp: debevec_solve(lv, ww, log_t, n_lev, lam, m, gp))
+
+        def solve_prior(lv, ww):
+            return vsolve(lv, ww, g_sub)
+
+    solve_plain = jax.vmap(lambda lv, ww: debevec_solve(lv, ww, log_t, n_lev, lam, m))
+    solve = solve_prior if smooth_prior == "subspace" else solve_plain
     g = solve(lev, w)  # (C, L)
     extra = {}
     if reweight_passes > 0:
-        g, w, extra = _select_by_loo(
-            z, t, g, w, lev, interior, valid, solve, m, code_max, anchor_z, reweight_passes
-        )
+        base = interior.astype(w.dtype) * valid[..., None].astype(w.dtype)
+        cands = [(g, w), _inverse_slope_fit(g, lev, base, solve, m, reweight_passes)]
+        if smooth_prior == "auto":
+            # started from the plain inverse-slope fit: a data dependency, so the two chains of
+            # solves run one after the other (run side by side, the XLA CPU runtime hung
+            # intermittently, every thread in a futex wait, on 256x256 real brackets)
+            cands.append(
+                _inverse_slope_fit(cands[1][0], lev, base, solve_prior, m, reweight_passes)
+            )
+        g, w, k, errs = _select_by_loo(z, t, cands, m, anchor_z)
+        extra = {
+            "loo_candidates": errs,
+            "inverse_slope_chosen": k >= 1,
+            "prior_chosen": (k == 2)
+            if smooth_prior == "auto"
+            else jnp.asarray(smooth_prior == "subspace"),
+        }
     if sparse_overlap > 0:
-        g, w, extra2 = _sparse_subspace(
-            z, g, w, lev, interior, valid, log_t, m, lam, sparse_overlap
-        )
+        g, w, extra2 = _sparse_subspace(z, g, w, g_sub, ws, sparse_overlap)
         extra = {**extra, **extra2}
     res = data_residual_rms(g, lev, w, log_t)
     table = monotone_repair(g.T, m)

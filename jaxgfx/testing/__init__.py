@@ -10,6 +10,7 @@ from jaxgfx.testing._finite_difference import check_grads_fd as check_grads_fd
 from jaxgfx.testing._finite_difference import check_grads_jit as check_grads_jit
 from jaxgfx.testing._finite_difference import grad_stats as grad_stats
 from jaxgfx.testing._furnace import furnace as furnace
+from jaxgfx.testing._hlo import unordered_lapack_calls as unordered_lapack_calls
 
 __all__ = [
     "chi2_test",
@@ -19,4 +20,5 @@ __all__ = [
     "grad_stats",
     "GradStats",
     "furnace",
+    "unordered_lapack_calls",
 ]

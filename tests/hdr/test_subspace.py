@@ -119,3 +119,57 @@ def test_sparse_overlap_bad_input(bad):
     ims, t = _gamma2_stack(np.float32)
     with pytest.raises(ValueError, match="sparse_overlap"):
         hdr.recover_response(ims, t, sparse_overlap=bad)
+
+
+def _doubling_levels(n_lev):
+    """Pixels at level ``k`` in a frame of time 1 and ``2k`` in one of time 4: consistent
+    with ``g = 2 ln z`` exactly (``g[2k] − g[k] = ln 4``); ``(P, 2)`` levels, unit weights."""
+    k = np.arange(1, (n_lev - 1) // 2 + 1)
+    lev = jnp.asarray(np.stack([k, 2 * k], axis=1), jnp.int32)
+    return lev, jnp.ones(lev.shape, jnp.float64), jnp.log(jnp.asarray([1.0, 4.0]))
+
+
+def test_smoothness_prior_leaves_a_consistent_prior_curve_unbent(x64):
+    """``λ S(g − prior)`` with the prior = the true (anchored) curve: data, smoothness, anchor
+    and ridge are all zero at the truth, so even a strong ``λ`` returns it, on every level
+    (the unobserved 0 and L−1 included); Debevec's ``λ S(g)`` bends the same curve towards a
+    straight line. Jitted; float64; levels ``(k, 2k)`` of ``g = 2 ln z``."""
+    from jaxgfx.hdr._debevec import debevec_solve
+
+    n = 64
+    lev, w, log_t = _doubling_levels(n)
+    m = (n - 1) // 2
+    z = np.clip(np.arange(n) / (n - 1), 0.5 / (n - 1), 1.0)
+    truth = 2.0 * np.log(z / z[m])  # anchored: g[m] = 0
+    solve = jax.jit(debevec_solve, static_argnums=(3, 5))
+    g = np.asarray(solve(lev, w, log_t, n, 1e-2, m, jnp.asarray(truth)))
+    np.testing.assert_allclose(g, truth, atol=1e-9)
+    plain = np.asarray(solve(lev, w, log_t, n, 1e-2, m))
+    assert np.max(np.abs(plain - truth)) > 0.05
+
+
+def test_smoothness_prior_gradient_matches_finite_differences(x64):
+    """The solve is linear in the prior and in ``ln t``: reverse mode against central
+    differences in both at once (float64, 16 levels, jitted: one compile each)."""
+    from jaxgfx.hdr._debevec import debevec_solve
+
+    n = 16
+    lev, w, log_t = _doubling_levels(n)
+    coef = jnp.linspace(-1.0, 1.0, n) ** 2
+    prior0 = jnp.asarray(np.log(np.linspace(0.05, 1.0, n)) * 1.7)
+
+    def f(x):
+        return jnp.sum(coef * debevec_solve(lev, w, x[n:], n, 1e-2, 7, x[:n]))
+
+    x0 = jnp.concatenate([prior0, log_t])
+    ok, g_ad, g_fd = check_grads_fd(f, x0, eps=1e-5, rtol=1e-6, atol=1e-9, jit=True)
+    assert ok, (g_ad, g_fd)
+    assert np.max(np.abs(g_ad[:n])) > 1e-3  # the prior does move the solution
+    assert abs(g_ad[n + 1]) > 1e-3  # and so does the long frame's time
+
+
+@pytest.mark.parametrize("bad", ["curve", True, None])
+def test_smooth_prior_bad_input(bad):
+    ims, t = _gamma2_stack(np.float32)
+    with pytest.raises(ValueError, match="smooth_prior"):
+        hdr.recover_response(ims, t, smooth_prior=bad)
