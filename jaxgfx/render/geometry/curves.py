@@ -238,7 +238,30 @@ def _segment_frame(axis):
     return e_rot, jnp.cross(e_rot, axis)
 
 
-class LinearCurves(eqx.Module):
+class _CurveQueries(eqx.Module):
+    """The BVH queries of both curve kinds; a subclass gives ``_leaf(pts, idx, o, d)``, the hit
+    distance of primitive ``idx`` (``inf`` on a miss)."""
+
+    def closest_t(self, o, d, *, tmin=0.0, tmax=jnp.inf):
+        """Nearest ``(t, primitive)`` per ray (``t = inf`` on misses); not differentiable."""
+        sg = jax.lax.stop_gradient
+        o, d, tmin, tmax = prepare_rays(sg(o), sg(d), sg(tmin), sg(tmax))
+        batch = o.shape[:-1]
+        pts = sg(self.points).astype(o.dtype)
+        flat = (o.reshape(-1, 3), d.reshape(-1, 3),
+                jnp.broadcast_to(tmin, batch).reshape(-1),
+                jnp.broadcast_to(tmax, batch).reshape(-1))  # fmt: skip
+        leaf = functools.partial(self._leaf, pts)
+        t, k = jax.vmap(lambda *r: _bvh_trace(self, leaf, *r))(*flat)
+        t = jnp.where(k >= 0, t, jnp.inf)
+        return t.reshape(batch), jnp.maximum(k, 0).reshape(batch)
+
+    def occluded(self, o, d, tmax, *, tmin=0.0):
+        """True where a curve lies on the ray in ``(tmin, tmax)``."""
+        return jnp.isfinite(self.closest_t(o, d, tmin=tmin, tmax=tmax)[0])
+
+
+class LinearCurves(_CurveQueries):
     """Linear curves as a shape of :func:`~jaxgfx.render.geometry.intersect_scene` (the
     custom-shape protocol ``closest_t`` / ``hit``), in world space.
 
@@ -304,24 +327,6 @@ class LinearCurves(eqx.Module):
     def _leaf(self, pts, idx, o, d):
         a, ra, b, rb, cap = self._ends(pts, idx)
         return round_cone_entry(a, ra, b, rb, o, d, cap)[0]
-
-    def closest_t(self, o, d, *, tmin=0.0, tmax=jnp.inf):
-        """Nearest ``(t, segment)`` per ray (``t = inf`` on misses); not differentiable."""
-        sg = jax.lax.stop_gradient
-        o, d, tmin, tmax = prepare_rays(sg(o), sg(d), sg(tmin), sg(tmax))
-        batch = o.shape[:-1]
-        pts = sg(self.points).astype(o.dtype)
-        flat = (o.reshape(-1, 3), d.reshape(-1, 3),
-                jnp.broadcast_to(tmin, batch).reshape(-1),
-                jnp.broadcast_to(tmax, batch).reshape(-1))  # fmt: skip
-        leaf = functools.partial(self._leaf, pts)
-        t, k = jax.vmap(lambda *r: _bvh_trace(self, leaf, *r))(*flat)
-        t = jnp.where(k >= 0, t, jnp.inf)
-        return t.reshape(batch), jnp.maximum(k, 0).reshape(batch)
-
-    def occluded(self, o, d, tmax, *, tmin=0.0):
-        """True where a segment lies on the ray in ``(tmin, tmax)``."""
-        return jnp.isfinite(self.closest_t(o, d, tmin=tmin, tmax=tmax)[0])
 
     def _local(self, prim_id, o, d, valid):
         """Live ``(valid, t, p, n, s, axis, a, b, ra, rb)`` at segment ``prim_id``."""
@@ -426,7 +431,7 @@ def _newton_step(G, J):
     return dt, dv
 
 
-class BSplineCurves(eqx.Module):
+class BSplineCurves(_CurveQueries):
     """Cubic B-spline curves (Mitsuba 3's ``bsplinecurve``) as a shape of
     :func:`~jaxgfx.render.geometry.intersect_scene`, in world space.
 
@@ -546,24 +551,6 @@ class BSplineCurves(eqx.Module):
     def _leaf(self, pts, idx, o, d):
         t, _, ok = self._solve(pts, idx, o, d)
         return jnp.where(ok, t, jnp.inf)
-
-    def closest_t(self, o, d, *, tmin=0.0, tmax=jnp.inf):
-        """Nearest ``(t, piece)`` per ray (``t = inf`` on misses); not differentiable."""
-        sg = jax.lax.stop_gradient
-        o, d, tmin, tmax = prepare_rays(sg(o), sg(d), sg(tmin), sg(tmax))
-        batch = o.shape[:-1]
-        pts = sg(self.points).astype(o.dtype)
-        flat = (o.reshape(-1, 3), d.reshape(-1, 3),
-                jnp.broadcast_to(tmin, batch).reshape(-1),
-                jnp.broadcast_to(tmax, batch).reshape(-1))  # fmt: skip
-        leaf = functools.partial(self._leaf, pts)
-        t, k = jax.vmap(lambda *r: _bvh_trace(self, leaf, *r))(*flat)
-        t = jnp.where(k >= 0, t, jnp.inf)
-        return t.reshape(batch), jnp.maximum(k, 0).reshape(batch)
-
-    def occluded(self, o, d, tmax, *, tmin=0.0):
-        """True where a curve lies on the ray in ``(tmin, tmax)``."""
-        return jnp.isfinite(self.closest_t(o, d, tmin=tmin, tmax=tmax)[0])
 
     def _local(self, prim_id, o, d, valid):
         sg = jax.lax.stop_gradient

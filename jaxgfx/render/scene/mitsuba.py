@@ -501,6 +501,21 @@ def _principled_keys(m, where) -> dict:
 # shapes
 
 
+def _shape_file(d, where, base_dir, work_dir, ext, write) -> str:
+    """The absolute path of a file-backed shape (curves, SDF grid): ``d["filename"]`` resolved
+    against ``base_dir``, or inline data written by ``write(path)`` to ``work_dir()`` under a
+    name made from ``where`` and ``ext``."""
+    if "filename" in d:
+        path = os.fspath(d["filename"])
+        if not os.path.isabs(path) and base_dir:
+            path = os.path.join(base_dir, path)
+        return os.path.abspath(path)
+    name = re.sub(r"[^A-Za-z0-9]+", "_", where).strip("_")
+    path = os.path.join(work_dir(), f"{name}{ext}")
+    write(path)
+    return path
+
+
 def _shape(d, where, base_dir, work_dir, mi) -> dict:
     from jaxgfx.render.scene import schema as S
 
@@ -522,18 +537,11 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
         m[:3, 3] = c
         return {"type": "sphere", "to_world": _transform(m, mi)}
     if kind in ("linearcurve", "bsplinecurve"):  # a curve text file (written for inline curves)
-        S.shape_from_desc(d, where, base_dir)  # validated as load_scene does
-        if "filename" in d:
-            path = os.fspath(d["filename"])
-            if not os.path.isabs(path) and base_dir:
-                path = os.path.join(base_dir, path)
-            path = os.path.abspath(path)
-        else:
-            name = re.sub(r"[^A-Za-z0-9]+", "_", where).strip("_")
-            path = os.path.join(work_dir(), f"{name}.txt")
-            from jaxgfx.render.geometry import write_curves
+        from jaxgfx.render.geometry import write_curves
 
-            write_curves(path, d["curves"])
+        S.shape_from_desc(d, where, base_dir)  # validated as load_scene does
+        path = _shape_file(d, where, base_dir, work_dir, ".txt",
+                           lambda p: write_curves(p, d["curves"]))  # fmt: skip
         out = {"type": kind, "filename": path}
         if "to_world" in d:
             out["to_world"] = _transform(np.asarray(d["to_world"], np.float64), mi)
@@ -542,15 +550,8 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
         from jaxgfx.render.geometry import write_vol
 
         S.shape_from_desc(d, where, base_dir)  # validated as load_scene does
-        if "filename" in d:
-            path = os.fspath(d["filename"])
-            if not os.path.isabs(path) and base_dir:
-                path = os.path.join(base_dir, path)
-            path = os.path.abspath(path)
-        else:
-            name = re.sub(r"[^A-Za-z0-9]+", "_", where).strip("_")
-            path = os.path.join(work_dir(), f"{name}.vol")
-            write_vol(path, np.asarray(d["values"], np.float32))
+        path = _shape_file(d, where, base_dir, work_dir, ".vol",
+                           lambda p: write_vol(p, np.asarray(d["values"], np.float32)))  # fmt: skip
         out = {"type": "sdfgrid", "filename": path, "normals": d.get("normals", "smooth")}
         if "to_world" in d:
             out["to_world"] = _transform(np.asarray(d["to_world"], np.float64), mi)
