@@ -47,6 +47,7 @@ from jaxgfx.pipelines.fit import FitJob, enable_compilation_cache, run_fit
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "configs", "inverse_material.yaml")
+CONFIG_DIR = os.path.dirname(CONFIG)  # the config's relative paths (its scene) start here
 LLVM19 = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"
 ALPHA = "materials.metal.alpha"
 ALBEDO = "materials.clay.reflectance"
@@ -78,7 +79,7 @@ def time_to_first(alpha_hist, seconds_cum, truth, rel=0.02):
 
 def run_jaxgfx(cfg: dict) -> dict:
     t0 = time.perf_counter()
-    out = run_fit(FitJob.load(cfg, None, base_dir=ROOT))
+    out = run_fit(FitJob.load(cfg, None, base_dir=CONFIG_DIR))
     wall = time.perf_counter() - t0
     truth_a = out["truth"][ALPHA]
     alpha = np.asarray(out["history"][ALPHA], np.float64)  # (steps + 1,)
@@ -129,10 +130,11 @@ def run_mitsuba(cfg: dict, steps: int, spp: int, lr: float) -> dict:
     mi = import_mitsuba(variant)
     import drjit as dr
 
-    desc = read_yaml(os.path.join(ROOT, cfg["scene"]))
+    scene_path = os.path.join(CONFIG_DIR, cfg["scene"])
+    desc = read_yaml(scene_path)
     r = cfg["render"]
     desc["camera"]["width"], desc["camera"]["height"] = r["width"], r["height"]
-    md = to_mitsuba_dict(desc, base_dir=ROOT, mi=mi)
+    md = to_mitsuba_dict(desc, base_dir=os.path.dirname(scene_path), mi=mi)
     md["integrator"] = {"type": "prb", "max_depth": int(r.get("max_depth", 2))}
     scene = mi.load_dict(md)
     params = mi.traverse(scene)
@@ -293,7 +295,7 @@ def main(argv=None) -> int:
             from jaxgfx.pipelines.fit import FitConfig, build_scene, prepare_fit
             from jaxgfx.render import render
 
-            prep = prepare_fit(load_config(FitConfig, cfg), base_dir=ROOT)
+            prep = prepare_fit(load_config(FitConfig, cfg), base_dir=CONFIG_DIR)
             s = build_scene(prep.scene, list(prep.truth), prep.truth)
             ours = np.asarray(render(s, jax.random.key(7), spp=256, integrator="direct"))
             res["target_relative_rmse_jaxgfx_vs_mitsuba"] = float(
