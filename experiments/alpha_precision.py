@@ -83,7 +83,7 @@ def run_adam(seeds):
     for seed in seeds:
         cfg = copy.deepcopy(base)
         cfg["seed"] = seed
-        res = run_fit(FitJob.load(cfg, None, base_dir=ROOT))
+        res = run_fit(FitJob.load(cfg, None, base_dir=os.path.dirname(CONFIG)))
         hist = np.asarray(res["history"]["materials.metal.alpha"], np.float64)
         a = float(hist[-1])
         rec = {

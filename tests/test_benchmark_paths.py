@@ -1,4 +1,4 @@
-"""The inverse-rendering benchmark finds its config's scene.
+"""The inverse-rendering benchmark and the alpha-precision experiment find their config's scene.
 
 ``benchmarks.inverse`` resolved ``configs/inverse_material.yaml``'s ``scene:`` from the repository
 root after the config's paths became relative to ``configs/``, and stopped with "file not found"
@@ -17,3 +17,12 @@ def test_inverse_benchmark_resolves_the_configs_scene():
     assert os.path.isfile(os.path.join(mod.CONFIG_DIR, cfg["scene"]))
     # the path the broken version used does not exist: the check can fail
     assert not os.path.isfile(os.path.join(mod.ROOT, cfg["scene"]))
+
+
+def test_alpha_precision_experiment_loads_the_config_from_its_directory():
+    """experiments.alpha_precision's Adam runs had the same root-relative ``base_dir``."""
+    import inspect
+
+    mod = importlib.import_module("experiments.alpha_precision")
+    src = inspect.getsource(mod)
+    assert "base_dir=ROOT" not in src and "base_dir=os.path.dirname(CONFIG)" in src
