@@ -222,7 +222,7 @@ def overlaps():
 
 def prior_rows():
     """The smoothness prior on the 5-frame brackets (issue 26's red row): for
-    ``smooth_prior`` "none" (the default before), "auto" (default) and "subspace", the
+    ``smooth_prior`` "none" (the default), "auto" (opt-in) and "subspace", the
     radiance error, the self-check's LOO candidates and whether the prior'd fit was chosen;
     the ``lam`` sweep without the prior (the rejected alternative: lowering λ); OpenCV; and
     the red curve's per-level error (ln, after the median offset over levels 30-224, every 15
@@ -277,8 +277,8 @@ def prior_rows():
 
 def timing(what="rule"):
     """``recover_response`` with the sparse-bracket rule off (``sparse_overlap=0``, the code
-    path before it) and on (default) — or, with ``what="prior"``, with ``smooth_prior="none"``
-    (the code path before the prior candidate) and the default —, interleaved in one process
+    path before it) and on (default) — or, with ``what="prior"``, with the default
+    (``smooth_prior="none"``) and ``"auto"`` —, interleaved in one process
     on the green 96×96 AEB and 5-frame stacks: first call after ``jax.clear_caches()``
     (compile) and the median of 4 steady calls, process CPU seconds and wall seconds, 2
     repeats."""
@@ -295,11 +295,11 @@ def timing(what="rule"):
     out = {"load average": [round(v, 1) for v in os.getloadavg()]}
     for _ in range(2):
         for bname, st in stacks.items():
-            ab = {
-                "rule": ("rule off", {"sparse_overlap": 0.0}),
-                "prior": ("prior off", {"smooth_prior": "none"}),
+            ab = {  # (A, B): B the option the A/B is about
+                "rule": (("rule off", {"sparse_overlap": 0.0}), ("default", {})),
+                "prior": (("default (prior off)", {}), ("prior on", {"smooth_prior": "auto"})),
             }
-            for label, o in (ab[what], ("default", {})):
+            for label, o in ab[what]:
                 jax.clear_caches()
                 first = run(st, **o)
                 steady = [run(st, **o) for _ in range(4)]

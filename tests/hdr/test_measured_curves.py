@@ -168,16 +168,25 @@ def test_defaults_beat_opencv_on_measured_curves_aeb(curve):
     assert ours < cv, (curve, ours, cv)
 
 
-# slow: ~8 s on 2 cores (1 fit + OpenCV). Issue 26's last measured-curve row, a strict xfail
-# until the smoothness prior (0.023 vs OpenCV 0.019 before; docs/hdr.md, "Measured curves"):
-# 42 % of the pixels are well exposed in 2 frames, so the sparse rule keeps the free table, and
-# the self-check picks the inverse-slope fit whose smoothness pulls towards the channel's
-# curve-space fit (measured 0.016; the fit without the prior, smooth_prior="none", 0.023)
+# slow: ~8 s on 2 cores (1 fit + OpenCV). Issue 26's last measured-curve row: 42 % of the pixels
+# are well exposed in 2 frames, so the sparse rule keeps the free table; with the option
+# smooth_prior="auto" the self-check picks the inverse-slope fit whose smoothness pulls towards
+# the channel's curve-space fit (measured 0.011 vs OpenCV 0.019). It is not the default: on
+# jaxgfx calibrate's synthetic default job "auto" raised the curve error from < 0.1 to 0.18 ln
+# (tests/pipelines/test_calibrate.py::test_synthetic_default_job), so the default row below
+# stays a strict xfail (0.023 vs 0.019)
 @pytest.mark.slow
-def test_defaults_beat_opencv_on_measured_curves_red_five_frames():
-    ours, cv, r = _ours_and_opencv("Ektachrome-320TCDRed", FIVE)
+def test_smooth_prior_auto_beats_opencv_on_measured_curves_red_five_frames():
+    ours, cv, r = _ours_and_opencv("Ektachrome-320TCDRed", FIVE, smooth_prior="auto")
     assert not bool(np.any(r.diagnostics["subspace_chosen"]))
     assert bool(r.diagnostics["prior_chosen"])
+    assert ours < cv, (ours, cv)
+
+
+@pytest.mark.slow  # ~8 s on 2 cores
+@pytest.mark.xfail(strict=True, reason="issue 26: the default's red 5-frame row loses to OpenCV")
+def test_defaults_beat_opencv_on_measured_curves_red_five_frames():
+    ours, cv, _ = _ours_and_opencv("Ektachrome-320TCDRed", FIVE)
     assert ours < cv, (ours, cv)
 
 
