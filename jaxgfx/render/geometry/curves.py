@@ -238,6 +238,23 @@ def _segment_frame(axis):
     return e_rot, jnp.cross(e_rot, axis)
 
 
+def _points_and_segments(points, segments, span, too_few, segment_rule):
+    """The checked ``(points (N, 4), segment starts (K,) int64)`` of a curve shape whose
+    segments each use ``span`` consecutive points (2 linear, 4 B-spline); ``segments`` ``None``:
+    every start. ``too_few`` / ``segment_rule``: the kind's wording of the two errors."""
+    p = as_points(jnp.asarray(points), "points", 4)
+    if not isinstance(p, jax.core.Tracer) and bool(jnp.any(p[:, 3] < 0)):
+        raise ValueError("points: radii (the 4th column) must be >= 0")
+    n = p.shape[0]
+    last = n - span  # the largest segment start
+    seg = np.asarray(np.arange(last + 1) if segments is None else segments, np.int64).reshape(-1)
+    if seg.size == 0 or n < span:
+        raise ValueError(f"points: {too_few}")
+    if seg.min() < 0 or seg.max() > last:
+        raise ValueError(f"segments: indices must lie in [0, {last}] ({segment_rule})")
+    return p, seg
+
+
 class _CurveQueries(eqx.Module):
     """The BVH queries of both curve kinds; a subclass gives ``_leaf(pts, idx, o, d)``, the hit
     distance of primitive ``idx`` (``inf`` on a miss)."""
@@ -287,18 +304,10 @@ class LinearCurves(_CurveQueries):
     max_leaf: int = eqx.field(static=True, default=4)
 
     def __init__(self, points, segments=None, *, max_leaf=4):
-        p = as_points(jnp.asarray(points), "points", 4)
-        if not isinstance(p, jax.core.Tracer) and bool(jnp.any(p[:, 3] < 0)):
-            raise ValueError("points: radii (the 4th column) must be >= 0")
-        n = p.shape[0]
-        if segments is None:
-            segments = np.arange(n - 1)
-        seg = np.asarray(segments, np.int64).reshape(-1)
-        if seg.size == 0 or n < 2:
-            raise ValueError("points: a curve needs at least two control points (one segment)")
-        if seg.min() < 0 or seg.max() > n - 2:
-            raise ValueError(f"segments: indices must lie in [0, {n - 2}] (a segment joins "
-                             "points i and i + 1)")  # fmt: skip
+        p, seg = _points_and_segments(
+            points, segments, 2, "a curve needs at least two control points (one segment)",
+            "a segment joins points i and i + 1",
+        )  # fmt: skip
         self.points = p
         self.segments = jnp.asarray(seg, jnp.int32)
         # Embree's rule (Mitsuba's backend): a segment draws its start ball only when no
@@ -467,18 +476,10 @@ class BSplineCurves(_CurveQueries):
     max_leaf: int = eqx.field(static=True, default=4)
 
     def __init__(self, points, segments=None, *, pieces=8, newton_steps=12, max_leaf=4):
-        p = as_points(jnp.asarray(points), "points", 4)
-        if not isinstance(p, jax.core.Tracer) and bool(jnp.any(p[:, 3] < 0)):
-            raise ValueError("points: radii (the 4th column) must be >= 0")
-        n = p.shape[0]
-        if segments is None:
-            segments = np.arange(n - 3)
-        seg = np.asarray(segments, np.int64).reshape(-1)
-        if seg.size == 0 or n < 4:
-            raise ValueError("points: a B-spline curve needs at least four control points")
-        if seg.min() < 0 or seg.max() > n - 4:
-            raise ValueError(f"segments: indices must lie in [0, {n - 4}] (a segment uses "
-                             "points i .. i + 3)")  # fmt: skip
+        p, seg = _points_and_segments(
+            points, segments, 4, "a B-spline curve needs at least four control points",
+            "a segment uses points i .. i + 3",
+        )  # fmt: skip
         self.points, self.segments = p, jnp.asarray(seg, jnp.int32)
         self.pieces, self.newton_steps, self.max_leaf = pieces, newton_steps, max_leaf
         pn = np.asarray(jax.lax.stop_gradient(p), np.float64)

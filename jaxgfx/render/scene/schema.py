@@ -465,14 +465,7 @@ def sdfgrid_from_desc(d, where, base_dir):
     if ("filename" in d) == ("values" in d):
         raise ValueError(f"{where}: give exactly one of 'filename' and 'values'")
     if "filename" in d:
-        path = d["filename"]
-        if not isinstance(path, str):
-            raise ValueError(f"{where}.filename: expected a path string, got {path!r}")
-        path = path if os.path.isabs(path) else os.path.join(base_dir or ".", path)
-        try:
-            values = read_vol(path)
-        except (OSError, ValueError) as e:
-            raise ValueError(f"{where}.filename: {e}") from None
+        values = _read_shape_file(d, where, base_dir, read_vol)
     else:
         values = as_float_array(d["values"], f"{where}.values")
     try:
@@ -484,6 +477,19 @@ def sdfgrid_from_desc(d, where, base_dir):
     m = check_instance_transforms(as_float_array(d["to_world"], f"{where}.to_world"),
                                   f"{where}.to_world")  # fmt: skip
     return Instances(shape, m)
+
+
+def _read_shape_file(d, where, base_dir, read):
+    """``read(path)`` of a file-backed shape's ``filename`` (a string, relative to
+    ``base_dir``); a read error becomes one ``ValueError`` naming ``{where}.filename``."""
+    path = d["filename"]
+    if not isinstance(path, str):
+        raise ValueError(f"{where}.filename: expected a path string, got {path!r}")
+    path = path if os.path.isabs(path) else os.path.join(base_dir or ".", path)
+    try:
+        return read(path)
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{where}.filename: {e}") from None
 
 
 def linearcurve_points(d, where, base_dir):
@@ -500,15 +506,10 @@ def linearcurve_points(d, where, base_dir):
     if ("filename" in d) == ("curves" in d):
         raise ValueError(f"{where}: give exactly one of 'filename' and 'curves'")
     if "filename" in d:
-        path = d["filename"]
-        if not isinstance(path, str):
-            raise ValueError(f"{where}.filename: expected a path string, got {path!r}")
-        path = path if os.path.isabs(path) else os.path.join(base_dir or ".", path)
-        try:
-            pts, starts = read_curves(path, min_points=need,
-                                      kind="B-spline" if spline else "linear")  # fmt: skip
-        except (OSError, ValueError) as e:
-            raise ValueError(f"{where}.filename: {e}") from None
+        kind = "B-spline" if spline else "linear"
+        pts, starts = _read_shape_file(
+            d, where, base_dir, lambda path: read_curves(path, min_points=need, kind=kind)
+        )
     else:
         curves = d["curves"]
         if not isinstance(curves, (list, tuple)) or not curves:
