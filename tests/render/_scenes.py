@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
+
 EXAMPLE_YAML = os.path.join(
     os.path.dirname(__file__), "..", "..", "configs", "scenes", "example.yaml"
 )
@@ -157,3 +159,17 @@ def sensor_test_xml(sensors: str = "", meter: str = "") -> str:
         <bsdf type="diffuse"><rgb name="reflectance" value="0.7"/></bsdf>{meter}</shape>
 </scene>
 """
+
+
+def replicate_block_z(a, b, n=8):
+    """``(z, mean_a, mean_b)`` of the ``n x n`` block means of replicate stacks ``a``, ``b``
+    ``(K, H, W, 3)`` (e.g. K jaxgfx and K Mitsuba renders of one scene): ``|z|`` from Welch
+    standard errors of the K replicates, plus a round-off floor for noise-free blocks."""
+    k = a.shape[0]
+
+    def blocks(x):
+        return x.reshape(k, x.shape[1] // n, n, x.shape[2] // n, n, 3).mean((2, 4))
+
+    ba, bb = blocks(a), blocks(b)
+    var = ba.var(0, ddof=1) / k + bb.var(0, ddof=1) / k + (1e-4 * (ba.mean(0) + bb.mean(0))) ** 2
+    return np.abs(ba.mean(0) - bb.mean(0)) / np.sqrt(var + 1e-12), ba.mean(0), bb.mean(0)

@@ -14,6 +14,7 @@ from jaxgfx.render.bsdf import Mask, Null, make_bsdf
 from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
 from jaxgfx.render.scene.mitsuba_xml import read_xml, save_scene
+from tests.render._scenes import replicate_block_z
 
 
 def _dir(cos, phi=0.7):
@@ -95,17 +96,8 @@ def mi():
     return mitsuba
 
 
-def _block_z(a, b, n=8):
-    """|z| of the n x n block means of replicate stacks a, b (K, H, W, 3), Welch standard
-    errors from the K replicates (a round-off floor for noise-free blocks)."""
-    k = a.shape[0]
-
-    def blocks(x):
-        return x.reshape(k, x.shape[1] // n, n, x.shape[2] // n, n, 3).mean((2, 4))
-
-    ba, bb = blocks(a), blocks(b)
-    var = ba.var(0, ddof=1) / k + bb.var(0, ddof=1) / k + (1e-4 * (ba.mean(0) + bb.mean(0))) ** 2
-    return np.abs(ba.mean(0) - bb.mean(0)) / np.sqrt(var + 1e-12)
+def _block_z(a, b):
+    return replicate_block_z(a, b)[0]
 
 
 @pytest.mark.mitsuba

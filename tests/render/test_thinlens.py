@@ -34,6 +34,7 @@ from jaxgfx.render.scene import load_scene
 from jaxgfx.render.scene.mitsuba import scene_to_desc, to_mitsuba_dict
 from jaxgfx.render.scene.mitsuba_xml import read_xml, save_scene
 from jaxgfx.testing import ad_fd_per_key
+from tests.render._scenes import replicate_block_z
 
 LOOK = dict(origin=[0.3, 1.2, 4.0], target=[-0.2, 0.4, 0.0], up=[0.1, 1.0, 0.0], fov=50.0)
 
@@ -444,19 +445,10 @@ MI_SCENE = """<scene version="3.0.0">
 MI_LENS = '<float name="aperture_radius" value="0.15"/><float name="focus_distance" value="4"/>'
 
 
-def _block_z(a, b, n=8):
-    """|z| of the n x n block means of replicate stacks a, b (K, H, W, 3): Welch standard
-    errors from the K replicates (plus a round-off floor for noise-free blocks, the sky)."""
-    k = a.shape[0]
-
-    def blocks(x):
-        return x.reshape(k, x.shape[1] // n, n, x.shape[2] // n, n, 3).mean((2, 4))
-
-    ba, bb = blocks(a), blocks(b)
-    var = ba.var(0, ddof=1) / k + bb.var(0, ddof=1) / k
-    var = var + (1e-4 * (ba.mean(0) + bb.mean(0))) ** 2 + 1e-12
-    rel = np.abs(ba.mean(0) - bb.mean(0)) / bb.mean(0)
-    return np.abs(ba.mean(0) - bb.mean(0)) / np.sqrt(var), rel
+def _block_z(a, b):
+    """Block |z| (:func:`replicate_block_z`) and the blocks' relative difference to ``b``."""
+    z, ma, mb = replicate_block_z(a, b)
+    return z, np.abs(ma - mb) / mb
 
 
 @pytest.mark.mitsuba
