@@ -6,9 +6,11 @@ All functions are pure, jittable, vmappable and differentiable; colours are chan
 """
 
 from .adaptation import CAT_MATRICES as CAT_MATRICES
+from .adaptation import __all__ as _adaptation_all
 from .adaptation import chromatic_adaptation as chromatic_adaptation
 from .adaptation import chromatic_adaptation_matrix as chromatic_adaptation_matrix
 from .adaptation import rgb_to_rgb as rgb_to_rgb
+from .difference import __all__ as _difference_all
 from .difference import delta_e_1976 as delta_e_1976
 from .difference import delta_e_2000 as delta_e_2000
 from .difference import delta_e_2000_residuals as delta_e_2000_residuals
@@ -17,6 +19,7 @@ from .spaces import RGB_SPACES as RGB_SPACES
 from .spaces import WHITEPOINTS as WHITEPOINTS
 from .spaces import YIQ_MATRIX as YIQ_MATRIX
 from .spaces import RGBSpace as RGBSpace
+from .spaces import __all__ as _spaces_all
 from .spaces import cmyk_to_rgb as cmyk_to_rgb
 from .spaces import hsv_to_rgb as hsv_to_rgb
 from .spaces import lab_to_xyz as lab_to_xyz
@@ -40,6 +43,7 @@ from .temperature import xy_to_cct as xy_to_cct
 from .transfer import ACES_NARKOWICZ2015 as ACES_NARKOWICZ2015
 from .transfer import ADOBE_RGB_GAMMA as ADOBE_RGB_GAMMA
 from .transfer import TRANSFER_FUNCTIONS as TRANSFER_FUNCTIONS
+from .transfer import __all__ as _transfer_all
 from .transfer import aces_narkowicz2015 as aces_narkowicz2015
 from .transfer import adobe_rgb_to_linear as adobe_rgb_to_linear
 from .transfer import gamma_decode as gamma_decode
@@ -54,6 +58,7 @@ from .transfer import srgb_to_linear as srgb_to_linear
 from .transfer import transfer_decode as transfer_decode
 from .transfer import transfer_encode as transfer_encode
 from .white_balance import WHITE_BALANCE_METHODS as WHITE_BALANCE_METHODS
+from .white_balance import __all__ as _white_balance_all
 from .white_balance import apply_white_balance as apply_white_balance
 from .white_balance import white_balance as white_balance
 from .white_balance import white_balance_brightest_pixel as white_balance_brightest_pixel
@@ -69,65 +74,14 @@ from .white_balance import white_balance_von_kries_matrix as white_balance_von_k
 from .white_balance import white_balance_white_patch as white_balance_white_patch
 from .white_balance import white_balance_white_patch_gains as white_balance_white_patch_gains
 
+# the public names are those of the submodules (each lists its own), less temperature's
+# uv1960 helpers
 __all__ = [
-    "srgb_to_linear",
-    "linear_to_srgb",
-    "linear_to_rec709",
-    "rec709_to_linear",
-    "linear_to_adobe_rgb",
-    "adobe_rgb_to_linear",
-    "linear_to_prophoto",
-    "prophoto_to_linear",
-    "gamma_encode",
-    "gamma_decode",
-    "transfer_encode",
-    "transfer_decode",
-    "TRANSFER_FUNCTIONS",
-    "ACES_NARKOWICZ2015",
-    "aces_narkowicz2015",
-    "ADOBE_RGB_GAMMA",
-    "WHITEPOINTS",
-    "RGB_SPACES",
-    "RGBSpace",
-    "LUMINANCE_WEIGHTS",
-    "YIQ_MATRIX",
-    "normalised_primary_matrix",
-    "rgb_to_xyz_matrix",
-    "whitepoint_xyz",
-    "xy_to_xyz",
-    "rgb_to_xyz",
-    "xyz_to_rgb",
-    "xyz_to_lab",
-    "lab_to_xyz",
-    "xyz_to_xyY",
-    "xyY_to_xyz",
-    "rgb_to_hsv",
-    "hsv_to_rgb",
-    "rgb_to_yiq",
-    "yiq_to_rgb",
-    "rgb_to_cmyk",
-    "cmyk_to_rgb",
-    "luminance",
-    "delta_e_1976",
-    "delta_e_2000",
-    "delta_e_2000_residuals",
-    "CAT_MATRICES",
-    "chromatic_adaptation_matrix",
-    "chromatic_adaptation",
-    "rgb_to_rgb",
-    "apply_white_balance",
-    "white_balance_grey_world",
-    "white_balance_grey_world_gains",
-    "white_balance_white_patch",
-    "white_balance_white_patch_gains",
-    "white_balance_brightest_pixel",
-    "white_balance_brightest_pixel_gains",
-    "white_balance_stretch",
-    "white_balance_stretch_limits",
-    "white_balance_von_kries",
-    "white_balance_von_kries_matrix",
-    "white_balance",
-    "WHITE_BALANCE_METHODS",
+    *_transfer_all,
+    *_spaces_all,
+    *_difference_all,
+    *_adaptation_all,
+    *_white_balance_all,
     "ROBERTSON1968",
     "xy_to_cct",
     "cct_to_xy",
