@@ -14,12 +14,14 @@ import pytest
 
 from jaxgfx.render import load_scene, render
 from jaxgfx.render.integrators import INTEGRATORS, ParticleTracer, make_integrator
+from tests.render._scenes import camera, rectangle, sphere
 
 
 @pytest.fixture(autouse=True)
 def _float64(x64):
     """float64 in every test of this module, restored after it (tests/conftest.py ``x64``)."""
     yield
+
 
 RHO, INTENSITY = 0.5, 10.0
 LIGHT = np.array([0.5, 0.3, 1.0])
@@ -30,23 +32,8 @@ def _plane_scene(n=8, **emitter):
     em = emitter or {"type": "point", "position": LIGHT.tolist(), "intensity": INTENSITY}
     return load_scene(
         {
-            "camera": {
-                "origin": [0, 0, 3],
-                "target": [0, 0, 0],
-                "up": [0, 1, 0],
-                "fov": 40,
-                "width": n,
-                "height": n,
-            },  # fmt: skip
-            "shapes": [
-                {
-                    "type": "rectangle",
-                    "center": [0, 0, 0],
-                    "normal": [0, 0, 1],
-                    "size": [10, 10],
-                    "material": "w",
-                }
-            ],  # fmt: skip
+            "camera": camera([0, 0, 3], [0, 0, 0], up=[0, 1, 0], fov=40, width=n),
+            "shapes": [rectangle([0, 0, 0], [0, 0, 1], [10, 10], material="w")],
             "materials": {"w": {"type": "diffuse", "reflectance": RHO}},
             "emitters": [em],
         }
@@ -114,29 +101,10 @@ def _cornerish(glossy="roughconductor"):
     }
     return load_scene(
         {
-            "camera": {
-                "origin": [0, 1.2, 4],
-                "target": [0, 0.8, 0],
-                "up": [0, 1, 0],
-                "fov": 55,
-                "width": 8,
-                "height": 8,
-            },  # fmt: skip
+            "camera": camera([0, 1.2, 4], [0, 0.8, 0], up=[0, 1, 0], fov=55, width=8),
             "shapes": [
-                {
-                    "type": "rectangle",
-                    "center": [0, 0, 0],
-                    "normal": [0, 1, 0],
-                    "size": [6, 6],
-                    "material": "floor",
-                },  # fmt: skip
-                {
-                    "type": "rectangle",
-                    "center": [0, 1.5, -1.5],
-                    "normal": [0, 0, 1],
-                    "size": [6, 3],
-                    "material": "wall",
-                },  # fmt: skip
+                rectangle([0, 0, 0], [0, 1, 0], [6, 6], material="floor"),
+                rectangle([0, 1.5, -1.5], [0, 0, 1], [6, 3], material="wall"),
                 {"type": "sphere", "center": [0.3, 0.5, 0], "radius": 0.5, "material": "gloss"},
             ],
             "materials": mats,
@@ -176,29 +144,10 @@ def _mirror_caustic_scene():
     light)."""
     return load_scene(
         {
-            "camera": {
-                "origin": [0, 0, 3],
-                "target": [0, 0, 0],
-                "up": [0, 1, 0],
-                "fov": 30,
-                "width": 8,
-                "height": 8,
-            },  # fmt: skip
+            "camera": camera([0, 0, 3], [0, 0, 0], up=[0, 1, 0], fov=30, width=8),
             "shapes": [
-                {
-                    "type": "rectangle",
-                    "center": [0, 0, 0],
-                    "normal": [0, 0, 1],
-                    "size": [10, 10],
-                    "material": "w",
-                },  # fmt: skip
-                {
-                    "type": "rectangle",
-                    "center": [1, 0, 0],
-                    "normal": [-1, 0, 0],
-                    "size": [10, 10],
-                    "material": "mirror",
-                },  # fmt: skip
+                rectangle([0, 0, 0], [0, 0, 1], [10, 10], material="w"),
+                rectangle([1, 0, 0], [-1, 0, 0], [10, 10], material="mirror"),
             ],
             "materials": {
                 "w": {"type": "diffuse", "reflectance": RHO},
@@ -261,29 +210,10 @@ def test_gradients_radiance_and_albedo_match_finite_differences():
 
     scene = load_scene(
         {
-            "camera": {
-                "origin": [0, 1, 3],
-                "target": [0, 0.5, 0],
-                "up": [0, 1, 0],
-                "fov": 60,
-                "width": 4,
-                "height": 4,
-            },  # fmt: skip
+            "camera": camera([0, 1, 3], [0, 0.5, 0], up=[0, 1, 0], fov=60, width=4),
             "shapes": [
-                {
-                    "type": "rectangle",
-                    "center": [0, 0, 0],
-                    "normal": [0, 1, 0],
-                    "size": [4, 4],
-                    "material": "floor",
-                },  # fmt: skip
-                {
-                    "type": "rectangle",
-                    "center": [0, 1, -1],
-                    "normal": [0, 0, 1],
-                    "size": [4, 2],
-                    "material": "floor",
-                },  # fmt: skip
+                rectangle([0, 0, 0], [0, 1, 0], [4, 4], material="floor"),
+                rectangle([0, 1, -1], [0, 0, 1], [4, 2], material="floor"),
             ],
             "materials": {"floor": {"type": "diffuse", "reflectance": [0.6, 0.5, 0.4]}},
             "emitters": [
@@ -430,23 +360,8 @@ def test_xml_integrator_row_and_writer(tmp_path):
 def _plane_two_lights(n=8, film=None):
     """A diffuse plane lit by a point light and a small downward-facing area light."""
     desc = {
-        "camera": {
-            "origin": [0, 0, 3],
-            "target": [0, 0, 0],
-            "up": [0, 1, 0],
-            "fov": 40,
-            "width": n,
-            "height": n,
-        },  # fmt: skip
-        "shapes": [
-            {
-                "type": "rectangle",
-                "center": [0, 0, 0],
-                "normal": [0, 0, 1],
-                "size": [4, 4],
-                "material": "w",
-            }
-        ],  # fmt: skip
+        "camera": camera([0, 0, 3], [0, 0, 0], up=[0, 1, 0], fov=40, width=n),
+        "shapes": [rectangle([0, 0, 0], [0, 0, 1], [4, 4], material="w")],
         "materials": {"w": {"type": "diffuse", "reflectance": [0.7, 0.5, 0.3]}},
         "emitters": [
             {"type": "point", "position": LIGHT.tolist(), "intensity": INTENSITY},
@@ -471,29 +386,10 @@ def _glass_and_spot(n=16):
     """Floor, back wall, a smooth glass sphere under a spot light (its caustic on the floor),
     a rough metal sphere and a tilted area light the camera sees."""
     return {
-        "camera": {
-            "origin": [0, 1.5, 4],
-            "target": [0, 0.5, 0],
-            "up": [0, 1, 0],
-            "fov": 50,
-            "width": n,
-            "height": n,
-        },  # fmt: skip
+        "camera": camera([0, 1.5, 4], [0, 0.5, 0], up=[0, 1, 0], fov=50, width=n),
         "shapes": [
-            {
-                "type": "rectangle",
-                "center": [0, 0, 0],
-                "normal": [0, 1, 0],
-                "size": [6, 6],
-                "material": "floor",
-            },  # fmt: skip
-            {
-                "type": "rectangle",
-                "center": [0, 1.5, -1.5],
-                "normal": [0, 0, 1],
-                "size": [6, 3],
-                "material": "wall",
-            },  # fmt: skip
+            rectangle([0, 0, 0], [0, 1, 0], [6, 6], material="floor"),
+            rectangle([0, 1.5, -1.5], [0, 0, 1], [6, 3], material="wall"),
             {"type": "sphere", "center": [0.6, 0.5, 0.3], "radius": 0.45, "material": "glass"},
             {"type": "sphere", "center": [-0.7, 0.45, -0.2], "radius": 0.45, "material": "metal"},
         ],
@@ -720,29 +616,12 @@ def _glass_scene():
     sampled refractions)."""
     return load_scene(
         {
-            "camera": {
-                "origin": [0, 0, 3],
-                "target": [0, 0, 0],
-                "up": [0, 1, 0],
-                "fov": 30,
-                "width": 8,
-                "height": 8,
-            },  # fmt: skip
+            "camera": camera([0, 0, 3], [0, 0, 0], up=[0, 1, 0], fov=30, width=8),
             "shapes": [
                 _tilted_quad(3.0, [0.45, 0.2, 1.0], material="floor"),
-                {
-                    "type": "sphere",
-                    "center": [-0.3, 0.25, 0.45],
-                    "radius": 0.3,
-                    "material": "rough_glass",
-                },  # fmt: skip
+                sphere([-0.3, 0.25, 0.45], 0.3, material="rough_glass"),
                 dict(_uv_sphere([0.35, -0.3, 0.3], 0.3), material="white"),
-                {
-                    "type": "sphere",
-                    "center": [1.1, 0, 0.8],
-                    "radius": 0.35,
-                    "material": "glass",
-                },  # fmt: skip
+                sphere([1.1, 0, 0.8], 0.35, material="glass"),
             ],
             "materials": {
                 "floor": {"type": "diffuse", "reflectance": [0.7, 0.6, 0.5]},
@@ -825,23 +704,8 @@ def test_constant_environment_plane_and_visible_sky_closed_form():
     le = 2.0
     scene = load_scene(
         {
-            "camera": {
-                "origin": [0, -4, 1.0],
-                "target": [0, 0, 0.6],
-                "up": [0, 0, 1],
-                "fov": 60,
-                "width": 8,
-                "height": 8,
-            },  # fmt: skip
-            "shapes": [
-                {
-                    "type": "rectangle",
-                    "center": [0, 0, 0],
-                    "normal": [0, 0, 1],
-                    "size": [10, 10],
-                    "material": "w",
-                }
-            ],  # fmt: skip
+            "camera": camera([0, -4, 1.0], [0, 0, 0.6], up=[0, 0, 1], fov=60, width=8),
+            "shapes": [rectangle([0, 0, 0], [0, 0, 1], [10, 10], material="w")],
             "materials": {"w": {"type": "diffuse", "reflectance": RHO}},
             "emitters": [{"type": "constant", "radiance": le}],
         }
@@ -875,22 +739,9 @@ def test_envmap_equals_path_tracer_in_expectation():
     img[1:3, 3:6] = [8.0, 6.0, 4.0]  # a "sun" patch above the horizon
     scene = load_scene(
         {
-            "camera": {
-                "origin": [0, 1.0, 4],
-                "target": [0, 0.6, 0],
-                "up": [0, 1, 0],
-                "fov": 60,
-                "width": 8,
-                "height": 8,
-            },  # fmt: skip
+            "camera": camera([0, 1.0, 4], [0, 0.6, 0], up=[0, 1, 0], fov=60, width=8),
             "shapes": [
-                {
-                    "type": "rectangle",
-                    "center": [0, 0, 0],
-                    "normal": [0, 1, 0],
-                    "size": [6, 6],
-                    "material": "floor",
-                },  # fmt: skip
+                rectangle([0, 0, 0], [0, 1, 0], [6, 6], material="floor"),
                 {"type": "sphere", "center": [0.2, 0.5, 0], "radius": 0.5, "material": "w"},
             ],
             "materials": {
@@ -918,14 +769,7 @@ def test_shading_normals_closed_form():
     light = np.array([0.3, 0.2, 1.2])
     scene = load_scene(
         {
-            "camera": {
-                "origin": [-2.5, 0, 2.5],
-                "target": [0, 0, 0],
-                "up": [0, 0, 1],
-                "fov": 40,
-                "width": 8,
-                "height": 8,
-            },  # fmt: skip
+            "camera": camera([-2.5, 0, 2.5], [0, 0, 0], up=[0, 0, 1], fov=40, width=8),
             "shapes": [_tilted_quad(3.0, ns.tolist(), material="w")],
             "materials": {"w": {"type": "diffuse", "reflectance": RHO}},
             "emitters": [{"type": "point", "position": light.tolist(), "intensity": INTENSITY}],
@@ -966,14 +810,7 @@ def test_grazing_directional_and_black_sky_finite_values_and_gradients():
     desc_env = {"type": "constant", "radiance": 0.0}
     scene = load_scene(
         {
-            "camera": {
-                "origin": [0, -3, 1],
-                "target": [0, 0, 0.5],
-                "up": [0, 0, 1],
-                "fov": 60,
-                "width": 4,
-                "height": 4,
-            },  # fmt: skip
+            "camera": camera([0, -3, 1], [0, 0, 0.5], up=[0, 0, 1], fov=60, width=4),
             "shapes": [
                 {"type": "rectangle", "center": [0, 0, 0], "normal": [0, 0, 1], "size": [4, 4]}
             ],  # fmt: skip
