@@ -546,6 +546,10 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
         if "to_world" in d:
             out["to_world"] = _transform(np.asarray(d["to_world"], np.float64), mi)
         return out
+    if kind == "ellipsoids":  # a PLY file (written for inline ellipsoids)
+        from jaxgfx.render.scene._ellipsoids import ellipsoids_mitsuba
+
+        return ellipsoids_mitsuba(d, where, base_dir, work_dir, mi)
     if kind == "sdfgrid":  # Mitsuba's sdfgrid: a .vol file (written for inline values)
         from jaxgfx.render.geometry import write_vol
 
@@ -1186,6 +1190,7 @@ def scene_to_desc(scene) -> dict:
     )
     from jaxgfx.render.geometry import (
         BSplineCurves,
+        Ellipsoids,
         Instances,
         LinearCurves,
         Rectangles,
@@ -1267,6 +1272,10 @@ def scene_to_desc(scene) -> dict:
 
             kind = "linearcurve" if isinstance(shape, LinearCurves) else "bsplinecurve"
             out.append(({"type": kind, "curves": curve_lists(shape)}, mats[0]))
+        elif isinstance(shape, Ellipsoids):
+            out.append(({"type": "ellipsoids", "centers": _list(shape.centers),
+                         "scales": _list(shape.scales), "quaternions": _list(shape.quaternions),
+                         "extent": shape.extent}, mats[0]))  # fmt: skip
         elif isinstance(shape, SDFGridShape):
             out.append(({"type": "sdfgrid", "values": _list(shape.grid.values),
                          "normals": shape.normals}, mats[0]))  # fmt: skip
