@@ -89,6 +89,7 @@ def ellipsoids_arrays(d, where, base_dir):
         if isinstance(sf, bool) or not isinstance(sf, (int, float)) or not sf > 0:
             raise ValueError(f"{where}.scale_factor: expected a positive number, got {sf!r}")
         tw = _to_world(d["to_world"], f"{where}.to_world") if "to_world" in d else None
+
         def read(path):
             return read_ellipsoids_ply(path, scale_factor=float(sf), to_world=tw)
 
