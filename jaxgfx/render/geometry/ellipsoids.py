@@ -41,6 +41,7 @@ visibility term of moving silhouettes is not: see docs/render_gradients.md).
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 
@@ -103,8 +104,20 @@ def ellipsoid_entry(c, s, q, o, d):
     R = quaternion_matrix(q)
     flat = jnp.any(s == 0, axis=-1)
     inv = safe_div(jnp.ones_like(s), s)
-    ol = _to_local(R, o - c) * inv
-    dl = _to_local(R, d) * inv
+    return _unit_sphere_entry(_to_local(R, o - c) * inv, _to_local(R, d) * inv, flat)
+
+
+def _to_unit_frames(c, s, q):
+    """``(W, flat)``: the maps ``W = S⁻¹ Rᵀ (N, 3, 3)`` into each ellipsoid's unit-sphere
+    frame and which ellipsoids are flat (the BVH's leaves use them: no rotation per test)."""
+    R = quaternion_matrix(q)
+    inv = safe_div(jnp.ones_like(s), s)
+    return jnp.swapaxes(R, -1, -2) * inv[..., :, None], jnp.any(s == 0, axis=-1)
+
+
+def _unit_sphere_entry(ol, dl, flat):
+    """``(t, ok)`` of :func:`ellipsoid_entry` from the ray ``ol + t dl`` in the unit-sphere
+    frame (the robust quadratic of the module docstring)."""
     A = sum_last(dl * dl)
     B = sum_last(ol * dl)
     C = sum_last(ol * ol) - 1.0
@@ -222,9 +235,12 @@ class Ellipsoids(eqx.Module):
         q = f(self.quaternions).astype(dtype)[k]
         return c, s, q
 
-    def _leaf(self, idx, o, d):
-        c, s, q = self._params(idx, o.dtype, live=False)
-        return ellipsoid_entry(c, s, q, o, d)[0]
+    @staticmethod
+    def _leaf(c, W, flat, idx, o, d):
+        ci, Wi = c[idx], W[idx]
+        ol = sum_last(Wi * (o - ci)[..., None, :])
+        dl = sum_last(Wi * d)
+        return _unit_sphere_entry(ol, dl, flat[idx])[0]
 
     def closest_t(self, o, d, *, tmin=0.0, tmax=jnp.inf):
         """Nearest ``(t, primitive)`` per ray (``t = inf`` on misses); not differentiable."""
@@ -234,7 +250,9 @@ class Ellipsoids(eqx.Module):
         flat = (o.reshape(-1, 3), d.reshape(-1, 3),
                 jnp.broadcast_to(tmin, batch).reshape(-1),
                 jnp.broadcast_to(tmax, batch).reshape(-1))  # fmt: skip
-        t, k = jax.vmap(lambda *r: _bvh_trace(self, self._leaf, *r))(*flat)
+        c, s, q = self._params(slice(None), o.dtype, live=False)
+        leaf = functools.partial(self._leaf, c, *_to_unit_frames(c, s, q))
+        t, k = jax.vmap(lambda *r: _bvh_trace(self, leaf, *r))(*flat)
         t = jnp.where(k >= 0, t, jnp.inf)
         return t.reshape(batch), jnp.maximum(k, 0).reshape(batch)
 
