@@ -171,8 +171,11 @@ def test_hit_gradients_match_finite_differences(x64):
            + col for fl, r, col in at]  # fmt: skip
 
     def f(x, o, d):
-        sh = eqx.tree_at(lambda e: (e.centers, e.scales, e.quaternions), shape,
-                         (x[:6].reshape(2, 3), x[6:12].reshape(2, 3), x[12:].reshape(2, 4)))
+        sh = eqx.tree_at(
+            lambda e: (e.centers, e.scales, e.quaternions),
+            shape,
+            (x[:6].reshape(2, 3), x[6:12].reshape(2, 3), x[12:].reshape(2, 4)),
+        )
         h = sh.hit(k, o, d, True)
         rec = jnp.concatenate([h.t[:, None], h.ng], -1)
         return jnp.sum(w * jnp.where(h.valid[:, None], rec, 0.0))
@@ -190,8 +193,12 @@ def test_hit_gradients_match_finite_differences(x64):
     R0 = E._np_quaternion_matrix(q[:1])[0]
     semi = 1.5 * s[0]
     graze = (np.r_[[c[0] + semi[0] * R0[:, 0] - 5 * R0[:, 1]], o[1:]], np.r_[[R0[:, 1]], d[1:]])
-    for x, (oo, dd) in ((flat, graze), (np.r_[flat[:6], 0, flat[7:]], (o, d)),
-                        (flat, (np.r_[c[:1], o[1:]], d)), (np.r_[flat[:16], 0, 0, 0, 0], (o, d))):
+    for x, (oo, dd) in (
+        (flat, graze),
+        (np.r_[flat[:6], 0, flat[7:]], (o, d)),
+        (flat, (np.r_[c[:1], o[1:]], d)),
+        (np.r_[flat[:16], 0, 0, 0, 0], (o, d)),
+    ):
         val, g = vg(jnp.asarray(x), jnp.asarray(oo), jnp.asarray(dd))
         assert np.isfinite(float(val)) and np.all(np.isfinite(np.asarray(g))), (x, g)
 
@@ -355,7 +362,7 @@ def test_xml_and_writer_round_trip(tmp_path):
 
 
 def test_scenes_without_ellipsoids_trace_no_ellipsoid_code(monkeypatch):
-    """"Model only what a scene needs": tracing a render of a sphere scene calls no ellipsoid
+    """ "Model only what a scene needs": tracing a render of a sphere scene calls no ellipsoid
     code (the shape's kernel is never traced); the same scene with ellipsoids calls it."""
     from jaxgfx.render import render
     from jaxgfx.render.scene import load_scene
@@ -429,6 +436,7 @@ def test_ray_intersections_match_mitsuba(mi, tmp_path, x64):
     centres, 40 of them starting inside an ellipsoid, and 20 grazing ones: identical hit/miss
     and ellipsoid, t and normals against Mitsuba 3.9.1 (scalar_rgb)."""
     from jaxgfx.render.scene._ellipsoids import ellipsoids_from_desc
+    from jaxgfx.render.scene.schema import _read_shape_file
 
     rng = np.random.default_rng(1)
     c, s, _, q = _random_ellipsoids(rng, 40, spread=1.0)
@@ -439,7 +447,8 @@ def test_ray_intersections_match_mitsuba(mi, tmp_path, x64):
                                               "filename": str(tmp_path / "e.ply")}})  # fmt: skip
     m = np.array(M.matrix, np.float64)
     shape = ellipsoids_from_desc({"type": "ellipsoids", "filename": str(tmp_path / "e.ply"),
-                                  "to_world": m.tolist()}, "e", None)  # fmt: skip
+                                  "to_world": m.tolist()}, "e", None,
+                                 _read_shape_file)  # fmt: skip
     cw = np.asarray(shape.centers, np.float64)
     n = 400
     o = _unit(rng.normal(size=(n, 3))) * 4 + cw.mean(0)

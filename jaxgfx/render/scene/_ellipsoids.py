@@ -22,8 +22,7 @@ import numpy as np
 
 from jaxgfx._checks import as_float_array
 
-__all__ = ["ELLIPSOID_KEYS", "ellipsoids_arrays", "ellipsoids_from_desc", "ellipsoids_xml",
-           "ellipsoids_mitsuba"]  # fmt: skip
+__all__ = ["ELLIPSOID_KEYS", "ellipsoids_arrays", "ellipsoids_from_desc", "ellipsoids_xml"]
 
 ELLIPSOID_KEYS = ("type", "material", "id", "filename", "scale_factor", "to_world", "centers",
                   "scales", "quaternions", "data", "extent",
@@ -77,10 +76,11 @@ def _extent(d, where):
     return float(e)
 
 
-def ellipsoids_arrays(d, where, base_dir):
-    """``(centers, scales, quaternions, extent)`` (NumPy) of a checked description."""
+def ellipsoids_arrays(d, where, base_dir, read_file):
+    """``(centers, scales, quaternions, extent)`` (NumPy) of a checked description;
+    ``read_file(d, where, base_dir, read)`` reads its ``filename`` (schema's, passed in: this
+    module sits below the schema)."""
     from jaxgfx.render.geometry.ellipsoids import read_ellipsoids_ply
-    from jaxgfx.render.scene.schema import _read_shape_file
 
     _check_keys(d, where)
     extent = _extent(d, where)
@@ -93,7 +93,7 @@ def ellipsoids_arrays(d, where, base_dir):
         def read(path):
             return read_ellipsoids_ply(path, scale_factor=float(sf), to_world=tw)
 
-        c, s, q = _read_shape_file(d, where, base_dir, read)
+        c, s, q = read_file(d, where, base_dir, read)
         return c, s, q, extent
     if "data" in d:
         a = np.asarray(as_float_array(d["data"], f"{where}.data"), np.float64)
@@ -115,13 +115,14 @@ def ellipsoids_arrays(d, where, base_dir):
     return (*arrs, extent)
 
 
-def ellipsoids_from_desc(d, where, base_dir):
-    """An :class:`~jaxgfx.render.geometry.Ellipsoids` from its description (module doc)."""
+def ellipsoids_from_desc(d, where, base_dir, read_file):
+    """An :class:`~jaxgfx.render.geometry.Ellipsoids` from its description (module doc;
+    ``read_file`` as :func:`ellipsoids_arrays`)."""
     import jax.numpy as jnp
 
     from jaxgfx.render.geometry import Ellipsoids
 
-    c, s, q, extent = ellipsoids_arrays(d, where, base_dir)
+    c, s, q, extent = ellipsoids_arrays(d, where, base_dir, read_file)
     try:
         return Ellipsoids(jnp.asarray(c, jnp.float32), jnp.asarray(s, jnp.float32),
                           jnp.asarray(q, jnp.float32), extent=extent)  # fmt: skip
@@ -169,24 +170,3 @@ def ellipsoids_xml(p, obj, doc, m, emitters):
     lo, hi = _boxes(c.astype(np.float64), np.abs(s.astype(np.float64)) * extent,
                     q.astype(np.float64))  # fmt: skip
     return sd, np.stack([lo.min(0), hi.max(0)])
-
-
-def ellipsoids_mitsuba(d, where, base_dir, work_dir, mi):
-    """Mitsuba 3's ``ellipsoids`` dictionary of a description: its PLY file (written to
-    ``work_dir()`` for inline ellipsoids), ``extent``, and ``scale_factor`` / ``to_world`` of
-    a file."""
-    from jaxgfx.render.geometry.ellipsoids import write_ellipsoids_ply
-    from jaxgfx.render.scene.mitsuba import _shape_file, _transform
-
-    c, s, q, extent = ellipsoids_arrays(d, where, base_dir)  # validated as load_scene does
-    if "filename" not in d and np.any(s == 0):
-        raise NotImplementedError(f"{where}.scales: a scale of 0 has no Mitsuba PLY form "
-                                  "(its logarithm; Mitsuba's reader clamps to 1e-6)")  # fmt: skip
-    path = _shape_file(d, where, base_dir, work_dir, ".ply",
-                       lambda p: write_ellipsoids_ply(p, c, s, q))  # fmt: skip
-    out = {"type": "ellipsoids", "filename": path, "extent": extent}
-    if "scale_factor" in d:
-        out["scale_factor"] = float(d["scale_factor"])
-    if "to_world" in d:
-        out["to_world"] = _transform(np.asarray(d["to_world"], np.float64), mi)
-    return out

@@ -546,10 +546,22 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
         if "to_world" in d:
             out["to_world"] = _transform(np.asarray(d["to_world"], np.float64), mi)
         return out
-    if kind == "ellipsoids":  # a PLY file (written for inline ellipsoids)
-        from jaxgfx.render.scene._ellipsoids import ellipsoids_mitsuba
+    if kind == "ellipsoids":  # a PLY file (written for inline ellipsoids), extent, ...
+        from jaxgfx.render.geometry import write_ellipsoids_ply
+        from jaxgfx.render.scene._ellipsoids import ellipsoids_arrays
 
-        return ellipsoids_mitsuba(d, where, base_dir, work_dir, mi)
+        c, s, q, extent = ellipsoids_arrays(d, where, base_dir, S._read_shape_file)
+        if "filename" not in d and np.any(s == 0):
+            raise NotImplementedError(f"{where}.scales: a scale of 0 has no Mitsuba PLY form "
+                                      "(ln 0; Mitsuba's reader clamps to 1e-6)")  # fmt: skip
+        path = _shape_file(d, where, base_dir, work_dir, ".ply",
+                           lambda p: write_ellipsoids_ply(p, c, s, q))  # fmt: skip
+        out = {"type": "ellipsoids", "filename": path, "extent": extent}
+        if "scale_factor" in d:
+            out["scale_factor"] = float(d["scale_factor"])
+        if "to_world" in d:
+            out["to_world"] = _transform(np.asarray(d["to_world"], np.float64), mi)
+        return out
     if kind == "sdfgrid":  # Mitsuba's sdfgrid: a .vol file (written for inline values)
         from jaxgfx.render.geometry import write_vol
 

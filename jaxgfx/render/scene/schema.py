@@ -445,7 +445,7 @@ def shape_from_desc(d, where, base_dir):
     if kind == "ellipsoids":  # jaxgfx/render/scene/_ellipsoids.py
         from jaxgfx.render.scene._ellipsoids import ellipsoids_from_desc
 
-        return "sdf", ellipsoids_from_desc(d, where, base_dir)
+        return "sdf", ellipsoids_from_desc(d, where, base_dir, _read_shape_file)
     # "sdf"
     expect_keys(d, where, ("type", "expr"), (*common, "max_steps", "eps"))
     expr = d["expr"]
