@@ -128,13 +128,18 @@ def test_hard_cases_are_as_documented(x64):
 def test_bvh_equals_brute_force_on_overlapping_ellipsoids(x64):
     """300 ellipsoids overlapping in a unit box (each ray crosses many), 400 rays from outside
     and 100 from inside the cloud: the BVH's nearest (t, ellipsoid) equals the brute-force
-    minimum of the per-ellipsoid near roots (tmin = 0)."""
+    minimum of the per-ellipsoid near roots (tmin = 0), and its any-hit query (shadow rays)
+    is True exactly where that minimum is below tmax."""
     rng = np.random.default_rng(2)
     c, s, _, q = _random_ellipsoids(rng, 300, spread=0.6)
     shape = Ellipsoids(c, s, q, extent=1.0)
     o = np.concatenate([3 * _unit(rng.normal(size=(400, 3))), rng.uniform(-0.3, 0.3, (100, 3))])
     d = _unit(rng.normal(0, 0.4, (500, 3)) - o)
-    t, k = jax.jit(lambda o, d: shape.closest_t(o, d))(jnp.asarray(o), jnp.asarray(d))
+    # shadow rays: tmax of 3 for the first half, 1.8 for the rest (some nearest hits beyond)
+    tmax = np.where(np.arange(500) < 250, 3.0, 1.8)
+    t, k, occ = jax.jit(lambda o, d, tm: (*shape.closest_t(o, d), shape.occluded(o, d, tm)))(
+        jnp.asarray(o), jnp.asarray(d), jnp.asarray(tmax)
+    )
     # brute force in NumPy: the near root of every (ray, ellipsoid) quadric
     R = np.stack([_axis_angle_matrix(qq) for qq in q])
     M = np.einsum("kij,kj,klj->kil", R, 1 / s**2, R)  # R S⁻² Rᵀ
@@ -149,6 +154,8 @@ def test_bvh_equals_brute_force_on_overlapping_ellipsoids(x64):
     np.testing.assert_allclose(np.asarray(t), tb.min(1), rtol=1e-9)
     hit = np.isfinite(tb.min(1))
     np.testing.assert_array_equal(np.asarray(k)[hit], tb.argmin(1)[hit])
+    blocked = tb.min(1) < tmax
+    assert 0 < np.sum(hit & ~blocked) and np.array_equal(np.asarray(occ), blocked)
 
 
 def test_hit_gradients_match_finite_differences(x64):
