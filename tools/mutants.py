@@ -383,6 +383,31 @@ MUTANTS = [
         ],
         "why": "a range limit dropped (intensity 100 gave a black image, commit ea6698c)",
     },
+    # ------------------------------------------------------------------ ellipsoids
+    {
+        "name": "render.ellipsoids.normal_one_inverse_scale",
+        "file": "jaxgfx/render/geometry/ellipsoids.py",
+        "old": "n = safe_normalize(_to_world(R, _to_local(R, p - c) * inv * inv))",
+        "new": "n = safe_normalize(_to_world(R, _to_local(R, p - c) * inv))",
+        "tests": ["tests/render/test_ellipsoids.py::test_hits_match_the_implicit_quadric"],
+        "why": "the normal as R S⁻¹ l instead of the gradient R S⁻² l",
+    },
+    {
+        "name": "render.ellipsoids.far_root",
+        "file": "jaxgfx/render/geometry/ellipsoids.py",
+        "old": "t = jnp.minimum(t1, t2)\n",
+        "new": "t = jnp.maximum(t1, t2)\n",
+        "tests": ["tests/render/test_ellipsoids.py::test_hard_cases_are_as_documented"],
+        "why": "the exit instead of the entry (Mitsuba culls back faces: rays from inside miss)",
+    },
+    {
+        "name": "render.ellipsoids.flat_hit",
+        "file": "jaxgfx/render/geometry/ellipsoids.py",
+        "old": "ok = (disc >= 0) & (A > 0) & ~flat & jnp.isfinite(t)",
+        "new": "ok = (disc >= 0) & (A > 0) & jnp.isfinite(t)",
+        "tests": ["tests/render/test_ellipsoids.py::test_hard_cases_are_as_documented"],
+        "why": "a scale of 0 drawn as a cylinder (Mitsuba 3.9.1 never hits a flat ellipsoid)",
+    },
     # ------------------------------------------------------------------ curves
     {
         "name": "render.curves.start_ball_always",

@@ -46,6 +46,7 @@ from jaxgfx.render.camera import PerspectiveCamera, look_at_basis
 from jaxgfx.render.estimator import pass_scan
 from jaxgfx.render.film import BoxFilter
 from jaxgfx.render.geometry.curves import BSplineCurves, LinearCurves
+from jaxgfx.render.geometry.ellipsoids import Ellipsoids
 from jaxgfx.render.geometry.frame import to_local
 from jaxgfx.render.geometry.mesh import TriangleMesh
 from jaxgfx.render.geometry.ray import spawn_ray
@@ -98,6 +99,12 @@ def check_visibility(visibility, scene, integrator) -> None:
             "visibility: edge sampling does not cover the silhouettes of curves "
             "(LinearCurves, BSplineCurves): render without visibility='edge' (the gradients of "
             "curve control points then lack the boundary term; material gradients are exact)"
+        )
+    if any(isinstance(s, Ellipsoids) for s in scene.shapes):
+        raise ValueError(
+            "visibility: edge sampling does not cover the silhouettes of ellipsoids: render "
+            "without visibility='edge' (the gradients of their centres, scales and rotations "
+            "then lack the boundary term; material gradients are exact)"
         )
     rf = scene.rfilter
     if rf is not None and not (isinstance(rf, BoxFilter) and rf.radius == 0.5):

@@ -4,7 +4,8 @@ One file per algorithm: ``ray`` (rays, :class:`Hit` records, robust spawning), `
 (orthonormal shading frames), ``sphere``, ``rectangle``, ``mesh`` (:class:`TriangleMesh`),
 ``triangle_moller_trumbore`` (Möller & Trumbore 1997), ``triangle_unit`` (affine map to the unit
 triangle), ``intersect`` (closest hit / any hit over shapes and scenes), ``instance``
-(instancing), ``curves`` (Mitsuba's linear and B-spline curves), ``area`` (areas and uniform
+(instancing), ``curves`` (Mitsuba's linear and B-spline curves), ``ellipsoids`` (Mitsuba's
+ellipsoids), ``area`` (areas and uniform
 area sampling for area lights), ``sdf`` (signed distance functions), ``sdfgrid`` (SDF grids,
 ``.vol`` files), ``sphere_tracing`` (Hart 1996; :class:`SDFShape`), ``mesh_io`` (OBJ / PLY,
 procedural meshes) and ``accel/`` (``bvh_sah``, ``grid_dda``, ``kdtree_sah``).
@@ -21,6 +22,9 @@ from jaxgfx.render.geometry.curves import LinearCurves as LinearCurves
 from jaxgfx.render.geometry.curves import curve_lists as curve_lists
 from jaxgfx.render.geometry.curves import read_curves as read_curves
 from jaxgfx.render.geometry.curves import write_curves as write_curves
+from jaxgfx.render.geometry.ellipsoids import Ellipsoids as Ellipsoids
+from jaxgfx.render.geometry.ellipsoids import read_ellipsoids_ply as read_ellipsoids_ply
+from jaxgfx.render.geometry.ellipsoids import write_ellipsoids_ply as write_ellipsoids_ply
 from jaxgfx.render.geometry.instance import Instances as Instances
 from jaxgfx.render.geometry.intersect import closest_t as closest_t
 from jaxgfx.render.geometry.intersect import intersect as intersect
@@ -88,6 +92,9 @@ __all__ = [
     "read_curves",
     "write_curves",
     "curve_lists",
+    "Ellipsoids",
+    "read_ellipsoids_ply",
+    "write_ellipsoids_ply",
     "TRIANGLE_INTERSECTORS",
     "sphere_intersect",
     "rectangle_intersect",

@@ -43,6 +43,9 @@ def instances_from_desc(d, where, base_dir, material_index, build_mesh):
         if isinstance(sd, Mapping) and sd.get("type") in ("linearcurve", "bsplinecurve"):
             raise ValueError(f"{w}: instanced curves are not supported (place the curves "
                              "with their own to_world)")  # fmt: skip
+        if isinstance(sd, Mapping) and sd.get("type") == "ellipsoids":
+            raise ValueError(f"{w}: instanced ellipsoids are not supported (list them in one "
+                             "ellipsoids shape)")  # fmt: skip
         kind, shape = shape_from_desc(sd, w, base_dir)
         m = to_world
         if isinstance(shape, Instances):  # an sdfgrid with its own to_world: compose

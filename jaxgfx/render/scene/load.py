@@ -23,6 +23,7 @@ from jaxgfx.render.emitters import (
 from jaxgfx.render.film import make_filter
 from jaxgfx.render.geometry import (
     BSplineCurves,
+    Ellipsoids,
     Instances,
     LinearCurves,
     Rectangles,
@@ -203,7 +204,8 @@ def load_scene(
                    None if k == "mesh" else pos, mat)
                   for ident, k, pos, mat in shape_ids]  # fmt: skip
     for m, mi in meshes:
-        one_material = (SDFShape, SDFGridShape, Instances, LinearCurves, BSplineCurves)
+        one_material = (SDFShape, SDFGridShape, Instances, LinearCurves, BSplineCurves,
+                        Ellipsoids)  # fmt: skip
         if isinstance(m, one_material):
             shapes.append(m)
             shape_mats.append(jnp.full((1,), mi, jnp.int32))
@@ -275,6 +277,9 @@ def load_scene(
             delta_lights.append(projector_from_desc(ed, where, base_dir))
         elif kind in ("area", "directionalarea"):
             expect_keys(ed, where, ("type", "shape", "radiance"), ("material", "id"))
+            if isinstance(ed["shape"], Mapping) and ed["shape"].get("type") == "ellipsoids":
+                raise ValueError(f"{where}.shape: ellipsoids cannot be area lights (Mitsuba's "
+                                 "ellipsoids have no area sampling)")  # fmt: skip
             sk, shape = shape_from_desc(ed["shape"], f"{where}.shape", base_dir)
             shape_ident = _object_id(ed["shape"], f"{where}.shape", "shapes", seen_ids)
             if sk == "sdf":

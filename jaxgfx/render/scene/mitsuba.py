@@ -546,6 +546,22 @@ def _shape(d, where, base_dir, work_dir, mi) -> dict:
         if "to_world" in d:
             out["to_world"] = _transform(np.asarray(d["to_world"], np.float64), mi)
         return out
+    if kind == "ellipsoids":  # a PLY file (written for inline ellipsoids), extent, ...
+        from jaxgfx.render.geometry import write_ellipsoids_ply
+        from jaxgfx.render.scene._ellipsoids import ellipsoids_arrays
+
+        c, s, q, extent = ellipsoids_arrays(d, where, base_dir, S._read_shape_file)
+        if "filename" not in d and np.any(s == 0):
+            raise NotImplementedError(f"{where}.scales: a scale of 0 has no Mitsuba PLY form "
+                                      "(ln 0; Mitsuba's reader clamps to 1e-6)")  # fmt: skip
+        path = _shape_file(d, where, base_dir, work_dir, ".ply",
+                           lambda p: write_ellipsoids_ply(p, c, s, q))  # fmt: skip
+        out = {"type": "ellipsoids", "filename": path, "extent": extent}
+        if "scale_factor" in d:
+            out["scale_factor"] = float(d["scale_factor"])
+        if "to_world" in d:
+            out["to_world"] = _transform(np.asarray(d["to_world"], np.float64), mi)
+        return out
     if kind == "sdfgrid":  # Mitsuba's sdfgrid: a .vol file (written for inline values)
         from jaxgfx.render.geometry import write_vol
 
@@ -1186,6 +1202,7 @@ def scene_to_desc(scene) -> dict:
     )
     from jaxgfx.render.geometry import (
         BSplineCurves,
+        Ellipsoids,
         Instances,
         LinearCurves,
         Rectangles,
@@ -1267,6 +1284,10 @@ def scene_to_desc(scene) -> dict:
 
             kind = "linearcurve" if isinstance(shape, LinearCurves) else "bsplinecurve"
             out.append(({"type": kind, "curves": curve_lists(shape)}, mats[0]))
+        elif isinstance(shape, Ellipsoids):
+            out.append(({"type": "ellipsoids", "centers": _list(shape.centers),
+                         "scales": _list(shape.scales), "quaternions": _list(shape.quaternions),
+                         "extent": shape.extent}, mats[0]))  # fmt: skip
         elif isinstance(shape, SDFGridShape):
             out.append(({"type": "sdfgrid", "values": _list(shape.grid.values),
                          "normals": shape.normals}, mats[0]))  # fmt: skip

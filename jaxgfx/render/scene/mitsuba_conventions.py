@@ -65,7 +65,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("shape", "sdfgrid"): S + " (`filename`, `normals`; exact per-voxel intersection)",
     ("shape", "bsplinecurve"): S + " (`filename`, `to_world`; circle sweep, Newton-refined)",
     ("shape", "linearcurve"): S + " (`filename`, `to_world`; exact round cones, culled backs)",
-    ("shape", "ellipsoids"): "refused: no ellipsoids in jaxgfx",
+    ("shape", "ellipsoids"): S + " (`filename` PLY, `extent`, `scale_factor`, `to_world`; exact, "
+                                 "culled backs; attributes and emitters refused)",
     # BSDFs
     ("bsdf", "diffuse"): S,
     ("bsdf", "twosided"): S + " (one nested BSDF)",

@@ -1387,10 +1387,14 @@ def _shape(obj: _Obj, doc, desc, ctx):
             sd["to_world"] = m.tolist()
         c = pts[:, :3] @ m[:3, :3].T + m[:3, 3]
         bbox = np.stack([(c - pts[:, 3:]).min(0), (c + pts[:, 3:]).max(0)])
+    elif t == "ellipsoids":  # jaxgfx/render/scene/_ellipsoids.py; the PLY read now for errors
+        from jaxgfx.render.scene._ellipsoids import ellipsoids_xml
+
+        sd, bbox = ellipsoids_xml(p, obj, doc, m, emitters)
     else:
         raise ValueError(f"{obj.where}: shape plugin {t!r} is not supported "
                          "(obj, ply, serialized, sphere, rectangle, cube, disk, "
-                         "cylinder, sdfgrid, linearcurve, bsplinecurve)")  # fmt: skip
+                         "cylinder, sdfgrid, linearcurve, bsplinecurve, ellipsoids)")  # fmt: skip
     p.done(children_ok=len(obj.children))
     ctx["bboxes"].append((bbox, obj))
     if meters:  # the irradiance meter's shape (read_xml puts it into the camera)

@@ -46,7 +46,7 @@ __all__ = [
 ]
 
 SHAPE_TYPES = ("sphere", "rectangle", "mesh", "sdf", "sdfgrid", "linearcurve",
-               "bsplinecurve")  # fmt: skip
+               "bsplinecurve", "ellipsoids")  # fmt: skip
 EMITTER_TYPES = ("area", "point", "constant", "envmap", "directional", "spot", "projector",
                  "directionalarea")  # fmt: skip
 SCENE_KEYS = (("camera", "shapes"), ("materials", "emitters", "film"))
@@ -442,6 +442,10 @@ def shape_from_desc(d, where, base_dir):
         return "sdf", sdfgrid_from_desc(d, where, base_dir)
     if kind in ("linearcurve", "bsplinecurve"):
         return "sdf", linearcurve_from_desc(d, where, base_dir)
+    if kind == "ellipsoids":  # jaxgfx/render/scene/_ellipsoids.py
+        from jaxgfx.render.scene._ellipsoids import ellipsoids_from_desc
+
+        return "sdf", ellipsoids_from_desc(d, where, base_dir, _read_shape_file)
     # "sdf"
     expect_keys(d, where, ("type", "expr"), (*common, "max_steps", "eps"))
     expr = d["expr"]
