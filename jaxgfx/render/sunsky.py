@@ -196,6 +196,12 @@ def _disc(aperture: float):
     return omc, 2.0 * math.asin(math.sqrt(0.5 * omc)), math.sin(float(h32))
 
 
+@eqx.filter_jit
+def _sampling_tables(sky):
+    # one compiled program (eager, its few hundred small ops took ~20 s to dispatch)
+    return sky.sampling_tables()
+
+
 class SunSky(eqx.Module):
     """Mitsuba 3's ``sunsky`` (RGB): Hosek-Wilkie sky and sun, see the module docstring.
 
@@ -298,10 +304,10 @@ class SunSky(eqx.Module):
             None if rot is None else jnp.asarray(rot, dtype), float(sun_aperture),
             bool(complex_sun),
         )  # fmt: skip
-        dist, power = self._sampling_tables()
+        dist, power = _sampling_tables(self)
         return eqx.tree_at(lambda e: (e._distribution, e._power), self, (dist, power))
 
-    def _sampling_tables(self):
+    def sampling_tables(self):
         """The sky's sampling density (its luminance at 2 x 2 points per cell of
         :data:`SKY_GRID`, plus 1/1000 of the mean) and the luminous powers ``(sky, sun)`` of
         the unscaled sky and sun (0 for a sun below the horizon)."""
