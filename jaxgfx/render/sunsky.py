@@ -224,30 +224,31 @@ class SunSky(eqx.Module):
     _sky_params: jnp.ndarray  # (10 turbidity, 2 albedo, 6 control points, 3 RGB, 9)
     _sky_rad: jnp.ndarray  # (10, 2, 6, 3)
     _sun_irr: jnp.ndarray  # (10 turbidity, 30 elevations, 3 RGB)
-    _distribution: Distribution2D  # sky sampling over (phi / 2 pi, cos theta)
-    _power: jnp.ndarray  # (2,) luminous power of the unscaled sky and sun (sampling only)
+    _distribution: Distribution2D | None = None  # sky sampling over (phi / 2 pi, cos theta)
+    _power: jnp.ndarray | None = None  # (2,) luminous power of the unscaled sky and sun
     _sun_rad: jnp.ndarray | None = None  # complex sun: (10, 45 segments, 3, 4, 6); else None
     to_world: jnp.ndarray | None = None
     sun_aperture: float = eqx.field(static=True, default=DEFAULT_SUN_APERTURE)
     complex_sun: bool = eqx.field(static=True, default=False)
 
     def __check_init__(self):  # also runs on Scene.replace (concrete values only)
-        check_finite(self.sun_direction, "sun_direction")
-        for name in ("turbidity", "sun_scale", "sky_scale"):
+        for name in ("sun_direction", "turbidity", "albedo", "sun_scale", "sky_scale"):
             check_finite(getattr(self, name), name)
-        if is_concrete(self.turbidity) and not 1.0 <= float(self.turbidity) <= 10.0:
-            raise ValueError(f"turbidity: expected a number in [1, 10], got "
-                             f"{float(self.turbidity)}")  # fmt: skip
-        if is_concrete(self.albedo) and not bool(jnp.all((self.albedo >= 0) & (self.albedo <= 1))):
-            raise ValueError(f"albedo: expected values in [0, 1], got {np.asarray(self.albedo)}")
-        for name in ("sun_scale", "sky_scale"):
-            v = getattr(self, name)
-            if is_concrete(v) and not float(v) >= 0:
-                raise ValueError(f"{name}: expected a non-negative number, got {float(v)}")
-        if is_concrete(self.sun_direction) and not float(jnp.linalg.norm(self.sun_direction)) > 0:
-            raise ValueError("sun_direction: expected a nonzero vector")
         if not 0.0 < self.sun_aperture < 180.0:
             raise ValueError(f"sun_aperture: expected degrees in (0, 180), got {self.sun_aperture}")
+        if not is_concrete(self.sun_direction) or not is_concrete(self.albedo):
+            return
+        if not np.linalg.norm(np.asarray(self.sun_direction, np.float64)) > 0:
+            raise ValueError("sun_direction: expected a nonzero vector")
+        a = np.asarray(self.albedo)
+        if not np.all((a >= 0) & (a <= 1)):
+            raise ValueError(f"albedo: expected values in [0, 1], got {a}")
+        for name, lo, hi in (("turbidity", 1.0, 10.0), ("sun_scale", 0.0, math.inf),
+                             ("sky_scale", 0.0, math.inf)):  # fmt: skip
+            v = getattr(self, name)
+            if is_concrete(v) and not lo <= float(v) <= hi:
+                what = "a number in [1, 10]" if name == "turbidity" else "a non-negative number"
+                raise ValueError(f"{name}: expected {what}, got {float(v)}")
 
     # -- construction (host) ---------------------------------------------------------------
 
@@ -258,54 +259,50 @@ class SunSky(eqx.Module):
         :func:`sun_direction_at` for a date and place). ``albedo`` a number or RGB triple.
         ``to_world``: ``None`` or a 3x3 / 4x4 affine rotation (translation ignored; a scale or
         shear raises ``ValueError`` naming ``sunsky.to_world``). Bad values raise one
-        ``ValueError`` naming the parameter."""
+        ``ValueError`` naming the parameter. Host function (checks in NumPy; one compiled
+        program per dtype builds the sampling tables)."""
         from jaxgfx.render.emitters import EnvironmentMap
 
         rot = EnvironmentMap.check_to_world(to_world, "sunsky.to_world")
-        s = as_float_array(sun_direction, "sun_direction")
-        check_finite(s, "sun_direction")
-        if s.shape != (3,):
-            raise ValueError(f"sun_direction: expected 3 numbers, got shape {s.shape}")
-        n = float(jnp.linalg.norm(s))
+        dtype = as_float_array(0.0, "dtype").dtype if not isinstance(
+            sun_direction, jax.Array) else as_float_array(sun_direction, "sun_direction").dtype  # fmt: skip
+        vals = {}
+        for name, v, shape in (("sun_direction", sun_direction, (3,)), ("turbidity", turbidity, ()),
+                               ("albedo", albedo, (3,)), ("sun_scale", sun_scale, ()),
+                               ("sky_scale", sky_scale, ()), ("sun_aperture", sun_aperture, ())):  # fmt: skip
+            a = np.asarray(as_float_array(v, name), np.float64)
+            if name == "albedo" and a.shape == ():
+                a = np.full(3, float(a))
+            if a.shape != shape:
+                what = "3 numbers" if shape else "a number"
+                if name == "albedo":
+                    what = "a number or an RGB triple"
+                raise ValueError(f"{name}: expected {what}, got shape {a.shape}")
+            check_finite(a, name)
+            vals[name] = a
+        n = float(np.linalg.norm(vals["sun_direction"]))
         if not n > 0:
             raise ValueError("sun_direction: expected a nonzero vector")
-        scalars = {}
-        for name, v in (("turbidity", turbidity), ("sun_scale", sun_scale),
-                        ("sky_scale", sky_scale)):  # fmt: skip
-            a = as_float_array(v, name)
-            if a.shape != ():
-                raise ValueError(f"{name}: expected a number, got shape {a.shape}")
-            check_finite(a, name)
-            scalars[name] = a
-        alb = as_float_array(albedo, "albedo")
-        if alb.shape == ():
-            alb = jnp.broadcast_to(alb, (3,))
-        if alb.shape != (3,):
-            raise ValueError(f"albedo: expected a number or an RGB triple, got shape {alb.shape}")
-        check_finite(alb, "albedo")
-        if isinstance(sun_aperture, bool) or not isinstance(sun_aperture, (int, float, np.number)):
-            ap = as_float_array(sun_aperture, "sun_aperture")
-            if ap.shape != ():
-                raise ValueError(f"sun_aperture: expected a number, got shape {ap.shape}")
-            sun_aperture = float(ap)
         if not isinstance(complex_sun, (bool, np.bool_)):
             raise TypeError(f"complex_sun: expected a bool, got {type(complex_sun).__name__}")
         t = tables()
         # Mitsuba's spectrum_to_srgb (without its CIE Y factor) of the solar irradiance
         rgb_cmf = t["cie_xyz"] @ XYZ_TO_REC709.T  # (11, 3)
         sun_irr = np.einsum("tel,lc->tec", t["sun_irradiance"], rgb_cmf) / rgb_cmf.shape[0]
-        dtype = s.dtype
-        self = cls(
-            s / n, scalars["turbidity"], alb, scalars["sun_scale"], scalars["sky_scale"],
-            jnp.asarray(t["sky_params_rgb"], dtype), jnp.asarray(t["sky_rad_rgb"], dtype),
-            jnp.asarray(sun_irr, dtype), Distribution2D(jnp.ones((1, 1), dtype)),
-            jnp.ones((2,), dtype),
-            jnp.asarray(t["sun_rad_rgb"], dtype) if complex_sun else None,
-            None if rot is None else jnp.asarray(rot, dtype), float(sun_aperture),
-            bool(complex_sun),
-        )  # fmt: skip
-        dist, power = _sampling_tables(self)
-        return eqx.tree_at(lambda e: (e._distribution, e._power), self, (dist, power))
+        sd = vals["sun_direction"] / n
+        arr = lambda x: jnp.asarray(x, dtype)  # noqa: E731
+        common = [arr(vals["turbidity"]), arr(vals["albedo"]), arr(vals["sun_scale"]),
+                  arr(vals["sky_scale"]), arr(t["sky_params_rgb"]), arr(t["sky_rad_rgb"]),
+                  arr(sun_irr)]  # fmt: skip
+        # the sampling tables depend on the sky and the sun's irradiance only: built on a
+        # canonical view (the local sun direction, no rotation, the default static fields), one
+        # compiled program per dtype whatever the aperture, complex_sun and to_world
+        local = sd if rot is None else rot.T @ sd
+        dist, power = _sampling_tables(cls(arr(local), *common))
+        return cls(arr(sd), *common, dist, power,
+                   arr(t["sun_rad_rgb"]) if complex_sun else None,
+                   None if rot is None else arr(rot), float(vals["sun_aperture"]),
+                   bool(complex_sun))  # fmt: skip
 
     def sampling_tables(self):
         """The sky's sampling density (its luminance at 2 x 2 points per cell of
@@ -326,6 +323,7 @@ class SunSky(eqx.Module):
         lum = jnp.maximum(lum, 0.0).reshape(h, 2, w, 2).mean((1, 3))
         lum = jnp.where(s[2] >= 0, lum, 0.0)
         p_sky = jnp.sum(lum) * (2 * math.pi / (h * w)) * CIE_Y_NORMALIZATION
+        # the disc's radiance times its solid angle: its irradiance, whatever the aperture
         p_sun = jnp.where(s[2] >= 0, self._sun_disc_rgb(s, dt) @ lum_w, 0.0)
         p_sun = jnp.maximum(p_sun, 0.0) * (2 * math.pi * _disc(self.sun_aperture)[0])
         dist = Distribution2D(lum + 1e-3 * jnp.mean(lum))
