@@ -270,7 +270,8 @@ class SunSky(eqx.Module):
         for name, v, shape in (("sun_direction", sun_direction, (3,)), ("turbidity", turbidity, ()),
                                ("albedo", albedo, (3,)), ("sun_scale", sun_scale, ()),
                                ("sky_scale", sky_scale, ()), ("sun_aperture", sun_aperture, ())):  # fmt: skip
-            a = np.asarray(as_float_array(v, name), np.float64)
+            as_float_array(v, name)  # its TypeError for non-numbers
+            a = np.asarray(v, np.float64)  # host float64: a Python aperture stays unrounded
             if name == "albedo" and a.shape == ():
                 a = np.full(3, float(a))
             if a.shape != shape:
