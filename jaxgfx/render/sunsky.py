@@ -14,9 +14,9 @@ are combined follows Mitsuba's ``include/mitsuba/render/sunsky.h`` (read, not co
 * sky, per RGB channel with ``theta`` the view's zenith angle and ``gamma`` its angle to the
   sun: ``(1 + A exp(B / (cos theta + 0.01))) (C + D exp(E gamma) + F cos^2 gamma + G chi(H,
   gamma) + I sqrt(cos theta)) L_M`` with ``chi = (1 + cos^2 gamma) / (1 + H^2 - 2 H cos
-  gamma)^1.5`` (the tables store the nine as A..G, I, H); they and ``L_M`` are linear in turbidity (levels 1..10) and
-  in the channel's albedo (levels 0, 1), then a quintic Bezier in ``x = (2 eta / pi)^(1/3)``,
-  ``eta`` the sun's elevation.
+  gamma)^1.5`` (the tables store the nine as A..G, I, H); they and ``L_M`` are linear in
+  turbidity (levels 1..10) and in the channel's albedo (levels 0, 1), then a quintic Bezier
+  in ``x = (2 eta / pi)^(1/3)``, ``eta`` the sun's elevation.
 * sun (default, Mitsuba's ``complex_sun`` false): a disc of half-angle ``sun_aperture / 2``
   of constant radiance ``E_sun / (2 pi (1 - cos(aperture / 2)))`` (Mitsuba's float32 value of
   that cosine, see ``_disc``), ``E_sun`` the model's
@@ -26,7 +26,9 @@ are combined follows Mitsuba's ``include/mitsuba/render/sunsky.h`` (read, not co
   model's piecewise polynomial in the view's elevation (45 segments) times the limb darkening
   polynomial in ``cos psi`` (baked into Mitsuba's RGB table), scaled by the same area ratio.
 * both times ``1 / 106.75025939941406`` (Mitsuba's CIE Y normalisation); 0 below the horizon,
-  and everything 0 when the sun is below the horizon (Mitsuba warns and renders black).
+  and everything 0 when the sun is below or exactly on the horizon (Mitsuba warns and renders
+  black; exactly on it, its float32 round trip through the zenith angle puts the sun 4e-8
+  below).
 
 Importance sampling (jaxgfx's own, not Mitsuba's warps): the sky from a piecewise-constant
 density over ``(phi / 2 pi, cos theta)`` tabulated at build time from the sky's luminance (with
@@ -48,7 +50,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgfx._checks import as_float_array, check_finite, is_concrete
-from jaxgfx._math import safe_atan2, safe_div, safe_norm, safe_normalize, safe_sqrt, sincos, sum_last
+from jaxgfx._math import (
+    safe_atan2,
+    safe_div,
+    safe_norm,
+    safe_normalize,
+    safe_sqrt,
+    sincos,
+    sum_last,
+)
 from jaxgfx.color import LUMINANCE_WEIGHTS
 from jaxgfx.render._sunsky_data import tables
 from jaxgfx.render.geometry.frame import frame_from_normal
@@ -116,8 +126,9 @@ def sun_coordinates(year, month, day, hour, minute, second, latitude, longitude,
     lmst = math.radians(gmst * 15.0 + float(longitude))
     lat = math.radians(float(latitude))
     ha = lmst - ra
-    zenith = math.acos(math.cos(lat) * math.cos(ha) * math.cos(decl) + math.sin(decl) * math.sin(lat))
-    azimuth = math.atan2(-math.sin(ha), math.tan(decl) * math.cos(lat) - math.sin(lat) * math.cos(ha))
+    cl, sl_, ch = math.cos(lat), math.sin(lat), math.cos(ha)
+    zenith = math.acos(cl * ch * math.cos(decl) + math.sin(decl) * sl_)
+    azimuth = math.atan2(-math.sin(ha), math.tan(decl) * cl - sl_ * ch)
     azimuth += 2 * math.pi if azimuth < 0 else 0.0
     zenith += _EARTH_MEAN_RADIUS / _ASTRONOMICAL_UNIT * math.sin(zenith)
     return zenith, azimuth - math.pi
@@ -264,12 +275,14 @@ class SunSky(eqx.Module):
         from jaxgfx.render.emitters import EnvironmentMap
 
         rot = EnvironmentMap.check_to_world(to_world, "sunsky.to_world")
-        dtype = as_float_array(0.0, "dtype").dtype if not isinstance(
-            sun_direction, jax.Array) else as_float_array(sun_direction, "sun_direction").dtype  # fmt: skip
+        # the leaves' dtype: the default float (float64 under x64), or a JAX sun_direction's
+        dtype = as_float_array(sun_direction if isinstance(sun_direction, jax.Array) else 0.0,
+                               "sun_direction").dtype  # fmt: skip
         vals = {}
-        for name, v, shape in (("sun_direction", sun_direction, (3,)), ("turbidity", turbidity, ()),
-                               ("albedo", albedo, (3,)), ("sun_scale", sun_scale, ()),
-                               ("sky_scale", sky_scale, ()), ("sun_aperture", sun_aperture, ())):  # fmt: skip
+        for name, v, shape in (("sun_direction", sun_direction, (3,)),
+                               ("turbidity", turbidity, ()), ("albedo", albedo, (3,)),
+                               ("sun_scale", sun_scale, ()), ("sky_scale", sky_scale, ()),
+                               ("sun_aperture", sun_aperture, ())):  # fmt: skip
             as_float_array(v, name)  # its TypeError for non-numbers
             a = np.asarray(v, np.float64)  # host float64: a Python aperture stays unrounded
             if name == "albedo" and a.shape == ():
@@ -322,10 +335,10 @@ class SunSky(eqx.Module):
         lum_w = jnp.asarray(LUMINANCE_WEIGHTS["rec709"], dt)
         lum = self._sky(d, s) @ lum_w  # (2h, 2w), unscaled, local directions
         lum = jnp.maximum(lum, 0.0).reshape(h, 2, w, 2).mean((1, 3))
-        lum = jnp.where(s[2] >= 0, lum, 0.0)
+        lum = jnp.where(s[2] > 0, lum, 0.0)
         p_sky = jnp.sum(lum) * (2 * math.pi / (h * w)) * CIE_Y_NORMALIZATION
         # the disc's radiance times its solid angle: its irradiance, whatever the aperture
-        p_sun = jnp.where(s[2] >= 0, self._sun_disc_rgb(s, dt) @ lum_w, 0.0)
+        p_sun = jnp.where(s[2] > 0, self._sun_disc_rgb(s, dt) @ lum_w, 0.0)
         p_sun = jnp.maximum(p_sun, 0.0) * (2 * math.pi * _disc(self.sun_aperture)[0])
         dist = Distribution2D(lum + 1e-3 * jnp.mean(lum))
         return jax.lax.stop_gradient((dist, jnp.stack([p_sky, p_sun])))
@@ -406,7 +419,9 @@ class SunSky(eqx.Module):
         dt = d.dtype
         dl = self._local(d)
         s = self._sun_local(dt)
-        active = (dl[..., 2] >= 0) & (s[2] >= 0)
+        # a sun exactly on the horizon is below it for Mitsuba (its float32 theta = pi / 2 gives
+        # z = cos(theta) = -4e-8): black, as there
+        active = (dl[..., 2] >= 0) & (s[2] > 0)
         gamma = _unit_angle(s, dl)
         sky = self._sky(dl, s) * (self.sky_scale.astype(dt) * CIE_Y_NORMALIZATION)
         half = _disc(self.sun_aperture)[1]

@@ -15,7 +15,8 @@ from jaxgfx.render.sunsky import SUNSKY_DEFAULTS, TIME_KEYS, SunSky, sun_directi
 __all__ = ["SUNSKY_KEYS", "sunsky_from_desc", "check_time"]
 
 SUNSKY_KEYS = (("type",), ("sun_direction", *TIME_KEYS, "turbidity", "albedo", "sun_scale",
-                           "sky_scale", "sun_aperture", "complex_sun", "to_world", "id"))  # fmt: skip
+                           "sky_scale", "sun_aperture", "complex_sun", "to_world",
+                           "id"))  # fmt: skip
 """(required, optional) keys of a ``sunsky`` description. Without ``sun_direction`` the sun
 is placed by the location / time keys (Mitsuba's defaults for the missing ones: Tokyo,
 2010-07-10 15:00, timezone 9); giving both is refused, as Mitsuba refuses it."""

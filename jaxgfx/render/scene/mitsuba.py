@@ -1204,7 +1204,6 @@ def scene_to_desc(scene) -> dict:
         DirectionalLight,
         ProjectorLight,
     )
-    from jaxgfx.render.sunsky import SunSky
     from jaxgfx.render.film import (
         CatmullRomFilter,
         GaussianFilter,
@@ -1221,6 +1220,7 @@ def scene_to_desc(scene) -> dict:
         Spheres,
         TriangleMesh,
     )
+    from jaxgfx.render.sunsky import SunSky
 
     def image_camera(cam):
         if isinstance(cam, MatrixCamera):
@@ -1386,7 +1386,8 @@ def scene_to_desc(scene) -> dict:
         ed = {"type": "sunsky", "sun_direction": _list(env.sun_direction),
               "turbidity": float(env.turbidity), "albedo": _list(env.albedo),
               "sun_scale": float(env.sun_scale), "sky_scale": float(env.sky_scale),
-              "sun_aperture": float(env.sun_aperture), "complex_sun": bool(env.complex_sun)}  # fmt: skip
+              "sun_aperture": float(env.sun_aperture),
+              "complex_sun": bool(env.complex_sun)}  # fmt: skip
         if env.to_world is not None:
             ed["to_world"] = np.asarray(env.to_world, np.float64).tolist()
         desc["emitters"].append(named(ed, "environment", 0))

@@ -50,9 +50,9 @@ from jaxgfx._checks import is_concrete
 from jaxgfx.render.bsdf.textured import Textured
 from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera, ThinLensCamera
 from jaxgfx.render.emitters import ConstantEnvironment, EnvironmentMap, PointLights
-from jaxgfx.render.sunsky import SunSky
 from jaxgfx.render.geometry import Rectangles, Spheres
 from jaxgfx.render.parameters import get_path, parameter_paths, revalidate
+from jaxgfx.render.sunsky import SunSky
 
 __all__ = [
     "Scene",
@@ -208,9 +208,9 @@ class Scene(eqx.Module):
     ``shape_materials`` (tuple of int32 arrays, material index per primitive of each shape);
     ``materials`` (tuple of BSDFs) named by the static ``material_names``; ``point_lights``
     (PointLights or None); ``area_lights`` (tuple of AreaLight); ``environment``
-    (ConstantEnvironment / EnvironmentMap / SunSky / None); ``emitter_shapes`` (tuple: the raw shape of each
-    area light, for sampling); ``rfilter`` (reconstruction filter, static); ``delta_lights``
-    (tuple of DirectionalLight / SpotLight / ProjectorLight).
+    (ConstantEnvironment / EnvironmentMap / SunSky / None); ``emitter_shapes`` (tuple: the raw
+    shape of each area light, for sampling); ``rfilter`` (reconstruction filter, static);
+    ``delta_lights`` (tuple of DirectionalLight / SpotLight / ProjectorLight).
     """
 
     camera: PerspectiveCamera | ThinLensCamera | MatrixCamera  # or a meter / BatchCamera
