@@ -83,24 +83,52 @@ def _hw_formula(p, rad, cos_theta, gamma):
             * rad)  # fmt: skip
 
 
-@pytest.mark.parametrize("turbidity, albedo", [(1.0, 0.0), (4.0, 1.0), (10.0, 0.0)])
-def test_sky_at_zenith_sun_is_the_tables_last_control_point(x64, turbidity, albedo):
-    """With the sun at the zenith the Bezier weight of the last control point is 1 (to 3e-7),
-    and at an integer turbidity and albedo 0 or 1 no interpolation is left: the radiance is
-    the paper's formula on one row of the raw tables (read from the npz directly), times
-    Mitsuba's CIE Y factor. rtol 1e-5 (measured 3e-7). Power: reading the last two
-    parameters in the paper's letter order (H before I) misses by more than 10 %."""
-    sky = SunSky.create([0.0, 0.0, 1.0], turbidity=turbidity, albedo=albedo, sun_scale=0.0)
+@pytest.mark.parametrize("turbidity, albedo, elev", [(1.0, 0.0, 90.0), (4.0, 1.0, 90.0),
+                                                    (10.0, 0.0, 11.25), (6.0, 1.0, 11.25)])
+def test_sky_is_the_papers_formula_on_the_raw_tables(x64, turbidity, albedo, elev):
+    """At an integer turbidity and albedo 0 or 1 only the sun's elevation is interpolated: by
+    the quintic Bezier in ``x = (2 eta / pi)^(1/3)`` over the six control points. The sun at
+    the zenith (x clamped to 1 - 2^-24: the last control point, to 3e-7) and at 11.25 deg
+    (x = 1/2: Bernstein weights (1, 5, 10, 10, 5, 1) / 32): the radiance is the paper's formula
+    (Hosek and Wilkie 2012, eq. 9) on rows of the raw tables (read from the npz directly)
+    times Mitsuba's CIE Y factor, rtol 1e-5 (measured 3e-7). Power: the last two parameters
+    in the paper's letter order (H before I) miss by more than 10 %."""
+    sun = _elev_dir(elev, 30.0) if elev < 90 else np.array([0.0, 0.0, 1.0])
+    sky = SunSky.create(sun, turbidity=turbidity, albedo=albedo, sun_scale=0.0)
+    w = np.array([0, 0, 0, 0, 0, 1.0]) if elev == 90 else np.array([1, 5, 10, 10, 5, 1]) / 32
     with np.load(NPZ_PATH) as z:
-        p = z["sky_params_rgb"][int(turbidity) - 1, int(albedo), 5]  # (3, 9)
-        rad = z["sky_rad_rgb"][int(turbidity) - 1, int(albedo), 5]  # (3,)
+        p = np.tensordot(w, z["sky_params_rgb"][int(turbidity) - 1, int(albedo)], 1)  # (3, 9)
+        rad = w @ z["sky_rad_rgb"][int(turbidity) - 1, int(albedo)]  # (3,)
     dirs = _unit([[0.0, 0.0, 1.0], [1.0, 0.3, 1.0], [0.2, -1.0, 0.4], [1.0, 0.0, 0.02]])
     got = np.asarray(_eval(sky, jnp.asarray(dirs)))
-    ref = np.stack([_hw_formula(p, rad, d[2], math.acos(d[2])) for d in dirs]) * CIE_Y
+    gam = [math.acos(np.clip(d @ sun, -1, 1)) for d in dirs]
+    ref = np.stack([_hw_formula(p, rad, d[2], g) for d, g in zip(dirs, gam)]) * CIE_Y
     np.testing.assert_allclose(got, ref, rtol=1e-5)
-    swapped = np.stack([_hw_formula(p[:, [0, 1, 2, 3, 4, 5, 6, 8, 7]], rad, d[2],
-                                     math.acos(d[2])) for d in dirs]) * CIE_Y  # fmt: skip
+    swapped = np.stack([_hw_formula(p[:, [0, 1, 2, 3, 4, 5, 6, 8, 7]], rad, d[2], g)
+                        for d, g in zip(dirs, gam)]) * CIE_Y  # fmt: skip
     assert np.max(np.abs(swapped / ref - 1)) > 0.1
+
+
+@pytest.mark.parametrize("turbidity, node", [(2.0, 6), (9.0, 0), (5.0, 29)])
+def test_sun_disc_is_the_tables_irradiance_over_its_solid_angle(x64, turbidity, node):
+    """The simple sun at an integer turbidity and a node of the irradiance table (elevation
+    2 + 3 node degrees): its radiance is the table's spectral irradiance converted to linear
+    Rec. 709 (the mean over the 11 wavelengths of the CIE 1931 functions times the sRGB
+    matrix), times Mitsuba's constants 467.069280386 / 106.75, over the disc's solid angle
+    ``2 pi (1 - cos h)`` with Mitsuba's float32 ``cos h`` (h = 0.2679 deg): rtol 1e-6."""
+    sun = _elev_dir(2.0 + 3.0 * node - (1e-9 if node == 29 else 0.0), -40.0)
+    e = SunSky.create(sun, turbidity=turbidity)
+    m = np.array([[3.240479, -1.537150, -0.498535], [-0.969256, 1.875991, 0.041556],
+                  [0.055648, -0.204043, 1.057311]])  # fmt: skip
+    with np.load(NPZ_PATH) as z:
+        irr = z["sun_irradiance"][int(turbidity) - 1, node].astype(np.float64)
+        rgb = np.mean((z["cie_xyz"] @ m.T) * irr[:, None], 0)
+    omc = 1.0 - float(np.cos(np.float32(np.float32(0.2679) * np.float32(math.pi / 180))))
+    ref = rgb * 467.069280386 * CIE_Y / (2 * math.pi * omc)
+    got = np.asarray(_eval(e, jnp.asarray(sun[None])))[0]
+    sky = np.asarray(_eval(eqx.tree_at(lambda x: x.sun_scale, e, jnp.asarray(0.0)),
+                           jnp.asarray(sun[None])))[0]  # fmt: skip
+    np.testing.assert_allclose(got - sky, ref, rtol=1e-6)
 
 
 # -- the sun's position -------------------------------------------------------------------
