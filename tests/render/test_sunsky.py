@@ -445,7 +445,10 @@ def test_xml_and_writer_round_trip(tmp_path):
         np.testing.assert_allclose(getattr(e2, k), getattr(e1, k), rtol=1e-6, atol=1e-7)
     assert (e2.complex_sun, e2.sun_aperture) == (True, 0.5358)
     assert scene_to_desc(s1)["emitters"][0]["type"] == "sunsky"
-    paths = [q.path for q in s1.parameters() if q.path.startswith("emitters")]
+    params = [q for q in s1.parameters() if q.path.startswith("emitters")]
+    assert [q.bounds for q in params[1:5]] == [(1.0, 10.0), (0.0, 1.0), (0.0, math.inf),
+                                                (0.0, math.inf)]  # fmt: skip
+    paths = [q.path for q in params]
     assert paths == [f"emitters.environment.{k}" for k in  # (to_world as an envmap's: listed,
                      ("sun_direction", "turbidity", "albedo", "sun_scale", "sky_scale",
                       "to_world")]  # without derivative)

@@ -89,6 +89,10 @@ PARAMETER_BOUNDS = {
     "intensity": (0.0, float("inf")),
     "cutoff_angle": (0.0, 180.0),
     "beam_width": (0.0, 180.0),
+    "turbidity": (1.0, 10.0),
+    "albedo": (0.0, 1.0),
+    "sun_scale": (0.0, float("inf")),
+    "sky_scale": (0.0, float("inf")),
 }
 """``(lower, upper)`` of a parameter by its last field name (what the constructors accept;
 reflectances at most 1 for energy conservation); others are unbounded."""
