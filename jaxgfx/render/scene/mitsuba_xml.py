@@ -63,6 +63,9 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
   interpolation of the resampled grid, see :func:`envmap_from_mitsuba`). ``to_world`` must be
   a rotation (its translation is ignored, as Mitsuba does for directions): it becomes the
   ``to_world`` of the envmap description; a scale or shear is refused.
+* ``sunsky``: Mitsuba's parameters and defaults (:class:`jaxgfx.render.sunsky.SunSky`); the
+  location / time parameters are kept in the description (the sun placed as Mitsuba places
+  it), ``to_world`` must be a rotation, out-of-range values are refused with file and line.
 """
 
 from __future__ import annotations
