@@ -31,6 +31,8 @@ _SPOT = {"type": "spot", "position": [0, 3, 0], "direction": [0, -1, 0], "intens
          "cutoff_angle": 30.0}  # fmt: skip
 _DIR = {"type": "directional", "direction": [0.3, -1, 0.2], "irradiance": 1.0}
 _POINT = {"type": "point", "position": [1, 2, 1], "intensity": 3.0}
+_ENVMAP = {"type": "envmap", "image": [[[0.2, 0.3, 0.5 + 0.1 * i] for i in range(4)],
+                                       [[0.1, 0.1, 0.1 * i] for i in range(4)]]}  # fmt: skip
 
 
 def _desc(*emitters):
@@ -44,6 +46,7 @@ CASES = [
     ("spot+point+directional", _desc(_SPOT, _POINT, _DIR), "path", 3),
     ("spot+directional whitted", _desc(_SPOT, _DIR), "whitted", 3),
     ("spot, tent filter", {**_desc(_SPOT), "film": {"filter": "tent"}}, "path", 3),
+    ("envmap", _desc(_ENVMAP), "path", 3),
 ]
 
 

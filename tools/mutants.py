@@ -445,4 +445,32 @@ MUTANTS = [
         ],
         "why": "the envelope of spheres instead of Embree's sweep of perpendicular circles",
     },
+    # ------------------------------------------------------------------ sunsky
+    {
+        "name": "render.sunsky.mie_g_and_zenith_swapped",
+        "file": "jaxgfx/render/sunsky.py",
+        "old": "A, B, C, D, E, F, G, I, H = (params[:, k] for k in range(9))",
+        "new": "A, B, C, D, E, F, G, H, I = (params[:, k] for k in range(9))",
+        "tests": ["tests/render/test_sunsky.py::test_sky_is_the_papers_formula_on_the_raw_tables"],
+        "why": "the paper's letter order, not the tables' (the first draft's bug: sky 60 % off)",
+    },
+    {
+        "name": "render.sunsky.bezier_without_cube_root",
+        "file": "jaxgfx/render/sunsky.py",
+        "old": "x = jnp.minimum(_cbrt_pos(2.0 / math.pi * eta), 1.0 - 2.0**-24)",
+        "new": "x = jnp.minimum(2.0 / math.pi * eta, 1.0 - 2.0**-24)",
+        "tests": ["tests/render/test_sunsky.py::test_sky_is_the_papers_formula_on_the_raw_tables"],
+        "why": "a missing power (invisible with the sun at the zenith, where x = 1 either way)",
+    },
+    {
+        "name": "render.sunsky.irradiance_grid_half_cell",
+        "file": "jaxgfx/render/sunsky.py",
+        "old": "e = jnp.clip((jnp.rad2deg(_elevation(s)) - 2.0) / 3.0, 0.0, 29.0)",
+        "new": "e = jnp.clip((jnp.rad2deg(_elevation(s)) - 0.5) / 3.0, 0.0, 29.0)",
+        "tests": [
+            "tests/render/test_sunsky.py::"
+            "test_sun_disc_is_the_tables_irradiance_over_its_solid_angle"
+        ],
+        "why": "a table's grid origin off by half a cell (the sun's colour shifts with elevation)",
+    },
 ]

@@ -49,6 +49,7 @@ from jaxgfx.render.render import render as render
 from jaxgfx.render.scene import Scene as Scene
 from jaxgfx.render.scene import load_scene as load_scene
 from jaxgfx.render.scene import read_xml as read_xml
+from jaxgfx.render.sunsky import SunSky as SunSky
 
 __all__ = [
     "accel",
@@ -78,6 +79,7 @@ __all__ = [
     "AreaLight",
     "ConstantEnvironment",
     "EnvironmentMap",
+    "SunSky",
     "Spheres",
     "Rectangles",
     "TriangleMesh",

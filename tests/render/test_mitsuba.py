@@ -197,7 +197,9 @@ def test_integrator_mapping():
             NotImplementedError,
             "view_proj_inverse",
         ),  # fmt: skip
-        ({"emitters": [{"type": "sunsky"}]}, ValueError, r"emitters\[0\]\.type"),
+        ({"emitters": [{"type": "skylight"}]}, ValueError, r"emitters\[0\]\.type"),
+        ({"emitters": [{"type": "sunsky", "turbidity": 0.5}]}, ValueError,
+         r"emitters\[0\]\.turbidity"),  # fmt: skip
         # spot and directional are exported since their XML mapping; validated as load_scene
         ({"emitters": [{"type": "spot"}]}, ValueError, r"emitters\[0\]: missing key"),
         (

@@ -459,9 +459,9 @@ def test_disk_is_a_fan_of_256_triangles(tmp_path):
             "BSDFs in jaxgfx)",
         ),  # fmt: skip
         (
-            '<emitter type="sunsky"/>',
+            '<emitter type="sunsky"><float name="turbidity" value="12"/></emitter>',
             10,
-            "<emitter type='sunsky'>: emitter plugin 'sunsky' is not supported",
+            "<emitter type='sunsky'>: parameter 'turbidity': expected a number in [1.0, 10.0]",
         ),  # fmt: skip
         (
             '<shape type="sphere" id="s">\n<float name="foo" value="1"/></shape>',

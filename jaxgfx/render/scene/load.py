@@ -38,6 +38,7 @@ from jaxgfx.render.scene._materials import (
     emission_from_desc,
     material_from_desc,
 )
+from jaxgfx.render.scene._sunsky import sunsky_from_desc
 from jaxgfx.render.scene.scene import Scene, id_problem, is_internal_name
 from jaxgfx.render.scene.schema import (
     EMITTER_TYPES,
@@ -232,7 +233,7 @@ def load_scene(
         ident = _object_id(ed, where, "emitters", seen_ids) if isinstance(ed, Mapping) else None
         n_delta = sum(_delta_kind(e) == kind for e in delta_lights)
         if ident is not None:  # index of this emitter among its kind (row: point lights)
-            ek = "environment" if kind in ("constant", "envmap") else kind
+            ek = "environment" if kind in ("constant", "envmap", "sunsky") else kind
             index = {"point": 0, "area": len(area_lights), "environment": 0}.get(ek, n_delta)
             row = len(points_pos) if ek == "point" else None
             object_ids.append((ident, ek, index, row, None))
@@ -308,10 +309,12 @@ def load_scene(
             )
             area_lights.append(AreaLight(rad, len(shapes) - 1))
             emitter_shapes.append(shape)
-        else:  # "constant" / "envmap"
+        else:  # "constant" / "envmap" / "sunsky"
             if environment is not None:
                 raise ValueError(f"{where}: only one environment emitter is supported")
-            if kind == "constant":
+            if kind == "sunsky":
+                environment = sunsky_from_desc(ed, where)
+            elif kind == "constant":
                 expect_keys(ed, where, ("type", "radiance"), ("id",))
                 environment = ConstantEnvironment(rgb(ed["radiance"], f"{where}.radiance"))
             else:

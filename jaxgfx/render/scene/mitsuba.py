@@ -913,11 +913,13 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
                 "position": np.asarray(S.vec(ed["position"], f"{where}.position")).tolist(),
                 "intensity": _rgb(S.rgb(ed["intensity"], f"{where}.intensity")),
             }
-        elif kind in ("constant", "envmap"):
+        elif kind in ("constant", "envmap", "sunsky"):
             n_env += 1
             if n_env > 1:
                 raise ValueError(f"{where}: only one environment emitter is supported")
-            if kind == "constant":
+            if kind == "sunsky":
+                out[key(ed, where, f"emitter_{i}")] = _sunsky_dict(ed, where, mi)
+            elif kind == "constant":
                 S.expect_keys(ed, where, ("type", "radiance"), ("id",))
                 out[key(ed, where, f"emitter_{i}")] = {
                     "type": "constant",
@@ -940,6 +942,31 @@ def to_mitsuba_dict(desc, *, base_dir=None, work_dir=None, mi=None, refs=False) 
         else:  # "directional" / "spot" (check_choice above admits only S.EMITTER_TYPES)
             out[key(ed, where, f"emitter_{i}")] = _delta_light(ed, where, mi, base_dir, work_dir)
     return out
+
+
+def _sunsky_dict(ed, where, mi) -> dict:
+    """Mitsuba ``sunsky`` dict of a jaxgfx description, validated as :func:`load_scene`
+    validates it: the description's ``sun_direction`` or location / time keys as given (Mitsuba
+    places the sun itself), the other parameters with their defaults made explicit."""
+    from jaxgfx.render.scene._sunsky import sunsky_from_desc
+    from jaxgfx.render.sunsky import TIME_KEYS
+
+    sky = sunsky_from_desc(ed, where)
+    d = {"type": "sunsky"}
+    if "sun_direction" in ed:
+        d["sun_direction"] = np.asarray(ed["sun_direction"], np.float64).tolist()
+    else:
+        d.update({k: ed[k] for k in TIME_KEYS if k in ed})
+    alb = np.asarray(sky.albedo, np.float64)
+    d.update(turbidity=float(sky.turbidity), sun_scale=float(sky.sun_scale),
+             sky_scale=float(sky.sky_scale), sun_aperture=float(sky.sun_aperture),
+             complex_sun=bool(sky.complex_sun),
+             albedo=float(alb[0]) if np.all(alb == alb[0]) else _rgb(alb))  # fmt: skip
+    if sky.to_world is not None:
+        m = np.eye(4)
+        m[:3, :3] = np.asarray(sky.to_world, np.float64)
+        d["to_world"] = _transform(m, mi)
+    return d
 
 
 def _emission(rad, where, base_dir, work_dir, mi):
@@ -1210,6 +1237,7 @@ def scene_to_desc(scene) -> dict:
         Spheres,
         TriangleMesh,
     )
+    from jaxgfx.render.sunsky import SunSky
 
     def image_camera(cam):
         if isinstance(cam, MatrixCamera):
@@ -1375,6 +1403,15 @@ def scene_to_desc(scene) -> dict:
     if isinstance(env, ConstantEnvironment):
         desc["emitters"].append(named({"type": "constant", "radiance": _list(env.radiance)},
                                       "environment", 0))  # fmt: skip
+    elif isinstance(env, SunSky):
+        ed = {"type": "sunsky", "sun_direction": _list(env.sun_direction),
+              "turbidity": float(env.turbidity), "albedo": _list(env.albedo),
+              "sun_scale": float(env.sun_scale), "sky_scale": float(env.sky_scale),
+              "sun_aperture": float(env.sun_aperture),
+              "complex_sun": bool(env.complex_sun)}  # fmt: skip
+        if env.to_world is not None:
+            ed["to_world"] = np.asarray(env.to_world, np.float64).tolist()
+        desc["emitters"].append(named(ed, "environment", 0))
     elif env is not None:
         ed = {"type": "envmap", "image": np.asarray(env.image, np.float32),
               "scale": float(env.scale)}  # fmt: skip

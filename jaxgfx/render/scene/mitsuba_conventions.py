@@ -104,7 +104,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("emitter", "spot"): S + " (a projected `texture` a bitmap)",
     ("emitter", "projector"): S + " (`irradiance` a colour or a bitmap; rigid `to_world`)",
     ("emitter", "directionalarea"): S + " (RGB `radiance`; lit only by the ptracer, as in Mitsuba)",
-    ("emitter", "sunsky"): "refused: not in jaxgfx",
+    ("emitter", "sunsky"): S + " (RGB; `sun_direction` or location / time; `complex_sun`; "
+    "rotating `to_world`; `albedo` a colour)",
     # sensors, films, filters, samplers
     ("sensor", "perspective"): S + " (rigid `to_world`)",
     ("sensor", "thinlens"): S + " (rigid `to_world`; `aperture_radius` required)",

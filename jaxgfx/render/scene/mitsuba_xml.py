@@ -63,6 +63,9 @@ Conventions read from Mitsuba 3 (3.9.1; each checked by tests/render/test_mitsub
   interpolation of the resampled grid, see :func:`envmap_from_mitsuba`). ``to_world`` must be
   a rotation (its translation is ignored, as Mitsuba does for directions): it becomes the
   ``to_world`` of the envmap description; a scale or shear is refused.
+* ``sunsky``: Mitsuba's parameters and defaults (:class:`jaxgfx.render.sunsky.SunSky`); the
+  location / time parameters are kept in the description (the sun placed as Mitsuba places
+  it), ``to_world`` must be a rotation, out-of-range values are refused with file and line.
 """
 
 from __future__ import annotations
@@ -1568,13 +1571,60 @@ def _emitter(obj: _Obj, doc, desc):
             d.update(texture=tex, up=_unit(lin[:, 1]))
     elif t == "projector":
         d = _projector(p)
+    elif t == "sunsky":
+        d = _sunsky(p)
     else:
         raise ValueError(f"{obj.where}: emitter plugin {t!r} is not supported "
                          "(area, point, constant, envmap, directional, spot, "
-                         "projector)")  # fmt: skip
+                         "projector, sunsky)")  # fmt: skip
     p.done()
     _name_by_id(d, obj.id)
     desc["emitters"].append(d)
+
+
+def _sunsky(p: _Params) -> dict:
+    """A ``sunsky``: Mitsuba's parameters and defaults (``sun_direction`` or the location /
+    time ones, not both), each checked here so that a bad value names its line; ``to_world``
+    a rotation (its translation ignored); ``albedo`` a number or colour, not a texture."""
+    from jaxgfx.render.scene._sunsky import check_time
+    from jaxgfx.render.sunsky import SUNSKY_DEFAULTS as D
+    from jaxgfx.render.sunsky import TIME_KEYS
+
+    d = {"type": "sunsky"}
+    m = p.transform("to_world")
+    if m is not None:
+        if not np.allclose(m[:3, :3].T @ m[:3, :3], np.eye(3), atol=1e-6):
+            raise p.err("to_world", "a sunsky's to_world must be a rotation (no scale or "
+                                    "shear)")  # fmt: skip
+        if not np.allclose(m[:3, :3], np.eye(3), rtol=0, atol=1e-12):
+            d["to_world"] = m[:3, :3].tolist()
+    sun = p.vec("sun_direction")
+    when = {k: (p.int(k) if k in ("year", "month", "day") else p.float(k)) for k in TIME_KEYS
+            if k in p.obj.props}  # fmt: skip
+    if sun is not None:
+        if when:
+            raise p.err("sun_direction", f"give either sun_direction or the location / time "
+                                         f"parameters {sorted(when)}, not both (Mitsuba "
+                                         "refuses both)")  # fmt: skip
+        if not (np.all(np.isfinite(sun)) and np.linalg.norm(sun) > 0):
+            raise p.err("sun_direction", f"expected a finite nonzero vector, got {sun}")
+        d["sun_direction"] = sun
+    else:
+        d.update(check_time(when, p.err))
+    for k, lo, hi in (("turbidity", 1.0, 10.0), ("sun_scale", 0.0, math.inf),
+                      ("sky_scale", 0.0, math.inf)):  # fmt: skip
+        v = p.float(k, D[k])
+        if not lo <= v <= hi:
+            raise p.err(k, f"expected a number in [{lo}, {hi}], got {v}")
+        d[k] = v
+    ap = p.float("sun_aperture", D["sun_aperture"])
+    if not 0.0 < ap < 180.0:
+        raise p.err("sun_aperture", f"expected degrees in (0, 180), got {ap}")
+    alb = p.color("albedo", [D["albedo"]] * 3)
+    if not all(0.0 <= a <= 1.0 for a in alb):
+        raise p.err("albedo", f"expected values in [0, 1], got {alb}")
+    d.update(sun_aperture=ap, albedo=alb, complex_sun=p.bool("complex_sun", D["complex_sun"]))
+    return d
 
 
 def _light_texture(p: _Params, name, lin) -> dict:
@@ -2210,7 +2260,7 @@ def _xml_object(tag, d, indent, name=None, ident=None) -> list[str]:
             body.append(f'{q}<transform name={_xml_attr(k)}><matrix value="'
                         f'{" ".join(map(_num, m))}"/></transform>')  # fmt: skip
         elif np.shape(v) == (3,):
-            tag3 = "vector" if k == "direction" else "point"  # a direction is a <vector>
+            tag3 = "vector" if k in ("direction", "sun_direction") else "point"  # a <vector>
             body.append(f'{q}<{tag3} name={_xml_attr(k)} value="{", ".join(map(_num, v))}"/>')
         else:  # pragma: no cover - the exporter writes the kinds above only
             raise ValueError(f"{k}: cannot write {v!r} as Mitsuba XML")

@@ -52,6 +52,7 @@ from jaxgfx.render.camera import MatrixCamera, PerspectiveCamera, ThinLensCamera
 from jaxgfx.render.emitters import ConstantEnvironment, EnvironmentMap, PointLights
 from jaxgfx.render.geometry import Rectangles, Spheres
 from jaxgfx.render.parameters import get_path, parameter_paths, revalidate
+from jaxgfx.render.sunsky import SunSky
 
 __all__ = [
     "Scene",
@@ -88,6 +89,10 @@ PARAMETER_BOUNDS = {
     "intensity": (0.0, float("inf")),
     "cutoff_angle": (0.0, 180.0),
     "beam_width": (0.0, 180.0),
+    "turbidity": (1.0, 10.0),
+    "albedo": (0.0, 1.0),
+    "sun_scale": (0.0, float("inf")),
+    "sky_scale": (0.0, float("inf")),
 }
 """``(lower, upper)`` of a parameter by its last field name (what the constructors accept;
 reflectances at most 1 for energy conservation); others are unbounded."""
@@ -207,9 +212,9 @@ class Scene(eqx.Module):
     ``shape_materials`` (tuple of int32 arrays, material index per primitive of each shape);
     ``materials`` (tuple of BSDFs) named by the static ``material_names``; ``point_lights``
     (PointLights or None); ``area_lights`` (tuple of AreaLight); ``environment``
-    (ConstantEnvironment / EnvironmentMap / None); ``emitter_shapes`` (tuple: the raw shape of each
-    area light, for sampling); ``rfilter`` (reconstruction filter, static); ``delta_lights``
-    (tuple of DirectionalLight / SpotLight / ProjectorLight).
+    (ConstantEnvironment / EnvironmentMap / SunSky / None); ``emitter_shapes`` (tuple: the raw
+    shape of each area light, for sampling); ``rfilter`` (reconstruction filter, static);
+    ``delta_lights`` (tuple of DirectionalLight / SpotLight / ProjectorLight).
     """
 
     camera: PerspectiveCamera | ThinLensCamera | MatrixCamera  # or a meter / BatchCamera
@@ -219,7 +224,7 @@ class Scene(eqx.Module):
     point_lights: PointLights | None
     area_lights: tuple
     emitter_shapes: tuple
-    environment: ConstantEnvironment | EnvironmentMap | None
+    environment: ConstantEnvironment | EnvironmentMap | SunSky | None
     material_names: tuple = eqx.field(static=True)
     rfilter: object = eqx.field(static=True)
     delta_lights: tuple = ()

@@ -48,7 +48,7 @@ __all__ = [
 SHAPE_TYPES = ("sphere", "rectangle", "mesh", "sdf", "sdfgrid", "linearcurve",
                "bsplinecurve", "ellipsoids")  # fmt: skip
 EMITTER_TYPES = ("area", "point", "constant", "envmap", "directional", "spot", "projector",
-                 "directionalarea")  # fmt: skip
+                 "directionalarea", "sunsky")  # fmt: skip
 SCENE_KEYS = (("camera", "shapes"), ("materials", "emitters", "film"))
 """(required, optional) top-level keys of a scene description."""
 FILM_KEYS = ("filter", "stddev", "radius", "B", "C", "lobes")
