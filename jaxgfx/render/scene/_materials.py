@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from jaxgfx.render.bsdf import BSDF_TYPES, Mask, make_bsdf
+from jaxgfx.render.bsdf import BSDF_TYPES, Mask, PassThrough, make_bsdf
 from jaxgfx.render.bsdf.textured import (
     Textured,
     is_texture_desc,
@@ -81,8 +81,9 @@ def check_one_sided(value, material, where) -> bool:
 
 
 def _has_mask(m) -> bool:
-    """Whether a ``mask`` is ``m`` or nested in it (textured, mapped or blended)."""
-    if isinstance(m, Mask):
+    """Whether a ``mask`` (or a pass-through: ``polarizer``, ``retarder``) is ``m`` or nested
+    in it (textured, mapped or blended)."""
+    if isinstance(m, (Mask, PassThrough)):
         return True
     return any(_has_mask(getattr(m, k)) for k in ("bsdf", "bsdf0", "bsdf1") if hasattr(m, k))
 
