@@ -1,10 +1,10 @@
-"""Mitsuba 3's ``pplastic``, ``polarizer`` and ``retarder`` in their unpolarised (RGB-variant)
-form (issue 24): :class:`PolarizedPlastic` against an independent NumPy transcription of its
-formula (Walter et al. 2007 microfacet terms, the unpolarised Fresnel equations), its albedo
-against the closed form ``kd (1 - F(cos θ_o)) (1 - F_dr(η))``, sampling (weights = eval / pdf,
-chi²), FD gradients of every continuous parameter in float64, hard cases; the pass-throughs'
-lobes, gradients and a closed-form render; errors. Against Mitsuba 3 itself:
-tests/render/test_bsdf_polarized_mitsuba.py (``mitsuba`` marker)."""
+"""Mitsuba 3's ``pplastic``, ``polarizer``, ``circular`` and ``retarder`` in their unpolarised
+(RGB-variant) form (issue 24): :class:`PolarizedPlastic` against an independent NumPy
+transcription of its formula (Walter et al. 2007 microfacet terms, the unpolarised Fresnel
+equations), its albedo against the closed form ``kd (1 - F(cos θ_o)) (1 - F_dr(η))``, sampling
+(weights = eval / pdf, chi²), FD gradients of every continuous parameter in float64, hard
+cases; the pass-throughs' lobes, gradients and a closed-form render; errors. Against Mitsuba 3
+itself: tests/render/test_bsdf_polarized_mitsuba.py (``mitsuba`` marker)."""
 
 import functools
 import math
@@ -16,6 +16,7 @@ import pytest
 from scipy.special import erf
 
 from jaxgfx.render.bsdf import (
+    CircularPolarizer,
     PolarizedPlastic,
     Polarizer,
     Retarder,
@@ -260,6 +261,10 @@ def test_errors_name_the_argument():
         Polarizer(polarizing="yes")
     with pytest.raises(ValueError, match="delta"):
         Retarder(delta=float("inf"))
+    with pytest.raises(ValueError, match="left_handed"):
+        CircularPolarizer(left_handed=1)
+    with pytest.raises(ValueError, match="unknown parameter for 'circular'"):
+        make_bsdf({"type": "circular", "theta": 3.0})
     with pytest.raises(ValueError, match="unknown parameter for 'retarder'"):
         make_bsdf({"type": "retarder", "polarizing": False})
 
@@ -267,18 +272,25 @@ def test_errors_name_the_argument():
 # ---------------------------------------------------------------- polarizer / retarder
 
 
-@pytest.mark.parametrize("kind, factor", [("polarizer", 0.5), ("retarder", 1.0)])
+_OPTIONS = {  # what each pass-through takes besides transmittance (no effect on the light)
+    "polarizer": ({}, {"theta": 37.0}, {"theta": -90.0, "polarizing": False}),
+    "circular": ({}, {"left_handed": True}),
+    "retarder": ({}, {"theta": 37.0}, {"theta": -90.0, "delta": 10.0}),
+}
+
+
+@pytest.mark.parametrize("kind, factor", [("polarizer", 0.5), ("circular", 0.5),
+                                          ("retarder", 1.0)])  # fmt: skip
 def test_pass_through_lobes(kind, factor):
     """Under jit, from either side and at grazing: ``sample`` continues straight on
     (``wi = -wo``) with ``pdf`` 1, delta, ``eta`` 1 and weight ``factor · transmittance``
-    (0.5 for the polarizer, 1 for the retarder, Mitsuba's RGB branches) whatever the angles;
-    ``eval`` and ``pdf`` are 0."""
+    (0.5 for the polarizers, 1 for the retarder, Mitsuba's RGB branches) whatever the angles
+    and handedness; ``eval`` and ``pdf`` are 0."""
     t = [0.9, 0.5, 0.2]
     wo = jnp.asarray(_upper(6, 5) * np.array([1, 1, -1]) ** np.arange(6)[:, None])
     wo = wo.at[0].set(jnp.array([1.0, 0.0, 1e-9]))
-    for angles in ({}, {"theta": 37.0}, {"theta": -90.0, **({"delta": 10.0} if factor == 1
-                                                           else {"polarizing": False})}):
-        b = make_bsdf({"type": kind, "transmittance": t, **angles})
+    for opts in _OPTIONS[kind]:
+        b = make_bsdf({"type": kind, "transmittance": t, **opts})
         s = _smp(b, wo, jnp.full(6, 0.3), jnp.full((6, 2), 0.7))
         np.testing.assert_array_equal(np.asarray(s.wi), -np.asarray(wo))
         np.testing.assert_allclose(np.asarray(s.weight), factor * np.tile(t, (6, 1)), rtol=1e-7)

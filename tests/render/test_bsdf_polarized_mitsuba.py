@@ -1,7 +1,7 @@
-"""``pplastic``, ``polarizer`` and ``retarder`` against Mitsuba 3.9.1's ``scalar_rgb`` (its
-unpolarised branches) in the same run (``mitsuba`` marker; skips without it): ``eval`` /
-``pdf`` on 300 direction pairs, ``sample`` for the same uniforms, and a same-run render of a
-pplastic sphere behind a polarizer plane (``replicate_block_z``)."""
+"""``pplastic``, ``polarizer``, ``circular`` and ``retarder`` against Mitsuba 3.9.1's
+``scalar_rgb`` (its unpolarised branches) in the same run (``mitsuba`` marker; skips without
+it): ``eval`` / ``pdf`` on 300 direction pairs, ``sample`` for the same uniforms, and a
+same-run render of a pplastic sphere behind a polarizer plane (``replicate_block_z``)."""
 
 import jax
 import jax.numpy as jnp
@@ -115,14 +115,16 @@ def test_pplastic_sample_equals_mitsuba(mi, case):
     assert np.all(w_m[~ok] == 0)
 
 
-@pytest.mark.parametrize("kind, factor", [("polarizer", 0.5), ("retarder", 1.0)])
-def test_pass_through_equals_mitsuba(mi, kind, factor):
+@pytest.mark.parametrize("kind, factor, opts", [
+    ("polarizer", 0.5, {"theta": 37.0}), ("circular", 0.5, {"left_handed": True}),
+    ("retarder", 1.0, {"theta": 37.0, "delta": 20.0})])  # fmt: skip
+def test_pass_through_equals_mitsuba(mi, kind, factor, opts):
     """Mitsuba's ``sample`` (from either side): ``wo = -wi``, pdf 1, the ``Null`` lobe (jaxgfx:
-    delta), weight ``factor · transmittance``; ``eval`` and ``pdf`` 0; the angles change
-    nothing."""
+    delta), weight ``factor · transmittance``; ``eval`` and ``pdf`` 0; the angles and the
+    handedness change nothing."""
     t = [0.9, 0.5, 0.2]
-    b = mi.load_dict({"type": kind, "transmittance": _rgb(t), "theta": 37.0})
-    o = make_bsdf({"type": kind, "transmittance": t, "theta": 37.0})
+    b = mi.load_dict({"type": kind, "transmittance": _rgb(t), **opts})
+    o = make_bsdf({"type": kind, "transmittance": t, **opts})
     wo = _dirs(8, 4) * np.array([1, 1, -1]) ** np.arange(8)[:, None]
     s = _smp(o, jnp.asarray(wo, jnp.float32), jnp.full(8, 0.4), jnp.full((8, 2), 0.6))
     for k, a in enumerate(wo):

@@ -1,6 +1,7 @@
-"""Mitsuba's ``pplastic``, ``polarizer`` and ``retarder`` (issue 24) through the XML reader,
-the scene description and the writers (``save_scene`` / ``to_mitsuba_dict``): Mitsuba's
-defaults and names, its refusals (with file and line), one-sidedness, and the round trips.
+"""Mitsuba's ``pplastic``, ``polarizer``, ``circular`` and ``retarder`` (issue 24) through the
+XML reader, the scene description and the writers (``save_scene`` / ``to_mitsuba_dict``):
+Mitsuba's defaults and names, its refusals (with file and line), one-sidedness, and the round
+trips.
 No rendering (the renders against Mitsuba: tests/render/test_bsdf_polarized_mitsuba.py)."""
 
 import math
@@ -109,6 +110,9 @@ def test_polarizer_and_retarder(tmp_path):
     m = _material(tmp_path, '<bsdf type="retarder"><texture type="checkerboard" name="theta"/>'
                             '<integer name="delta" value="30"/></bsdf>')  # fmt: skip
     assert m == {"type": "retarder", "transmittance": [1.0] * 3, "delta": 30.0}
+    m = _material(tmp_path, '<bsdf type="circular"><boolean name="left_handed" value="true"/>'
+                            "</bsdf>")  # fmt: skip
+    assert m == {"type": "circular", "transmittance": [1.0] * 3, "left_handed": True}
     x, _ = _read(tmp_path, '<bsdf type="polarizer"/>')
     b = load_scene(x.desc).materials[0]
     assert isinstance(b, Polarizer) and float(b.theta) == 0.0 and b.polarizing is True
@@ -122,6 +126,7 @@ def test_polarizer_and_retarder(tmp_path):
     ('<bsdf type="mask"><bsdf type="retarder"/></bsdf>',
      "a retarder nested in a blendbsdf or mask is not supported"),
     ('<bsdf type="polarizer"><float name="delta" value="3"/></bsdf>', "'delta' is not supported"),
+    ('<bsdf type="circular"><float name="theta" value="3"/></bsdf>', "'theta' is not supported"),
     ('<bsdf type="polarizer"><float name="transmittance" value="-1"/></bsdf>', "transmittance"),
 ])  # fmt: skip
 def test_pass_through_refusals(tmp_path, bsdf, msg):
@@ -151,6 +156,8 @@ _ROUND = [
     '<rgb name="transmittance" value="0.9, 0.5, 0.1"/></bsdf>',
     '<bsdf type="retarder"><float name="theta" value="10"/><float name="delta" value="45"/>'
     "</bsdf>",
+    '<bsdf type="circular"><boolean name="left_handed" value="true"/>'
+    '<float name="transmittance" value="0.7"/></bsdf>',
 ]
 
 

@@ -26,6 +26,7 @@ from jaxgfx.render.bsdf._normalmap import NormalMap as NormalMap
 from jaxgfx.render.bsdf._normalmap import TangentSpace as TangentSpace
 from jaxgfx.render.bsdf._phong import Phong as Phong
 from jaxgfx.render.bsdf._plastic import SmoothPlastic as SmoothPlastic
+from jaxgfx.render.bsdf._polarizer import CircularPolarizer as CircularPolarizer
 from jaxgfx.render.bsdf._polarizer import PassThrough as PassThrough
 from jaxgfx.render.bsdf._polarizer import Polarizer as Polarizer
 from jaxgfx.render.bsdf._polarizer import Retarder as Retarder
@@ -58,6 +59,7 @@ __all__ = [
     "Null",
     "PassThrough",
     "Polarizer",
+    "CircularPolarizer",
     "Retarder",
     "NormalMap",
     "BumpMap",
@@ -88,6 +90,7 @@ BSDF_TYPES = {
     "hair": Hair,
     "pplastic": PolarizedPlastic,
     "polarizer": Polarizer,
+    "circular": CircularPolarizer,
     "retarder": Retarder,
 }
 

@@ -1,5 +1,5 @@
-"""Mitsuba 3's ``polarizer`` and ``retarder`` as its RGB (unpolarised) variants evaluate them:
-straight pass-through surfaces that scale the light."""
+"""Mitsuba 3's ``polarizer``, ``circular`` and ``retarder`` as its RGB (unpolarised) variants
+evaluate them: straight pass-through surfaces that scale the light."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from jaxgfx.render.bsdf._base import (
     sample_setup,
 )
 
-__all__ = ["PassThrough", "Polarizer", "Retarder"]
+__all__ = ["PassThrough", "Polarizer", "CircularPolarizer", "Retarder"]
 
 
 class PassThrough(BSDF):
@@ -80,6 +80,21 @@ class Polarizer(PassThrough):
         check_scalar(self.theta, "theta")
         if not isinstance(self.polarizing, bool):
             raise ValueError(f"polarizing: expected a bool, got {self.polarizing!r}")
+
+
+class CircularPolarizer(PassThrough):
+    """Mitsuba 3's ``circular`` polarizer in its RGB variants: a straight pass-through of weight
+    ``0.5 · transmittance`` (Mitsuba's ``circular.cpp``, the non-polarised branches).
+    ``left_handed`` (static, default false) is accepted and kept for the round trip; it has no
+    effect on unpolarised light."""
+
+    left_handed: bool = eqx.field(static=True, default=False)
+
+    FACTOR: ClassVar[float] = 0.5
+
+    def __check_init__(self):  # equinox also runs PassThrough's
+        if not isinstance(self.left_handed, bool):
+            raise ValueError(f"left_handed: expected a bool, got {self.left_handed!r}")
 
 
 class Retarder(PassThrough):

@@ -374,6 +374,9 @@ def _mitsuba_bsdf(m, where) -> dict:
         out = {"type": kind, **_distribution(m, where), "eta": _float(m.eta),
                "diffuse_reflectance": _rgb(m.diffuse_reflectance),
                "specular_reflectance": _rgb(m.specular_reflectance)}  # fmt: skip
+    elif kind == "circular":
+        out = {"type": kind, "transmittance": _rgb(m.transmittance),
+               "left_handed": bool(m.left_handed)}  # fmt: skip
     elif kind in ("polarizer", "retarder"):
         out = {"type": kind, "transmittance": _rgb(m.transmittance), "theta": _float(m.theta)}
         if kind == "polarizer":
@@ -1110,6 +1113,9 @@ def _bsdf_desc(m, where) -> dict:
     if isinstance(m, B.Polarizer):
         return {"type": "polarizer", "transmittance": _list(m.transmittance),
                 "theta": _list(m.theta), "polarizing": bool(m.polarizing)}  # fmt: skip
+    if isinstance(m, B.CircularPolarizer):
+        return {"type": "circular", "transmittance": _list(m.transmittance),
+                "left_handed": bool(m.left_handed)}  # fmt: skip
     if isinstance(m, B.Retarder):
         return {"type": "retarder", "transmittance": _list(m.transmittance),
                 "theta": _list(m.theta), "delta": _list(m.delta)}  # fmt: skip

@@ -86,6 +86,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     "Fresnel-weighted diffuse lobe; anisotropic in the dp/du frame)",
     ("bsdf", "polarizer"): S + " (unpolarised, as Mitsuba's RGB variants: a pass-through of "
     "0.5 x `transmittance`; `theta`, `polarizing` have no effect; not nested)",
+    ("bsdf", "circular"): S + " (unpolarised, as Mitsuba's RGB variants: a pass-through of "
+    "0.5 x `transmittance`; `left_handed` has no effect; not nested)",
     ("bsdf", "retarder"): S + " (unpolarised, as Mitsuba's RGB variants: a pass-through of "
     "`transmittance`; `theta`, `delta` have no effect; not nested)",
     ("bsdf", "measured"): "refused: no measured BSDFs in jaxgfx",
@@ -175,6 +177,7 @@ BSDF_TO_MITSUBA = {
     "RoughPlastic": "roughplastic",
     "PolarizedPlastic": "pplastic",
     "Polarizer": "polarizer",
+    "CircularPolarizer": "circular",
     "Retarder": "retarder",
     "ThinDielectric": "thindielectric",
     "BlendBSDF": "blendbsdf",

@@ -916,10 +916,13 @@ def _angle(p: _Params, name: str, default: float):
 
 
 def _pass_through(p: _Params, t: str) -> dict:
-    """``polarizer`` / ``retarder`` in Mitsuba's RGB variants: ``transmittance`` (a colour or
-    a texture, default 1) and the angles (kept when numbers; no effect on unpolarised light);
-    ``polarizing`` (a polarizer's; no effect either)."""
+    """``polarizer`` / ``circular`` / ``retarder`` in Mitsuba's RGB variants:
+    ``transmittance`` (a colour or a texture, default 1) and the angles (kept when numbers; no
+    effect on unpolarised light); ``polarizing`` (a polarizer's) and ``left_handed`` (a circular
+    polarizer's; no effect either)."""
     m = {"type": t, "transmittance": p.color("transmittance", [1.0] * 3, texture=True)}
+    if t == "circular":
+        return {**m, "left_handed": p.bool("left_handed", False)}
     angles = (("theta", 0.0),) + ((("delta", 90.0),) if t == "retarder" else ())
     for name, default in angles:
         v = _angle(p, name, default)
@@ -1058,7 +1061,7 @@ def _bsdf_dict(obj: _Obj, doc, *, nested=False, in_map=False) -> dict:
         children_ok = len(obj.children)
     elif t == "pplastic":
         m = _dpdu_frame(_pplastic(p), obj, nested, in_map)
-    elif t in ("polarizer", "retarder"):
+    elif t in ("polarizer", "circular", "retarder"):
         if nested:
             raise ValueError(f"{obj.where}: a {t} nested in a blendbsdf or mask is not "
                              "supported (a pass-through, as the null BSDF)")  # fmt: skip
