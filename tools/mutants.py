@@ -412,8 +412,10 @@ MUTANTS = [
     {
         "name": "render.polarizer.factor",
         "file": "jaxgfx/render/bsdf/_polarizer.py",
-        "old": "FACTOR: ClassVar[float] = 0.5",
-        "new": "FACTOR: ClassVar[float] = 1.0",
+        "old": "polarizing: bool = eqx.field(static=True, default=True)\n\n"
+        "    FACTOR: ClassVar[float] = 0.5",
+        "new": "polarizing: bool = eqx.field(static=True, default=True)\n\n"
+        "    FACTOR: ClassVar[float] = 1.0",
         "tests": ["tests/render/test_bsdf_polarized.py::test_pass_through_lobes"],
         "why": "the polarizer as a plain pass-through (Mitsuba's RGB variants halve the light)",
     },
