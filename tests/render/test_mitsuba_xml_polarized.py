@@ -202,3 +202,15 @@ def test_to_mitsuba_dict_keys():
                      "theta": 20.0, "polarizing": True}  # fmt: skip
     assert bs[2]["delta"] == 30.0 and bs[2]["theta"] == 0.0
     assert isinstance(load_scene(desc).materials[2], Retarder)
+
+
+def test_specfilm_is_refused_as_mitsubas_rgb_variants_refuse_it(tmp_path):
+    """Mitsuba's ``specfilm`` exists in its spectral variants only (``specfilm.cpp`` logs an
+    error in the others); jaxgfx renders RGB as those do, so it refuses the film, saying so,
+    with file and line, also nested in a sensor."""
+    p = tmp_path / "f.xml"
+    p.write_text(XML.replace('<film type="hdrfilm">', '<film type="specfilm">').format(bsdf=""))
+    with pytest.raises(ValueError, match=rf"{re.escape(str(p))}:3: <film type='specfilm'>: film "
+                       r"plugin 'specfilm' is not supported \(spectral variants only, as in "
+                       r"Mitsuba, whose RGB variants refuse it too; jaxgfx renders RGB\)"):
+        read_xml(str(p))

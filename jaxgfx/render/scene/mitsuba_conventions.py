@@ -119,8 +119,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("sensor", "batch"): S + " (perspective, thin-lens and orthographic sensors side by side; "
     "film width divisible by their number)",
     ("film", "hdrfilm"): S,
-    ("film", "specfilm"): "refused: as in Mitsuba's RGB variants, which refuse it (it needs a "
-    "spectral variant; jaxgfx renders RGB as they do)",
+    ("film", "specfilm"): "refused: spectral variants only, as in Mitsuba, whose RGB variants "
+    "refuse it too; jaxgfx renders RGB",
     ("rfilter", "box"): S,
     ("rfilter", "gaussian"): S,
     ("rfilter", "tent"): S,
