@@ -214,3 +214,29 @@ def test_specfilm_is_refused_as_mitsubas_rgb_variants_refuse_it(tmp_path):
                        r"plugin 'specfilm' is not supported \(spectral variants only, as in "
                        r"Mitsuba, whose RGB variants refuse it too; jaxgfx renders RGB\)"):
         read_xml(str(p))
+
+
+def test_mitsuba_docs_pplastic_in_matpreview(tmp_path):
+    """The pplastic of Mitsuba's documentation scene (mitsuba-data ``docs/scenes/
+    bsdf_pplastic.xml``: kd (0.05, 0.03, 0.1), α 0.06) as the material of the reduced
+    matpreview scene (tests/data/mitsuba/scenes/matpreview) reads (its description; building
+    the scene, 8282 faces and an environment map, is left to the matpreview tests)."""
+    import os
+
+    from tests.render.test_mitsuba_xml_matpreview import DIR
+    from tests.render.test_mitsuba_xml_matpreview import XML as MATPREVIEW
+
+    with open(MATPREVIEW) as f:
+        text = re.sub(r'<bsdf type="plastic" id="bsdf-matpreview">.*?</bsdf>',
+                      '<bsdf type="pplastic" id="bsdf-matpreview"><rgb name="diffuse_reflectance" '
+                      'value="0.05, 0.03, 0.1"/><float name="alpha" value="0.06"/></bsdf>',
+                      f.read(), flags=re.S)  # fmt: skip
+    for fn in os.listdir(DIR):
+        if fn != "matpreview.xml":
+            os.symlink(os.path.join(DIR, fn), tmp_path / fn)
+    p = tmp_path / "m.xml"
+    p.write_text(text)
+    desc = read_xml(str(p), width=8, height=6).desc
+    m = desc["materials"]["bsdf-matpreview"]
+    assert (m["type"], m["alpha"], m["diffuse_reflectance"], m["one_sided"]) == (
+        "pplastic", 0.06, [0.05, 0.03, 0.1], True)
