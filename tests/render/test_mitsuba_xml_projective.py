@@ -65,6 +65,8 @@ def test_loaded_integrators_are_direct_and_path_with_edge_sampling(tmp_path):
     defaults (max_depth 6, rr_depth 5), adjoint ``ad`` (geometry gradients; replay covers
     materials only), both with ``visibility="edge"``; each resolves to the very integrator
     plain ``direct`` / ``path`` of that depth resolve to (so the primal images are the same)."""
+    assert _read(tmp_path, "direct_projective", '<integer name="max_depth" value="0"/>'
+                 ).integrator_spec == {"type": "direct"}  # read and ignored, as Mitsuba
     x = _read(tmp_path, "direct_projective", '<integer name="max_depth" value="7"/>')
     assert (x.integrator, x.visibility, x.integrator_spec) == ("direct", "edge",
                                                                {"type": "direct"})  # fmt: skip
@@ -99,6 +101,8 @@ def test_mitsubas_parameters_are_accepted(tmp_path, kind):
 
 @pytest.mark.parametrize("kind, body, name, msg", [
     ("prb_projective", '<integer name="max_depth" value="0"/>', "max_depth", "max_depth -1 or"),
+    ("direct_projective", '<integer name="max_depth" value="-2"/>', "max_depth",
+     "max_depth -1 or >= 0"),
     ("direct_projective", '<integer name="rr_depth" value="0"/>', "max_depth", "rr_depth >= 1"),
     ("prb_projective", '<integer name="sppc" value="-1"/>', "sppc", "sample count >= 0"),
     ("direct_projective", '<integer name="sppi" value="-4"/>', "sppi", "sample count >= 0"),

@@ -2069,8 +2069,9 @@ def _projective(p: _Params, obj):
         raise p.err("hide_emitters", "hidden emitters are supported by 'ptracer' only")
     depth = p.int("max_depth", 6)
     rr = p.int("rr_depth", 5)
-    if depth == 0 or depth < -1 or rr < 1:
-        raise p.err("max_depth", f"expected max_depth -1 or >= 1 and rr_depth >= 1, got "
+    low = 0 if obj.type == "direct_projective" else 1  # Mitsuba ignores that one's max_depth
+    if not (depth == -1 or depth >= low) or rr < 1:
+        raise p.err("max_depth", f"expected max_depth -1 or >= {low} and rr_depth >= 1, got "
                                  f"{depth}, {rr}")  # fmt: skip
     for name in ("sppc", "sppp", "sppi"):
         v = p.int(name)
