@@ -240,3 +240,18 @@ def test_mitsuba_docs_pplastic_in_matpreview(tmp_path):
     m = desc["materials"]["bsdf-matpreview"]
     assert (m["type"], m["alpha"], m["diffuse_reflectance"], m["one_sided"]) == (
         "pplastic", 0.06, [0.05, 0.03, 0.1], True)
+
+
+def test_textured_transmittance(tmp_path):
+    """A checkerboard ``transmittance`` (Mitsuba's default colours 0.4 / 0.2): a ``Textured``
+    polarizer whose per-hit lobe weighs 0.5 × the texel."""
+    import jax.numpy as jnp
+    import numpy as np
+
+    x, _ = _read(tmp_path, '<bsdf type="polarizer"><texture type="checkerboard" '
+                           'name="transmittance"/></bsdf>')  # fmt: skip
+    m = load_scene(x.desc).materials[0]
+    assert isinstance(m, Textured) and isinstance(m.bsdf, Polarizer)
+    uv = jnp.array([[0.25, 0.25], [0.75, 0.25]])
+    s = m.at(uv).sample(jnp.array([0.0, 0.0, 1.0]), jnp.zeros(2), jnp.zeros((2, 2)))
+    np.testing.assert_allclose(np.asarray(s.weight), [[0.2] * 3, [0.1] * 3], rtol=1e-6)
