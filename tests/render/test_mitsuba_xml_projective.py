@@ -17,7 +17,6 @@ from jaxgfx.render.estimator import resolve_integrator
 from jaxgfx.render.integrators import DirectIntegrator, PathIntegrator
 from jaxgfx.render.scene import load_scene
 from jaxgfx.render.scene.mitsuba_xml import read_xml, save_scene
-from jaxgfx.testing import ad_fd_per_key
 
 XML = """<scene version="3.0.0">
   <integrator type="{kind}">{body}</integrator>
@@ -168,8 +167,8 @@ def _loss(t, key, scene, path, c0, w, spec, vis):
     return jnp.sum(img.mean(-1) * w) / w.size
 
 
-@pytest.mark.slow  # slow: ~120-140 s on 2 cores at load 7 (float64 value-and-gradient programs
-# with and without the boundary term, and the forward program of the differences)
+@pytest.mark.slow  # slow: ~75 s on 2 cores at load 5 (a float64 program of the value and both
+# gradients, and the forward program of the differences)
 def test_boundary_gradient_matches_float64_finite_differences(x64, tmp_path):
     """The sphere of the XML scene moving sideways over the lit floor (its silhouette over the
     floor, its shadow on the floor), 8², 16 spp, float64: d(weighted image sum)/dx by AD with the
@@ -178,9 +177,9 @@ def test_boundary_gradient_matches_float64_finite_differences(x64, tmp_path):
     ``direct`` / ``path``, the same integrator) the same comparison fails by more than 4
     standard errors. Also: the primal values are those of the plain integrator. Only
     ``direct_projective`` (``prb_projective`` maps onto ``path`` with the same edge sampling,
-    whose first-vertex boundary term is the same code; its float64 program costs ~140 s here).
-    Measured: AD -0.0153, FD -0.0135 +- 0.0015; edge - FD -0.0017 +- 0.0015 (1.1 SE), plain -
-    FD +0.0135 +- 0.0015 (9 SE)."""
+    whose first-vertex boundary term is the same code; experiments/projective_mitsuba.py
+    compares both with Mitsuba's own gradients). Measured: AD -0.0153, FD -0.0135 +- 0.0011;
+    edge - FD -0.0017 +- 0.0015 (1.1 SE), plain - FD +0.0135 +- 0.0015 (9 SE)."""
     kind = "direct_projective"
     x = _read(tmp_path, kind)
     scene = load_scene(x.desc)
@@ -191,15 +190,22 @@ def test_boundary_gradient_matches_float64_finite_differences(x64, tmp_path):
     w = jnp.asarray(np.arange(8)[None, :] >= 4, jnp.float64) * jnp.ones((8, 1))
     keys = jax.random.split(jax.random.key(24), 32)
     args = (scene, path, c0, w, x.integrator_spec)
-    vals, ad, fd = ad_fd_per_key(_loss, jnp.float64(0.0), keys, 0.05, args=(*args, "edge"))
-    plain = jax.jit(jax.vmap(jax.value_and_grad(lambda t, k: _loss(t, k, *args, None)),
-                             in_axes=(None, 0)))  # fmt: skip
-    pv, pg = (np.asarray(a) for a in plain(jnp.float64(0.0), keys))
-    np.testing.assert_allclose(vals, pv, rtol=1e-12)  # the same primal (other programs)
+
+    def grads(t, k):  # one program: the value and both gradients (the forward pass is shared)
+        v, ge = jax.value_and_grad(lambda t: _loss(t, k, *args, x.visibility))(t)
+        return v, ge, jax.grad(lambda t: _loss(t, k, *args, None))(t)
+
+    vals, ad, pg = (np.asarray(a) for a in jax.jit(jax.vmap(grads, in_axes=(None, 0)))(
+        jnp.float64(0.0), keys))  # fmt: skip
+    fwd = jax.jit(jax.vmap(lambda t, k: _loss(t, k, *args, None), in_axes=(None, 0)))
+    h = 0.05
+    fd = (np.asarray(fwd(jnp.float64(h), keys)) - np.asarray(fwd(jnp.float64(-h), keys))) / (2 * h)
+    # the same primal as plain direct (another program: float rounding only)
+    np.testing.assert_allclose(vals, np.asarray(fwd(jnp.float64(0.0), keys)), rtol=1e-12)
     d, p = ad - fd, pg - fd
     se = d.std(ddof=1) / np.sqrt(d.size)
     sp = p.std(ddof=1) / np.sqrt(p.size)
-    print(f"{kind}: AD {ad.mean():.4f} FD {fd.mean():.4f} +- {fd.std(ddof=1) / 4:.4f}, "
+    print(f"{kind}: AD {ad.mean():.4f} FD {fd.mean():.4f} +- {fd.std(ddof=1) / np.sqrt(32):.4f}, "
           f"edge - FD {d.mean():.4f} +- {se:.4f}, plain - FD {p.mean():.4f} +- {sp:.4f}")
     assert abs(d.mean()) <= 4 * se
     assert abs(p.mean()) > 4 * sp
