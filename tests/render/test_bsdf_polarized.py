@@ -157,6 +157,7 @@ def test_chi2_sampling_matches_pdf(kind, alpha):
     k1, k2 = jax.random.split(key)
     lost = np.mean(np.all(np.asarray(sample(jax.random.uniform(k1, (n,)),
                                             jax.random.uniform(k2, (n, 2)))) == 0, -1))
+    print(f"{kind}: p = {p:.3f}, pdf integral {d['pdf_integral']:.4f}, failed samples {lost:.4f}")
     assert abs(d["pdf_integral"] - (1 - lost)) < 4 * math.sqrt(lost / n) + 2e-3, (d, lost)
 
 
