@@ -418,6 +418,33 @@ MUTANTS = [
         "why": "Embree's joint rule dropped (a zero-length segment's successor draws its ball)",
     },
     {
+        "name": "render.pplastic.one_fresnel_transmission",
+        "file": "jaxgfx/render/bsdf/_pplastic.py",
+        "old": "t = (1.0 - fresnel_dielectric(co, self.eta).r) * (1.0 - fresnel_dielectric(ci, "
+        "self.eta).r)",
+        "new": "t = 1.0 - fresnel_dielectric(ci, self.eta).r",
+        "tests": ["tests/render/test_bsdf_polarized.py::test_eval_equals_the_formula"],
+        "why": "the diffuse lobe entering the coat only (Mitsuba's pplastic crosses it twice)",
+    },
+    {
+        "name": "render.pplastic.lobe_fresnel_at_normal",
+        "file": "jaxgfx/render/bsdf/_pplastic.py",
+        "old": "f = fresnel_dielectric(vdot(wo, h), self.eta).r",
+        "new": "f = fresnel_dielectric(wo[..., 2], self.eta).r",
+        "tests": ["tests/render/test_bsdf_polarized.py::test_eval_equals_the_formula"],
+        "why": "the microfacet lobe's Fresnel at the macro normal instead of the half vector",
+    },
+    {
+        "name": "render.polarizer.factor",
+        "file": "jaxgfx/render/bsdf/_polarizer.py",
+        "old": "polarizing: bool = eqx.field(static=True, default=True)\n\n"
+        "    FACTOR: ClassVar[float] = 0.5",
+        "new": "polarizing: bool = eqx.field(static=True, default=True)\n\n"
+        "    FACTOR: ClassVar[float] = 1.0",
+        "tests": ["tests/render/test_bsdf_polarized.py::test_pass_through_lobes"],
+        "why": "the polarizer as a plain pass-through (Mitsuba's RGB variants halve the light)",
+    },
+    {
         "name": "render.curves.zero_length_drawn",
         "file": "jaxgfx/render/geometry/curves.py",
         "old": "better = on & (L2 > 0) & (dd >= 0) & (t < best)",

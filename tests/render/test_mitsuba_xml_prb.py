@@ -53,7 +53,6 @@ def test_prb_is_the_replay_path_integrator(tmp_path):
     ("prb", '<boolean name="hide_emitters" value="true"/>', r"s.xml:2: .*hide_emitters"),
     ("prb_basic", '<integer name="max_depth" value="0"/>', "max_depth -1 or >= 1"),
     ("prb", '<integer name="rr_depth" value="0"/>', "rr_depth >= 1"),
-    ("prb_projective", "", "prb_projective"),
 ])  # fmt: skip
 def test_prb_refusals_name_the_file_and_line(tmp_path, kind, body, match):
     with pytest.raises(ValueError, match=match):

@@ -126,6 +126,7 @@ _ONE_SIDED_BSDFS = {
     "roughconductor": {"type": "roughconductor", "alpha": 0.3},
     "plastic": {"type": "plastic"},
     "roughplastic": {"type": "roughplastic", "alpha": 0.3},
+    "pplastic": {"type": "pplastic", "alpha": 0.3},
     "principled": {"type": "principled", "roughness": 0.4, "clearcoat": 0.5, "sheen": 0.3},
     "blendbsdf": {
         "type": "blendbsdf",
@@ -148,8 +149,8 @@ def _resolved(name):
     return make_bsdf(_ONE_SIDED_BSDFS[name])
 
 
-# slow: 3.5-8.5 s each on 2 cores under load (the principled / microfacet samplers' compile)
-_SLOW = ("plastic", "roughplastic", "principled", "blendbsdf", "bumpmap")
+# slow: 3.5-10.5 s each on 2 cores under load (the principled / microfacet samplers' compile)
+_SLOW = ("plastic", "roughplastic", "pplastic", "principled", "blendbsdf", "bumpmap")
 
 
 @pytest.mark.parametrize(
@@ -189,6 +190,7 @@ def test_reflection_bsdfs_are_black_below(x64, rng, name):
         ({"type": "dielectric"}, "SmoothDielectric (transmissive)"),
         ({"type": "principled", "spec_trans": 0.5}, "Principled (transmissive)"),
         ({"type": "mask", "opacity": 0.5, "bsdf": {"type": "diffuse"}}, "a mask"),
+        ({"type": "polarizer"}, "a pass-through (Polarizer)"),
     ],
 )
 def test_one_sided_refused_on_two_sided_scatterers(material, why):

@@ -26,6 +26,11 @@ from jaxgfx.render.bsdf._normalmap import NormalMap as NormalMap
 from jaxgfx.render.bsdf._normalmap import TangentSpace as TangentSpace
 from jaxgfx.render.bsdf._phong import Phong as Phong
 from jaxgfx.render.bsdf._plastic import SmoothPlastic as SmoothPlastic
+from jaxgfx.render.bsdf._polarizer import CircularPolarizer as CircularPolarizer
+from jaxgfx.render.bsdf._polarizer import PassThrough as PassThrough
+from jaxgfx.render.bsdf._polarizer import Polarizer as Polarizer
+from jaxgfx.render.bsdf._polarizer import Retarder as Retarder
+from jaxgfx.render.bsdf._pplastic import PolarizedPlastic as PolarizedPlastic
 from jaxgfx.render.bsdf._principled import Principled as Principled
 from jaxgfx.render.bsdf._principledthin import PrincipledThin as PrincipledThin
 from jaxgfx.render.bsdf._roughconductor import RoughConductor as RoughConductor
@@ -47,10 +52,15 @@ __all__ = [
     "SmoothDielectric",
     "SmoothPlastic",
     "RoughPlastic",
+    "PolarizedPlastic",
     "ThinDielectric",
     "BlendBSDF",
     "Mask",
     "Null",
+    "PassThrough",
+    "Polarizer",
+    "CircularPolarizer",
+    "Retarder",
     "NormalMap",
     "BumpMap",
     "TangentSpace",
@@ -78,6 +88,10 @@ BSDF_TYPES = {
     "normalmap": NormalMap,
     "bumpmap": BumpMap,
     "hair": Hair,
+    "pplastic": PolarizedPlastic,
+    "polarizer": Polarizer,
+    "circular": CircularPolarizer,
+    "retarder": Retarder,
 }
 
 

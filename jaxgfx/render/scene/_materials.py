@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from jaxgfx.render.bsdf import BSDF_TYPES, Mask, make_bsdf
+from jaxgfx.render.bsdf import BSDF_TYPES, Mask, PassThrough, make_bsdf
 from jaxgfx.render.bsdf.textured import (
     Textured,
     is_texture_desc,
@@ -74,17 +74,22 @@ def check_one_sided(value, material, where) -> bool:
     if not isinstance(value, bool):
         raise ValueError(f"{where}: expected true or false, got {value!r}")
     if value and (material.is_transmissive or _has_mask(material)):
-        kind = "a mask" if _has_mask(material) else f"{type(material).__name__} (transmissive)"
+        kind = _has_mask(material) or f"{type(material).__name__} (transmissive)"
         raise ValueError(f"{where}: only reflection-only materials can be one-sided; "
                          f"{kind} scatters on both sides")  # fmt: skip
     return value
 
 
-def _has_mask(m) -> bool:
-    """Whether a ``mask`` is ``m`` or nested in it (textured, mapped or blended)."""
+def _has_mask(m) -> str:
+    """``"a mask"`` / ``"a pass-through (Polarizer)"`` when a ``mask`` or a pass-through
+    (``polarizer``, ``retarder``) is ``m`` or nested in it (textured, mapped or blended), else
+    ``""``."""
     if isinstance(m, Mask):
-        return True
-    return any(_has_mask(getattr(m, k)) for k in ("bsdf", "bsdf0", "bsdf1") if hasattr(m, k))
+        return "a mask"
+    if isinstance(m, PassThrough):
+        return f"a pass-through ({type(m).__name__})"
+    kids = (_has_mask(getattr(m, k)) for k in ("bsdf", "bsdf0", "bsdf1") if hasattr(m, k))
+    return next((k for k in kids if k), "")
 
 
 def emission_from_desc(value, where, *, base_dir=None, rgb=None):

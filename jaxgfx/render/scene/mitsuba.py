@@ -370,6 +370,19 @@ def _mitsuba_bsdf(m, where) -> dict:
             "specular_reflectance": _rgb(m.specular_reflectance),
             "nonlinear": bool(m.nonlinear),
         }
+    elif kind == "pplastic":  # eta written as such: Mitsuba's pplastic takes it (a texture too)
+        out = {"type": kind, **_distribution(m, where), "eta": _float(m.eta),
+               "diffuse_reflectance": _rgb(m.diffuse_reflectance),
+               "specular_reflectance": _rgb(m.specular_reflectance)}  # fmt: skip
+    elif kind == "circular":
+        out = {"type": kind, "transmittance": _rgb(m.transmittance),
+               "left_handed": bool(m.left_handed)}  # fmt: skip
+    elif kind in ("polarizer", "retarder"):
+        out = {"type": kind, "transmittance": _rgb(m.transmittance), "theta": _float(m.theta)}
+        if kind == "polarizer":
+            out["polarizing"] = bool(m.polarizing)
+        else:
+            out["delta"] = _float(m.delta)
     elif kind == "blendbsdf":
         # Mitsuba orders the nested BSDFs by name (bsdf_0, bsdf_1; unnamed in XML: document
         # order). Each one-sided component is wrapped in twosided: jaxgfx shades it on both
@@ -1134,6 +1147,21 @@ def _bsdf_desc(m, where) -> dict:
                 "diffuse_reflectance": _list(m.diffuse_reflectance),
                 "specular_reflectance": _list(m.specular_reflectance),
                 "nonlinear": bool(m.nonlinear)}  # fmt: skip
+    if isinstance(m, B.PolarizedPlastic):
+        dist = m.distribution
+        return {"type": "pplastic", "distribution": dist.type, "alpha": _list(dist.alpha_u),
+                "alpha_v": _list(dist.alpha_v), "sample_visible": bool(dist.sample_visible),
+                "eta": _list(m.eta), "diffuse_reflectance": _list(m.diffuse_reflectance),
+                "specular_reflectance": _list(m.specular_reflectance)}  # fmt: skip
+    if isinstance(m, B.Polarizer):
+        return {"type": "polarizer", "transmittance": _list(m.transmittance),
+                "theta": _list(m.theta), "polarizing": bool(m.polarizing)}  # fmt: skip
+    if isinstance(m, B.CircularPolarizer):
+        return {"type": "circular", "transmittance": _list(m.transmittance),
+                "left_handed": bool(m.left_handed)}  # fmt: skip
+    if isinstance(m, B.Retarder):
+        return {"type": "retarder", "transmittance": _list(m.transmittance),
+                "theta": _list(m.theta), "delta": _list(m.delta)}  # fmt: skip
     if isinstance(m, B.RoughDielectric):
         dist = m.distribution
         return {"type": "roughdielectric", "distribution": dist.type,
@@ -1462,20 +1490,24 @@ def mitsuba_integrator(
     Mitsuba counterpart (``NotImplementedError``); other names raise ``ValueError``. The
     Mitsuba names ``"prb"`` / ``"prb_basic"`` (path replay backpropagation: jaxgfx's
     ``PathIntegrator(adjoint="replay")``, with ``strategy="bsdf"`` for ``prb_basic``) are
-    written as they are, with ``max_depth`` and ``rr_depth``.
+    written as they are, with ``max_depth`` and ``rr_depth``, and so are ``"prb_projective"``
+    and ``"direct_projective"`` (jaxgfx's ``path`` / ``direct`` with ``visibility="edge"``;
+    the latter with ``max_depth = 2``, as Mitsuba overrides it).
 
     Example: ``mitsuba_integrator("direct")["max_depth"] == 2``.
     """
     for arg, v in (("max_depth", max_depth), ("rr_depth", rr_depth)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             raise ValueError(f"{arg}: expected a positive integer, got {v!r}")
-    if name == "direct":
+    mitsuba_names = ("ptracer", "prb", "prb_basic", "prb_projective", "direct_projective")
+    if name in ("direct", "direct_projective"):
         max_depth = 2
     elif name in ("whitted", "aov"):
         raise NotImplementedError(f"integrator: {name!r} has no Mitsuba 3 counterpart")
-    elif name not in ("path", "ptracer", "prb", "prb_basic"):
+    elif name not in ("path",) + mitsuba_names:
         raise ValueError(
-            f"integrator: expected 'path', 'direct', 'ptracer', 'prb' or 'prb_basic', got {name!r}"
+            "integrator: expected 'path', 'direct', 'ptracer', 'prb', 'prb_basic', "
+            f"'prb_projective' or 'direct_projective', got {name!r}"
         )
     if not isinstance(hide_emitters, bool):
         raise ValueError(f"hide_emitters: expected a bool, got {hide_emitters!r}")
@@ -1483,7 +1515,7 @@ def mitsuba_integrator(
         raise ValueError(
             f"hide_emitters: jaxgfx's {name!r} does not hide emitters ('ptracer' does)"
         )
-    kind = name if name in ("ptracer", "prb", "prb_basic") else "path"
+    kind = name if name in mitsuba_names else "path"
     out = {"type": kind, "max_depth": int(max_depth), "rr_depth": int(rr_depth)}
     if hide_emitters:
         out["hide_emitters"] = True

@@ -83,9 +83,14 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("bsdf", "bumpmap"): S + " (one nested bitmap texture, `scale`; not inside a blendbsdf)",
     ("bsdf", "normalmap"): S + " (texture `normalmap`, one nested BSDF; not inside a blendbsdf)",
     ("bsdf", "blendbsdf"): S + " (two nested BSDFs; a texture weight at the top level only)",
-    ("bsdf", "pplastic"): "refused: no polarized BSDFs in jaxgfx",
-    ("bsdf", "polarizer"): "refused: no polarized BSDFs in jaxgfx",
-    ("bsdf", "retarder"): "refused: no polarized BSDFs in jaxgfx",
+    ("bsdf", "pplastic"): S + " (unpolarised, as Mitsuba's RGB variants: rough specular plus "
+    "Fresnel-weighted diffuse lobe; anisotropic in the dp/du frame)",
+    ("bsdf", "polarizer"): S + " (unpolarised, as Mitsuba's RGB variants: a pass-through of "
+    "0.5 x `transmittance`; `theta`, `polarizing` have no effect; not nested)",
+    ("bsdf", "circular"): S + " (unpolarised, as Mitsuba's RGB variants: a pass-through of "
+    "0.5 x `transmittance`; `left_handed` has no effect; not nested)",
+    ("bsdf", "retarder"): S + " (unpolarised, as Mitsuba's RGB variants: a pass-through of "
+    "`transmittance`; `theta`, `delta` have no effect; not nested)",
     ("bsdf", "measured"): "refused: no measured BSDFs in jaxgfx",
     ("bsdf", "null"): S + " (`Null`: a mask of opacity 0; not nested)",
     ("bsdf", "hair"): S + " (`sigma_a` an RGB or a number, not a texture; not nested)",
@@ -116,7 +121,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("sensor", "batch"): S + " (perspective, thin-lens and orthographic sensors side by side; "
     "film width divisible by their number)",
     ("film", "hdrfilm"): S,
-    ("film", "specfilm"): "refused: jaxgfx renders RGB only",
+    ("film", "specfilm"): "refused: spectral variants only, as in Mitsuba, whose RGB variants "
+    "refuse it too; jaxgfx renders RGB",
     ("rfilter", "box"): S,
     ("rfilter", "gaussian"): S,
     ("rfilter", "tent"): S,
@@ -134,8 +140,12 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("integrator", "moment"): S + " (reads the nested integrator)",
     ("integrator", "prb"): S + " (a `PathIntegrator` with adjoint replay; default max_depth 6)",
     ("integrator", "prb_basic"): S + " (as prb with strategy bsdf, no Russian roulette)",
-    ("integrator", "direct_projective"): "refused: not in jaxgfx",
-    ("integrator", "prb_projective"): "refused: not in jaxgfx",
+    ("integrator", "direct_projective"): S + " (`direct` with visibility='edge': edge-sampled "
+    "boundary gradients; `sppc`/`sppp`/`sppi`, guiding options read and unused; perspective "
+    "sensor, box rfilter, no curves)",
+    ("integrator", "prb_projective"): S + " (`path` with visibility='edge' and adjoint 'ad'; "
+    "default max_depth 6; `sppc`/`sppp`/`sppi`, guiding options read and unused; perspective "
+    "sensor, box rfilter, no curves)",
     ("integrator", "volpath"): "refused: jaxgfx renders surfaces only",
     ("integrator", "volpathmis"): "refused: jaxgfx renders surfaces only",
     ("integrator", "ptracer"): S + " (point, spot, directional, area, directionalarea, "
@@ -167,6 +177,10 @@ BSDF_TO_MITSUBA = {
     "RoughDielectric": "roughdielectric",
     "SmoothPlastic": "plastic",
     "RoughPlastic": "roughplastic",
+    "PolarizedPlastic": "pplastic",
+    "Polarizer": "polarizer",
+    "CircularPolarizer": "circular",
+    "Retarder": "retarder",
     "ThinDielectric": "thindielectric",
     "BlendBSDF": "blendbsdf",
     "Mask": "mask",
@@ -178,7 +192,7 @@ BSDF_TO_MITSUBA = {
 """jaxgfx BSDF class -> Mitsuba plugin (``Phong`` has none)."""
 
 ONE_SIDED_BSDFS = (
-    "diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "principled"
+    "diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "principled", "pplastic"
 )  # fmt: skip
 """Mitsuba BSDFs that are black from behind (``principled`` only without ``spec_trans``). The
 XML reader loads them ``one_sided: true`` unless a ``twosided`` encloses them; the writer wraps
@@ -195,6 +209,9 @@ DEFAULTS = {
     "roughplastic.int_ior": "polypropylene",
     "roughplastic.ext_ior": "air",
     "roughplastic.diffuse_reflectance": 0.5,
+    "pplastic.int_ior": "polypropylene",
+    "pplastic.ext_ior": "air",
+    "pplastic.diffuse_reflectance": 0.5,
     "principled.base_color": 0.5,
     "principled.roughness": 0.5,
     "principled.specular": 0.5,

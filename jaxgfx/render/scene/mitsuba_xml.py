@@ -116,8 +116,10 @@ class XMLScene:
     only: pass it to ``ParticleTracer(hide_emitters=...)``), and the ``PathIntegrator`` options
     ``adjoint`` (``"replay"`` for Mitsuba's ``prb`` / ``prb_basic``, else ``"ad"``) and
     ``strategy`` (``"bsdf"`` for ``prb_basic``, else ``"mis"``), the ``aov`` options ``aovs``
-    and ``near_clip`` (the sensor's; Mitsuba measures depth from it); :attr:`integrator_spec` is
-    all of them as the mapping ``render(..., integrator=...)`` takes."""
+    and ``near_clip`` (the sensor's; Mitsuba measures depth from it), and ``visibility``
+    (``"edge"`` for Mitsuba's ``direct_projective`` / ``prb_projective``, else ``None``: pass it
+    to ``render(..., visibility=...)``); :attr:`integrator_spec` is the integrator options as
+    the mapping ``render(..., integrator=...)`` takes."""
 
     desc: dict
     spp: int | None
@@ -130,6 +132,7 @@ class XMLScene:
     strategy: str = "mis"
     aovs: tuple = ()
     near_clip: float = 0.0
+    visibility: str | None = None
 
     @property
     def integrator_spec(self) -> dict:
@@ -877,6 +880,62 @@ def _hair(p: _Params) -> dict:
     return {**m, "eumelanin": eu, "pheomelanin": ph}
 
 
+def _pplastic(p: _Params) -> dict:
+    """``pplastic`` (its unpolarised form): Mitsuba's names and defaults; ``eta`` (a number or
+    a texture) or ``int_ior`` / ``ext_ior`` (polypropylene / air, which must differ), not
+    both; ``alpha`` or ``alpha_u`` / ``alpha_v`` (anisotropic: in the dp/du frame)."""
+    d = DEFAULTS
+    if "eta" in p.obj.props:
+        both = [k for k in ("int_ior", "ext_ior") if k in p.obj.props]
+        if both:
+            p.obj.props[both[0]].used = True
+            raise p.err(both[0], "give either eta or int_ior / ext_ior, not both (as Mitsuba)")
+        eta = p.scalar_or_texture("eta")
+        if not isinstance(eta, dict) and not eta > 0:
+            raise p.err("eta", f"expected a positive number, got {eta}")
+    else:
+        i, e = p.ior("int_ior", d["pplastic.int_ior"]), p.ior("ext_ior", d["pplastic.ext_ior"])
+        if i == e:
+            raise p.err("int_ior", f"the interior and exterior IORs must differ, got {i} "
+                                   "(as Mitsuba)")  # fmt: skip
+        eta = i / e
+    return {"type": "pplastic", **_distribution(p, aniso=True), "eta": eta,
+            "diffuse_reflectance": p.color("diffuse_reflectance",
+                                           [d["pplastic.diffuse_reflectance"]] * 3, texture=True),
+            "specular_reflectance": p.color("specular_reflectance", [1.0] * 3, texture=True)}
+
+
+def _angle(p: _Params, name: str, default: float):
+    """A ``polarizer`` / ``retarder`` angle (degrees): a number, a uniform RGB or a constant
+    spectrum -> a float; any other value (a texture, per-channel angles) is read and dropped
+    (``None``): angles only rotate polarisation states, which unpolarised rendering lacks."""
+    q = p.obj.props.get(name)
+    if q is None:
+        return default
+    if q.kind == "integer":
+        return p.float(name)
+    v = p.color(name, texture=True)
+    return float(v[0]) if isinstance(v, list) and len(set(v)) == 1 else None
+
+
+def _pass_through(p: _Params, t: str) -> dict:
+    """``polarizer`` / ``circular`` / ``retarder`` in Mitsuba's RGB variants:
+    ``transmittance`` (a colour or a texture, default 1) and the angles (kept when numbers; no
+    effect on unpolarised light); ``polarizing`` (a polarizer's) and ``left_handed`` (a circular
+    polarizer's; no effect either)."""
+    m = {"type": t, "transmittance": p.color("transmittance", [1.0] * 3, texture=True)}
+    if t == "circular":
+        return {**m, "left_handed": p.bool("left_handed", False)}
+    angles = (("theta", 0.0),) + ((("delta", 90.0),) if t == "retarder" else ())
+    for name, default in angles:
+        v = _angle(p, name, default)
+        if v is not None:
+            m[name] = v
+    if t == "polarizer":
+        m["polarizing"] = p.bool("polarizing", True)
+    return m
+
+
 def _anisotropy(p: _Params, m: dict) -> None:
     """``anisotropic`` (a number in [0, 1] or a texture) into ``m`` unless absent or 0
     (Mitsuba's ``get_flag``: the isotropic program)."""
@@ -1003,6 +1062,13 @@ def _bsdf_dict(obj: _Obj, doc, *, nested=False, in_map=False) -> dict:
             raise ValueError(f"{obj.where}: a mask nested in a blendbsdf or mask is not supported")
         m = _mask_dict(obj, p, doc)
         children_ok = len(obj.children)
+    elif t == "pplastic":
+        m = _dpdu_frame(_pplastic(p), obj, nested, in_map)
+    elif t in ("polarizer", "circular", "retarder"):
+        if nested:
+            raise ValueError(f"{obj.where}: a {t} nested in a blendbsdf or mask is not "
+                             "supported (a pass-through, as the null BSDF)")  # fmt: skip
+        m = _pass_through(p, t)
     elif t == "null":  # no parameters: Mask(Diffuse(0), opacity 0)
         if nested:
             raise ValueError(f"{obj.where}: a null BSDF nested in a blendbsdf or mask is not "
@@ -2039,6 +2105,64 @@ def _aov(p: _Params, obj):
     return "aov", None, 5, False, {"aovs": tuple(types)}
 
 
+_PROJECTIVE = ("direct_projective", "prb_projective")
+
+
+def _projective(p: _Params, obj):
+    """Mitsuba's projective-sampling integrators as jaxgfx's ``direct`` / ``path`` with edge
+    sampling (``visibility="edge"``, reverse mode ``adjoint="ad"``): the same images, and
+    boundary (visibility) terms in the derivatives. ``max_depth`` / ``rr_depth`` as Mitsuba's
+    ``ADIntegrator`` reads them (``prb_projective``: default 6 and 5; ``direct_projective``
+    reads and then ignores them: depth 2); ``sppc`` / ``sppp`` / ``sppi`` (integers >= 0),
+    ``guiding`` (none, grid, octree), ``guiding_proj``, ``guiding_rounds`` (>= 1) and
+    ``project_seed`` (both, bsdf, emitter) are checked and have no jaxgfx meaning: edge
+    sampling draws the silhouettes it knows directly (no guiding), with the render's ``spp``
+    passes of boundary samples (no separate counts)."""
+    hide = p.bool("hide_emitters", False)
+    if hide:
+        raise p.err("hide_emitters", "hidden emitters are supported by 'ptracer' only")
+    depth = p.int("max_depth", 6)
+    rr = p.int("rr_depth", 5)
+    low = 0 if obj.type == "direct_projective" else 1  # Mitsuba ignores that one's max_depth
+    if not (depth == -1 or depth >= low) or rr < 1:
+        raise p.err("max_depth", f"expected max_depth -1 or >= {low} and rr_depth >= 1, got "
+                                 f"{depth}, {rr}")  # fmt: skip
+    for name in ("sppc", "sppp", "sppi"):
+        v = p.int(name)
+        if v is not None and v < 0:
+            raise p.err(name, f"expected a sample count >= 0, got {v}")
+    p.string("guiding", "octree", ("none", "grid", "octree"))
+    p.bool("guiding_proj", True)
+    rounds = p.int("guiding_rounds", 1)
+    if rounds < 1:
+        raise p.err("guiding_rounds", f"expected a positive integer, got {rounds}")
+    p.string("project_seed", "both", ("both", "bsdf", "emitter"))
+    p.done()
+    opts = {"visibility": "edge"}
+    if obj.type == "direct_projective":  # Mitsuba overrides both: a path of depth 2
+        return "direct", 2, 5, False, opts
+    return "path", (None if depth == -1 else depth), rr, False, opts
+
+
+def _check_projective(integ: _Obj, sensor: _Obj, desc: dict, ctx: dict) -> None:
+    """What jaxgfx's edge sampling needs of a scene rendered by a projective integrator: a
+    perspective sensor (Mitsuba's projective integrators refuse the others too), the box
+    rfilter (edge sampling's pixel integral; Mitsuba's default is gaussian) and no curves
+    (their silhouettes are not edge-sampled; Mitsuba projects them)."""
+    if sensor.type != "perspective":
+        raise ValueError(f"{sensor.where}: {integ.type} needs a perspective sensor (as in "
+                         f"Mitsuba), got {sensor.type!r}")  # fmt: skip
+    rf = (desc.get("film") or {}).get("filter", "gaussian")
+    if rf != "box":
+        raise ValueError(f"{integ.where}: {integ.type} needs <rfilter type=\"box\"/> in the "
+                         f"film (jaxgfx's edge sampling integrates box pixels), got {rf!r}")
+    for _, o in ctx["bboxes"]:
+        if o.type in ("linearcurve", "bsplinecurve"):
+            raise ValueError(f"{o.where}: {integ.where}: {integ.type} with a {o.type} is not "
+                             "supported (jaxgfx's edge sampling does not sample curve "
+                             "silhouettes; use prb / path for material gradients)")  # fmt: skip
+
+
 def _integrator(obj: _Obj, doc):
     p = _Params(obj, doc)
     if obj.type == "moment":  # its first channels are the nested integrator's image
@@ -2048,9 +2172,12 @@ def _integrator(obj: _Obj, doc):
         return _integrator(obj.children[0], doc)
     if obj.type == "aov":
         return _aov(p, obj)
+    if obj.type in _PROJECTIVE:
+        return _projective(p, obj)
     if obj.type not in ("path", "direct", "ptracer", "prb", "prb_basic"):
         raise ValueError(f"{obj.where}: integrator plugin {obj.type!r} is not supported "
-                         "(path, direct, ptracer, prb, prb_basic, moment, aov)")  # fmt: skip
+                         "(path, direct, ptracer, prb, prb_basic, direct_projective, "
+                         "prb_projective, moment, aov)")  # fmt: skip
     hide = p.bool("hide_emitters", False)
     if hide and obj.type != "ptracer":
         raise p.err("hide_emitters", "hidden emitters are supported by 'ptracer' only")
@@ -2195,6 +2322,8 @@ def read_xml(path, **params) -> XMLScene:
     _check_clip(ctx)
     if not desc["emitters"]:
         del desc["emitters"]
+    if opts.get("visibility"):
+        _check_projective(integ[0], sensors[0], desc, ctx)
     if integrator == "aov" and "clip" in ctx:  # Mitsuba's depth: from the near plane
         nears = {float(c[1]) for c in ctx["clip"]}
         if len(nears) > 1:
@@ -2330,7 +2459,7 @@ def save_scene(
         integ = M.mitsuba_integrator(
             integrator, max_depth=1, rr_depth=rr_depth, hide_emitters=hide_emitters
         )
-        integ["max_depth"] = 2 if integrator == "direct" else -1
+        integ["max_depth"] = 2 if integrator in ("direct", "direct_projective") else -1
     else:
         integ = M.mitsuba_integrator(
             integrator, max_depth=max_depth, rr_depth=rr_depth, hide_emitters=hide_emitters
