@@ -152,7 +152,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     "constant and envmap emitters; hide_emitters)",
     ("integrator", "aov"): S + " (`aovs` of types albedo, depth, position, geo_normal, "
     "sh_normal; no nested integrator)",
-    ("integrator", "stokes"): "refused: jaxgfx renders unpolarized RGB only",
+    ("integrator", "stokes"): "refused: polarized variants only, as in Mitsuba, whose RGB "
+    "variants refuse it too; jaxgfx renders unpolarized RGB",
 }
 """``(tag, type)`` -> status of every Mitsuba 3 plugin the loader knows (tested against the
 table in docs/render_scenes.md)."""
