@@ -21,6 +21,7 @@ from jaxgfx.render.bsdf._diffuse import Diffuse as Diffuse
 from jaxgfx.render.bsdf._hair import Hair as Hair
 from jaxgfx.render.bsdf._mask import Mask as Mask
 from jaxgfx.render.bsdf._mask import Null as Null
+from jaxgfx.render.bsdf._measured import Measured as Measured
 from jaxgfx.render.bsdf._normalmap import BumpMap as BumpMap
 from jaxgfx.render.bsdf._normalmap import NormalMap as NormalMap
 from jaxgfx.render.bsdf._normalmap import TangentSpace as TangentSpace
@@ -38,6 +39,7 @@ __all__ = [
     "BSDFSample",
     "Diffuse",
     "Hair",
+    "Measured",
     "Mirror",
     "Phong",
     "Principled",
@@ -78,6 +80,7 @@ BSDF_TYPES = {
     "normalmap": NormalMap,
     "bumpmap": BumpMap,
     "hair": Hair,
+    "measured": Measured,
 }
 
 

@@ -20,7 +20,8 @@ import numpy as np
 
 from jaxgfx._math import safe_div, safe_sqrt
 
-__all__ = ["Warp2D", "build_warp", "param_corners", "warp_eval", "warp_sample", "warp_invert"]
+__all__ = ["Warp2D", "build_warp", "param_corners", "bilinear", "warp_eval", "warp_sample",
+           "warp_invert"]
 
 _EPS32 = 2.0**-24  # dr::Epsilon<float>
 
@@ -92,49 +93,66 @@ def param_corners(params, values):
     return corners
 
 
-def _lookup(table, corners, idx):
-    """``Σ weight · table[slice, idx]`` over the corners; ``table`` (S, N), ``idx`` (...)."""
+def _rows(table, corners, idx=None):
+    """``Σ weight · table[slice, idx]`` over the parameter corners: ``table`` (S, R, ...) with
+    ``idx`` (...) a row index -> (..., *rest); ``table`` (S, N) without ``idx`` -> (..., N).
+    (One gather of a whole row per corner: Mitsuba looks up single entries inside its binary
+    searches; the rows are the same numbers, and a far smaller program.)"""
     out = 0.0
     for s, w in corners:
-        out = out + w * table[s, idx]
+        v = table[s] if idx is None else table[s, idx]
+        w = jnp.asarray(w)
+        out = out + w.reshape(w.shape + (1,) * (v.ndim - w.ndim)) * v
     return out
 
 
-def _flat(a):
-    return a.reshape(a.shape[0], -1)
+def _at(row, i):
+    """``row[..., i]`` for an index array ``i`` (...)."""
+    return jnp.take_along_axis(row, i[..., None], axis=-1)[..., 0]
+
+
+def _count_below(row, x):
+    """drjit's ``binary_search`` over a nondecreasing ``row``: the number of entries < x."""
+    return jnp.sum(row < x[..., None], axis=-1).astype(jnp.int32)
+
+
+def _cell(pos, w, h):
+    """Patch index ``(ox, oy)`` and position inside it of a point of the unit square (clipped),
+    as Mitsuba's ``eval`` / ``invert``."""
+    p = jnp.clip(pos, 0.0, 1.0) * jnp.asarray([w - 1, h - 1], pos.dtype)
+    ox = jnp.minimum(p[..., 0].astype(jnp.int32), w - 2)
+    oy = jnp.minimum(p[..., 1].astype(jnp.int32), h - 2)
+    return ox, oy, p[..., 0] - ox, p[..., 1] - oy
+
+
+def bilinear(table, pos, corners=((0, 1.0),)):
+    """Bilinear value at ``pos`` (..., 2) of ``table`` (S, h, w) -> (...) or (S, C, h, w) ->
+    (..., C), interpolated over the parameter ``corners`` (Mitsuba's ``Marginal2D::eval``)."""
+    h, w = table.shape[-2:]
+    ox, oy, fx, fy = _cell(pos, w, h)
+    if table.ndim == 4:  # channels: rows (..., C, w)
+        a = _rows(jnp.moveaxis(table, 2, 1), corners, oy)
+        b = _rows(jnp.moveaxis(table, 2, 1), corners, oy + 1)
+
+        def take(r, i):
+            return jnp.take_along_axis(r, i[..., None, None], axis=-1)[..., 0]
+
+        fx, fy = fx[..., None], fy[..., None]
+    else:
+        a, b = _rows(table, corners, oy), _rows(table, corners, oy + 1)
+        take = _at
+    v00, v10, v01, v11 = take(a, ox), take(a, ox + 1), take(b, ox), take(b, ox + 1)
+    return _lerp(_lerp(v00, v10, fx), _lerp(v01, v11, fx), fy)
 
 
 def warp_eval(warp: Warp2D, pos, corners=((0, 1.0),)):
     """Bilinear value of the (normalised) data at ``pos`` (..., 2) in the unit square
     (clipped to it), interpolated over the parameter ``corners``."""
-    w, h = warp.size
-    data = _flat(warp.data)
-    p = jnp.clip(pos, 0.0, 1.0) * jnp.asarray([w - 1, h - 1], pos.dtype)
-    ox = jnp.minimum(p[..., 0].astype(jnp.int32), w - 2)
-    oy = jnp.minimum(p[..., 1].astype(jnp.int32), h - 2)
-    fx, fy = p[..., 0] - ox, p[..., 1] - oy
-    i = ox + oy * w
-    v00, v10 = _lookup(data, corners, i), _lookup(data, corners, i + 1)
-    v01, v11 = _lookup(data, corners, i + w), _lookup(data, corners, i + w + 1)
-    return _lerp(_lerp(v00, v10, fx), _lerp(v01, v11, fx), fy)
+    return bilinear(warp.data, pos, corners)
 
 
 def _lerp(a, b, t):
     return a + (b - a) * t
-
-
-def _binary_search(lo, hi, pred, shape):
-    """drjit's ``binary_search``: the first index in [lo, hi] where ``pred`` is false (``hi``
-    when none), by ``log2(hi - lo) + 1`` bisection steps."""
-    start = jnp.full(shape, lo, jnp.int32)
-    end = jnp.full(shape, hi, jnp.int32)
-    steps = int(np.log2(hi - lo)) + 1 if lo < hi else 0
-    for _ in range(steps):
-        mid = (start + end) >> 1
-        c = pred(mid)
-        start = jnp.where(c, jnp.minimum(mid + 1, end), start)
-        end = jnp.where(c, end, mid)
-    return start
 
 
 def _sample_segment(u, inv_width, v0, v1):
@@ -155,30 +173,22 @@ def warp_sample(warp: Warp2D, u, corners=((0, 1.0),)):
     """Mitsuba's ``Marginal2D::sample_continuous``: ``u`` (..., 2) uniform -> ``(point (..., 2),
     density)`` (normalised tables)."""
     w, h = warp.size
-    data, cond, marg = _flat(warp.data), _flat(warp.cond), warp.marg
-    shape = u.shape[:-1]
     u = jnp.clip(u, _EPS32, 1.0 - _EPS32)
     ux, uy = u[..., 0], u[..., 1]
-    n_marg = h - 1
-    row = _binary_search(0, n_marg - 1, lambda i: _lookup(marg, corners, i) < uy, shape)
-    uy = uy - jnp.where(row > 0, _lookup(marg, corners, jnp.maximum(row - 1, 0)), 0.0)
-    oc = row * (w - 1)
-    r0 = _lookup(cond, corners, oc + (w - 2))
-    r1 = _lookup(cond, corners, oc + (2 * w - 3))
+    marg = jnp.broadcast_to(_rows(warp.marg, corners), uy.shape + (h - 1,))
+    row = jnp.minimum(_count_below(marg, uy), h - 2)
+    uy = uy - jnp.where(row > 0, _at(marg, jnp.maximum(row - 1, 0)), 0.0)
+    ca, cb = _rows(warp.cond, corners, row), _rows(warp.cond, corners, row + 1)  # (..., w-1)
+    r0, r1 = ca[..., -1], cb[..., -1]
     y = _sample_segment(uy, h - 1, r0, r1)
     ux = ux * _lerp(r0, r1, y)
-
-    def fetch(i):
-        return _lerp(_lookup(cond, corners, oc + i), _lookup(cond, corners, oc + i + (w - 1)), y)
-
+    cc = _lerp(ca, cb, y[..., None])
     # drjit searches [0, w - 1]; index w - 1 (past the row) is only reached by round-off
-    col = jnp.minimum(_binary_search(0, w - 1, lambda i: fetch(jnp.minimum(i, w - 2)) < ux,
-                                     shape), w - 2)  # fmt: skip
-    ux = ux - jnp.where(col > 0, fetch(jnp.maximum(col - 1, 0)), 0.0)
-    od = row * w + col
-    v00, v10 = _lookup(data, corners, od), _lookup(data, corners, od + 1)
-    v01, v11 = _lookup(data, corners, od + w), _lookup(data, corners, od + w + 1)
-    c0, c1 = _lerp(v00, v01, y), _lerp(v10, v11, y)
+    col = jnp.minimum(_count_below(cc, ux), w - 2)
+    ux = ux - jnp.where(col > 0, _at(cc, jnp.maximum(col - 1, 0)), 0.0)
+    da, db = _rows(warp.data, corners, row), _rows(warp.data, corners, row + 1)
+    c0 = _lerp(_at(da, col), _at(db, col), y)
+    c1 = _lerp(_at(da, col + 1), _at(db, col + 1), y)
     x = _sample_segment(ux, w - 1, c0, c1)
     pt = jnp.stack([(col + x) / (w - 1), (row + y) / (h - 1)], axis=-1)
     return pt, _lerp(c0, c1, x)
@@ -188,24 +198,18 @@ def warp_invert(warp: Warp2D, pt, corners=((0, 1.0),)):
     """Mitsuba's ``Marginal2D::invert_continuous``: a point (..., 2) -> ``(u (..., 2),
     density)``, the inverse of :func:`warp_sample`."""
     w, h = warp.size
-    data, cond, marg = _flat(warp.data), _flat(warp.cond), warp.marg
-    p = jnp.clip(pt, 0.0, 1.0) * jnp.asarray([w - 1, h - 1], pt.dtype)
-    px = jnp.minimum(p[..., 0].astype(jnp.int32), w - 2)
-    py = jnp.minimum(p[..., 1].astype(jnp.int32), h - 2)
-    x, y = p[..., 0] - px, p[..., 1] - py
-    od = py * w + px
-    v00, v10 = _lookup(data, corners, od), _lookup(data, corners, od + 1)
-    v01, v11 = _lookup(data, corners, od + w), _lookup(data, corners, od + w + 1)
-    c0, c1 = _lerp(v00, v01, y), _lerp(v10, v11, y)
+    px, py, x, y = _cell(pt, w, h)
+    da, db = _rows(warp.data, corners, py), _rows(warp.data, corners, py + 1)
+    c0 = _lerp(_at(da, px), _at(db, px), y)
+    c1 = _lerp(_at(da, px + 1), _at(db, px + 1), y)
     pdf = _lerp(c0, c1, x)
     x = _invert_segment(x, 1.0 / (w - 1), c0, c1)
-    oc = py * (w - 1)
+    ca, cb = _rows(warp.cond, corners, py), _rows(warp.cond, corners, py + 1)
     i = jnp.maximum(px - 1, 0)
-    prev = _lerp(_lookup(cond, corners, oc + i), _lookup(cond, corners, oc + i + (w - 1)), y)
-    x = x + jnp.where(px > 0, prev, 0.0)
-    r0 = _lookup(cond, corners, oc + (w - 2))
-    r1 = _lookup(cond, corners, oc + (2 * w - 3))
+    x = x + jnp.where(px > 0, _lerp(_at(ca, i), _at(cb, i), y), 0.0)
+    r0, r1 = ca[..., -1], cb[..., -1]
     x = safe_div(x, _lerp(r0, r1, y))
     y = _invert_segment(y, 1.0 / (h - 1), r0, r1)
-    y = y + jnp.where(py > 0, _lookup(marg, corners, jnp.maximum(py - 1, 0)), 0.0)
+    marg = jnp.broadcast_to(_rows(warp.marg, corners), y.shape + (h - 1,))
+    y = y + jnp.where(py > 0, _at(marg, jnp.maximum(py - 1, 0)), 0.0)
     return jnp.stack([x, y], axis=-1), pdf

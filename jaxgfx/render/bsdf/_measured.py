@@ -33,6 +33,7 @@ import math
 import os
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -48,6 +49,7 @@ from jaxgfx.render.bsdf._base import (
 )
 from jaxgfx.render.bsdf._marginal2d import (
     Warp2D,
+    bilinear,
     build_warp,
     param_corners,
     warp_eval,
@@ -118,6 +120,15 @@ def read_measured(path) -> dict:
     for k in ("ndf", "sigma", "vndf", "luminance", "rgb", "theta_i", "phi_i"):
         if not np.all(np.isfinite(f[k])):
             raise ValueError(f"{path}: field {k!r}: non-finite values")
+    for k in ("ndf", "sigma", "vndf", "luminance", "rgb"):
+        if np.any(f[k] < 0):
+            raise ValueError(f"{path}: field {k!r}: negative values (min {f[k].min()})")
+    for k in ("vndf", "luminance"):  # sampled: every slice must integrate to > 0
+        dead = np.argwhere(f[k].sum(axis=(2, 3)) <= 0)
+        if dead.size:
+            raise ValueError(f"{path}: field {k!r}: the slice (phi_i, theta_i) = "
+                             f"{tuple(int(i) for i in dead[0])} is all zero (cannot be "
+                             "sampled)")  # fmt: skip
     out = {k: f[k] for k in MEASURED_FIELDS}
     out["description"] = bytes(f["description"]).decode("utf-8", "replace")
     out["jacobian"] = bool(f["jacobian"][0])
@@ -234,6 +245,12 @@ class Measured(BSDF):
 
     # -- shared steps ------------------------------------------------------------------------
 
+    def _tables(self):
+        """The private tables, outside differentiation (only ``rgb`` is a parameter; this keeps
+        the gradient programs small)."""
+        return jax.lax.stop_gradient((self._ndf, self._sigma, self._vndf, self._luminance,
+                                      self._theta_i, self._phi_i))  # fmt: skip
+
     def _reduce(self, wi):
         """Mitsuba's ``m_reduction`` mirroring: the signs ``(sx, sy)`` and the mirrored ``wi``."""
         if self.reduction < 2:
@@ -251,29 +268,14 @@ class Measured(BSDF):
         return jnp.stack([_mulsign_neg(v[..., 0], sx), _mulsign_neg(v[..., 1], sy), v[..., 2]],
                          axis=-1)  # fmt: skip
 
-    def _spec(self, sample, u_m, u_wi, corners):
+    def _spec(self, sample, u_m, u_wi, corners, tabs):
         """``rgb`` at the primary sample ``sample`` (..., 3), times ``D / (4 σ)`` if the file
         sets ``jacobian``."""
-        w, h = self.rgb.shape[-1], self.rgb.shape[-2]
-        flat = self.rgb.reshape(-1, 3, h * w)
-        p = jnp.clip(sample, 0.0, 1.0) * jnp.asarray([w - 1, h - 1], sample.dtype)
-        ox = jnp.minimum(p[..., 0].astype(jnp.int32), w - 2)
-        oy = jnp.minimum(p[..., 1].astype(jnp.int32), h - 2)
-        fx, fy = (p[..., 0] - ox)[..., None], (p[..., 1] - oy)[..., None]
-        i = ox + oy * w
-
-        def at(j):  # (..., 3): the channels of node j, interpolated over the slices
-            out = 0.0
-            for s, wt in corners:
-                out = out + jnp.asarray(wt)[..., None] * flat[s, :, j]
-            return out
-
-        v00, v10, v01, v11 = at(i), at(i + 1), at(i + w), at(i + w + 1)
-        spec = v00 + (v10 - v00) * fx
-        spec = spec + (v01 + (v11 - v01) * fx - spec) * fy
+        p, t = self.rgb.shape[:2]
+        spec = bilinear(self.rgb.reshape(p * t, *self.rgb.shape[2:]), sample, corners)
         if self.jacobian:
-            d = warp_eval(self._ndf, u_m)
-            sig = warp_eval(self._sigma, u_wi)
+            d = warp_eval(tabs[0], u_m)
+            sig = warp_eval(tabs[1], u_wi)
             spec = spec * safe_div(d, 4.0 * sig)[..., None]
         return spec
 
@@ -286,8 +288,9 @@ class Measured(BSDF):
         u_m = jnp.stack([_theta2u(theta_m), uy - jnp.floor(uy)], axis=-1)
         return theta_i, phi_i, u_wi, u_m
 
-    def _corners(self, phi_i, theta_i):
-        return param_corners([phi_i, theta_i], [self._phi_i, self._theta_i])
+    @staticmethod
+    def _corners(phi_i, theta_i, tabs):
+        return param_corners([phi_i, theta_i], [tabs[5], tabs[4]])
 
     @staticmethod
     def _jacobian(u_mx, sin_theta_m, wi, m):
@@ -308,11 +311,12 @@ class Measured(BSDF):
         m = v_o + v_i
         m = m / jnp.sqrt(vdot(m, m, keepdims=True))
         theta_i, phi_i, u_wi, u_m = self._coords(v_i, m)
-        corners = self._corners(phi_i, theta_i)
-        sample, vndf_pdf = warp_invert(self._vndf, u_m, corners)
+        tabs = self._tables()
+        corners = self._corners(phi_i, theta_i, tabs)
+        sample, vndf_pdf = warp_invert(tabs[2], u_m, corners)
         if want_eval:
-            return mask3(valid, self._spec(sample, u_m, u_wi, corners))
-        lum_pdf = warp_eval(self._luminance, sample, corners)
+            return mask3(valid, self._spec(sample, u_m, u_wi, corners, tabs))
+        lum_pdf = warp_eval(tabs[3], sample, corners)
         sin_m = safe_sqrt(m[..., 0] ** 2 + m[..., 1] ** 2)
         pdf = safe_div(vndf_pdf * lum_pdf, self._jacobian(u_m[..., 0], sin_m, v_i, m))
         return jnp.where(valid, pdf, 0.0)
@@ -333,10 +337,11 @@ class Measured(BSDF):
         sx, sy, v_i = self._reduce(v_i)
         theta_i, phi_i = _elevation(v_i), safe_atan2(v_i[..., 1], v_i[..., 0])
         u_wi = jnp.stack([_theta2u(theta_i), _phi2u(phi_i)], axis=-1)
-        corners = self._corners(phi_i, theta_i)
+        tabs = self._tables()
+        corners = self._corners(phi_i, theta_i, tabs)
         u = jnp.broadcast_to(jnp.stack([u2[..., 1], u2[..., 0]], axis=-1), shape + (2,))
-        sample, lum_pdf = warp_sample(self._luminance, u, corners)
-        u_m, ndf_pdf = warp_sample(self._vndf, sample, corners)
+        sample, lum_pdf = warp_sample(tabs[3], u, corners)
+        u_m, ndf_pdf = warp_sample(tabs[2], sample, corners)
         phi_m = (2.0 * u_m[..., 1] - 1.0) * _PI
         theta_m = jnp.square(u_m[..., 0]) * (_PI / 2)
         if self.isotropic:
@@ -346,7 +351,7 @@ class Measured(BSDF):
         jac = self._jacobian(u_m[..., 0], st, v_i, m)
         wi = 2.0 * vdot(m, v_i, keepdims=True) * m - v_i
         pdf = safe_div(ndf_pdf * lum_pdf, jac)
-        spec = self._spec(sample, u_m, u_wi, corners)
+        spec = self._spec(sample, u_m, u_wi, corners, tabs)
         wi = self._mirror(wi, sx, sy)
         valid = front & (wi[..., 2] > 0) & (pdf > 0)
         weight = safe_div(spec, pdf[..., None])

@@ -85,7 +85,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     ("bsdf", "pplastic"): "refused: no polarized BSDFs in jaxgfx",
     ("bsdf", "polarizer"): "refused: no polarized BSDFs in jaxgfx",
     ("bsdf", "retarder"): "refused: no polarized BSDFs in jaxgfx",
-    ("bsdf", "measured"): "refused: no measured BSDFs in jaxgfx",
+    ("bsdf", "measured"): S + " (RGB `.bsdf` files, not spectral ones; anisotropic ones not "
+                              "nested)",
     ("bsdf", "null"): S + " (`Null`: a mask of opacity 0; not nested)",
     ("bsdf", "hair"): S + " (`sigma_a` an RGB or a number, not a texture; not nested)",
     # textures
@@ -172,6 +173,7 @@ BSDF_TO_MITSUBA = {
     "Principled": "principled",
     "PrincipledThin": "principledthin",
     "Hair": "hair",
+    "Measured": "measured",
 }
 """jaxgfx BSDF class -> Mitsuba plugin (``Phong`` has none)."""
 
