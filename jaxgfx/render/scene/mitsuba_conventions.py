@@ -178,7 +178,7 @@ BSDF_TO_MITSUBA = {
 """jaxgfx BSDF class -> Mitsuba plugin (``Phong`` has none)."""
 
 ONE_SIDED_BSDFS = (
-    "diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "principled"
+    "diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "principled", "measured"
 )  # fmt: skip
 """Mitsuba BSDFs that are black from behind (``principled`` only without ``spec_trans``). The
 XML reader loads them ``one_sided: true`` unless a ``twosided`` encloses them; the writer wraps
