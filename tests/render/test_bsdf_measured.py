@@ -160,6 +160,7 @@ def test_warp_matches_the_closed_form_of_a_linear_density(x64):
         np.testing.assert_allclose(pdf2, pdf, rtol=1e-6)
 
 
+@pytest.mark.slow  # slow: ~8 s on 2 cores at load 7 (float64 warp compiles with 4 corners)
 def test_warp_invert_is_the_inverse_with_parameters(x64):
     """A random (2, 3, 7, 5) table over a 2 x 3 parameter grid: invert(sample(u)) = u at
     parameters between and beyond the nodes (clamped), and the density integrates to 1."""
@@ -187,8 +188,10 @@ def test_warp_invert_is_the_inverse_with_parameters(x64):
 # ---------------------------------------------------------------------- the BSDF
 
 
-@pytest.mark.parametrize("path, med, p90, mean", [(ISO, 0.012, 0.15, 0.015),
-                                                  (ANISO, 0.08, 0.55, 0.06)])  # fmt: skip
+@pytest.mark.parametrize("path, med, p90, mean", [
+    (ISO, 0.012, 0.15, 0.015),
+    pytest.param(ANISO, 0.08, 0.55, 0.06, marks=pytest.mark.slow),  # slow: ~6 s at load 7
+])  # fmt: skip
 def test_eval_matches_the_analytic_brdf_to_the_tables_resolution(path, med, p90, mean):
     """The tabulated GGX conductor against its closed form on 4000 random direction pairs
     (float32). Measured: ggx_iso (32 x 32 tables, 9 θ_i) median relative error 0.69 %, 90th
@@ -241,10 +244,8 @@ def test_sampler_chi2(x64, path, theta):
     assert d["pdf_integral"] <= 1.01
 
 
-BOTH = [ISO, pytest.param(ANISO, marks=pytest.mark.slow)]  # slow: ~10 s more compile each
-
-
-@pytest.mark.parametrize("path", BOTH)
+@pytest.mark.slow  # slow: ~7 s (iso) / 14 s (aniso) on 2 cores at load 7 (sampler compile)
+@pytest.mark.parametrize("path", [ISO, ANISO])
 def test_sample_pdf_and_weight_are_eval_over_pdf(path):
     b = Measured(path)
     rng = np.random.default_rng(3)
@@ -263,38 +264,57 @@ def test_sample_pdf_and_weight_are_eval_over_pdf(path):
     assert not np.any(np.asarray(s.weight)[~ok])
 
 
-@pytest.mark.parametrize("path", BOTH)
+_Z = [0.0, 0.0, 1.0]
+HARD_WO = np.asarray([_Z, [math.cos(1e-4), 0.0, math.sin(1e-4)], [0.6, 0.0, 1e-7],
+                      [0.3, 0.1, -0.9], _Z, [0.8, 0.0, 0.6]])  # fmt: skip
+HARD_WO /= np.linalg.norm(HARD_WO, axis=-1, keepdims=True)
+HARD_WI = np.asarray([_Z, [-0.6, 0.0, 0.8], [-0.6, 0.0, 0.8], _Z, [0.2, 0.3, -0.93], _Z])
+
+
+@jax.jit
+def _hard(b, wo, wi):
+    def loss(b, wo, wi):
+        return jnp.sum(b.eval(wo, wi)) + jnp.sum(b.pdf(wo, wi))
+
+    return b.eval(wo, wi), b.pdf(wo, wi), jax.grad(loss, argnums=(0, 1, 2))(b, wo, wi)
+
+
+@pytest.mark.parametrize("path", [ISO, pytest.param(ANISO, marks=pytest.mark.slow)])
 def test_hard_cases_values_and_gradients_finite(path):
     """Normal incidence (wo = wi = +z: φ of a pole), grazing θ_o → 90°, wo or wi below the
-    surface (0: one-sided; no sample), and a black table (0 everywhere, finite gradients)."""
+    surface (0: one-sided), and a black table (0 everywhere, finite gradients); values and
+    gradients w.r.t. the table and both directions. (Sampling at these: the next test.)"""
     b = Measured(path)
-    z = [0.0, 0.0, 1.0]
-    g = [math.cos(1e-4), 0.0, math.sin(1e-4)]
-    wo = jnp.asarray([z, g, [0.6, 0.0, 1e-7], [0.3, 0.1, -0.9], z, [0.8, 0.0, 0.6]], jnp.float32)
-    wi = jnp.asarray([z, [-0.6, 0.0, 0.8], [-0.6, 0.0, 0.8], z, [0.2, 0.3, -0.93], z],
-                     jnp.float32)  # fmt: skip
-    wo = wo / jnp.linalg.norm(wo, axis=-1, keepdims=True)
-    f, pdf = _ev(b, wo, wi)
+    wo, wi = jnp.asarray(HARD_WO, jnp.float32), jnp.asarray(HARD_WI, jnp.float32)
+    f, pdf, (gb, gwo, gwi) = _hard(b, wo, wi)
     assert np.all(np.isfinite(f)) and np.all(np.isfinite(pdf))
     assert np.all(np.asarray(f) >= 0) and np.all(np.asarray(pdf) >= 0)
     assert np.all(np.asarray(f)[3:5] == 0) and np.all(np.asarray(pdf)[3:5] == 0)
     assert float(f[0, 1]) > 0.1 and float(f[5, 1]) > 0 and float(pdf[1]) > 0
-
-    def loss(b, wo, wi):
-        return jnp.sum(b.eval(wo, wi)) + jnp.sum(b.pdf(wo, wi))
-
-    gb, gwo, gwi = jax.jit(jax.grad(loss, argnums=(0, 1, 2)))(b, wo, wi)
     assert np.all(np.isfinite(gb.rgb)) and np.any(gb.rgb != 0)
     assert np.all(np.isfinite(gwo)) and np.all(np.isfinite(gwi))
-    s = _smp(b, wo, jnp.full((6,), 0.5), jnp.full((6, 2), 0.3))
+    black = eqx.tree_at(lambda m: m.rgb, b, jnp.zeros_like(b.rgb))
+    fb, _, (gk, _, _) = _hard(black, wo, wi)
+    assert np.all(np.asarray(fb) == 0)
+    assert np.all(np.isfinite(gk.rgb)) and np.any(gk.rgb != 0)
+
+
+@pytest.mark.slow  # slow: ~10 s on 2 cores at load 7 (sampler and its gradient compile)
+@pytest.mark.parametrize("path", [ISO, ANISO])
+def test_hard_cases_sampling(path):
+    """``sample`` at the same hard cases: finite, no sample below the surface, black table ->
+    zero weights with finite gradients w.r.t. the table."""
+    b = Measured(path)
+    wo = jnp.asarray(HARD_WO, jnp.float32)
+    u1, u2 = jnp.full((6,), 0.5), jnp.full((6, 2), 0.3)
+    s = _smp(b, wo, u1, u2)
     assert np.all(np.isfinite(s.weight)) and np.all(np.isfinite(s.wi))
+    assert np.all(np.isfinite(s.pdf)) and float(s.pdf[0]) > 0 and float(s.pdf[1]) > 0
     assert np.all(np.asarray(s.weight)[3] == 0) and float(s.pdf[3]) == 0  # below: no sample
     black = eqx.tree_at(lambda m: m.rgb, b, jnp.zeros_like(b.rgb))
-    assert np.all(np.asarray(_ev(black, wo, wi)[0]) == 0)
-    assert np.all(np.asarray(_smp(black, wo, jnp.full((6,), 0.5), jnp.full((6, 2), 0.3)).weight)
-                  == 0)  # fmt: skip
-    gk = jax.jit(jax.grad(loss))(black, wo, wi)
-    assert np.all(np.isfinite(gk.rgb)) and np.any(gk.rgb != 0)
+    assert np.all(np.asarray(_smp(black, wo, u1, u2).weight) == 0)
+    g = jax.jit(jax.grad(lambda m: jnp.sum(m.sample(wo, u1, u2).weight)))(black)
+    assert np.all(np.isfinite(g.rgb)) and np.any(g.rgb != 0)
 
 
 def test_grazing_incidence_converges(iso):
@@ -312,6 +332,7 @@ def test_grazing_incidence_converges(iso):
     np.testing.assert_allclose(f, a, rtol=0.12)
 
 
+@pytest.mark.slow  # slow: ~12 s on 2 cores at load 7 (float64 eval + sampler, value and grad)
 def test_gradients_wrt_the_rgb_table_match_finite_differences(x64, iso):
     """float64: d/d(a scale of rgb) and d/d(two random perturbations of the whole table) of
     eval and of sample weights (the sampled directions do not depend on rgb) against central

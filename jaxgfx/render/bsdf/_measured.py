@@ -160,6 +160,12 @@ def _elevation(d):
     return 2.0 * jnp.arcsin(jnp.clip(0.5 * dist, -1.0, 1.0))
 
 
+def _atan2(y, x):
+    """``atan2`` as drjit computes it: a signed zero ``y`` counts as +0 (``-0`` -> +π, not -π,
+    for ``x < 0``); 0 at the origin with a zero gradient."""
+    return safe_atan2(jnp.where(y == 0, 0.0, y), x)
+
+
 def _theta2u(t):
     return safe_sqrt(t * (2.0 / _PI))
 
@@ -281,8 +287,8 @@ class Measured(BSDF):
 
     def _coords(self, wi, m):
         """``(θ_i, φ_i, u_wi, u_m)`` of the (mirrored) viewing direction and half vector."""
-        theta_i, phi_i = _elevation(wi), safe_atan2(wi[..., 1], wi[..., 0])
-        theta_m, phi_m = _elevation(m), safe_atan2(m[..., 1], m[..., 0])
+        theta_i, phi_i = _elevation(wi), _atan2(wi[..., 1], wi[..., 0])
+        theta_m, phi_m = _elevation(m), _atan2(m[..., 1], m[..., 0])
         u_wi = jnp.stack([_theta2u(theta_i), _phi2u(phi_i)], axis=-1)
         uy = _phi2u(phi_m - phi_i if self.isotropic else phi_m)
         u_m = jnp.stack([_theta2u(theta_m), uy - jnp.floor(uy)], axis=-1)
@@ -335,7 +341,7 @@ class Measured(BSDF):
         front = wo[..., 2] > 0
         v_i = jnp.where(front[..., None], wo, jnp.asarray([0.0, 0.0, 1.0], dt))
         sx, sy, v_i = self._reduce(v_i)
-        theta_i, phi_i = _elevation(v_i), safe_atan2(v_i[..., 1], v_i[..., 0])
+        theta_i, phi_i = _elevation(v_i), _atan2(v_i[..., 1], v_i[..., 0])
         u_wi = jnp.stack([_theta2u(theta_i), _phi2u(phi_i)], axis=-1)
         tabs = self._tables()
         corners = self._corners(phi_i, theta_i, tabs)
