@@ -49,7 +49,8 @@ def ggx_d(m, ax, ay):
 
 
 def sigma(w, ax, ay):
-    """Projected area of the GGX microsurface seen from ``w``: ``(cos + sqrt(cos² + α² sin²))/2``."""
+    """Projected area of the GGX microsurface seen from ``w``:
+    ``(cos + sqrt(cos² + α² sin²)) / 2``."""
     z = w[..., 2]
     s2 = w[..., 0] ** 2 + w[..., 1] ** 2
     a2 = np.where(s2 > 0, (ax * ax * w[..., 0] ** 2 + ay * ay * w[..., 1] ** 2) / np.where(

@@ -408,11 +408,15 @@ def _measured_file(m, where) -> str:
     from jaxgfx.render.bsdf._measured import read_measured
 
     if m.filename is None:
-        raise NotImplementedError(f"{where}: a Measured built from tables has no file; write "
-                                  "one with jaxgfx.render.bsdf._measured.write_measured")  # fmt: skip
+        raise NotImplementedError(
+            f"{where}: a Measured built from tables has no file; write one with "
+            "jaxgfx.render.bsdf._measured.write_measured"
+        )
     if not np.array_equal(np.asarray(m.rgb, np.float32), read_measured(m.filename)["rgb"]):
-        raise NotImplementedError(f"{where}.rgb: differs from the table of {m.filename}; write "
-                                  "it with write_measured(path, m.tables()) and use that file")  # fmt: skip
+        raise NotImplementedError(
+            f"{where}.rgb: differs from the table of {m.filename}; write it with "
+            "write_measured(path, m.tables()) and use that file"
+        )
     return m.filename
 
 
