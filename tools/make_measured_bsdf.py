@@ -131,7 +131,7 @@ def tables(alpha, f0, n_phi, n_theta, res, ndf_res=32):
 
 
 def main(out_dir):
-    from jaxgfx.render.bsdf._measured import write_measured
+    from jaxgfx.render.bsdf import write_measured
 
     os.makedirs(out_dir, exist_ok=True)
     for name, kw in FILES.items():

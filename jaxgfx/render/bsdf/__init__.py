@@ -22,6 +22,8 @@ from jaxgfx.render.bsdf._hair import Hair as Hair
 from jaxgfx.render.bsdf._mask import Mask as Mask
 from jaxgfx.render.bsdf._mask import Null as Null
 from jaxgfx.render.bsdf._measured import Measured as Measured
+from jaxgfx.render.bsdf._measured import read_measured as read_measured
+from jaxgfx.render.bsdf._measured import write_measured as write_measured
 from jaxgfx.render.bsdf._normalmap import BumpMap as BumpMap
 from jaxgfx.render.bsdf._normalmap import NormalMap as NormalMap
 from jaxgfx.render.bsdf._normalmap import TangentSpace as TangentSpace
@@ -59,6 +61,8 @@ __all__ = [
     "BSDF_TYPES",
     "make_bsdf",
     "rgb_param",
+    "read_measured",
+    "write_measured",
 ]
 
 BSDF_TYPES = {

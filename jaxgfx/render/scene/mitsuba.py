@@ -405,12 +405,12 @@ def _mitsuba_bsdf(m, where) -> dict:
 def _measured_file(m, where) -> str:
     """The ``.bsdf`` file of a ``Measured`` (absolute path), refused when its ``rgb`` is no
     longer the file's (a fit: write it with ``write_measured(path, m.tables())``)."""
-    from jaxgfx.render.bsdf._measured import read_measured
+    from jaxgfx.render.bsdf import read_measured
 
     if m.filename is None:
         raise NotImplementedError(
             f"{where}: a Measured built from tables has no file; write one with "
-            "jaxgfx.render.bsdf._measured.write_measured"
+            "jaxgfx.render.bsdf.write_measured"
         )
     if not np.array_equal(np.asarray(m.rgb, np.float32), read_measured(m.filename)["rgb"]):
         raise NotImplementedError(

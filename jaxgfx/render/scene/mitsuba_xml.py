@@ -800,7 +800,7 @@ def _measured(obj: _Obj, p: _Params, doc, nested, in_map) -> dict:
     """``measured`` (an RGL ``.bsdf`` file, relative to the XML file's folder): read and
     checked now, for file / line errors; an anisotropic file (more than two ``phi_i`` nodes)
     shades in Mitsuba's ``dp/du`` frame (:func:`_dpdu_frame`)."""
-    from jaxgfx.render.bsdf._measured import read_measured
+    from jaxgfx.render.bsdf import read_measured
 
     fname = p.string("filename")
     if fname is None:
