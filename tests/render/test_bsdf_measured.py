@@ -133,6 +133,8 @@ def test_constructor_arguments():
         Measured()
     with pytest.raises(TypeError, match="filename: expected a path"):
         Measured(3)
+    with pytest.raises(ValueError, match="filename: cannot read 'no.bsdf'"):
+        Measured("no.bsdf")
     b = make_bsdf({"type": "measured", "filename": ISO})
     assert isinstance(b, Measured) and b.isotropic and b.jacobian and b.reduction == 0
     assert "GGX" in b.description and b.rgb.shape == (1, 9, 3, 32, 32)

@@ -210,7 +210,13 @@ class Measured(BSDF):
         if filename is not None:
             if not isinstance(filename, (str, os.PathLike)):
                 raise TypeError(f"filename: expected a path, got {type(filename).__name__}")
-            tables = read_measured(filename)
+            try:
+                tables = read_measured(filename)
+            except OSError as e:
+                raise ValueError(f"filename: cannot read {os.fspath(filename)!r}: "
+                                 f"{e.strerror or e}") from None  # fmt: skip
+            except ValueError as e:
+                raise ValueError(f"filename: {e}") from None
             self.filename = os.path.abspath(os.fspath(filename))
         else:
             if not isinstance(tables, dict):
