@@ -154,7 +154,9 @@ def test_yaml_scene_filename_relative_to_the_file(tmp_path):
     scene = load_scene(str(p))
     assert isinstance(scene.materials[0], Measured)
     assert scene.materials[0].filename == str(tmp_path / "g.bsdf")
-    assert "materials.gold.rgb" in [q.path for q in scene.parameters()]
+    (q,) = [q for q in scene.parameters() if q.path.startswith("materials.gold.")]
+    assert q.path == "materials.gold.rgb" and q.bounds == (0.0, float("inf"))
+    assert q.shape == (1, 9, 3, 32, 32)
     p.write_text(YAML.format(f="nope.bsdf"))
     with pytest.raises(ValueError, match=r"materials.gold: filename: cannot read .*nope.bsdf"):
         load_scene(str(p))

@@ -88,6 +88,7 @@ PARAMETER_BOUNDS = {
     "intensity": (0.0, float("inf")),
     "cutoff_angle": (0.0, 180.0),
     "beam_width": (0.0, 180.0),
+    "rgb": (0.0, float("inf")),  # a measured BSDF's table (f cos θ times 4σ / D: may exceed 1)
 }
 """``(lower, upper)`` of a parameter by its last field name (what the constructors accept;
 reflectances at most 1 for energy conservation); others are unbounded."""
