@@ -77,6 +77,16 @@ def test_xml_reads_the_file_relative_to_the_scene(tmp_path):
     assert a["type"] == "normalmap" and a["bsdf"]["type"] == "measured" and a["one_sided"]
     s = load_scene(read_xml(_xml(tmp_path, f="ggx_aniso.bsdf")).desc)
     assert any(isinstance(x, NormalMap) and isinstance(x.bsdf, Measured) for x in s.materials)
+    # an isotropic file nests (no frame of its own); the writer wraps it in twosided there
+    blend = ('<bsdf type="blendbsdf"><float name="weight" value="0.3"/>'
+             + MEASURED.format(f="ggx_iso.bsdf") + '<bsdf type="diffuse"/></bsdf>')  # fmt: skip
+    x = read_xml(_xml(tmp_path, bsdf=blend))
+    s = load_scene(x.desc)
+    assert any(isinstance(getattr(m, "bsdf0", None), Measured) for m in s.materials)
+    (bd,) = [v["bsdf"] for v in to_mitsuba_dict(x.desc).values() if isinstance(v, dict)
+             and v.get("bsdf", {}).get("type") == "blendbsdf"]  # fmt: skip
+    assert bd["bsdf_0"] == {"type": "twosided", "bsdf": {
+        "type": "measured", "filename": str(tmp_path / "ggx_iso.bsdf")}}  # fmt: skip
 
 
 @pytest.mark.parametrize("case, match", [
