@@ -7,7 +7,10 @@ inversion); measured differences (iso / aniso; ``pytest -s`` prints them): |Δ e
 8.3e-7 (peaks 1.74 / 1.33), |Δ pdf| 9.5e-7 / 7.5e-7, sampled directions within 2.5e-5 / 4.4e-5,
 sample pdfs within 7.9e-5 / 1.3e-4 relative, weights within 7.2e-6 / 2.8e-5 relative; asserted
 1e-5 of the peak, 2e-4, 1e-3 and 5e-4. Power: the anisotropic file evaluated without Mitsuba's
-azimuth mirroring (``reduction`` 1) is off by more than 100 x the bound."""
+azimuth mirroring (``reduction`` 1) is off by more than 100 x the bound. Mitsuba's isotropic
+sampler depends on an uninitialised member (``m_reduction``); its samples are ours or their
+mirror images (see the test), checked by forcing jaxgfx's ``reduction`` to 2, 3, 4: ours but
+the pole, and about half mirrored, all with the same pdf and weight (to 8e-7)."""
 
 import jax
 import jax.numpy as jnp
@@ -77,15 +80,18 @@ def test_eval_pdf_sample_equal_mitsuba(mi, path):
     assert np.array_equal(np.asarray(s.weight).max(-1) > 0, ok)
     swi = np.asarray(s.wi)
     if b.isotropic:
-        # Mitsuba 3.9.1 leaves m_reduction unset for isotropic files (an uninitialised member;
-        # here it acts as 2: a viewing direction with y >= 0 is turned by π about the normal
-        # and the sample turned back). For an isotropic table that changes nothing except at
-        # the pole, whose azimuth is undefined: there the sample comes back turned by π.
-        np.testing.assert_allclose(np.abs(swi[0]), np.abs(wi_m[0]), atol=2e-4)
-        ok[0] = False
-    print(f"sampled directions {np.abs(swi[ok] - wi_m[ok]).max():.1e}, pdf rel "
-          f"{np.abs(np.asarray(s.pdf)[ok] / sp_m[ok] - 1).max():.1e}, weight rel "
-          f"{np.abs(np.asarray(s.weight)[ok] / w_m[ok] - 1).max():.1e}")
+        # Mitsuba 3.9.1 leaves m_reduction unset for isotropic files (an uninitialised member):
+        # by its value from run to run, the viewing direction is mirrored or turned by π about
+        # the normal before sampling and the sample mapped back. For an isotropic table that
+        # gives the same value, pdf and weight but possibly the sample's mirror image across
+        # the plane of incidence (or, at the pole, the sample turned by π): accept those.
+        p = np.stack([-wo[:, 1], wo[:, 0], 0 * wo[:, 0]], -1)
+        p /= np.maximum(np.linalg.norm(p, axis=-1, keepdims=True), 1e-30)
+        mirror = swi - 2 * np.sum(swi * p, -1, keepdims=True) * p
+        turned = swi * [-1, -1, 1]
+        best = np.argmin([np.abs(c - wi_m).max(-1) for c in (swi, mirror, turned)], axis=0)
+        swi = np.choose(best[:, None], [swi, mirror, turned])
+        print("isotropic samples as ours / mirrored / turned:", np.bincount(best, minlength=3))
     np.testing.assert_allclose(swi[ok], wi_m[ok], atol=2e-4)
     np.testing.assert_allclose(np.asarray(s.pdf)[ok], sp_m[ok], rtol=1e-3)
     np.testing.assert_allclose(np.asarray(s.weight)[ok], w_m[ok], rtol=5e-4)
