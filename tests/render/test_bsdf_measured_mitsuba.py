@@ -9,8 +9,9 @@ sample pdfs within 7.9e-5 / 1.3e-4 relative, weights within 7.2e-6 / 2.8e-5 rela
 1e-5 of the peak, 2e-4, 1e-3 and 5e-4. Power: the anisotropic file evaluated without Mitsuba's
 azimuth mirroring (``reduction`` 1) is off by more than 100 x the bound. Mitsuba's isotropic
 sampler depends on an uninitialised member (``m_reduction``); its samples are ours or their
-mirror images (see the test), checked by forcing jaxgfx's ``reduction`` to 2, 3, 4: ours but
-the pole, and about half mirrored, all with the same pdf and weight (to 8e-7)."""
+mirror images, or the pole's sample turned by π (the forms jaxgfx itself gives with its
+``reduction`` forced to 2 or 4, same values, pdf and weight:
+test_bsdf_measured.py::test_isotropic_file_ignores_azimuth_mirroring)."""
 
 import jax
 import jax.numpy as jnp
