@@ -143,6 +143,10 @@ def test_constructor_arguments():
     t = read_measured(ISO)
     c = Measured(tables=t)
     assert c.filename is None and np.array_equal(c.rgb, b.rgb)
+    with pytest.raises(ValueError, match=r"tables: field 'vndf': expected float32 with 4 axes"):
+        Measured(tables={**t, "vndf": t["vndf"][0]})
+    with pytest.raises(ValueError, match=r"tables: missing \['rgb'\]"):
+        Measured(tables={k: v for k, v in t.items() if k != "rgb"})
 
 
 # ---------------------------------------------------------------------- the warp

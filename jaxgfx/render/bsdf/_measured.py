@@ -85,7 +85,11 @@ def read_measured(path) -> dict:
     field, a wrong dtype / number of axes / shape, grids smaller than 2 x 2, or ``theta_i`` /
     ``phi_i`` not increasing."""
     path = os.fspath(path)
-    f = read_tensor_file(path)
+    return _check_fields(path, read_tensor_file(path))
+
+
+def _check_fields(path, f) -> dict:
+    """:func:`read_measured`'s checks of the fields ``f`` (errors start with ``path``)."""
     if "wavelengths" in f:
         raise ValueError(f"{path}: a spectral measurement (field 'wavelengths'): Mitsuba "
                          "renders these only in its spectral variants and jaxgfx renders RGB; "
@@ -135,22 +139,28 @@ def read_measured(path) -> dict:
     return out
 
 
+def _as_file_fields(fields: dict) -> dict:
+    """``fields`` with the file's dtypes (float32 tables, uint8 ``description`` / ``jacobian``)."""
+    out = {}
+    for k in MEASURED_FIELDS:
+        v = fields[k]
+        if k == "description":
+            out[k] = np.frombuffer(str(v).encode("utf-8"), np.uint8)
+        elif k == "jacobian":
+            out[k] = np.asarray([1 if bool(np.asarray(v).reshape(-1)[0]) else 0], np.uint8)
+        else:
+            out[k] = np.asarray(v, np.float32)
+    return out
+
+
 def write_measured(path, fields: dict) -> None:
     """Write an RGB ``.bsdf`` file from ``fields`` (the keys of :data:`MEASURED_FIELDS`; arrays
     are stored as float32, ``description`` a ``str``, ``jacobian`` a bool), then read it back
     through :func:`read_measured` (so a malformed table fails here, naming the field)."""
-    out = {}
-    for k in MEASURED_FIELDS:
-        if k not in fields:
-            raise ValueError(f"fields: missing {k!r}")
-        v = fields[k]
-        if k == "description":
-            out[k] = str(v)
-        elif k == "jacobian":
-            out[k] = np.asarray([1 if v else 0], np.uint8)
-        else:
-            out[k] = np.asarray(v, np.float32)
-    write_tensor_file(path, out)
+    missing = [k for k in MEASURED_FIELDS if k not in fields]
+    if missing:
+        raise ValueError(f"fields: missing {missing}")
+    write_tensor_file(path, _as_file_fields(fields))
     read_measured(path)
 
 
@@ -224,6 +234,7 @@ class Measured(BSDF):
             missing = [k for k in MEASURED_FIELDS if k not in tables]
             if missing:
                 raise ValueError(f"tables: missing {missing}")
+            tables = _check_fields("tables", _as_file_fields(tables))
             self.filename = None
         phi = np.asarray(tables["phi_i"], np.float32)
         theta = np.asarray(tables["theta_i"], np.float32)
