@@ -138,6 +138,38 @@ MUTANTS = [
         "tests": ["tests/render/test_bsdf_aniso.py"],
         "why": "two terms swapped (issue 15: the default test_bsdf.py missed it)",
     },
+    {
+        "name": "render.measured.jacobian_half",
+        "file": "jaxgfx/render/bsdf/_measured.py",
+        "old": "jnp.maximum(2.0 * _PI**2 * u_mx * sin_theta_m, 1e-6)",
+        "new": "jnp.maximum(_PI**2 * u_mx * sin_theta_m, 1e-6)",
+        "tests": [
+            "tests/render/test_bsdf_measured.py::test_pdf_integrates_to_one_over_the_hemisphere"
+        ],
+        "why": "a factor of 2 dropped in the u_m -> solid angle Jacobian",
+    },
+    {
+        "name": "render.measured.theta2u_scale",
+        "file": "jaxgfx/render/bsdf/_measured.py",
+        "old": "return safe_sqrt(t * (2.0 / _PI))",
+        "new": "return safe_sqrt(t * (1.9 / _PI))",
+        "tests": [
+            "tests/render/test_bsdf_measured.py::"
+            "test_eval_matches_the_analytic_brdf_to_the_tables_resolution"
+        ],
+        "why": "a constant off by 5 % in the elevation -> unit-square map",
+    },
+    {
+        "name": "render.marginal2d.sample_segment_width",
+        "file": "jaxgfx/render/bsdf/_marginal2d.py",
+        "old": "u = u * (2.0 * inv_width)",
+        "new": "u = u * inv_width",
+        "tests": [
+            "tests/render/test_bsdf_measured.py::"
+            "test_warp_matches_the_closed_form_of_a_linear_density"
+        ],
+        "why": "a factor of 2 dropped in the linear-segment inversion",
+    },
     # ------------------------------------------------------------------ render: integrators
     {
         "name": "render.path.throughput_x1.05",

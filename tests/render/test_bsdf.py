@@ -333,6 +333,10 @@ def test_make_bsdf_and_errors():
             with pytest.raises(ValueError, match="'blendbsdf' needs 'bsdf0', 'bsdf1'"):
                 make_bsdf({"type": name})
             continue
+        if name == "measured":  # the material is its file (or tables): nothing to default to
+            with pytest.raises(ValueError, match="filename: give exactly one"):
+                make_bsdf({"type": name})
+            continue
         if name in ("normalmap", "bumpmap", "mask"):  # wrappers: the nested BSDF is theirs to name
             with pytest.raises(ValueError, match="bsdf: missing nested BSDF"):
                 make_bsdf({"type": name})

@@ -21,6 +21,9 @@ from jaxgfx.render.bsdf._diffuse import Diffuse as Diffuse
 from jaxgfx.render.bsdf._hair import Hair as Hair
 from jaxgfx.render.bsdf._mask import Mask as Mask
 from jaxgfx.render.bsdf._mask import Null as Null
+from jaxgfx.render.bsdf._measured import Measured as Measured
+from jaxgfx.render.bsdf._measured import read_measured as read_measured
+from jaxgfx.render.bsdf._measured import write_measured as write_measured
 from jaxgfx.render.bsdf._normalmap import BumpMap as BumpMap
 from jaxgfx.render.bsdf._normalmap import NormalMap as NormalMap
 from jaxgfx.render.bsdf._normalmap import TangentSpace as TangentSpace
@@ -43,6 +46,7 @@ __all__ = [
     "BSDFSample",
     "Diffuse",
     "Hair",
+    "Measured",
     "Mirror",
     "Phong",
     "Principled",
@@ -67,6 +71,8 @@ __all__ = [
     "BSDF_TYPES",
     "make_bsdf",
     "rgb_param",
+    "read_measured",
+    "write_measured",
 ]
 
 BSDF_TYPES = {
@@ -92,6 +98,7 @@ BSDF_TYPES = {
     "polarizer": Polarizer,
     "circular": CircularPolarizer,
     "retarder": Retarder,
+    "measured": Measured,
 }
 
 

@@ -5,6 +5,7 @@ loader, which imports the XML reader, which imports the writer)."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 
 from jaxgfx.render.bsdf import BSDF_TYPES, Mask, PassThrough, make_bsdf
@@ -31,6 +32,7 @@ def material_from_desc(desc, *, where="material", base_dir=None):
     :func:`~jaxgfx.render.scene.load_scene`) is ignored here.
     """
     desc = dict(desc)
+    _resolve_measured(desc, base_dir)
     # one-sidedness is the scene's (Scene.one_sided, read by load_scene), not the BSDF's
     desc.pop("one_sided", None)
     pre = f"{where}." if where else ""
@@ -64,6 +66,13 @@ def material_from_desc(desc, *, where="material", base_dir=None):
             raise ValueError(f"{pre}{k}: texture values must be {need}, got min {lo}")
         textures[k] = tex
     return Textured(bsdf, textures)
+
+
+def _resolve_measured(desc, base_dir) -> None:
+    """A ``measured`` material's relative ``filename`` is relative to ``base_dir``."""
+    path = desc.get("filename") if desc.get("type") == "measured" else None
+    if isinstance(path, (str, os.PathLike)) and base_dir and not os.path.isabs(path):
+        desc["filename"] = os.path.join(base_dir, os.fspath(path))
 
 
 def check_one_sided(value, material, where) -> bool:

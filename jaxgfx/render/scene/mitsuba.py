@@ -408,9 +408,29 @@ def _mitsuba_bsdf(m, where) -> dict:
             out.update(sigma_a=_rgb(m.sigma_a), scale=_float(m.scale))
     elif kind in ("principled", "principledthin"):
         out = _principled_keys(m, where)
+    elif kind == "measured":
+        out = {"type": kind, "filename": _measured_file(m, where)}
     else:
         raise NotImplementedError(f"{where}.type: {type(m).__name__} has no Mitsuba 3 mapping")
     return out
+
+
+def _measured_file(m, where) -> str:
+    """The ``.bsdf`` file of a ``Measured`` (absolute path), refused when its ``rgb`` is no
+    longer the file's (a fit: write it with ``write_measured(path, m.tables())``)."""
+    from jaxgfx.render.bsdf import read_measured
+
+    if m.filename is None:
+        raise NotImplementedError(
+            f"{where}: a Measured built from tables has no file; write one with "
+            "jaxgfx.render.bsdf.write_measured"
+        )
+    if not np.array_equal(np.asarray(m.rgb, np.float32), read_measured(m.filename)["rgb"]):
+        raise NotImplementedError(
+            f"{where}.rgb: differs from the table of {m.filename}; write it with "
+            "write_measured(path, m.tables()) and use that file"
+        )
+    return m.filename
 
 
 _MAP_KEYS = {"normalmap": "normalmap", "bumpmap": "height"}
@@ -1204,6 +1224,8 @@ def _bsdf_desc(m, where) -> dict:
         out.update({k: _list(getattr(m, k)) for k in weights})
         out.update({k: _list(getattr(m, k)) for k in optional if getattr(m, k) is not None})
         return {**out, **{k: getattr(m, k) for k in rates}}
+    if isinstance(m, B.Measured):
+        return {"type": "measured", "filename": _measured_file(m, where)}
     if isinstance(m, B.Hair):
         out = {
             "type": "hair",

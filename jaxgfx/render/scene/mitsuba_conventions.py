@@ -91,7 +91,8 @@ PLUGINS: dict[tuple[str, str], str] = {
     "0.5 x `transmittance`; `left_handed` has no effect; not nested)",
     ("bsdf", "retarder"): S + " (unpolarised, as Mitsuba's RGB variants: a pass-through of "
     "`transmittance`; `theta`, `delta` have no effect; not nested)",
-    ("bsdf", "measured"): "refused: no measured BSDFs in jaxgfx",
+    ("bsdf", "measured"): S + " (RGB `.bsdf` files, not spectral ones; anisotropic ones not "
+                              "nested)",
     ("bsdf", "null"): S + " (`Null`: a mask of opacity 0; not nested)",
     ("bsdf", "hair"): S + " (`sigma_a` an RGB or a number, not a texture; not nested)",
     # textures
@@ -189,11 +190,13 @@ BSDF_TO_MITSUBA = {
     "Principled": "principled",
     "PrincipledThin": "principledthin",
     "Hair": "hair",
+    "Measured": "measured",
 }
 """jaxgfx BSDF class -> Mitsuba plugin (``Phong`` has none)."""
 
 ONE_SIDED_BSDFS = (
-    "diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "principled", "pplastic"
+    "diffuse", "conductor", "roughconductor", "plastic", "roughplastic", "principled", "pplastic",
+    "measured",
 )  # fmt: skip
 """Mitsuba BSDFs that are black from behind (``principled`` only without ``spec_trans``). The
 XML reader loads them ``one_sided: true`` unless a ``twosided`` encloses them; the writer wraps

@@ -785,19 +785,39 @@ def _distribution(p: _Params, aniso=False):
     return out
 
 
-def _dpdu_frame(m: dict, obj: _Obj, nested, in_map) -> dict:
+def _dpdu_frame(m: dict, obj: _Obj, nested, in_map, aniso=None) -> dict:
     """An anisotropic ``roughconductor`` (``alpha_v``) or ``principled`` / ``principledthin``
     (``anisotropic``) outside a normal map: wrapped in the identity normal map
     ``(0.5, 0.5, 1)`` (no flip, no shadowing factor), whose perturbed frame is the unperturbed
     one with the tangent ``dp/du``: Mitsuba's shading frame (jaxgfx's own plain frame has
     another tangent). Inside a normal map the nested BSDF already has that frame."""
-    if ("alpha_v" not in m and "anisotropic" not in m) or in_map:
+    if aniso is None:
+        aniso = "alpha_v" in m or "anisotropic" in m
+    if not aniso or in_map:
         return m
     if nested:
         raise ValueError(f"{obj.where}: an anisotropic {obj.type} inside a blendbsdf or "
                          "mask is not supported (its dp/du tangent frame)")  # fmt: skip
     return {"type": "normalmap", "normalmap": [0.5, 0.5, 1.0], "bsdf": m,
             "flip_invalid_normals": False, "use_shadowing_function": False}  # fmt: skip
+
+
+def _measured(obj: _Obj, p: _Params, doc, nested, in_map) -> dict:
+    """``measured`` (an RGL ``.bsdf`` file, relative to the XML file's folder): read and
+    checked now, for file / line errors; an anisotropic file (more than two ``phi_i`` nodes)
+    shades in Mitsuba's ``dp/du`` frame (:func:`_dpdu_frame`)."""
+    from jaxgfx.render.bsdf import read_measured
+
+    fname = p.string("filename")
+    if fname is None:
+        raise ValueError(f"{obj.where}: missing parameter 'filename'")
+    path = doc.resolve(fname, obj.props["filename"].node, obj.label)
+    try:
+        f = read_measured(path)
+    except (OSError, ValueError) as e:
+        raise p.err("filename", str(e)) from None
+    m = {"type": "measured", "filename": os.path.abspath(path)}
+    return _dpdu_frame(m, obj, nested, in_map, aniso=f["phi_i"].shape[0] > 2)
 
 
 def _conductor(p: _Params) -> dict:
@@ -1052,6 +1072,8 @@ def _bsdf_dict(obj: _Obj, doc, *, nested=False, in_map=False) -> dict:
         m = _dpdu_frame(_principled(p), obj, nested, in_map)
     elif t == "principledthin":
         m = _dpdu_frame(_principledthin(p), obj, nested, in_map)
+    elif t == "measured":
+        m = _measured(obj, p, doc, nested, in_map)
     elif t == "hair":
         if nested or in_map:
             raise ValueError(f"{obj.where}: a hair BSDF nested in another BSDF is not supported "

@@ -93,6 +93,7 @@ PARAMETER_BOUNDS = {
     "albedo": (0.0, 1.0),
     "sun_scale": (0.0, float("inf")),
     "sky_scale": (0.0, float("inf")),
+    "rgb": (0.0, float("inf")),  # a measured BSDF's table (f cos θ times 4σ / D: may exceed 1)
 }
 """``(lower, upper)`` of a parameter by its last field name (what the constructors accept;
 reflectances at most 1 for energy conservation); others are unbounded."""
