@@ -453,10 +453,10 @@ def test_disk_is_a_fan_of_256_triangles(tmp_path):
             "<shape type='sdfgrid'>: missing parameter 'filename'",
         ),  # fmt: skip
         (
-            '<bsdf type="polarizer" id="p"/>',
+            '<bsdf type="measured_polarized" id="p"/>',
             10,
-            "<bsdf type='polarizer' id='p'>: bsdf plugin 'polarizer' is not supported (no "
-            "polarized BSDFs in jaxgfx)",
+            "<bsdf type='measured_polarized' id='p'>: bsdf plugin 'measured_polarized' is not "
+            "supported (unknown plugin; supported: diffuse,",
         ),  # fmt: skip
         (
             '<emitter type="sunsky"><float name="turbidity" value="12"/></emitter>',
