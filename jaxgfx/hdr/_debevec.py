@@ -14,6 +14,11 @@ from .weighting import get_weighting
 
 DEBEVEC_MAX_CANDIDATES = 1 << 14
 
+DEBEVEC_SAMPLES = 1 << 14
+"""Default ``n_samples`` of ``"debevec"``: as many as the candidate grid holds
+(:data:`DEBEVEC_MAX_CANDIDATES`), i.e. every candidate of a bin with at most
+``n_samples / 32`` of them (docs/hdr.md, "Pixel samples")."""
+
 SPARSE_OVERLAP = 0.06
 """Default ``sparse_overlap`` of ``"debevec"``: a channel in which fewer than this fraction of
 the candidate pixels is well exposed (8-bit levels 16…239, :data:`WELL_EXPOSED`) in at least
@@ -31,6 +36,24 @@ the channel's 3-parameter curve-space fit ``g_sub`` (:mod:`jaxgfx.hdr._subspace`
 ``n_poly=0``), ``λ S(g − g_sub)``, in every fit; ``"auto"``: the inverse-slope fit
 with the ``"subspace"`` prior is a third candidate of the leave-one-out choice (with
 ``reweight_passes > 0``; the end-weighted fit and the plain inverse-slope fit keep ``"none"``)."""
+
+PRIOR_STRENGTHS = (1.0, 10.0)
+"""Default ``prior_strengths`` of ``"debevec"``: with ``smooth_prior="auto"`` one candidate of
+the self-check per entry, the inverse-slope fit with the curve-space smoothness prior at
+``λ · s``."""
+
+
+def _check_strengths(v):
+    try:
+        out = tuple(float(x) for x in v)
+    except (TypeError, ValueError):
+        out = ()
+    if not out or len(out) > 4 or not all(0 < x < 1e6 for x in out):
+        raise ValueError(
+            f"prior_strengths: expected 1 to 4 numbers in (0, 1e6) (multiples of lam), got {v!r}"
+        )
+    return out
+
 
 WELL_EXPOSED = (16.0 / 255.0, 239.0 / 255.0)
 """Normalised level range counted as well exposed by :func:`bracket_overlap` (1/16 of the
@@ -162,17 +185,32 @@ def inverse_slope_weights(g, anchor_index):
     return jnp.minimum(ref / sl, 1.0)
 
 
-def _inverse_slope_fit(g0, lev, base, solve, m, passes):
-    """``passes`` refits with :func:`inverse_slope_weights` of the previous curve, from
-    ``g0``: ``(g, w)``."""
-    g1 = g0
-    for _ in range(passes):
-        f = inverse_slope_weights(g1, m)
+def _refit_chain(g0, lev, base, log_t, n_lev, m, stages, passes, g_sub):
+    """The inverse-slope refits, ``passes`` per stage, each from the previous curve (from
+    ``g0`` ``(C, L)``): stage ``(lam, prior)`` solves with data weights
+    :func:`inverse_slope_weights` of the previous curve times ``base``, smoothness ``lam`` and,
+    if ``prior``, the curve-space prior ``g_sub`` (:func:`debevec_solve`). One ``lax.scan``
+    over all refits: the program holds one solve (its LAPACK calls ordered by the loop) however
+    many candidates there are. Returns every refit's ``(g, w)`` stacked, ``(S·passes, C, ...)``."""
+    lams = jnp.asarray([lm for lm, _ in stages for _ in range(passes)], base.dtype)
+    use = jnp.asarray([float(p) for _, p in stages for _ in range(passes)], base.dtype)
+    gp0 = jnp.zeros_like(g0) if g_sub is None else g_sub
+    solve = jax.vmap(
+        lambda lv, ww, gp, lm: debevec_solve(lv, ww, log_t, n_lev, lm, m, gp),
+        in_axes=(0, 0, 0, None),
+    )
+
+    def step(g, xs):
+        lm, u = xs
+        f = inverse_slope_weights(g, m)
         w1 = base * jnp.take_along_axis(
             f[:, None, :], lev.reshape(lev.shape[0], 1, -1), axis=2
         ).reshape(lev.shape)
-        g1 = solve(lev, w1)
-    return g1, w1
+        g1 = solve(lev, w1, gp0 * u, lm)
+        return g1, (g1, w1)
+
+    _, (gs, ws) = jax.lax.scan(step, g0, (lams, use))
+    return gs, ws
 
 
 def _select_by_loo(z, t, candidates, m, anchor_z):
@@ -277,7 +315,7 @@ def recover_debevec(
     code_max,
     *,
     key=None,
-    n_samples: int = 4096,
+    n_samples: int = DEBEVEC_SAMPLES,
     lam: float = 1e-6,
     n_levels: int | None = None,
     weighting: str = "hat",
@@ -286,7 +324,8 @@ def recover_debevec(
     max_candidates: int = None,
     reweight_passes: int = 3,
     sparse_overlap: float = SPARSE_OVERLAP,
-    smooth_prior: str = "none",
+    smooth_prior: str = "auto",
+    prior_strengths: tuple = PRIOR_STRENGTHS,
 ):
     """Debevec & Malik (1997) response recovery (method ``"debevec"``).
 
@@ -354,6 +393,7 @@ def recover_debevec(
     ):
         raise ValueError(f"reweight_passes: expected an integer in 0…10, got {reweight_passes!r}")
     check_choice(smooth_prior, "smooth_prior", SMOOTH_PRIORS)
+    prior_strengths = _check_strengths(prior_strengths)
     anchor_z = resolve_anchor(anchor)
     n_lev = default_levels(code_max, n_levels)
     lev, w, interior, valid = debevec_samples(
@@ -364,31 +404,27 @@ def recover_debevec(
     g_sub = ws = None
     if sparse_overlap > 0 or smooth_prior != "none":
         g_sub, ws = _subspace_fit(lev, interior, valid, log_t, m, lam, n_lev, w.dtype)
-    if g_sub is not None:
-        vsolve = jax.vmap(lambda lv, ww, gp: debevec_solve(lv, ww, log_t, n_lev, lam, m, gp))
-
-        def solve_prior(lv, ww):
-            return vsolve(lv, ww, g_sub)
-
-    solve_plain = jax.vmap(lambda lv, ww: debevec_solve(lv, ww, log_t, n_lev, lam, m))
-    solve = solve_prior if smooth_prior == "subspace" else solve_plain
-    g = solve(lev, w)  # (C, L)
+    zero = jnp.zeros((z.shape[-1], n_lev), w.dtype)
+    g = jax.vmap(lambda lv, ww, gp: debevec_solve(lv, ww, log_t, n_lev, lam, m, gp))(
+        lev, w, g_sub if smooth_prior == "subspace" else zero
+    )  # (C, L)
     extra = {}
     if reweight_passes > 0:
         base = interior.astype(w.dtype) * valid[..., None].astype(w.dtype)
-        cands = [(g, w), _inverse_slope_fit(g, lev, base, solve, m, reweight_passes)]
+        # the chains of refits, one after the other: the plain inverse-slope fit, then (with
+        # "auto") one prior'd chain per strength, each started from the previous chain's curve
         if smooth_prior == "auto":
-            # started from the plain inverse-slope fit: a data dependency, so the two chains of
-            # solves run one after the other (run side by side, the XLA CPU runtime hung
-            # intermittently, every thread in a futex wait, on 256x256 real brackets)
-            cands.append(
-                _inverse_slope_fit(cands[1][0], lev, base, solve_prior, m, reweight_passes)
-            )
+            stages = [(lam, False)] + [(lam * s_k, True) for s_k in prior_strengths]
+        else:
+            stages = [(lam, smooth_prior == "subspace")]
+        gs, ws_ = _refit_chain(g, lev, base, log_t, n_lev, m, stages, reweight_passes, g_sub)
+        ends = [(k + 1) * reweight_passes - 1 for k in range(len(stages))]
+        cands = [(g, w)] + [(gs[e], ws_[e]) for e in ends]
         g, w, k, errs = _select_by_loo(z, t, cands, m, anchor_z)
         extra = {
             "loo_candidates": errs,
             "inverse_slope_chosen": k >= 1,
-            "prior_chosen": (k == 2)
+            "prior_chosen": (k >= 2)
             if smooth_prior == "auto"
             else jnp.asarray(smooth_prior == "subspace"),
         }
