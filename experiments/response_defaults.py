@@ -74,9 +74,7 @@ def _candidates(st, strengths=(1.0, 3.0, 10.0, 100.0), lam=1e-6, passes=3):
     z = jnp.asarray(st.images, jnp.float32) / 255.0
     t = jnp.asarray(st.exposure_times, jnp.float32)
     n_lev, m = 256, 127
-    lev, w, interior, valid = D.debevec_samples(
-        z, None, D.DEBEVEC_SAMPLES, None, n_lev, "hat", 0.2
-    )
+    lev, w, interior, valid = D.debevec_samples(z, None, D.DEBEVEC_SAMPLES, None, n_lev, "hat", 0.2)
     log_t = jnp.log(t)
     g_sub, _ = D._subspace_fit(lev, interior, valid, log_t, m, lam, n_lev, w.dtype)
     zero = jnp.zeros_like(g_sub)
@@ -154,7 +152,9 @@ def rows():
         for k, o in _fits().items():
             r = hdr.recover_response(st.images, st.exposure_times, **o)
             e = hdr.merge_radiance(st.images, st.exposure_times, r)
-            row[k] = _r([hdr.response_curve_error(r, st.response), hdr.radiance_error(e, st.radiance)])
+            row[k] = _r(
+                [hdr.response_curve_error(r, st.response), hdr.radiance_error(e, st.radiance)]
+            )
             row[k + " candidates"] = cands(r)
         log(row)
         out.append(row)

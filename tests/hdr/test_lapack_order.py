@@ -28,9 +28,7 @@ def test_the_debevec_program_with_the_prior_orders_its_lapack_calls():
     z, t = _stack()
     for opts in ((), (("smooth_prior", "none"),)):  # the default ("auto") and without the prior
         text = (
-            R._recover_jit.lower(
-                z, t, jax.random.key(0), method="debevec", code_max=255, opts=opts
-            )
+            R._recover_jit.lower(z, t, jax.random.key(0), method="debevec", code_max=255, opts=opts)
             .compile()
             .as_text()
         )
