@@ -74,7 +74,7 @@ def _candidates(st, strengths=(1.0, 3.0, 10.0, 100.0), lam=1e-6, passes=3):
     z = jnp.asarray(st.images, jnp.float32) / 255.0
     t = jnp.asarray(st.exposure_times, jnp.float32)
     n_lev, m = 256, 127
-    lev, w, interior, valid = D.debevec_samples(z, None, D.DEBEVEC_SAMPLES, None, n_lev, "hat", 0.2)
+    lev, w, interior, valid = D.debevec_samples(z, None, None, None, n_lev, "hat", 0.2)
     log_t = jnp.log(t)
     g_sub, _ = D._subspace_fit(lev, interior, valid, log_t, m, lam, n_lev, w.dtype)
     zero = jnp.zeros_like(g_sub)

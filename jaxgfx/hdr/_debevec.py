@@ -9,15 +9,25 @@ from .._checks import check_choice, check_nonnegative
 from .._math import spd_solve_small
 from ._curve_space import response_basis
 from ._model import CameraResponse, resolve_anchor
-from ._sampling import level_index, monotone_repair, select_samples
+from ._sampling import _stride_for, level_index, monotone_repair, select_samples
 from .weighting import get_weighting
 
 DEBEVEC_MAX_CANDIDATES = 1 << 14
 
-DEBEVEC_SAMPLES = 1 << 14
-"""Default ``n_samples`` of ``"debevec"``: as many as the candidate grid holds
-(:data:`DEBEVEC_MAX_CANDIDATES`), i.e. every candidate of a bin with at most
-``n_samples / 32`` of them (docs/hdr.md, "Pixel samples")."""
+
+def grid_samples(h, w, max_candidates=None):
+    """Default ``n_samples`` of ``"debevec"`` for an ``h × w`` image: the number of pixels of
+    :func:`select_samples`' candidate grid (at most ``max_candidates``, default
+    :data:`DEBEVEC_MAX_CANDIDATES`), rounded down to a multiple of its 32 intensity bins (at
+    least 32): as many samples as candidates, so a bin with its share of them keeps every one
+    (docs/hdr.md, "Pixel samples")."""
+    mc = DEBEVEC_MAX_CANDIDATES if max_candidates is None else int(max_candidates)
+    s = _stride_for(h, w, mc)
+    oy = (h - 1 - ((h - 1) // s) * s) // 2
+    ox = (w - 1 - ((w - 1) // s) * s) // 2
+    n = len(range(oy, h, s)) * len(range(ox, w, s))
+    return max(32, (n // 32) * 32)
+
 
 SPARSE_OVERLAP = 0.06
 """Default ``sparse_overlap`` of ``"debevec"``: a channel in which fewer than this fraction of
@@ -255,6 +265,8 @@ def debevec_samples(z, key, n_samples, max_candidates, n_lev, weighting, end_wei
     if key is None:
         key = jax.random.key(0)
     mc = DEBEVEC_MAX_CANDIDATES if max_candidates is None else int(max_candidates)
+    if n_samples is None:
+        n_samples = grid_samples(z.shape[1], z.shape[2], mc)
     samples, valid = select_samples(
         key, z, n_samples=n_samples, flat_reach=2, max_candidates=max(mc, n_samples)
     )
@@ -315,7 +327,7 @@ def recover_debevec(
     code_max,
     *,
     key=None,
-    n_samples: int = DEBEVEC_SAMPLES,
+    n_samples: int | None = None,
     lam: float = 1e-6,
     n_levels: int | None = None,
     weighting: str = "hat",
