@@ -169,7 +169,7 @@ def test_defaults_beat_opencv_on_measured_curves_aeb(curve):
     assert ours < cv, (curve, ours, cv)
 
 
-# slow: ~15 s on 2 cores (2 fits + OpenCV). Issue 26's last measured-curve row (a strict xfail
+# slow: ~17 s on 2 cores (2 fits + OpenCV). Issue 26's last measured-curve row (a strict xfail
 # until the prior'd candidates and 16 384 samples became the default): 42 % of the pixels are
 # well exposed in 2 frames, so the sparse rule keeps the free table, and the self-check picks
 # the inverse-slope fit whose smoothness pulls towards the channel's curve-space fit (measured
