@@ -43,9 +43,10 @@ SMOOTH_PRIORS = ("auto", "subspace", "none")
 """Values of ``smooth_prior`` of ``"debevec"``: what the smoothness term pulls the table
 towards. ``"none"``: a straight line, ``λ S(g)`` (Debevec & Malik's term); ``"subspace"``:
 the channel's 3-parameter curve-space fit ``g_sub`` (:mod:`jaxgfx.hdr._subspace`,
-``n_poly=0``), ``λ S(g − g_sub)``, in every fit; ``"auto"``: the inverse-slope fit
-with the ``"subspace"`` prior is a third candidate of the leave-one-out choice (with
-``reweight_passes > 0``; the end-weighted fit and the plain inverse-slope fit keep ``"none"``)."""
+``n_poly=0``), ``λ S(g − g_sub)``, in every fit; ``"auto"`` (the default): the
+inverse-slope fit with the ``"subspace"`` prior at each of ``prior_strengths`` (× ``λ``) is a
+candidate of the leave-one-out choice (with ``reweight_passes > 0``; the end-weighted fit and
+the plain inverse-slope fit keep ``"none"``)."""
 
 PRIOR_STRENGTHS = (1.0, 10.0)
 """Default ``prior_strengths`` of ``"debevec"``: with ``smooth_prior="auto"`` one candidate of
@@ -360,8 +361,9 @@ def recover_debevec(
     choice between the two by a self-check. Starting from the end-weighted curve, the data
     equations are reweighted ``reweight_passes`` times by :func:`inverse_slope_weights` of
     the previous curve (``min(1, s_med / g'(z))``, no hat, no end weight: the inverse
-    standard deviation of ``ln x`` at constant noise in levels), and of the two curves the one
-    with the smaller leave-one-out re-exposure error (:func:`jaxgfx.hdr.leave_one_out`,
+    standard deviation of ``ln x`` at constant noise in levels), and of the candidate curves
+    (these two, and the prior'd ones below) the one with the smallest leave-one-out
+    re-exposure error (:func:`jaxgfx.hdr.leave_one_out`,
     default merge, on the candidate grid) is returned. Neither weighting wins everywhere: on
     brackets through measured film curves (steep toe, flat shoulder, issue 26) the end weight
     bent the curve (radiance error 0.097–0.112 on 5-frame brackets; 0.008–0.023 with the
@@ -370,8 +372,9 @@ def recover_debevec(
     such stacks (docs/hdr.md, "Measured curves").
     Returns a ``"table"`` :class:`CameraResponse`; ``diagnostics["residual_rms"]`` is the
     weighted RMS of the data equations per channel (in ln units) of the returned fit;
-    with ``reweight_passes > 0`` also ``diagnostics["loo_candidates"]`` ``(2,)`` (the LOO
-    error of the end-weighted and of the inverse-slope curve, levels on 0–255) and
+    with ``reweight_passes > 0`` also ``diagnostics["loo_candidates"]`` (the LOO error of
+    the end-weighted curve, of the inverse-slope curve and of the prior'd ones, levels on
+    0–255) and
     ``diagnostics["inverse_slope_chosen"]`` (bool).
     ``sparse_overlap`` (default :data:`SPARSE_OVERLAP` = 0.06; 0 turns it off): a channel in
     which fewer than this fraction of the candidate pixels is well exposed (levels 16…239) in
@@ -379,18 +382,24 @@ def recover_debevec(
     3-parameter ``"subspace"`` fit (``1, ln z, ln(1 − z)``; :mod:`jaxgfx.hdr._subspace`)
     instead: its free table is under-determined there (issue 26, docs/hdr.md "Measured
     curves"). ``diagnostics["overlap"]`` and ``diagnostics["subspace_chosen"]`` ``(C,)``.
-    ``smooth_prior`` (:data:`SMOOTH_PRIORS`, default ``"none"``: on the synthetic 5-frame
-    sRGB-like stack of ``jaxgfx calibrate``'s default job, ``"auto"``'s self-check picked the
-    prior'd fit and the curve error rose from < 0.1 to 0.18 ln RMS, so it is opt-in): with
-    ``"auto"`` and
-    ``reweight_passes > 0`` the self-check has a third candidate, the inverse-slope fit whose
-    smoothness term is ``λ S(g − g_sub)`` (:func:`debevec_solve` with ``prior``), ``g_sub``
-    the channel's 3-parameter ``"subspace"`` fit: Debevec's ``λ S(g)`` pulls a film curve's
-    steep toe and flat shoulder towards a straight line and left a ±0.04 ln mid-tone wave on
-    the red 5-frame measured bracket (radiance error 0.023 vs OpenCV 0.019; 0.016 with the
-    prior). ``diagnostics["loo_candidates"]`` is then ``(3,)`` and
-    ``diagnostics["prior_chosen"]`` says whether the prior'd fit was returned. ``"none"``:
-    the two candidates of before; ``"subspace"``: the prior in every fit.
+    ``smooth_prior`` (:data:`SMOOTH_PRIORS`, default ``"auto"``) and ``prior_strengths``
+    (default :data:`PRIOR_STRENGTHS` = ``(1, 10)``): with ``"auto"`` and ``reweight_passes >
+    0`` the self-check has one more candidate per strength ``s``, the inverse-slope fit whose
+    smoothness term is ``λ s · S(g − g_sub)`` (:func:`debevec_solve` with ``prior``),
+    ``g_sub`` the channel's 3-parameter ``"subspace"`` fit, each chain started from the
+    previous one's curve. Debevec's ``λ S(g)`` pulls a film curve's steep toe and flat
+    shoulder towards a straight line (a ±0.04 ln mid-tone wave on the red 5-frame measured
+    bracket: 0.023 vs OpenCV 0.019; 0.011 with the prior). Two strengths because with every
+    exposure step the same ratio ``r`` a wave of ``g`` with period ``ln r`` is invisible to the
+    data and to the self-check, and sensor noise fills it: on ``jaxgfx calibrate``'s synthetic
+    job the candidate at ``λ`` alone had a 0.18 ln RMS wave, the one at ``10 λ`` 0.04 and a
+    lower LOO (docs/hdr.md, "The Debevec default"). ``diagnostics["loo_candidates"]`` is then
+    ``(2 + len(prior_strengths),)`` and ``diagnostics["prior_chosen"]`` says whether a prior'd
+    fit was returned. ``"none"``: the two plain candidates; ``"subspace"``: the prior (at
+    ``λ``) in every fit.
+    ``n_samples`` (default ``None``): :func:`grid_samples`, as many as the candidate grid has
+    pixels (16 384 from 128×128 up; the table's variance falls with the count: 4096 → 16 384
+    halved the spread of the fitted curve over noise realisations).
     """
     check_nonnegative(lam, "lam")
     check_nonnegative(end_weight, "end_weight")
