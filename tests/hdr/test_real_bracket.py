@@ -51,7 +51,7 @@ def test_real_bracket_long_frame_beats_opencv(name):
 # 10.61 / 12.10 vs OpenCV 6.16 / 8.72 / 13.29, an xfail until then). flowers: met since the
 # Debevec default takes 16 384 samples (every candidate of the 128x128 grid up to 512 per
 # intensity bin): middle frame 7.02 -> 6.13 vs OpenCV 6.34. Measured now: oldhouse 5.15 /
-# 5.81 / 11.28, flowers 7.12 / 6.13 / 11.46 vs OpenCV 7.99 / 6.34 / 12.14
+# 5.80 / 11.28, flowers 7.12 / 6.13 / 11.46 vs OpenCV 7.99 / 6.34 / 12.14
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["oldhouse", "flowers"])
 def test_real_bracket_every_frame_beats_opencv(name):
