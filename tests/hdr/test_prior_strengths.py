@@ -82,7 +82,7 @@ def _calibrate_stack():
 # slow: ~30 s on 2 cores at load 6 (two fits of the 48x64 stack, each a compile). The job that
 # failed when "auto" (one prior'd candidate at lam) was made the default: its candidate had the wave
 # (curve error 0.18 ln RMS) and the lowest LOO of the three. The candidate at 10 lam has a
-# still lower LOO and no wave (measured: LOO 4.86 / 5.01 / 4.62 / 4.60, curve 0.040)
+# still lower LOO and no wave (measured: LOO 4.87 / 5.00 / 4.63 / 4.61, curve 0.037)
 @pytest.mark.slow
 def test_the_default_picks_the_stronger_prior_on_the_calibrate_job():
     st, resp = _calibrate_stack()
