@@ -2,7 +2,7 @@
 every candidate-grid pixel as a sample.
 
     python -m experiments.response_defaults [--why] [--rows] [--variance] [--timing]
-        [--json out.json]
+        [--shoulder] [--json out.json]
 
 ``--why``: the synthetic stack of ``jaxgfx calibrate``'s default job (filmic curve, 5 frames
 8× apart, shot-noise gain 2e-4, read σ 1e-3; 48×64 as in
@@ -19,6 +19,7 @@ MergeDebevec`` in the same run (:func:`rows`).
 
 ``--variance``: the spread of the fitted curve over noise realisations at 4096 and 16 384
 samples (:func:`variance`). ``--timing``: the cost, A/B in one process (:func:`timing`).
+``--shoulder``: why the sample count is the grid's and not a fixed 16 384 (:func:`shoulder`).
 """
 
 from __future__ import annotations
@@ -228,6 +229,34 @@ def variance(n_real=6):
     return out
 
 
+def shoulder():
+    """The JPEG-like camera 3-frame stack of ``tests/hdr/test_selfcheck.py`` (96×96, 3 frames
+    8× apart): the fitted curve's toe ``x(2)/x(128)`` and shoulder ``x(250)/x(128)`` (truth
+    0.0086 and 6.44; the test asserts 0.004–0.012 and 5.0–8.5), the curve error and the LOO,
+    for the previous default, a fixed 16 384 samples and the default (9 216 = the grid)."""
+    rad = hdr.synthetic_radiance(jax.random.key(1), 96, 96, dynamic_range=1e4)
+    st = hdr.make_jpeg_stack(jax.random.key(2), rad, jnp.asarray((1 / 64, 1 / 8, 1.0)), "camera")
+    z = jnp.asarray([[2 / 255] * 3, [128 / 255] * 3, [250 / 255] * 3])
+    out = []
+    for label, o in (
+        ("previous default", OLD),
+        ("n_samples 16384", {"n_samples": 16384}),
+        ("default", NEW),
+    ):
+        r = hdr.recover_response(st.images, st.exposure_times, **o)
+        x = np.asarray(r.to_linear_normalized(z)).mean(axis=1)
+        row = {"fit": label, "toe": round(float(x[0] / x[1]), 4)}
+        row["shoulder"] = round(float(x[2] / x[1]), 2)
+        row["curve ln RMS"] = round(float(hdr.response_curve_error(r, st.response)), 3)
+        row["LOO"] = round(
+            float(hdr.leave_one_out(st.images, st.exposure_times, r).mean_abs_error), 3
+        )
+        row["candidates"] = _r(r.diagnostics["loo_candidates"])
+        log(row)
+        out.append(row)
+    return out
+
+
 def timing(repeats=2):
     """``recover_response`` with the previous default (:data:`OLD`) and the new one,
     interleaved in one process: the green 96×96 5-frame measured stack, the real flowers
@@ -281,10 +310,12 @@ def main(argv=None):
     ap.add_argument("--rows", action="store_true")
     ap.add_argument("--variance", action="store_true")
     ap.add_argument("--timing", action="store_true")
+    ap.add_argument("--shoulder", action="store_true")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     out = {}
-    for flag, fn in (("why", why), ("rows", rows), ("variance", variance), ("timing", timing)):
+    fns = {"why": why, "rows": rows, "variance": variance, "timing": timing, "shoulder": shoulder}
+    for flag, fn in fns.items():
         if getattr(a, flag):
             out[flag] = fn()
     emit_json(out, a.json)
