@@ -110,7 +110,7 @@ def figure(rows, path):
 
     skip = ("curve", "bracket", "inverse-slope fit chosen", "subspace chosen", "overlap")
     keys = [k for k in rows[0] if k not in skip]
-    fig, ax = plt.subplots(figsize=(9, 3.6))
+    fig, ax = plt.subplots(figsize=(10.5, 3.6))
     x = np.arange(len(rows))
     w = 0.8 / len(keys)
     for i, k in enumerate(keys):
@@ -121,7 +121,7 @@ def figure(rows, path):
     )
     ax.set_ylabel("median |Δ ln E|")
     ax.set_title("Brackets through measured curves (DoRF Ektachrome 320T), lower is better")
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 

@@ -222,7 +222,7 @@ def overlaps():
 
 def prior_rows():
     """The smoothness prior on the 5-frame brackets (issue 26's red row): for
-    ``smooth_prior`` "none" (the default), "auto" (opt-in) and "subspace", the
+    ``smooth_prior`` "none", "auto" (the default since issue 26's last step) and "subspace", the
     radiance error, the self-check's LOO candidates and whether the prior'd fit was chosen;
     the ``lam`` sweep without the prior (the rejected alternative: lowering λ); OpenCV; and
     the red curve's per-level error (ln, after the median offset over levels 30-224, every 15
@@ -277,7 +277,7 @@ def prior_rows():
 
 def timing(what="rule"):
     """``recover_response`` with the sparse-bracket rule off (``sparse_overlap=0``, the code
-    path before it) and on (default) — or, with ``what="prior"``, with the default
+    path before it) and on (default) — or, with ``what="prior"``, with
     (``smooth_prior="none"``) and ``"auto"`` —, interleaved in one process
     on the green 96×96 AEB and 5-frame stacks: first call after ``jax.clear_caches()``
     (compile) and the median of 4 steady calls, process CPU seconds and wall seconds, 2
@@ -297,7 +297,7 @@ def timing(what="rule"):
         for bname, st in stacks.items():
             ab = {  # (A, B): B the option the A/B is about
                 "rule": (("rule off", {"sparse_overlap": 0.0}), ("default", {})),
-                "prior": (("default (prior off)", {}), ("prior on", {"smooth_prior": "auto"})),
+                "prior": (("prior off", {"smooth_prior": "none"}), ("prior on (default)", {})),
             }
             for label, o in ab[what]:
                 jax.clear_caches()

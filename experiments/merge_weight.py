@@ -94,8 +94,8 @@ def sample_rows():
     textured ones included) and the same count taken as the flattest quarter of a 4x larger
     grid (``max_candidates=65536``) — with OpenCV in the same run; ``slope`` merge."""
     fits = {
-        "default (n_samples 4096)": {},
-        "n_samples 16384": {"n_samples": 16384},
+        "previous default (n_samples 4096)": {"n_samples": 4096},
+        "n_samples 16384 (the default's grid size here)": {"n_samples": 16384},
         "n_samples 16384, max_candidates 65536": {"n_samples": 16384, "max_candidates": 65536},
     }
     rows = []

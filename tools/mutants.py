@@ -53,6 +53,17 @@ MUTANTS = [
         "why": "a square dropped (issue 15: caught only by a 1 % margin)",
     },
     {
+        "name": "hdr.debevec.prior_strength_ignored",
+        "file": "jaxgfx/hdr/_debevec.py",
+        "old": "[(lam * s_k, True) for s_k in prior_strengths]",
+        "new": "[(lam, True) for s_k in prior_strengths]",
+        "tests": [
+            "tests/hdr/test_prior_strengths.py::"
+            "test_the_default_picks_the_stronger_prior_on_the_calibrate_job"
+        ],
+        "why": "a scale dropped: every prior'd candidate at lam (issue 26: the job's wave)",
+    },
+    {
         "name": "hdr.merge_radiance.variance_x1.05",
         "file": "jaxgfx/hdr/merge.py",
         "old": "var = jnp.sum(w * w * var_e_j, axis=0) / (den * den)",

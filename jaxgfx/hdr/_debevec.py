@@ -9,10 +9,25 @@ from .._checks import check_choice, check_nonnegative
 from .._math import spd_solve_small
 from ._curve_space import response_basis
 from ._model import CameraResponse, resolve_anchor
-from ._sampling import level_index, monotone_repair, select_samples
+from ._sampling import _stride_for, level_index, monotone_repair, select_samples
 from .weighting import get_weighting
 
 DEBEVEC_MAX_CANDIDATES = 1 << 14
+
+
+def grid_samples(h, w, max_candidates=None):
+    """Default ``n_samples`` of ``"debevec"`` for an ``h × w`` image: the number of pixels of
+    :func:`select_samples`' candidate grid (at most ``max_candidates``, default
+    :data:`DEBEVEC_MAX_CANDIDATES`), rounded down to a multiple of its 32 intensity bins (at
+    least 32): as many samples as candidates, so a bin with its share of them keeps every one
+    (docs/hdr.md, "Pixel samples")."""
+    mc = DEBEVEC_MAX_CANDIDATES if max_candidates is None else int(max_candidates)
+    s = _stride_for(h, w, mc)
+    oy = (h - 1 - ((h - 1) // s) * s) // 2
+    ox = (w - 1 - ((w - 1) // s) * s) // 2
+    n = len(range(oy, h, s)) * len(range(ox, w, s))
+    return max(32, (n // 32) * 32)
+
 
 SPARSE_OVERLAP = 0.06
 """Default ``sparse_overlap`` of ``"debevec"``: a channel in which fewer than this fraction of
@@ -28,9 +43,28 @@ SMOOTH_PRIORS = ("auto", "subspace", "none")
 """Values of ``smooth_prior`` of ``"debevec"``: what the smoothness term pulls the table
 towards. ``"none"``: a straight line, ``λ S(g)`` (Debevec & Malik's term); ``"subspace"``:
 the channel's 3-parameter curve-space fit ``g_sub`` (:mod:`jaxgfx.hdr._subspace`,
-``n_poly=0``), ``λ S(g − g_sub)``, in every fit; ``"auto"``: the inverse-slope fit
-with the ``"subspace"`` prior is a third candidate of the leave-one-out choice (with
-``reweight_passes > 0``; the end-weighted fit and the plain inverse-slope fit keep ``"none"``)."""
+``n_poly=0``), ``λ S(g − g_sub)``, in every fit; ``"auto"`` (the default): the
+inverse-slope fit with the ``"subspace"`` prior at each of ``prior_strengths`` (× ``λ``) is a
+candidate of the leave-one-out choice (with ``reweight_passes > 0``; the end-weighted fit and
+the plain inverse-slope fit keep ``"none"``)."""
+
+PRIOR_STRENGTHS = (1.0, 10.0)
+"""Default ``prior_strengths`` of ``"debevec"``: with ``smooth_prior="auto"`` one candidate of
+the self-check per entry, the inverse-slope fit with the curve-space smoothness prior at
+``λ · s``."""
+
+
+def _check_strengths(v):
+    try:
+        out = tuple(float(x) for x in v)
+    except (TypeError, ValueError):
+        out = ()
+    if not out or len(out) > 4 or not all(0 < x < 1e6 for x in out):
+        raise ValueError(
+            f"prior_strengths: expected 1 to 4 numbers in (0, 1e6) (multiples of lam), got {v!r}"
+        )
+    return out
+
 
 WELL_EXPOSED = (16.0 / 255.0, 239.0 / 255.0)
 """Normalised level range counted as well exposed by :func:`bracket_overlap` (1/16 of the
@@ -162,17 +196,32 @@ def inverse_slope_weights(g, anchor_index):
     return jnp.minimum(ref / sl, 1.0)
 
 
-def _inverse_slope_fit(g0, lev, base, solve, m, passes):
-    """``passes`` refits with :func:`inverse_slope_weights` of the previous curve, from
-    ``g0``: ``(g, w)``."""
-    g1 = g0
-    for _ in range(passes):
-        f = inverse_slope_weights(g1, m)
+def _refit_chain(g0, lev, base, log_t, n_lev, m, stages, passes, g_sub):
+    """The inverse-slope refits, ``passes`` per stage, each from the previous curve (from
+    ``g0`` ``(C, L)``): stage ``(lam, prior)`` solves with data weights
+    :func:`inverse_slope_weights` of the previous curve times ``base``, smoothness ``lam`` and,
+    if ``prior``, the curve-space prior ``g_sub`` (:func:`debevec_solve`). One ``lax.scan``
+    over all refits: the program holds one solve (its LAPACK calls ordered by the loop) however
+    many candidates there are. Returns every refit's ``(g, w)`` stacked, ``(S·passes, C, ...)``."""
+    lams = jnp.asarray([lm for lm, _ in stages for _ in range(passes)], base.dtype)
+    use = jnp.asarray([float(p) for _, p in stages for _ in range(passes)], base.dtype)
+    gp0 = jnp.zeros_like(g0) if g_sub is None else g_sub
+    solve = jax.vmap(
+        lambda lv, ww, gp, lm: debevec_solve(lv, ww, log_t, n_lev, lm, m, gp),
+        in_axes=(0, 0, 0, None),
+    )
+
+    def step(g, xs):
+        lm, u = xs
+        f = inverse_slope_weights(g, m)
         w1 = base * jnp.take_along_axis(
             f[:, None, :], lev.reshape(lev.shape[0], 1, -1), axis=2
         ).reshape(lev.shape)
-        g1 = solve(lev, w1)
-    return g1, w1
+        g1 = solve(lev, w1, gp0 * u, lm)
+        return g1, (g1, w1)
+
+    _, (gs, ws) = jax.lax.scan(step, g0, (lams, use))
+    return gs, ws
 
 
 def _select_by_loo(z, t, candidates, m, anchor_z):
@@ -217,6 +266,8 @@ def debevec_samples(z, key, n_samples, max_candidates, n_lev, weighting, end_wei
     if key is None:
         key = jax.random.key(0)
     mc = DEBEVEC_MAX_CANDIDATES if max_candidates is None else int(max_candidates)
+    if n_samples is None:
+        n_samples = grid_samples(z.shape[1], z.shape[2], mc)
     samples, valid = select_samples(
         key, z, n_samples=n_samples, flat_reach=2, max_candidates=max(mc, n_samples)
     )
@@ -277,7 +328,7 @@ def recover_debevec(
     code_max,
     *,
     key=None,
-    n_samples: int = 4096,
+    n_samples: int | None = None,
     lam: float = 1e-6,
     n_levels: int | None = None,
     weighting: str = "hat",
@@ -286,7 +337,8 @@ def recover_debevec(
     max_candidates: int = None,
     reweight_passes: int = 3,
     sparse_overlap: float = SPARSE_OVERLAP,
-    smooth_prior: str = "none",
+    smooth_prior: str = "auto",
+    prior_strengths: tuple = PRIOR_STRENGTHS,
 ):
     """Debevec & Malik (1997) response recovery (method ``"debevec"``).
 
@@ -309,8 +361,9 @@ def recover_debevec(
     choice between the two by a self-check. Starting from the end-weighted curve, the data
     equations are reweighted ``reweight_passes`` times by :func:`inverse_slope_weights` of
     the previous curve (``min(1, s_med / g'(z))``, no hat, no end weight: the inverse
-    standard deviation of ``ln x`` at constant noise in levels), and of the two curves the one
-    with the smaller leave-one-out re-exposure error (:func:`jaxgfx.hdr.leave_one_out`,
+    standard deviation of ``ln x`` at constant noise in levels), and of the candidate curves
+    (these two, and the prior'd ones below) the one with the smallest leave-one-out
+    re-exposure error (:func:`jaxgfx.hdr.leave_one_out`,
     default merge, on the candidate grid) is returned. Neither weighting wins everywhere: on
     brackets through measured film curves (steep toe, flat shoulder, issue 26) the end weight
     bent the curve (radiance error 0.097–0.112 on 5-frame brackets; 0.008–0.023 with the
@@ -319,8 +372,9 @@ def recover_debevec(
     such stacks (docs/hdr.md, "Measured curves").
     Returns a ``"table"`` :class:`CameraResponse`; ``diagnostics["residual_rms"]`` is the
     weighted RMS of the data equations per channel (in ln units) of the returned fit;
-    with ``reweight_passes > 0`` also ``diagnostics["loo_candidates"]`` ``(2,)`` (the LOO
-    error of the end-weighted and of the inverse-slope curve, levels on 0–255) and
+    with ``reweight_passes > 0`` also ``diagnostics["loo_candidates"]`` (the LOO error of
+    the end-weighted curve, of the inverse-slope curve and of the prior'd ones, levels on
+    0–255) and
     ``diagnostics["inverse_slope_chosen"]`` (bool).
     ``sparse_overlap`` (default :data:`SPARSE_OVERLAP` = 0.06; 0 turns it off): a channel in
     which fewer than this fraction of the candidate pixels is well exposed (levels 16…239) in
@@ -328,18 +382,24 @@ def recover_debevec(
     3-parameter ``"subspace"`` fit (``1, ln z, ln(1 − z)``; :mod:`jaxgfx.hdr._subspace`)
     instead: its free table is under-determined there (issue 26, docs/hdr.md "Measured
     curves"). ``diagnostics["overlap"]`` and ``diagnostics["subspace_chosen"]`` ``(C,)``.
-    ``smooth_prior`` (:data:`SMOOTH_PRIORS`, default ``"none"``: on the synthetic 5-frame
-    sRGB-like stack of ``jaxgfx calibrate``'s default job, ``"auto"``'s self-check picked the
-    prior'd fit and the curve error rose from < 0.1 to 0.18 ln RMS, so it is opt-in): with
-    ``"auto"`` and
-    ``reweight_passes > 0`` the self-check has a third candidate, the inverse-slope fit whose
-    smoothness term is ``λ S(g − g_sub)`` (:func:`debevec_solve` with ``prior``), ``g_sub``
-    the channel's 3-parameter ``"subspace"`` fit: Debevec's ``λ S(g)`` pulls a film curve's
-    steep toe and flat shoulder towards a straight line and left a ±0.04 ln mid-tone wave on
-    the red 5-frame measured bracket (radiance error 0.023 vs OpenCV 0.019; 0.016 with the
-    prior). ``diagnostics["loo_candidates"]`` is then ``(3,)`` and
-    ``diagnostics["prior_chosen"]`` says whether the prior'd fit was returned. ``"none"``:
-    the two candidates of before; ``"subspace"``: the prior in every fit.
+    ``smooth_prior`` (:data:`SMOOTH_PRIORS`, default ``"auto"``) and ``prior_strengths``
+    (default :data:`PRIOR_STRENGTHS` = ``(1, 10)``): with ``"auto"`` and ``reweight_passes >
+    0`` the self-check has one more candidate per strength ``s``, the inverse-slope fit whose
+    smoothness term is ``λ s · S(g − g_sub)`` (:func:`debevec_solve` with ``prior``),
+    ``g_sub`` the channel's 3-parameter ``"subspace"`` fit, each chain started from the
+    previous one's curve. Debevec's ``λ S(g)`` pulls a film curve's steep toe and flat
+    shoulder towards a straight line (a ±0.04 ln mid-tone wave on the red 5-frame measured
+    bracket: 0.023 vs OpenCV 0.019; 0.011 with the prior). Two strengths because with every
+    exposure step the same ratio ``r`` a wave of ``g`` with period ``ln r`` is invisible to the
+    data and to the self-check, and sensor noise fills it: on ``jaxgfx calibrate``'s synthetic
+    job the candidate at ``λ`` alone had a 0.18 ln RMS wave, the one at ``10 λ`` 0.04 and a
+    lower LOO (docs/hdr.md, "The Debevec default"). ``diagnostics["loo_candidates"]`` is then
+    ``(2 + len(prior_strengths),)`` and ``diagnostics["prior_chosen"]`` says whether a prior'd
+    fit was returned. ``"none"``: the two plain candidates; ``"subspace"``: the prior (at
+    ``λ``) in every fit.
+    ``n_samples`` (default ``None``): :func:`grid_samples`, as many as the candidate grid has
+    pixels (16 384 from 128×128 up; the table's variance falls with the count: 4096 → 16 384
+    halved the spread of the fitted curve over noise realisations).
     """
     check_nonnegative(lam, "lam")
     check_nonnegative(end_weight, "end_weight")
@@ -354,6 +414,7 @@ def recover_debevec(
     ):
         raise ValueError(f"reweight_passes: expected an integer in 0…10, got {reweight_passes!r}")
     check_choice(smooth_prior, "smooth_prior", SMOOTH_PRIORS)
+    prior_strengths = _check_strengths(prior_strengths)
     anchor_z = resolve_anchor(anchor)
     n_lev = default_levels(code_max, n_levels)
     lev, w, interior, valid = debevec_samples(
@@ -364,31 +425,27 @@ def recover_debevec(
     g_sub = ws = None
     if sparse_overlap > 0 or smooth_prior != "none":
         g_sub, ws = _subspace_fit(lev, interior, valid, log_t, m, lam, n_lev, w.dtype)
-    if g_sub is not None:
-        vsolve = jax.vmap(lambda lv, ww, gp: debevec_solve(lv, ww, log_t, n_lev, lam, m, gp))
-
-        def solve_prior(lv, ww):
-            return vsolve(lv, ww, g_sub)
-
-    solve_plain = jax.vmap(lambda lv, ww: debevec_solve(lv, ww, log_t, n_lev, lam, m))
-    solve = solve_prior if smooth_prior == "subspace" else solve_plain
-    g = solve(lev, w)  # (C, L)
+    zero = jnp.zeros((z.shape[-1], n_lev), w.dtype)
+    g = jax.vmap(lambda lv, ww, gp: debevec_solve(lv, ww, log_t, n_lev, lam, m, gp))(
+        lev, w, g_sub if smooth_prior == "subspace" else zero
+    )  # (C, L)
     extra = {}
     if reweight_passes > 0:
         base = interior.astype(w.dtype) * valid[..., None].astype(w.dtype)
-        cands = [(g, w), _inverse_slope_fit(g, lev, base, solve, m, reweight_passes)]
+        # the chains of refits, one after the other: the plain inverse-slope fit, then (with
+        # "auto") one prior'd chain per strength, each started from the previous chain's curve
         if smooth_prior == "auto":
-            # started from the plain inverse-slope fit: a data dependency, so the two chains of
-            # solves run one after the other (run side by side, the XLA CPU runtime hung
-            # intermittently, every thread in a futex wait, on 256x256 real brackets)
-            cands.append(
-                _inverse_slope_fit(cands[1][0], lev, base, solve_prior, m, reweight_passes)
-            )
+            stages = [(lam, False)] + [(lam * s_k, True) for s_k in prior_strengths]
+        else:
+            stages = [(lam, smooth_prior == "subspace")]
+        gs, ws_ = _refit_chain(g, lev, base, log_t, n_lev, m, stages, reweight_passes, g_sub)
+        ends = [(k + 1) * reweight_passes - 1 for k in range(len(stages))]
+        cands = [(g, w)] + [(gs[e], ws_[e]) for e in ends]
         g, w, k, errs = _select_by_loo(z, t, cands, m, anchor_z)
         extra = {
             "loo_candidates": errs,
             "inverse_slope_chosen": k >= 1,
-            "prior_chosen": (k == 2)
+            "prior_chosen": (k >= 2)
             if smooth_prior == "auto"
             else jnp.asarray(smooth_prior == "subspace"),
         }

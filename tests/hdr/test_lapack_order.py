@@ -26,17 +26,19 @@ def _stack():
 
 def test_the_debevec_program_with_the_prior_orders_its_lapack_calls():
     z, t = _stack()
-    opts = (("smooth_prior", "auto"),)
     text = (
-        R._recover_jit.lower(z, t, jax.random.key(0), method="debevec", code_max=255, opts=opts)
+        R._recover_jit.lower(z, t, jax.random.key(0), method="debevec", code_max=255, opts=())
         .compile()
         .as_text()
     )
     calls, unordered = unordered_lapack_calls(text)
-    # 7 solves of the (3, 256, 256) tables (the plain fit, 3 inverse-slope passes, 3 with the
-    # curve-space prior), each one getrf and two trsm; the default (smooth_prior="none") is this
-    # program without the last 3 (a sub-chain); the main of before had 36 pairs unordered
-    assert calls == 21, calls
+    # the default (smooth_prior="auto"): two solves of the (3, 256, 256) tables, each one getrf
+    # and two trsm: the end-weighted fit, and the one solve in the lax.scan over every
+    # inverse-slope refit (3 plain, then 3 + 3 with the curve-space prior at lam and 10 lam);
+    # the loop's input is the first solve's output, so the two are ordered. smooth_prior="none"
+    # is the same program with a shorter loop. (Unrolled, the refits were 21 calls with one
+    # prior'd chain; the main of before that had 36 pairs unordered.)
+    assert calls == 6, calls
     assert unordered == 0
 
 
