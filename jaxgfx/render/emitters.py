@@ -54,6 +54,7 @@ from jaxgfx.color import LUMINANCE_WEIGHTS
 from jaxgfx.render.bsdf import rgb_param
 from jaxgfx.render.bsdf.texture import Texture, lookup
 from jaxgfx.render.bsdf.textured import texture_eval, texture_min
+from jaxgfx.render.geometry.frame import rotation_to_local, rotation_to_world
 from jaxgfx.render.sampling import Distribution2D
 
 __all__ = [
@@ -591,14 +592,10 @@ class EnvironmentMap(eqx.Module):
 
     def _local(self, d):
         """World direction -> the map's frame (``to_world^T d``; ``d`` itself without one)."""
-        if self.to_world is None:
-            return d
-        return d @ jax.lax.stop_gradient(self.to_world).astype(d.dtype)
+        return rotation_to_local(self.to_world, d)
 
     def _world(self, d):
-        if self.to_world is None:
-            return d
-        return d @ jax.lax.stop_gradient(self.to_world).astype(d.dtype).T
+        return rotation_to_world(self.to_world, d)
 
     def _lookup(self, uv):
         # bilinear with wrap in u and clamp in v (texel centres at (i + 0.5) / n)

@@ -61,7 +61,7 @@ from jaxgfx._math import (
 )
 from jaxgfx.color import LUMINANCE_WEIGHTS
 from jaxgfx.render._sunsky_data import tables
-from jaxgfx.render.geometry.frame import frame_from_normal
+from jaxgfx.render.geometry.frame import frame_from_normal, rotation_to_local, rotation_to_world
 from jaxgfx.render.sampling import Distribution2D
 
 __all__ = ["SunSky", "sun_coordinates", "sun_direction_at", "SUNSKY_DEFAULTS"]
@@ -347,14 +347,10 @@ class SunSky(eqx.Module):
     # -- model -------------------------------------------------------------------------------
 
     def _local(self, d):
-        if self.to_world is None:
-            return d
-        return d @ jax.lax.stop_gradient(self.to_world).astype(d.dtype)
+        return rotation_to_local(self.to_world, d)
 
     def _world(self, d):
-        if self.to_world is None:
-            return d
-        return d @ jax.lax.stop_gradient(self.to_world).astype(d.dtype).T
+        return rotation_to_world(self.to_world, d)
 
     def _sun_local(self, dtype):
         return self._local(safe_normalize(self.sun_direction.astype(dtype)))

@@ -53,6 +53,7 @@ from jaxtyping import Array, Float, Int
 
 from jaxgfx._math import safe_div, safe_normalize, safe_sqrt, sum_last
 from jaxgfx.render.geometry.curves import _box_bvh, _bvh_trace
+from jaxgfx.render.geometry.mesh_io import ply_header_and_body
 from jaxgfx.render.geometry.ray import Hit, hit_record, prepare_rays
 
 __all__ = [
@@ -313,15 +314,7 @@ def read_ellipsoids_ply(path, *, scale_factor=1.0, to_world=None):
             data = fh.read()
     except OSError as e:
         raise ValueError(f"{path}: {e.strerror or e}") from None
-    end = data.find(b"end_header")
-    if not data.startswith(b"ply") or end < 0:
-        raise ValueError(f"{path}: not a PLY file (missing 'ply' magic or 'end_header')")
-    nl = data.find(b"\n", end)
-    body = data[nl + 1 :] if nl >= 0 else b""
-    try:
-        header = data[:end].decode("ascii").splitlines()
-    except UnicodeDecodeError:
-        raise ValueError(f"{path}: PLY header is not ASCII") from None
+    header, body = ply_header_and_body(path, data)
     fmt, elements = None, []
     for lineno, line in enumerate(header[1:], 2):
         s = line.split()

@@ -7,6 +7,7 @@ unit vectors pointing *away* from the surface; ``cos_theta(w) = w[..., 2]``.
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from jaxgfx._math import safe_div, safe_sqrt, sum_last
@@ -73,6 +74,22 @@ def to_world(frame: Frame, v):
     """Local vector ``v`` (..., 3) expressed in world coordinates."""
     return v[..., 0:1] * frame.s + v[..., 1:2] * frame.t + v[..., 2:3] * frame.n
 
+
+
+def rotation_to_local(to_world, d):
+    """World direction(s) ``d (..., 3)`` -> the frame of an environment emitter's rotation
+    ``to_world (3, 3)`` (``to_world^T d``); ``d`` itself when ``to_world`` is None. The rotation
+    is a fixed placement: no derivative flows into it."""
+    if to_world is None:
+        return d
+    return d @ jax.lax.stop_gradient(to_world).astype(d.dtype)
+
+
+def rotation_to_world(to_world, d):
+    """The inverse of :func:`rotation_to_local` (``to_world d``)."""
+    if to_world is None:
+        return d
+    return d @ jax.lax.stop_gradient(to_world).astype(d.dtype).T
 
 def cos_theta(w):
     """``cos θ`` of a local direction: ``w[..., 2]``."""

@@ -141,6 +141,20 @@ _PLY_TYPES = {
 }  # fmt: skip
 
 
+def ply_header_and_body(path, data: bytes) -> tuple[list[str], bytes]:
+    """A PLY file's header lines (up to ``end_header``, ASCII) and the bytes after it;
+    ``ValueError`` naming ``path`` when ``data`` is not a PLY file."""
+    end = data.find(b"end_header")
+    if not data.startswith(b"ply") or end < 0:
+        raise ValueError(f"{path}: not a PLY file (missing 'ply' magic or 'end_header')")
+    nl = data.find(b"\n", end)
+    body = data[nl + 1 :] if nl >= 0 else b""
+    try:
+        return data[:end].decode("ascii").splitlines(), body
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: PLY header is not ASCII") from None
+
+
 def load_ply(path, *, attributes: bool = False):
     """Read a PLY file (``ascii`` or ``binary_little_endian`` 1.0).
 
@@ -154,15 +168,7 @@ def load_ply(path, *, attributes: bool = False):
     path = os.fspath(path)
     with open(path, "rb") as fh:
         data = fh.read()
-    end = data.find(b"end_header")
-    if not data.startswith(b"ply") or end < 0:
-        raise ValueError(f"{path}: not a PLY file (missing 'ply' magic or 'end_header')")
-    nl = data.find(b"\n", end)
-    body = data[nl + 1 :] if nl >= 0 else b""
-    try:
-        header = data[:end].decode("ascii").splitlines()
-    except UnicodeDecodeError:
-        raise ValueError(f"{path}: PLY header is not ASCII") from None
+    header, body = ply_header_and_body(path, data)
     fmt = None
     elements: list[tuple[str, int, list]] = []
     for line in header[1:]:
