@@ -163,7 +163,9 @@ class JaxgfxRender:
 
 class MitsubaRender:
     """``call(seed)``: ``mi.render(scene, spp=spp, seed=seed)`` of the same description
-    (``to_mitsuba_dict``), evaluated and synchronised (``dr.eval``, ``dr.sync_thread``)."""
+    (``to_mitsuba_dict``), evaluated and synchronised (``dr.eval``, ``dr.sync_thread``).
+    ``integrator``: a jaxgfx name (``mitsuba_integrator(integrator, max_depth=...)``) or a
+    Mitsuba integrator dict used as it is (e.g. ``{"type": "direct"}``, Mitsuba's own)."""
 
     system = "mitsuba"
 
@@ -174,7 +176,11 @@ class MitsubaRender:
 
         t = time.perf_counter()
         d = to_mitsuba_dict(desc, mi=mi)
-        d["integrator"] = mitsuba_integrator(integrator, max_depth=max_depth)
+        d["integrator"] = (
+            dict(integrator)
+            if isinstance(integrator, dict)
+            else mitsuba_integrator(integrator, max_depth=max_depth)
+        )
         d["sensor"]["sampler"]["sample_count"] = spp
         self.scene = mi.load_dict(d)
         self.load_s = time.perf_counter() - t

@@ -58,6 +58,7 @@ import sys
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CONFIG = os.path.join(ROOT, "configs", "inverse_material.yaml")
 VARIANTS = (
     "default",
     "checkpointed",
@@ -312,9 +313,29 @@ def _child(config: str, variant: str, image_dir: str | None = None) -> dict:
     return out
 
 
+def run_variant(variant: str, *, config: str = CONFIG, images: str | None = None) -> dict:
+    """One variant's row (see the module docstring) measured in a fresh Python process with
+    the compilation cache off (``JAXGFX_CACHE_DIR=off``), plus ``process_wall_s`` (the whole
+    child process) and ``load_avg_after``. ``SystemExit`` with the child's stderr on failure."""
+    env = dict(os.environ, JAXGFX_CACHE_DIR="off")
+    env["PYTHONPATH"] = os.pathsep.join([ROOT, env.get("PYTHONPATH", "")])
+    t = time.perf_counter()
+    p = subprocess.run(
+        [sys.executable, "-m", "benchmarks.render_compile", "--config", config,
+         "--child", variant] + (["--images", images] if images else []),
+        env=env, capture_output=True, text=True, cwd=ROOT,
+    )  # fmt: skip
+    if p.returncode != 0:
+        raise SystemExit(p.stderr[-3000:])
+    row = json.loads(p.stdout.strip().splitlines()[-1])
+    row["process_wall_s"] = time.perf_counter() - t
+    row["load_avg_after"] = [round(x, 2) for x in os.getloadavg()]
+    return row
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--config", default=os.path.join(ROOT, "configs", "inverse_material.yaml"))
+    ap.add_argument("--config", default=CONFIG)
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--out", default=None)
     ap.add_argument(
@@ -342,20 +363,8 @@ def main(argv=None):
     from benchmarks._report import emit, machine
 
     doc = {"benchmark": "render_compile", "machine": machine(), "config": a.config, "rows": []}
-    env = dict(os.environ, JAXGFX_CACHE_DIR="off")
-    env["PYTHONPATH"] = os.pathsep.join([ROOT, env.get("PYTHONPATH", "")])
     for v in a.variants.split(","):
-        t = time.perf_counter()
-        p = subprocess.run(
-            [sys.executable, "-m", "benchmarks.render_compile", "--config", a.config,
-             "--child", v] + (["--images", a.images] if a.images else []),
-            env=env, capture_output=True, text=True, cwd=ROOT,
-        )  # fmt: skip
-        if p.returncode != 0:
-            raise SystemExit(p.stderr[-3000:])
-        row = json.loads(p.stdout.strip().splitlines()[-1])
-        row["process_wall_s"] = time.perf_counter() - t
-        row["load_avg_after"] = [round(x, 2) for x in os.getloadavg()]
+        row = run_variant(v, config=a.config, images=a.images)
         if a.images:
             import numpy as np
 
