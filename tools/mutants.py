@@ -543,4 +543,16 @@ MUTANTS = [
         ],
         "why": "a table's grid origin off by half a cell (the sun's colour shifts with elevation)",
     },
+    # ------------------------------------------------------------------ benchmarks
+    {
+        "name": "benchmarks.fitloop.verdict_bound_not_inclusive",
+        "file": "benchmarks/fitloop.py",
+        "old": 'return "met" if value <= target.threshold else "not met"',
+        "new": 'return "met" if value < target.threshold else "not met"',
+        "tests": [
+            "tests/test_benchmark_fitloop.py::"
+            "test_verdict_is_exact_at_the_bound_and_fails_just_past_it"
+        ],
+        "why": "issue 22's bounds are inclusive (<= 2x): a ratio at the bound is met",
+    },
 ]
