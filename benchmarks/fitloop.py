@@ -152,7 +152,8 @@ def _target_cell(t: Target) -> str:
 
 def table_markdown(rows: list[dict]) -> str:
     """The Markdown table of ``rows`` (each with ``target``, ``case``, ``jaxgfx_text``,
-    ``mitsuba_text``, ``ratio``, ``verdict`` and the conditions), one line per row."""
+    ``mitsuba_text``, ``ratio``, ``verdict`` and the conditions: ``load_avg``, ``cores`` =
+    this run's CPU per wall second, ``other_cores``, ``loaded``), one line per row."""
     head = ("| target (issue 22) | case | jaxgfx | Mitsuba 3 (same run) | ratio | target | "
             "verdict | conditions |")  # fmt: skip
     lines = [head, "|" + "---|" * 8]
@@ -161,6 +162,8 @@ def table_markdown(rows: list[dict]) -> str:
         cond = []
         if r.get("load_avg") is not None:
             cond.append(f"load {r['load_avg'][0]:.2f}")
+        if r.get("cores") is not None:
+            cond.append(f"this run {r['cores']:.2f} cores")
         if r.get("other_cores") is not None:
             cond.append(f"others {r['other_cores']:.2f} cores")
         if r.get("loaded"):
