@@ -169,7 +169,8 @@ def table_markdown(rows: list[dict]) -> str:
         if r.get("loaded"):
             cond.append("**loaded**")
         v = r.get("verdict") or verdict(t, r)
-        notes = "; ".join(r.get("notes") or [])
+        why = r.get("unreliable_because")
+        notes = "; ".join(([f"not reliable: {why}"] if why else []) + (r.get("notes") or []))
         cells = [
             t.text,
             r.get("case", ""),
@@ -177,7 +178,7 @@ def table_markdown(rows: list[dict]) -> str:
             r.get("mitsuba_text") or _num(r.get("mitsuba")),
             _num(r.get("ratio"), "×") if t.on == "ratio" else "—",
             _target_cell(t),
-            f"**{v}**" + (f" ({notes})" if notes else ""),
+            f"**{v}{'?' if why else ''}**" + (f" ({notes})" if notes else ""),
             ", ".join(cond),
         ]
         lines.append("| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |")
@@ -200,12 +201,15 @@ def run_caption(doc: dict) -> str:
 
 
 def finish_rows(rows: list[dict], *, loaded: bool) -> list[dict]:
-    """Each row with its ``verdict`` and ``loaded`` flag (the run's load gate)."""
+    """Each row with its ``verdict``, ``loaded`` flag (the run's load gate) and ``reliable``
+    (``False`` where the row gives ``unreliable_because``, e.g. Mitsuba below its known
+    throughput: the verdict is then printed as ``met?`` / ``not met?``)."""
     for r in rows:
         if r["target"] not in TARGET:
             raise KeyError(f"row for an unknown target {r['target']!r}")
         r["loaded"] = bool(loaded)
         r["verdict"] = verdict(TARGET[r["target"]], r)
+        r["reliable"] = not r.get("unreliable_because")
     return rows
 
 
@@ -284,14 +288,15 @@ def section_throughput(mi, *, quick: bool, repeats: int = 3):
         mesh = r["scene"].startswith("mesh")
         j = r["jaxgfx"]["samples_per_s"] / 1e6
         m = r["mitsuba"]["samples_per_s"] / 1e6 if "mitsuba" in r else None
-        notes = [r["mitsuba_suspect"]] if r.get("mitsuba_suspect") else []
+        unreliable = r.get("mitsuba_suspect")
         case = (f"{r.get('triangles', '')}-triangle mesh" if mesh else "two spheres") + (
             f", {r['width']}×{r['height']}, path depth 4, 16 spp"
         )
         rows.append(_row(
             "path_mesh" if mesh else "path_analytic", case, jaxgfx=j, mitsuba=m,
             ratio=None if m is None else j / m, jaxgfx_text=f"{j:.3g} M samples/s",
-            mitsuba_text=None if m is None else f"{m:.3g} M samples/s", notes=notes,
+            mitsuba_text=None if m is None else f"{m:.3g} M samples/s",
+            unreliable_because=unreliable,
             load_avg=[round(x, 2) for x in load0], **_harness_conditions(r),
         ))  # fmt: skip
     raw["direct"] = []
@@ -306,17 +311,15 @@ def section_throughput(mi, *, quick: bool, repeats: int = 3):
         res = H.interleave(renders, repeats=repeats)
         j = res["jaxgfx"]["samples_per_s"] / 1e6
         m = res["mitsuba"]["samples_per_s"] / 1e6 if "mitsuba" in res else None
-        notes = []
-        if mi is not None and H.mitsuba_suspect(res["mitsuba"]):
-            notes.append(H.mitsuba_suspect(res["mitsuba"]))
+        unreliable = None if mi is None else H.mitsuba_suspect(res["mitsuba"])
         raw["direct"].append({"width": w, "height": h, "spp": 16, **res})
         _log(json.dumps(raw["direct"][-1]))
         rows.append(_row(
             "direct_analytic", f"two spheres, {w}×{h}, direct, 16 spp (Mitsuba `direct`)",
             jaxgfx=j, mitsuba=m, ratio=None if m is None else j / m,
             jaxgfx_text=f"{j:.3g} M samples/s",
-            mitsuba_text=None if m is None else f"{m:.3g} M samples/s", notes=notes,
-            load_avg=load, **_harness_conditions(res),
+            mitsuba_text=None if m is None else f"{m:.3g} M samples/s",
+            unreliable_because=unreliable, load_avg=load, **_harness_conditions(res),
         ))  # fmt: skip
     return rows, raw
 

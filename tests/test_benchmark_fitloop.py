@@ -54,9 +54,11 @@ def test_table_has_one_line_per_row_with_its_verdict():
         _row("grad_time_ratio", ratio=2.01, jaxgfx=0.2, mitsuba=3.3, notes=["n1"]),
         _row("fit_step_compile", jaxgfx=5.5, jaxgfx_text="5.5 s (trace 2 + ...)"),
         _row("time_to_2pct", missing_is_unmet=True, mitsuba=3.9),
+        _row("path_mesh", ratio=0.5, unreliable_because="Mitsuba starved"),
     ]  # fmt: skip
     F.finish_rows(rows, loaded=True)
-    assert [r["verdict"] for r in rows] == ["not met", "not met", "met", "not met"]
+    assert [r["verdict"] for r in rows] == ["not met", "not met", "met", "not met", "met"]
+    assert [r["reliable"] for r in rows] == [True] * 4 + [False]
     assert all(r["loaded"] for r in rows)
     table = F.table_markdown(rows).splitlines()
     assert len(table) == 2 + len(rows)
@@ -71,6 +73,7 @@ def test_table_has_one_line_per_row_with_its_verdict():
     assert cells[1][6] == "**not met** (n1)" and cells[1][4] == "2.01×"
     assert cells[2][4] == "—" and cells[2][5] == "≤ 6 s" and cells[2][6] == "**met**"
     assert cells[2][2] == "5.5 s (trace 2 + ...)"
+    assert cells[4][6] == "**met?** (not reliable: Mitsuba starved)"  # flagged, not hidden
     with pytest.raises(KeyError, match="unknown target"):
         F.finish_rows([_row("no_such_target")], loaded=False)
 
