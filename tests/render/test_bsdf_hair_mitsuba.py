@@ -18,15 +18,12 @@ import pytest
 
 from jaxgfx.render.bsdf import Hair
 from jaxgfx.render.bsdf import _hair as H
+from tests.render._mitsuba import mitsuba_fixture
 
 pytestmark = pytest.mark.mitsuba
 
 
-@pytest.fixture(scope="module")
-def mi():
-    mitsuba = pytest.importorskip("mitsuba")
-    mitsuba.set_variant("scalar_rgb")
-    return mitsuba
+mi = mitsuba_fixture()
 
 
 def _published_log_i0(x):

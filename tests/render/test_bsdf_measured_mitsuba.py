@@ -19,17 +19,14 @@ import numpy as np
 import pytest
 
 from jaxgfx.render.bsdf import Measured
+from tests.render._mitsuba import mitsuba_fixture
 
 pytestmark = pytest.mark.mitsuba
 
 FILES = ["tests/data/measured/ggx_iso.bsdf", "tests/data/measured/ggx_aniso.bsdf"]
 
 
-@pytest.fixture(scope="module")
-def mi():
-    mitsuba = pytest.importorskip("mitsuba")
-    mitsuba.set_variant("scalar_rgb")
-    return mitsuba
+mi = mitsuba_fixture()
 
 
 def _hemi(rng, n):
