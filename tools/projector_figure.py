@@ -29,13 +29,13 @@ def main(argv=None) -> int:
     sys.path.insert(0, str(ROOT))
     import jax
     import matplotlib
+    from _figure import srgb_display
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
 
     from jaxgfx import io
-    from jaxgfx.color.transfer import linear_to_srgb
     from jaxgfx.render import load_scene, render
     from jaxgfx.render.scene.mitsuba_xml import read_xml
 
@@ -43,7 +43,7 @@ def main(argv=None) -> int:
     x = read_xml(str(scenes / "projector.xml"), res=str(a.res), spp=str(a.spp))
     img = render(load_scene(x.desc), jax.random.key(0), spp=a.spp, integrator=x.integrator,
                  max_depth=x.max_depth)  # fmt: skip
-    shown = np.clip(np.asarray(linear_to_srgb(np.clip(4.0 * np.asarray(img), 0, 1))), 0, 1)
+    shown = srgb_display(img, 4.0)
     slide = io.read_image(str(scenes / "projector_slide.png"))
     gobo = io.read_image(str(scenes / "projector_gobo.png"))
     fig = plt.figure(figsize=(8.4, 4.2), dpi=100)

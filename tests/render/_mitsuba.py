@@ -39,6 +39,26 @@ def local_si(mi, wo):
     return si
 
 
+def mitsuba_eval_pdf_sample(mi, bsdf, wo, wi, u1, u2):
+    """Mitsuba's ``eval``, ``pdf`` and ``sample`` of the loaded ``bsdf`` at each local pair
+    ``wo[i]``, ``wi[i]`` (shading point at the origin, normal ``+z``) and uniforms ``u1[i]``,
+    ``u2[i]``: float64 arrays ``(eval, pdf, sampled wo, sample pdf, sample weight)``."""
+    ctx = mi.BSDFContext()
+    f, pdf, sw, sp, sv = [], [], [], [], []
+    for a, c, v1, v2 in zip(wo, wi, u1, u2, strict=True):
+        si = mi.SurfaceInteraction3f()
+        si.p, si.n = [0, 0, 0], [0, 0, 1]
+        si.sh_frame = mi.Frame3f(si.n)
+        si.wi = mi.Vector3f(*a)
+        f.append(np.array(bsdf.eval(ctx, si, mi.Vector3f(*c))))
+        pdf.append(bsdf.pdf(ctx, si, mi.Vector3f(*c)))
+        bs, w = bsdf.sample(ctx, si, float(v1), mi.Point2f(*v2))
+        sw.append(np.array(bs.wo))
+        sp.append(bs.pdf)
+        sv.append(np.array(w))
+    return [np.asarray(x, np.float64) for x in (f, pdf, sw, sp, sv)]
+
+
 def mitsuba_replicates(mi, scene, k, spp, *, seed0=0):
     """``k`` Mitsuba renders of the loaded ``scene`` at ``spp``, seeds ``seed0 .. seed0+k-1``,
     as one float64 stack ``(k, H, W, 3)`` (RGB of each film)."""
