@@ -23,23 +23,14 @@ from tests.render.test_mitsuba_xml_render import (  # noqa: F401
     compare,
     data_dir,
     mitsubas_own_renders_scored,
-    refs,
-    render_xml,
-    sample_variance,
+    scene_scores,
 )
 
 SPP = 16
 
 
 def _run(data_dir, name, samplevar=False):  # noqa: F811
-    scene = data_dir / "tests" / "scenes" / "bsdf_spheres"
-    img = render_xml(str(scene / f"test_{name}_path.xml"), SPP)
-    ref, var = refs(str(scene / "refs" / f"test_{name}_ref_rgb.exr"))
-    if samplevar:
-        var = sample_variance(str(scene / "refs" / f"test_{name}_ref_rgb.exr"))
-    c = compare(img, ref, var, SPP)
-    print(name, c, img.mean((0, 1)), ref.mean((0, 1)))
-    return c
+    return scene_scores(data_dir, name, SPP, samplevar=samplevar)
 
 
 @pytest.mark.slow  # slow: 55-112 s measured here (10 OBJ spheres of 32 512 triangles; 48², 16 spp)
@@ -94,11 +85,8 @@ def test_textured_anisotropic_roughconductor_matches_mitsubas_reference(data_dir
 def test_texture_interp_to_uv_matches_mitsubas_reference(data_dir):  # noqa: F811
     """``texture_interp``: ``carrot.png`` with ``to_uv`` = scale 2 then translate -0.5 under
     each wrap mode (repeat, mirror, clamp) and filter (bilinear, nearest)."""
-    scene = data_dir / "tests" / "scenes" / "texture_interp"
-    img = render_xml(str(scene / "test_texture_interp_direct.xml"), SPP)
-    ref, var = refs(str(scene / "refs" / "test_texture_interp_ref_rgb.exr"))
-    c = compare(img, ref, var, SPP)
-    print(c, img.mean((0, 1)), ref.mean((0, 1)))
+    c = scene_scores(data_dir, "texture_interp", SPP, folder="texture_interp",
+                     xml="test_texture_interp_direct.xml")  # fmt: skip
     # measured: z_mean (-0.41, -0.14, 0.01), z RMS 0.82, 99.8 % of the blocks |z| < 3.5,
     # rel. RMSE 1.1 % (noise level 1.8 %)
     assert_noise_like(c)

@@ -23,25 +23,16 @@ import pytest
 
 from tests.render.test_mitsuba_xml_render import (  # noqa: F401
     assert_noise_like,
-    compare,
     data_dir,
     mitsubas_own_renders_scored,
-    refs,
-    render_xml,
-    sample_variance,
+    scene_scores,
 )
 
 SPP = 16
 
 
 def _run(data_dir, name):  # noqa: F811
-    scene = data_dir / "tests" / "scenes" / "bsdf_spheres"
-    img = render_xml(str(scene / f"test_{name}_path.xml"), SPP)
-    ref, var = refs(str(scene / "refs" / f"test_{name}_ref_rgb.exr"))
-    assert var.min() < 0  # the reference's variance image is broken (module docstring)
-    c = compare(img, ref, sample_variance(str(scene / "refs" / f"test_{name}_ref_rgb.exr")), SPP)
-    print(name, c, img.mean((0, 1)), ref.mean((0, 1)))
-    return c
+    return scene_scores(data_dir, name, SPP, samplevar=True)
 
 
 @pytest.mark.slow  # slow: 68-80 s measured here (1 OBJ sphere of 32 512 triangles; 48², 16 spp)
