@@ -17,6 +17,12 @@ def srgb_display(img, gain=1.0):
     return np.clip(np.asarray(linear_to_srgb(np.clip(gain * np.asarray(img), 0, 1))), 0, 1)
 
 
+def save_figure(fig, out):
+    """Write the matplotlib figure ``fig`` to ``out``, creating its folder."""
+    os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+    fig.savefig(out)
+
+
 def jaxgfx_and_mitsuba_figure(desc, spp, out, *, scene=None, max_depth=3):
     """The side-by-side figure of a scene description ``desc``: jaxgfx's render (path tracer,
     ``max_depth``, ``spp``, key 0; of ``scene`` when given, else of ``load_scene(desc)``) and,
@@ -54,6 +60,5 @@ def jaxgfx_and_mitsuba_figure(desc, spp, out, *, scene=None, max_depth=3):
         ax.axis("off")
         print(f"{title}: mean {np.asarray(im).mean(axis=(0, 1)).round(4).tolist()}, "
               f"{cpu:.1f} s CPU")  # fmt: skip
-    os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
-    fig.savefig(out)
+    save_figure(fig, out)
     print(f"wrote {out}")

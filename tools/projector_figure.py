@@ -13,7 +13,6 @@ curve (``jaxgfx.color.transfer.linear_to_srgb``); the images as their PNGs encod
 from __future__ import annotations
 
 import argparse
-import os
 import pathlib
 import sys
 
@@ -29,7 +28,7 @@ def main(argv=None) -> int:
     sys.path.insert(0, str(ROOT))
     import jax
     import matplotlib
-    from _figure import srgb_display
+    from _figure import save_figure, srgb_display
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -58,8 +57,7 @@ def main(argv=None) -> int:
         ax.set_title(title, fontsize=9)
         ax.set_xticks([])
         ax.set_yticks([])
-    os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
-    fig.savefig(a.out)
+    save_figure(fig, a.out)
     print(f"wrote {a.out}; image mean {np.asarray(img).mean(axis=(0, 1)).round(4).tolist()}")
     return 0
 

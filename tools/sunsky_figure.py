@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import pathlib
 import sys
 
@@ -54,7 +53,7 @@ def main(argv=None) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
-    from _figure import srgb_display
+    from _figure import save_figure, srgb_display
 
     from jaxgfx.render import load_scene, render
     from jaxgfx.render.scene.mitsuba import to_mitsuba_dict
@@ -104,8 +103,7 @@ def main(argv=None) -> int:
     fig.suptitle(f"sunsky, turbidity 3: path depth 3, {a.res}², {a.k} x {a.spp} spp each",
                  fontsize=10)  # fmt: skip
     fig.tight_layout()
-    os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
-    fig.savefig(a.out)
+    save_figure(fig, a.out)
     print(f"wrote {a.out}")
     return 0
 
