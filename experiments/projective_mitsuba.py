@@ -29,12 +29,12 @@ from experiments._common import emit_json, log
 
 SCENE = """<scene version="3.0.0">
   <integrator type="{kind}">{body}</integrator>
-  <sensor type="perspective"><float name="fov" value="40"/>
+  <sensor type="{sensor}"><float name="fov" value="40"/>{extra}
     <transform name="to_world"><lookat origin="0, 1.2, 4" target="0, 0.5, 0" up="0, 1, 0"/>
     </transform>
     <sampler type="independent"><integer name="sample_count" value="{spp}"/></sampler>
     <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/>
-      <rfilter type="box"/></film>
+      {rfilter}</film>
   </sensor>
   <shape type="sphere" id="ball"><point name="center" x="0" y="0.6" z="0"/>
     <float name="radius" value="0.4"/>
@@ -46,8 +46,21 @@ SCENE = """<scene version="3.0.0">
       <rotate x="1" angle="150"/><translate y="1.3" z="-1.5"/></transform>
     <emitter type="area"><rgb name="radiance" value="5, 5, 5"/></emitter></shape>
   <emitter type="constant"><rgb name="radiance" value="0.2, 0.2, 0.2"/></emitter>
+  {more}
 </scene>
 """
+
+
+def scene_xml(kind, body="", *, spp=16, sensor="perspective", extra="",
+              rfilter='<rfilter type="box"/>', more=""):  # fmt: skip
+    """The scene as XML text: integrator ``kind`` with the XML ``body`` inside its element,
+    ``spp`` samples per pixel, the ``sensor`` type with ``extra`` XML inside it, the film's
+    ``rfilter`` element and ``more`` XML at the end of the scene (the sphere's id is ``ball``).
+    Also the scene of tests/render/test_mitsuba_xml_projective.py (imported by name there)."""
+    return SCENE.format(kind=kind, body=body, spp=spp, sensor=sensor, extra=extra,
+                        rfilter=rfilter, more=more)  # fmt: skip
+
+
 LLVM19 = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"
 
 
@@ -129,7 +142,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as d:
         path = os.path.join(d, "scene.xml")
         with open(path, "w", encoding="utf-8") as f:
-            f.write(SCENE.format(kind=a.kind, body=body, spp=a.spp))
+            f.write(scene_xml(a.kind, body, spp=a.spp))
         vis, ours = jaxgfx_gradients(path, a.keys, a.spp)
         theirs = mitsuba_gradients(path, a.keys, a.spp)
     out = {"kind": a.kind, "max_depth": a.max_depth if prb else 2,

@@ -14,10 +14,8 @@ each render (compile included for jaxgfx).
 from __future__ import annotations
 
 import argparse
-import os
 import pathlib
 import sys
-import time
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -64,41 +62,14 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "docs" / "images" / "render_curves.png"))
     a = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT))
-    import jax
-    import matplotlib
+    from _figure import jaxgfx_and_mitsuba_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    from jaxgfx.color.transfer import linear_to_srgb
-    from jaxgfx.render import load_scene, render
+    from jaxgfx.render import load_scene
 
     desc = scene(a.res)
     sc = load_scene(desc)
     print(f"{sum(getattr(s, 'segment_count', 0) for s in sc.shapes)} segments")
-    t0 = time.process_time()
-    img = np.asarray(render(sc, jax.random.key(0), spp=a.spp, integrator="path", max_depth=3))
-    images = [(img, f"jaxgfx, path, {a.spp} spp", time.process_time() - t0)]
-    try:
-        from jaxgfx.render.scene.mitsuba import render_mitsuba
-
-        t0 = time.process_time()
-        ref = render_mitsuba(desc, spp=a.spp, integrator="path", max_depth=3)
-        images.append((ref, f"Mitsuba 3, path, {a.spp} spp", time.process_time() - t0))
-    except ImportError:
-        pass
-    fig = plt.figure(figsize=(4.2 * len(images), 3.4), dpi=100)
-    for k, (im, title, cpu) in enumerate(images):
-        ax = fig.add_axes([k / len(images), 0.0, 1 / len(images), 0.9])
-        ax.imshow(np.clip(np.asarray(linear_to_srgb(np.clip(im, 0, 1))), 0, 1))
-        ax.set_title(title, fontsize=9)
-        ax.axis("off")
-        print(f"{title}: mean {np.asarray(im).mean(axis=(0, 1)).round(4).tolist()}, "
-              f"{cpu:.1f} s CPU")  # fmt: skip
-    os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
-    fig.savefig(a.out)
-    print(f"wrote {a.out}")
+    jaxgfx_and_mitsuba_figure(desc, a.spp, a.out, scene=sc)
     return 0
 
 

@@ -56,10 +56,9 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT))
     import jax
-    import numpy as np
+    from _figure import srgb_display
 
     from jaxgfx import io
-    from jaxgfx.color.transfer import linear_to_srgb
     from jaxgfx.render import load_scene, render
     from jaxgfx.render.scene.mitsuba_xml import read_xml
 
@@ -73,7 +72,7 @@ def main(argv=None) -> int:
     scene = load_scene(x.desc)
     img = render(scene, jax.random.key(0), spp=a.spp, integrator=x.integrator,
                  max_depth=x.max_depth)  # fmt: skip
-    img = np.clip(np.asarray(linear_to_srgb(np.clip(np.asarray(img), 0, 1))), 0, 1)
+    img = srgb_display(img)
     io.write_png(a.out, img)
     print(a.out, img.shape, "mean", img.mean((0, 1)))
     return 0

@@ -40,6 +40,15 @@ def _desc(*emitters):
             "materials": {"m": {"type": "diffuse", "reflectance": 0.5}}}  # fmt: skip
 
 
+# every delta-only BSDF (Mirror, SmoothDielectric, ThinDielectric, the pass-through polarizers)
+_DELTA = {"camera": _CAMERA, "emitters": [_POINT, _DIR],
+          "shapes": [{**_FLOOR, "material": "mirror"}, {**_BALL, "material": "glass"},
+                     {**_BALL, "center": [1, 0.3, 0], "radius": 0.3, "material": "thin"},
+                     {**_BALL, "center": [-1, 0.3, 0], "radius": 0.3, "material": "pol"}],
+          "materials": {"mirror": {"type": "conductor", "eta": 0.2, "k": 3.0},
+                        "glass": {"type": "dielectric"}, "thin": {"type": "thindielectric"},
+                        "pol": {"type": "polarizer", "transmittance": 0.8}}}  # fmt: skip
+
 CASES = [
     ("example.yaml", "configs/scenes/example.yaml", "path", 3),
     ("spot", _desc(_SPOT), "path", 3),
@@ -47,6 +56,7 @@ CASES = [
     ("spot+directional whitted", _desc(_SPOT, _DIR), "whitted", 3),
     ("spot, tent filter", {**_desc(_SPOT), "film": {"filter": "tent"}}, "path", 3),
     ("envmap", _desc(_ENVMAP), "path", 3),
+    ("delta BSDFs", _DELTA, "path", 3),
 ]
 
 

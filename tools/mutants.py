@@ -478,6 +478,22 @@ MUTANTS = [
         "why": "the microfacet lobe's Fresnel at the macro normal instead of the half vector",
     },
     {
+        "name": "render.delta_bsdf.eval_nonzero",
+        "file": "jaxgfx/render/bsdf/_base.py",
+        "old": "return jnp.zeros(shape, jnp.result_type(wo, wi, getattr(",
+        "new": "return jnp.ones(shape, jnp.result_type(wo, wi, getattr(",
+        "tests": ["tests/render/test_bsdf.py::test_delta_bsdfs"],
+        "why": "a delta-only BSDF (Mirror, dielectrics, pass-throughs) with a non-zero eval",
+    },
+    {
+        "name": "render.delta_bsdf.pdf_nonzero",
+        "file": "jaxgfx/render/bsdf/_base.py",
+        "old": "return jnp.zeros(jnp.broadcast_shapes(wo.shape, wi.shape)[:-1], jnp.result_type(",
+        "new": "return jnp.ones(jnp.broadcast_shapes(wo.shape, wi.shape)[:-1], jnp.result_type(",
+        "tests": ["tests/render/test_bsdf_polarized.py::test_pass_through_lobes"],
+        "why": "a delta-only BSDF with a non-zero solid-angle pdf (MIS would weight it)",
+    },
+    {
         "name": "render.polarizer.factor",
         "file": "jaxgfx/render/bsdf/_polarizer.py",
         "old": "polarizing: bool = eqx.field(static=True, default=True)\n\n"

@@ -13,7 +13,6 @@ curve (``jaxgfx.color.transfer.linear_to_srgb``); the images as their PNGs encod
 from __future__ import annotations
 
 import argparse
-import os
 import pathlib
 import sys
 
@@ -29,13 +28,13 @@ def main(argv=None) -> int:
     sys.path.insert(0, str(ROOT))
     import jax
     import matplotlib
+    from _figure import save_figure, srgb_display
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
 
     from jaxgfx import io
-    from jaxgfx.color.transfer import linear_to_srgb
     from jaxgfx.render import load_scene, render
     from jaxgfx.render.scene.mitsuba_xml import read_xml
 
@@ -43,7 +42,7 @@ def main(argv=None) -> int:
     x = read_xml(str(scenes / "projector.xml"), res=str(a.res), spp=str(a.spp))
     img = render(load_scene(x.desc), jax.random.key(0), spp=a.spp, integrator=x.integrator,
                  max_depth=x.max_depth)  # fmt: skip
-    shown = np.clip(np.asarray(linear_to_srgb(np.clip(4.0 * np.asarray(img), 0, 1))), 0, 1)
+    shown = srgb_display(img, 4.0)
     slide = io.read_image(str(scenes / "projector_slide.png"))
     gobo = io.read_image(str(scenes / "projector_gobo.png"))
     fig = plt.figure(figsize=(8.4, 4.2), dpi=100)
@@ -58,8 +57,7 @@ def main(argv=None) -> int:
         ax.set_title(title, fontsize=9)
         ax.set_xticks([])
         ax.set_yticks([])
-    os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
-    fig.savefig(a.out)
+    save_figure(fig, a.out)
     print(f"wrote {a.out}; image mean {np.asarray(img).mean(axis=(0, 1)).round(4).tolist()}")
     return 0
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import pathlib
 import sys
 
@@ -54,8 +53,8 @@ def main(argv=None) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
+    from _figure import save_figure, srgb_display
 
-    from jaxgfx.color.transfer import linear_to_srgb
     from jaxgfx.render import load_scene, render
     from jaxgfx.render.scene.mitsuba import to_mitsuba_dict
     from jaxgfx.render.sunsky import SunSky
@@ -64,7 +63,6 @@ def main(argv=None) -> int:
     mi.set_variant("scalar_rgb")
     f = jax.jit(jax.vmap(lambda s, k: render(s, k, spp=a.spp, integrator="path", max_depth=3),
                          in_axes=(None, 0)))  # fmt: skip
-    show = lambda x: np.clip(np.asarray(linear_to_srgb(np.clip(3.0 * x, 0, 1))), 0, 1)  # noqa: E731
     fig, axes = plt.subplots(2, 2, figsize=(6.4, 6.8), dpi=100)
     for row, elev in enumerate(ELEVATIONS):
         desc = _scene(elev, a.res)
@@ -81,7 +79,7 @@ def main(argv=None) -> int:
               f"{z.max():.2f}, RMS {math.sqrt((z**2).mean()):.2f} ({z.size} block channels)")
         for col, (img, who) in enumerate(((ours, "jaxgfx"), (theirs, "Mitsuba 3.9.1"))):
             ax = axes[row, col]
-            ax.imshow(show(img.mean(0)))
+            ax.imshow(srgb_display(img.mean(0), 3.0))
             ax.set_title(f"{who}, sun at {elev:g}°", fontsize=9)
             ax.axis("off")
         # the sky alone: eval at 20 000 upper directions against Mitsuba's
@@ -105,8 +103,7 @@ def main(argv=None) -> int:
     fig.suptitle(f"sunsky, turbidity 3: path depth 3, {a.res}², {a.k} x {a.spp} spp each",
                  fontsize=10)  # fmt: skip
     fig.tight_layout()
-    os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
-    fig.savefig(a.out)
+    save_figure(fig, a.out)
     print(f"wrote {a.out}")
     return 0
 

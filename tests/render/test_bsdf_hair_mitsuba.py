@@ -18,15 +18,12 @@ import pytest
 
 from jaxgfx.render.bsdf import Hair
 from jaxgfx.render.bsdf import _hair as H
+from tests.render._mitsuba import mitsuba_eval_pdf_sample, mitsuba_fixture
 
 pytestmark = pytest.mark.mitsuba
 
 
-@pytest.fixture(scope="module")
-def mi():
-    mitsuba = pytest.importorskip("mitsuba")
-    mitsuba.set_variant("scalar_rgb")
-    return mitsuba
+mi = mitsuba_fixture()
 
 
 def _published_log_i0(x):
@@ -60,20 +57,7 @@ def _mitsuba(mi, p, wo, wi, u1, u2):
     d = {"type": "hair", **{k: v for k, v in p.items() if k != "sigma_a"}}
     if "sigma_a" in p:
         d["sigma_a"] = {"type": "rgb", "value": p["sigma_a"]}
-    b, ctx = mi.load_dict(d), mi.BSDFContext()
-    f, pdf, sw, sp, sv = [], [], [], [], []
-    for a, c, v1, v2 in zip(wo, wi, u1, u2, strict=True):
-        si = mi.SurfaceInteraction3f()
-        si.p, si.n = [0, 0, 0], [0, 0, 1]
-        si.sh_frame = mi.Frame3f(si.n)
-        si.wi = mi.Vector3f(*a)
-        f.append(np.array(b.eval(ctx, si, mi.Vector3f(*c))))
-        pdf.append(b.pdf(ctx, si, mi.Vector3f(*c)))
-        bs, w = b.sample(ctx, si, float(v1), mi.Point2f(*v2))
-        sw.append(np.array(bs.wo))
-        sp.append(bs.pdf)
-        sv.append(np.array(w))
-    return [np.asarray(x, np.float64) for x in (f, pdf, sw, sp, sv)]
+    return mitsuba_eval_pdf_sample(mi, mi.load_dict(d), wo, wi, u1, u2)
 
 
 @pytest.mark.parametrize("i", range(len(SETS)))

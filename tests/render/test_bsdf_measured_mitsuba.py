@@ -19,17 +19,14 @@ import numpy as np
 import pytest
 
 from jaxgfx.render.bsdf import Measured
+from tests.render._mitsuba import mitsuba_eval_pdf_sample, mitsuba_fixture
 
 pytestmark = pytest.mark.mitsuba
 
 FILES = ["tests/data/measured/ggx_iso.bsdf", "tests/data/measured/ggx_aniso.bsdf"]
 
 
-@pytest.fixture(scope="module")
-def mi():
-    mitsuba = pytest.importorskip("mitsuba")
-    mitsuba.set_variant("scalar_rgb")
-    return mitsuba
+mi = mitsuba_fixture()
 
 
 def _hemi(rng, n):
@@ -39,20 +36,8 @@ def _hemi(rng, n):
 
 
 def _mitsuba(mi, path, wo, wi, u1, u2):
-    b, ctx = mi.load_dict({"type": "measured", "filename": path}), mi.BSDFContext()
-    f, pdf, sw, sp, sv = [], [], [], [], []
-    for a, c, v1, v2 in zip(wo, wi, u1, u2, strict=True):
-        si = mi.SurfaceInteraction3f()
-        si.p, si.n = [0, 0, 0], [0, 0, 1]
-        si.sh_frame = mi.Frame3f(si.n)
-        si.wi = mi.Vector3f(*a)
-        f.append(np.array(b.eval(ctx, si, mi.Vector3f(*c))))
-        pdf.append(b.pdf(ctx, si, mi.Vector3f(*c)))
-        bs, w = b.sample(ctx, si, float(v1), mi.Point2f(*v2))
-        sw.append(np.array(bs.wo))
-        sp.append(bs.pdf)
-        sv.append(np.array(w))
-    return [np.asarray(x, np.float64) for x in (f, pdf, sw, sp, sv)]
+    b = mi.load_dict({"type": "measured", "filename": path})
+    return mitsuba_eval_pdf_sample(mi, b, wo, wi, u1, u2)
 
 
 _run = jax.jit(lambda b, wo, wi, u1, u2: (b.eval(wo, wi), b.pdf(wo, wi), b.sample(wo, u1, u2)))

@@ -12,31 +12,19 @@ import numpy as np
 import pytest
 
 from jaxgfx.render.bsdf import make_bsdf
+from tests.render._mitsuba import local_si, mitsuba_fixture, unit_dirs
 
 pytestmark = pytest.mark.mitsuba
 
 
-@pytest.fixture(scope="module")
-def mi():
-    mitsuba = pytest.importorskip("mitsuba")
-    mitsuba.set_variant("scalar_rgb")
-    return mitsuba
-
-
-def _dirs(n, upper, seed):
-    v = np.random.default_rng(seed).normal(size=(n, 3))
-    if upper:
-        v[:, 2] = np.abs(v[:, 2])
-    return v / np.linalg.norm(v, axis=1, keepdims=True)
+mi = mitsuba_fixture()
 
 
 def _mitsuba_values(mi, desc, wo, wi):
     b = mi.load_dict(desc)
     f, p = [], []
     for a, c in zip(wo, wi, strict=True):
-        si = mi.SurfaceInteraction3f()
-        si.wi = mi.Vector3f(a)
-        si.sh_frame = mi.Frame3f(mi.Normal3f(0, 0, 1))
+        si = local_si(mi, a)
         f.append(np.array(b.eval(mi.BSDFContext(), si, mi.Vector3f(c))))
         p.append(b.pdf(mi.BSDFContext(), si, mi.Vector3f(c)))
     return np.array(f), np.array(p)
@@ -82,7 +70,7 @@ CASES = [
 
 @pytest.mark.parametrize("ours,theirs,upper,rtol", CASES, ids=lambda x: str(x)[:40])
 def test_eval_and_pdf_equal_mitsuba(mi, ours, theirs, upper, rtol):
-    wo, wi = _dirs(200, upper, 0), _dirs(200, upper, 1)
+    wo, wi = unit_dirs(200, 0, upper=upper), unit_dirs(200, 1, upper=upper)
     fm, pm = _mitsuba_values(mi, theirs, wo, wi)
     f, p = _ev(make_bsdf(ours), jnp.asarray(wo, jnp.float32), jnp.asarray(wi, jnp.float32))
     f, p = np.asarray(f), np.asarray(p)
@@ -92,13 +80,6 @@ def test_eval_and_pdf_equal_mitsuba(mi, ours, theirs, upper, rtol):
     np.testing.assert_allclose(f[~live], fm[~live], atol=2e-5)
     big = pm > 1e-3
     np.testing.assert_allclose(p[big], pm[big], rtol=rtol)
-
-
-def _si(mi, wo):
-    si = mi.SurfaceInteraction3f()
-    si.wi = mi.Vector3f(wo)
-    si.sh_frame = mi.Frame3f(mi.Normal3f(0, 0, 1))
-    return si
 
 
 _sample = jax.jit(lambda b, wo, u1, u2: b.sample(wo, u1, u2))
@@ -117,13 +98,13 @@ def test_plastic_sample_equals_mitsuba(mi, nonlinear):
     ours = make_bsdf({"type": "plastic", "eta": 1.6, "nonlinear": nonlinear,
                       "diffuse_reflectance": kd})  # fmt: skip
     rng = np.random.default_rng(3)
-    wo = _dirs(120, True, 2)
+    wo = unit_dirs(120, 2, upper=True)
     wo[:10, 2] = 0.02  # grazing: the specular lobe is likely
     wo /= np.linalg.norm(wo, axis=1, keepdims=True)
     u1, u2 = rng.random(120), rng.random((120, 2))
     w_m, p_m, d_m, wi_m = [], [], [], []
     for a, b, c in zip(wo, u1, u2, strict=True):
-        bs, w = theirs.sample(mi.BSDFContext(), _si(mi, a), float(b), mi.Point2f(c))
+        bs, w = theirs.sample(mi.BSDFContext(), local_si(mi, a), float(b), mi.Point2f(c))
         w_m.append(np.array(w))
         p_m.append(bs.pdf)
         d_m.append(mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta))
@@ -159,7 +140,7 @@ def test_roughdielectric_sample_visible_false_mitsuba_weight_is_not_eval_over_pd
     means, ratio = {}, []
     for sv, n in ((True, 2000), (False, 300)):
         b = mi.load_dict({**desc, "sample_visible": sv})
-        si = _si(mi, wo)
+        si = local_si(mi, wo)
         w = np.zeros(n)
         for k in range(n):
             bs, wk = b.sample(mi.BSDFContext(), si, float(rng.random()), mi.Point2f(rng.random(2)))

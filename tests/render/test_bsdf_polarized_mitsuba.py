@@ -9,32 +9,21 @@ import numpy as np
 import pytest
 
 from jaxgfx.render.bsdf import make_bsdf
-from jaxgfx.render.render import render
 from jaxgfx.render.scene import load_scene
 from jaxgfx.render.scene.mitsuba_xml import read_xml
+from tests.render._mitsuba import (
+    jaxgfx_replicates,
+    local_si,
+    mitsuba_fixture,
+    mitsuba_replicates,
+    unit_dirs,
+)
 from tests.render._scenes import replicate_block_z
 
 pytestmark = pytest.mark.mitsuba
 
 
-@pytest.fixture(scope="module")
-def mi():
-    mitsuba = pytest.importorskip("mitsuba")
-    mitsuba.set_variant("scalar_rgb")
-    return mitsuba
-
-
-def _dirs(n, seed):
-    v = np.random.default_rng(seed).normal(size=(n, 3))
-    v[:, 2] = np.abs(v[:, 2])
-    return v / np.linalg.norm(v, axis=1, keepdims=True)
-
-
-def _si(mi, wo):
-    si = mi.SurfaceInteraction3f()
-    si.wi = mi.Vector3f(wo)
-    si.sh_frame = mi.Frame3f(mi.Normal3f(0, 0, 1))
-    return si
+mi = mitsuba_fixture()
 
 
 def _rgb(v):
@@ -67,11 +56,11 @@ CASES = [
 
 @pytest.mark.parametrize("ours, theirs, rtol, pdf", CASES, ids=range(len(CASES)))
 def test_eval_and_pdf_equal_mitsuba(mi, ours, theirs, rtol, pdf):
-    wo, wi = _dirs(300, 0), _dirs(300, 1)
+    wo, wi = unit_dirs(300, 0, upper=True), unit_dirs(300, 1, upper=True)
     b = mi.load_dict(theirs)
-    fm = np.array([np.array(b.eval(mi.BSDFContext(), _si(mi, a), mi.Vector3f(c)))
+    fm = np.array([np.array(b.eval(mi.BSDFContext(), local_si(mi, a), mi.Vector3f(c)))
                    for a, c in zip(wo, wi, strict=True)])  # fmt: skip
-    pm = np.array([b.pdf(mi.BSDFContext(), _si(mi, a), mi.Vector3f(c))
+    pm = np.array([b.pdf(mi.BSDFContext(), local_si(mi, a), mi.Vector3f(c))
                    for a, c in zip(wo, wi, strict=True)])  # fmt: skip
     f, p = (np.asarray(x) for x in _ev(make_bsdf(ours), jnp.asarray(wo, jnp.float32),
                                        jnp.asarray(wi, jnp.float32)))  # fmt: skip
@@ -82,7 +71,7 @@ def test_eval_and_pdf_equal_mitsuba(mi, ours, theirs, rtol, pdf):
     if pdf:
         np.testing.assert_allclose(p, pm, rtol=1e-4)
     # below the surface: 0 in both
-    fb = np.array(b.eval(mi.BSDFContext(), _si(mi, wo[0] * [1, 1, -1]), mi.Vector3f(wi[0])))
+    fb = np.array(b.eval(mi.BSDFContext(), local_si(mi, wo[0] * [1, 1, -1]), mi.Vector3f(wi[0])))
     assert np.all(fb == 0)
 
 
@@ -95,10 +84,10 @@ def test_pplastic_sample_equals_mitsuba(mi, case):
     ours, theirs, rtol, _ = CASES[case]
     b, o = mi.load_dict(theirs), make_bsdf(ours)
     rng = np.random.default_rng(3)
-    wo, u1, u2 = _dirs(200, 2), rng.random(200), rng.random((200, 2))
+    wo, u1, u2 = unit_dirs(200, 2, upper=True), rng.random(200), rng.random((200, 2))
     w_m, p_m, t_m, wi_m = [], [], [], []
     for a, x, y in zip(wo, u1, u2, strict=True):
-        bs, w = b.sample(mi.BSDFContext(), _si(mi, a), float(x), mi.Point2f(y))
+        bs, w = b.sample(mi.BSDFContext(), local_si(mi, a), float(x), mi.Point2f(y))
         w_m.append(np.array(w))
         p_m.append(bs.pdf)
         t_m.append(mi.has_flag(bs.sampled_type, mi.BSDFFlags.GlossyReflection))
@@ -127,16 +116,16 @@ def test_pass_through_equals_mitsuba(mi, kind, factor, opts):
     t = [0.9, 0.5, 0.2]
     b = mi.load_dict({"type": kind, "transmittance": _rgb(t), **opts})
     o = make_bsdf({"type": kind, "transmittance": t, **opts})
-    wo = _dirs(8, 4) * np.array([1, 1, -1]) ** np.arange(8)[:, None]
+    wo = unit_dirs(8, 4, upper=True) * np.array([1, 1, -1]) ** np.arange(8)[:, None]
     s = _smp(o, jnp.asarray(wo, jnp.float32), jnp.full(8, 0.4), jnp.full((8, 2), 0.6))
     for k, a in enumerate(wo):
-        bs, w = b.sample(mi.BSDFContext(), _si(mi, a), 0.4, mi.Point2f(0.6, 0.6))
+        bs, w = b.sample(mi.BSDFContext(), local_si(mi, a), 0.4, mi.Point2f(0.6, 0.6))
         assert mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null) and bool(s.is_delta[k])
         np.testing.assert_allclose(np.asarray(s.wi[k]), np.array(bs.wo), atol=1e-6)
         assert bs.pdf == float(s.pdf[k]) == 1.0
         np.testing.assert_allclose(np.asarray(s.weight[k]), np.array(w), rtol=1e-6)
         np.testing.assert_allclose(np.array(w), factor * np.array(t), rtol=1e-6)
-        si = _si(mi, a)
+        si = local_si(mi, a)
         assert np.all(np.array(b.eval(mi.BSDFContext(), si, mi.Vector3f(-a))) == 0)
         assert b.pdf(mi.BSDFContext(), si, mi.Vector3f(-a)) == 0
 
@@ -177,19 +166,16 @@ def test_pplastic_and_polarizer_render_like_mitsuba(mi, tmp_path):
     p.write_text(XML.format(sphere="pplastic", front="polarizer"))
     x = read_xml(str(p))
     scene = load_scene(x.desc)
-    keys = jax.random.split(jax.random.key(5), k)
-    f = jax.vmap(lambda key: render(scene, key, spp=x.spp, integrator=x.integrator,
-                                    max_depth=x.max_depth))  # fmt: skip
-    a = np.asarray(f(keys), np.float64)
+    a = jaxgfx_replicates(scene, 5, k, spp=x.spp, integrator=x.integrator,
+                          max_depth=x.max_depth)  # fmt: skip
     assert np.all(np.isfinite(a)) and a.mean() > 0.01
 
     def theirs(text):
-        s = mi.load_string(text)
-        return np.stack([np.array(mi.render(s, spp=64, seed=j))[..., :3] for j in range(k)])
+        return mitsuba_replicates(mi, mi.load_string(text), k, 64)
 
-    z, ma, mb = replicate_block_z(a, theirs(p.read_text()).astype(np.float64))
+    z, ma, mb = replicate_block_z(a, theirs(p.read_text()))
     assert z.max() < 5, (z.max(), ma.mean(), mb.mean())
-    c = theirs(XML.format(sphere="pplastic", front="retarder")).astype(np.float64)
+    c = theirs(XML.format(sphere="pplastic", front="retarder"))
     zr = replicate_block_z(a, c)[0].max()
     print(f"max |z| {z.max():.2f}, means {ma.mean():.4f} / {mb.mean():.4f}; retarder {zr:.1f}")
     assert zr > 5
@@ -215,14 +201,14 @@ def test_written_scene_loads_in_mitsuba(mi, tmp_path):
     for s in scene.shapes():
         b = s.bsdf()
         got[round(float(s.bbox().center().x) / 3)] = b
-    wo, wi = _dirs(1, 8)[0], _dirs(1, 9)[0]
-    pp = np.array(got[0].eval(mi.BSDFContext(), _si(mi, wo), mi.Vector3f(wi)))
+    wo, wi = unit_dirs(1, 8, upper=True)[0], unit_dirs(1, 9, upper=True)[0]
+    pp = np.array(got[0].eval(mi.BSDFContext(), local_si(mi, wo), mi.Vector3f(wi)))
     ours = np.asarray(make_bsdf(mats["p"]).eval(jnp.asarray(wo, jnp.float32),
                                                  jnp.asarray(wi, jnp.float32)))  # fmt: skip
     np.testing.assert_allclose(ours, pp, rtol=8e-3)
     for i, k in enumerate(mats):
         if k == "p":
             continue
-        bs, w = got[i].sample(mi.BSDFContext(), _si(mi, wo), 0.5, mi.Point2f(0.5, 0.5))
+        bs, w = got[i].sample(mi.BSDFContext(), local_si(mi, wo), 0.5, mi.Point2f(0.5, 0.5))
         s = make_bsdf(mats[k]).sample(jnp.asarray(wo), 0.5, jnp.array([0.5, 0.5]))
         np.testing.assert_allclose(np.array(w), np.asarray(s.weight), rtol=1e-6)

@@ -11,27 +11,19 @@ import numpy as np
 import pytest
 
 from jaxgfx.render.bsdf import make_bsdf
+from tests.render._mitsuba import (
+    assert_channels_and_pixels_agree,
+    jaxgfx_replicates,
+    local_si,
+    mitsuba_fixture,
+    mitsuba_replicates,
+    unit_dirs,
+)
 
 pytestmark = pytest.mark.mitsuba
 
 
-@pytest.fixture(scope="module")
-def mi():
-    mitsuba = pytest.importorskip("mitsuba")
-    mitsuba.set_variant("scalar_rgb")
-    return mitsuba
-
-
-def _dirs(n, seed):
-    v = np.random.default_rng(seed).normal(size=(n, 3))
-    return v / np.linalg.norm(v, axis=1, keepdims=True)
-
-
-def _si(mi, wo):
-    si = mi.SurfaceInteraction3f()
-    si.wi = mi.Vector3f(wo)
-    si.sh_frame = mi.Frame3f(mi.Normal3f(0, 0, 1))
-    return si
+mi = mitsuba_fixture()
 
 
 def _mitsuba_dict(desc):
@@ -68,11 +60,11 @@ CASES = [
 @pytest.mark.parametrize("desc", CASES, ids=lambda d: f"{d['type']}-{d['roughness']}")
 def test_eval_and_pdf_equal_mitsuba(mi, desc):
     """300 random pairs over the whole sphere (both sides, reflection and transmission)."""
-    wo, wi = _dirs(300, 0), _dirs(300, 1)
+    wo, wi = unit_dirs(300, 0), unit_dirs(300, 1)
     theirs = mi.load_dict(_mitsuba_dict(desc))
-    fm = np.array([np.array(theirs.eval(mi.BSDFContext(), _si(mi, a), mi.Vector3f(c)))
+    fm = np.array([np.array(theirs.eval(mi.BSDFContext(), local_si(mi, a), mi.Vector3f(c)))
                    for a, c in zip(wo, wi, strict=True)])  # fmt: skip
-    pm = np.array([theirs.pdf(mi.BSDFContext(), _si(mi, a), mi.Vector3f(c))
+    pm = np.array([theirs.pdf(mi.BSDFContext(), local_si(mi, a), mi.Vector3f(c))
                    for a, c in zip(wo, wi, strict=True)])  # fmt: skip
     f, p = _ev(make_bsdf(desc), jnp.asarray(wo, jnp.float32), jnp.asarray(wi, jnp.float32))
     f, p = np.asarray(f), np.asarray(p)
@@ -102,7 +94,8 @@ def test_sampled_albedo_equals_mitsuba(mi, desc):
     u1, u2 = jax.random.uniform(k1, (n,)), jax.random.uniform(k2, (n, 2))
     for cos in (0.6, -0.4):
         wo = np.array([math.sqrt(1 - cos * cos), 0.0, cos])
-        w_m = np.array([np.array(theirs.sample(mi.BSDFContext(), _si(mi, wo), float(rng.random()),
+        si = local_si(mi, wo)
+        w_m = np.array([np.array(theirs.sample(mi.BSDFContext(), si, float(rng.random()),
                                                mi.Point2f(rng.random(2)))[1])
                         for _ in range(n_mi)])  # fmt: skip
         w = np.asarray(_sample(ours, jnp.tile(jnp.asarray(wo, jnp.float32), (n, 1)), u1, u2).weight,
@@ -145,22 +138,12 @@ def test_spheres_render_like_mitsuba(mi, tmp_path):
     area light and a constant environment, saved as XML and rendered by both (path tracing,
     depth 6). Channel means agree within 5 standard errors of the replicate spread, >= 95 % of
     the pixels within 4 (K = 4 replicates per renderer; the errors are per-seed ones)."""
-    from jaxgfx.render.render import render
     from jaxgfx.render.scene import load_scene
     from jaxgfx.render.scene.mitsuba_xml import save_scene
 
     out = save_scene(SCENE, str(tmp_path / "s.xml"), spp=SPP, max_depth=6)
-    scene = mi.load_file(out)
-    b = np.stack([np.array(mi.render(scene, spp=SPP, seed=s))[..., :3] for s in range(K)])
-    ours = load_scene(SCENE)
-    keys = jax.random.split(jax.random.key(7), K)
-    a = np.asarray(jax.vmap(lambda k: render(ours, k, spp=SPP, max_depth=6))(keys), np.float64)
-    ma, mb = a.mean((0, 1, 2)), b.mean((0, 1, 2))
-    se = np.sqrt(a.mean((1, 2)).var(0, ddof=1) / K + b.mean((1, 2)).var(0, ddof=1) / K)
-    print("means", ma, mb, "z", (ma - mb) / se)
-    assert np.all(np.abs(ma - mb) < 5 * se + 1e-6), (ma, mb, se)
-    var = a.var(0, ddof=1) / K + b.var(0, ddof=1) / K + (1e-4 * (a.mean(0) + b.mean(0))) ** 2
-    z = np.abs(a.mean(0) - b.mean(0)) / np.sqrt(var + 1e-12)
-    print("pixels |z| < 4:", np.mean(z < 4))
-    assert np.mean(z < 4) >= 0.95, np.mean(z < 4)
+    b = mitsuba_replicates(mi, mi.load_file(out), K, SPP)
+    a = jaxgfx_replicates(load_scene(SCENE), 7, K, spp=SPP, max_depth=6)
+    ma, mb, frac = assert_channels_and_pixels_agree(a, b)
+    print("means", ma, mb, "pixels |z| < 4:", frac)
     assert math.isfinite(float(ma.sum())) and ma.min() > 0.01

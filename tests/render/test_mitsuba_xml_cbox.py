@@ -5,11 +5,16 @@ from __future__ import annotations
 
 import os
 
-import jax
 import numpy as np
 import pytest
 
 from jaxgfx.render.scene import load_scene
+from tests.render._mitsuba import (
+    assert_channels_and_blocks_agree,
+    jaxgfx_replicates,
+    mitsuba_fixture,
+    mitsuba_replicates,
+)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CBOX = os.path.join(ROOT, "configs", "scenes", "cbox.xml")
@@ -29,26 +34,17 @@ def test_cbox_is_cornells_published_geometry_named_by_its_ids():
     assert scene.get("shapes.tallbox.vertices").shape == (20, 3)
 
 
-@pytest.fixture(scope="module")
-def mi():
-    mitsuba = pytest.importorskip("mitsuba")
-    mitsuba.set_variant("scalar_rgb")
-    return mitsuba
+mi = mitsuba_fixture()
 
 
 @pytest.mark.mitsuba
 @pytest.mark.slow  # slow: ~68 s on 2 cores (jaxgfx compile dominates)
 def test_cbox_renders_like_mitsuba(mi):
-    from jaxgfx.render.render import render
-    from tests.render.test_mitsuba_xml_textured_write import assert_agree
-
     k, spp, res, depth = 4, 64, 32, 6  # interreflection: paths of up to 6 vertices
     ms = mi.load_file(CBOX, res=str(res), spp=str(spp), max_depth=str(depth))
-    b = np.stack([np.array(mi.render(ms, spp=spp, seed=s))[..., :3] for s in range(k)])
-    scene = load_scene(CBOX, res=res)
-    keys = jax.random.split(jax.random.key(5), k)
-    a = np.asarray(jax.vmap(lambda kk: render(scene, kk, spp=spp, max_depth=depth))(keys))
-    zc, zb = assert_agree(a.astype(np.float64), b.astype(np.float64))
+    b = mitsuba_replicates(mi, ms, k, spp)
+    a = jaxgfx_replicates(load_scene(CBOX, res=res), 5, k, spp=spp, max_depth=depth)
+    zc, zb = assert_channels_and_blocks_agree(a, b)
     print("cbox channel means", a.mean((0, 1, 2)), b.mean((0, 1, 2)), "z", zc,
           "block |z|<4", np.mean(np.abs(zb) < 4))  # fmt: skip
 

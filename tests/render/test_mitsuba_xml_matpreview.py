@@ -8,12 +8,17 @@ from __future__ import annotations
 import os
 import re
 
-import jax
 import numpy as np
 import pytest
 
 from jaxgfx.render.scene import load_scene
 from jaxgfx.render.scene.mitsuba_xml import read_xml
+from tests.render._mitsuba import (
+    assert_channels_and_blocks_agree,
+    jaxgfx_replicates,
+    mitsuba_fixture,
+    mitsuba_replicates,
+)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 DIR = os.path.join(ROOT, "tests", "data", "mitsuba", "scenes", "matpreview")
@@ -56,28 +61,19 @@ def test_matpreview_reads_with_its_ids_and_the_reduced_data():
     assert desc["emitters"][0]["type"] == "envmap"
 
 
-@pytest.fixture(scope="module")
-def mi():
-    mitsuba = pytest.importorskip("mitsuba")
-    mitsuba.set_variant("scalar_rgb")
-    return mitsuba
+mi = mitsuba_fixture()
 
 
 @pytest.mark.mitsuba
 @pytest.mark.slow  # slow: 38 s diffuse, 59 s roughconductor, 79 s roughplastic on 2 cores (compile)
 @pytest.mark.parametrize("name", sorted(MATERIALS))
 def test_matpreview_renders_like_mitsuba(mi, name, tmp_path):
-    from jaxgfx.render.render import render
-    from tests.render.test_mitsuba_xml_textured_write import assert_agree
-
     k, spp, w, h, depth = 4, 64, 32, 24, 4
     p = _with_material(tmp_path, name)
     params = dict(width=w, height=h, spp=spp, max_depth=depth)
     ms = mi.load_file(p, **{a: str(b) for a, b in params.items()})
-    b = np.stack([np.array(mi.render(ms, spp=spp, seed=s))[..., :3] for s in range(k)])
-    scene = load_scene(p, **params)
-    keys = jax.random.split(jax.random.key(7), k)
-    a = np.asarray(jax.vmap(lambda kk: render(scene, kk, spp=spp, max_depth=depth))(keys))
-    zc, zb = assert_agree(a.astype(np.float64), b.astype(np.float64))
+    b = mitsuba_replicates(mi, ms, k, spp)
+    a = jaxgfx_replicates(load_scene(p, **params), 7, k, spp=spp, max_depth=depth)
+    zc, zb = assert_channels_and_blocks_agree(a, b)
     print(name, "channel means", a.mean((0, 1, 2)), b.mean((0, 1, 2)), "z", zc,
           "block |z|<4", np.mean(np.abs(zb) < 4))  # fmt: skip

@@ -5,6 +5,7 @@ combinations edge sampling cannot do refused, the writer round trip; the primal 
 plain ``direct`` / ``path``; the boundary gradient of a sphere's position against float64
 finite differences (slow); the primal against Mitsuba's own renders (``mitsuba``, slow)."""
 
+import importlib
 import os
 
 import jax
@@ -18,34 +19,13 @@ from jaxgfx.render.integrators import DirectIntegrator, PathIntegrator
 from jaxgfx.render.scene import load_scene
 from jaxgfx.render.scene.mitsuba_xml import read_xml, save_scene
 
-XML = """<scene version="3.0.0">
-  <integrator type="{kind}">{body}</integrator>
-  <sensor type="{sensor}"><float name="fov" value="40"/>{extra}
-    <transform name="to_world"><lookat origin="0, 1.2, 4" target="0, 0.5, 0" up="0, 1, 0"/>
-    </transform>
-    <sampler type="independent"><integer name="sample_count" value="4"/></sampler>
-    <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/>
-      {rfilter}</film>
-  </sensor>
-  <shape type="sphere"><point name="center" x="0" y="0.6" z="0"/>
-    <float name="radius" value="0.4"/>
-    <bsdf type="diffuse"><rgb name="reflectance" value="0.6, 0.6, 0.6"/></bsdf></shape>
-  <shape type="rectangle"><transform name="to_world"><rotate x="1" angle="-90"/>
-      <scale value="3"/></transform>
-    <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf></shape>
-  <shape type="rectangle"><transform name="to_world"><scale x="0.7" y="0.45"/>
-      <rotate x="1" angle="150"/><translate y="1.3" z="-1.5"/></transform>
-    <emitter type="area"><rgb name="radiance" value="5, 5, 5"/></emitter></shape>
-  <emitter type="constant"><rgb name="radiance" value="0.2, 0.2, 0.2"/></emitter>
-  {more}
-</scene>
-"""
+# the scene of experiments/projective_mitsuba.py (imported by name: tests do not import
+# experiments statically), 4 spp unless said
+_scene_xml = importlib.import_module("experiments.projective_mitsuba").scene_xml
 
 
-def _xml(kind, body="", *, sensor="perspective", extra="", rfilter='<rfilter type="box"/>',
-         more=""):  # fmt: skip
-    return XML.format(kind=kind, body=body, sensor=sensor, extra=extra, rfilter=rfilter,
-                      more=more)  # fmt: skip
+def _xml(kind, body="", *, spp=4, **kw):
+    return _scene_xml(kind, body, spp=spp, **kw)
 
 
 def _write(tmp_path, text, name="s.xml"):
@@ -234,7 +214,7 @@ def test_primal_renders_like_mitsuba(tmp_path, kind, body):
     mi = pytest.importorskip("mitsuba")
     _llvm_backend_renders()
     mi.set_variant("llvm_ad_rgb")
-    text = _xml(kind, body).replace('value="4"/></sampler>', 'value="64"/></sampler>')
+    text = _xml(kind, body, spp=64)
     x = read_xml(_write(tmp_path, text))
     scene = load_scene(x.desc)
     k = 8

@@ -20,6 +20,8 @@ from jaxgfx.io import write_exr, write_png
 from jaxgfx.render.scene import load_scene
 from jaxgfx.render.scene.mitsuba import scene_to_desc, to_mitsuba_dict
 from jaxgfx.render.scene.mitsuba_xml import read_xml, save_scene
+from tests.render._mitsuba import assert_channels_and_blocks_agree as assert_agree
+from tests.render._mitsuba import jaxgfx_replicates, mitsuba_fixture, mitsuba_replicates
 
 XML = """<scene version="3.0.0">
   <sensor type="perspective"><float name="fov" value="45"/>
@@ -143,11 +145,7 @@ def test_scalar_checkerboards_are_read_and_written_with_mitsubas_eval_1_colours(
     assert swap_scalar_checkerboard(bitmap) is bitmap
 
 
-@pytest.fixture(scope="module")
-def mi():
-    mitsuba = pytest.importorskip("mitsuba")
-    mitsuba.set_variant("scalar_rgb")
-    return mitsuba
+mi = mitsuba_fixture()
 
 
 K, SPP = 4, 64
@@ -164,8 +162,7 @@ def test_saved_textured_scene_renders_in_mitsuba_like_the_original_xml(mi, xml, 
     (tmp_path / "orig.xml").write_text(orig)
     for name in ("albedo.png", "rough.exr", "normals.exr"):
         (tmp_path / name).write_bytes((Path(xml).parent / name).read_bytes())
-    a, b = (np.stack([np.array(mi.render(mi.load_file(str(p)), spp=SPP, seed=s0 + s))[..., :3]
-                      for s in range(K)]).astype(np.float64)
+    a, b = (mitsuba_replicates(mi, mi.load_file(str(p)), K, SPP, seed0=s0)
             for p, s0 in ((tmp_path / "orig.xml", 0), (out, K)))  # fmt: skip
     assert_agree(a, b)
 
@@ -245,35 +242,12 @@ def test_scalar_checkerboard_bsdfs_evaluate_like_mitsubas(mi, mat, tmp_path):
 @pytest.mark.mitsuba
 @pytest.mark.slow  # slow: ~62-68 s on 2 cores (jaxgfx compile of the textured path program)
 def test_saved_textured_scene_renders_in_mitsuba_like_jaxgfx(mi, xml, tmp_path):
-    from jaxgfx.render.render import render
-
     scene = load_scene(xml)
     out = save_scene(scene, tmp_path / "saved.xml", spp=SPP, max_depth=3)
-    ms = mi.load_file(out)
-    b = np.stack([np.array(mi.render(ms, spp=SPP, seed=s))[..., :3] for s in range(K)])
-    keys = jax.random.split(jax.random.key(11), K)
-    f = jax.vmap(lambda k: render(scene, k, spp=SPP, max_depth=3))
-    a = np.asarray(f(keys), np.float64)
+    b = mitsuba_replicates(mi, mi.load_file(out), K, SPP)
+    a = jaxgfx_replicates(scene, 11, K, spp=SPP, max_depth=3)
     zc, zb = assert_agree(a, b)
     print("textured channel means", a.mean((0, 1, 2)), b.mean((0, 1, 2)), "z", zc,
           "block |z|<4", np.mean(np.abs(zb) < 4))  # fmt: skip
 
 
-def assert_agree(a, b, block=8):
-    """Replicate stacks ``a`` (jaxgfx) and ``b`` (Mitsuba), K x H x W x 3: channel means within
-    5 standard errors of the replicate spread, and 8x8-block means with |z| < 4 in >= 90 %
-    of the blocks (few replicates: heavy tails)."""
-    k = a.shape[0]
-    ma, mb = a.mean((0, 1, 2)), b.mean((0, 1, 2))
-    se = np.sqrt(a.mean((1, 2)).var(0, ddof=1) / k + b.mean((1, 2)).var(0, ddof=1) / k)
-    assert np.all(np.abs(ma - mb) < 5 * se + 1e-6), (ma, mb, se)
-    h, w = a.shape[1] // block, a.shape[2] // block
-
-    def blocks(x):
-        return x[:, : h * block, : w * block].reshape(k, h, block, w, block, 3).mean((2, 4))
-
-    ba, bb = blocks(a), blocks(b)
-    se_b = np.sqrt(ba.var(0, ddof=1) / k + bb.var(0, ddof=1) / k) + 1e-9
-    z = (ba.mean(0) - bb.mean(0)) / se_b
-    assert np.mean(np.abs(z) < 4) >= 0.9, z
-    return (ma - mb) / se, z

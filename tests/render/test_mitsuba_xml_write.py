@@ -28,6 +28,12 @@ from jaxgfx.render.scene.mitsuba_conventions import (
     rectangle_to_world,
 )
 from jaxgfx.render.scene.mitsuba_xml import read_xml, save_scene, to_xml
+from tests.render._mitsuba import (
+    assert_channels_and_pixels_agree,
+    jaxgfx_replicates,
+    mitsuba_fixture,
+    mitsuba_replicates,
+)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCENES = os.path.join(ROOT, "configs", "scenes")
@@ -247,11 +253,7 @@ def test_every_named_conductor_loads_from_xml(tmp_path):
 # against Mitsuba 3
 
 
-@pytest.fixture(scope="module")
-def mi():
-    mitsuba = pytest.importorskip("mitsuba")
-    mitsuba.set_variant("scalar_rgb")
-    return mitsuba
+mi = mitsuba_fixture()
 
 
 @pytest.mark.mitsuba
@@ -298,12 +300,8 @@ K, SPP, RES = 4, 64, 16
 
 
 def _jaxgfx_replicates(desc, base_dir, max_depth):
-    from jaxgfx.render.render import render
-
-    scene = load_scene(desc, base_dir=base_dir)
-    keys = jax.random.split(jax.random.key(7), K)
-    f = jax.vmap(lambda k: render(scene, k, spp=SPP, max_depth=max_depth))
-    return np.asarray(f(keys), np.float64)
+    return jaxgfx_replicates(load_scene(desc, base_dir=base_dir), 7, K, spp=SPP,
+                             max_depth=max_depth)  # fmt: skip
 
 
 @pytest.mark.mitsuba
@@ -312,22 +310,8 @@ def _jaxgfx_replicates(desc, base_dir, max_depth):
 def test_yaml_scene_saved_as_xml_renders_in_mitsuba_like_jaxgfx(mi, tmp_path, name):
     desc = _small_yaml(name, RES)
     out = save_scene(desc, str(tmp_path / f"{name}.xml"), spp=SPP, max_depth=3, base_dir=SCENES)
-    scene = mi.load_file(out)
-    b = np.stack([np.array(mi.render(scene, spp=SPP, seed=s))[..., :3] for s in range(K)])
-    a = _jaxgfx_replicates(desc, SCENES, 3)
-    _assert_agree(a, b)
-
-
-def _assert_agree(a, b):
-    """Replicate stacks ``a`` (jaxgfx) and ``b`` (Mitsuba), K x H x W x 3, agree."""
-    # channel means: Welch-type z from the replicate spread (P(|z| > 5) ~ 1e-3 with 6 dof)
-    ma, mb = a.mean((0, 1, 2)), b.mean((0, 1, 2))
-    se = np.sqrt(a.mean((1, 2)).var(0, ddof=1) / K + b.mean((1, 2)).var(0, ddof=1) / K)
-    assert np.all(np.abs(ma - mb) < 5 * se + 1e-6), (ma, mb, se)
-    # pixels: mean of 4 replicates each; |z| < 4 for >= 95 % (few dof per pixel: heavy tails)
-    var = a.var(0, ddof=1) / K + b.var(0, ddof=1) / K + (1e-4 * (a.mean(0) + b.mean(0))) ** 2
-    z = np.abs(a.mean(0) - b.mean(0)) / np.sqrt(var + 1e-12)
-    assert np.mean(z < 4) >= 0.95, np.mean(z < 4)
+    b = mitsuba_replicates(mi, mi.load_file(out), K, SPP)
+    assert_channels_and_pixels_agree(_jaxgfx_replicates(desc, SCENES, 3), b)
 
 
 # -------------------------------------------------------------------------------------------
@@ -442,10 +426,8 @@ def test_plastic_and_roughdielectric_scene_renders_in_mitsuba_like_jaxgfx(mi, tm
     desc = read_xml(str(p)).desc
     assert desc["materials"]["ggx_glass"]["sample_visible"] is True
     out = save_scene(desc, str(tmp_path / "w.xml"), spp=SPP, max_depth=6)
-    scene = mi.load_file(out)
-    b = np.stack([np.array(mi.render(scene, spp=SPP, seed=s))[..., :3] for s in range(K)])
-    a = _jaxgfx_replicates(desc, None, 6)
-    _assert_agree(a, b)
+    b = mitsuba_replicates(mi, mi.load_file(out), K, SPP)
+    assert_channels_and_pixels_agree(_jaxgfx_replicates(desc, None, 6), b)
 
 
 # -------------------------------------------------------------------------------------------

@@ -12,21 +12,21 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgfx.render import render
 from jaxgfx.render._sunsky_data import tables
 from jaxgfx.render.scene import load_scene
-from jaxgfx.render.scene.mitsuba import to_mitsuba_dict
 from jaxgfx.render.sunsky import SunSky, _disc, sun_direction_at
+from tests.render._mitsuba import (
+    jaxgfx_replicates,
+    mitsuba_fixture,
+    mitsuba_replicates,
+    mitsuba_scene_from_desc,
+)
 from tests.render._scenes import replicate_block_z
 
 pytestmark = pytest.mark.mitsuba
 
 
-@pytest.fixture(scope="module")
-def mi():
-    mitsuba = pytest.importorskip("mitsuba")
-    mitsuba.set_variant("scalar_rgb")
-    return mitsuba
+mi = mitsuba_fixture()
 
 
 def _unit(v):
@@ -188,21 +188,13 @@ def test_render_matches_mitsuba(mi):
     k = 8
     desc = _scene(_elev_dir(35.0, -60.0))
     scene = load_scene(desc)
-    keys = jax.random.split(jax.random.key(5), k)
-    f = jax.jit(jax.vmap(lambda key: render(scene, key, spp=64, integrator="path",
-                                            max_depth=3)))  # fmt: skip
-    a = np.asarray(f(keys), np.float64)
-    md = to_mitsuba_dict(desc, mi=mi)
-    md["integrator"] = {"type": "path", "max_depth": 3}
-    ms = mi.load_dict(md)
-    b = np.stack([np.array(mi.render(ms, spp=64, seed=s))[..., :3] for s in range(k)])
+    a = jaxgfx_replicates(scene, 5, k, jit=True, spp=64, integrator="path", max_depth=3)
+    integ = {"type": "path", "max_depth": 3}
+    b = mitsuba_replicates(mi, mitsuba_scene_from_desc(mi, desc, integ), k, 64)
     assert np.all(np.isfinite(a)) and a.mean() > 0.05
-    z = replicate_block_z(a, b.astype(np.float64))[0]
+    z = replicate_block_z(a, b)[0]
     assert z.max() < 5, z.max()
     other = _scene(_elev_dir(35.0, -60.0))
     other["emitters"][0]["turbidity"] = 4.0
-    mo = to_mitsuba_dict(other, mi=mi)
-    mo["integrator"] = {"type": "path", "max_depth": 3}
-    c = np.stack([np.array(mi.render(mi.load_dict(mo), spp=64, seed=s))[..., :3]
-                  for s in range(k)])  # fmt: skip
-    assert replicate_block_z(a, c.astype(np.float64))[0].max() > 5
+    c = mitsuba_replicates(mi, mitsuba_scene_from_desc(mi, other, integ), k, 64)
+    assert replicate_block_z(a, c)[0].max() > 5

@@ -14,6 +14,7 @@ from jaxgfx._checks import as_float_array, check_finite, check_nonnegative, chec
 __all__ = [
     "BSDF",
     "BSDFSample",
+    "DeltaBSDF",
     "to_rgb",
     "rgb_param",
     "scalar_param",
@@ -85,6 +86,26 @@ class BSDF(eqx.Module):
     @property
     def albedo(self):  # pragma: no cover - interface
         raise NotImplementedError
+
+
+class DeltaBSDF(BSDF):
+    """Base of the BSDFs made of delta lobes only (``Mirror``, the smooth and thin dielectrics,
+    the pass-through polarizers): ``eval`` (..., 3) and ``pdf`` (...) are 0 for every pair of
+    directions, and ``has_delta`` is true; subclasses define ``sample`` and ``albedo``.
+    ``eval``'s zeros take the dtype of ``wo``, ``wi`` and the field named by ``EVAL_DTYPE_OF``;
+    ``pdf``'s that of ``wo``, ``wi``."""
+
+    has_delta: ClassVar[bool] = True
+    EVAL_DTYPE_OF: ClassVar[str]
+
+    def eval(self, wo, wi):
+        wo, wi = prep_dirs(wo, wi)
+        shape = jnp.broadcast_shapes(wo.shape, wi.shape)
+        return jnp.zeros(shape, jnp.result_type(wo, wi, getattr(self, self.EVAL_DTYPE_OF)))
+
+    def pdf(self, wo, wi):
+        wo, wi = prep_dirs(wo, wi)
+        return jnp.zeros(jnp.broadcast_shapes(wo.shape, wi.shape)[:-1], jnp.result_type(wo, wi))
 
 
 def to_rgb(x, name):

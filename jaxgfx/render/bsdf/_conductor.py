@@ -7,11 +7,10 @@ import jax.numpy as jnp
 
 from jaxgfx._checks import check_choice
 from jaxgfx.render.bsdf._base import (
-    BSDF,
     BSDFSample,
+    DeltaBSDF,
     check_rgb,
     mask3,
-    prep_dirs,
     sample_setup,
     to_rgb,
 )
@@ -61,7 +60,7 @@ def check_fresnel(fresnel, eta, k):
         check_rgb(k, "k")
 
 
-class Mirror(BSDF):
+class Mirror(DeltaBSDF):
     """Ideal specular reflection (Mitsuba ``conductor``): ``wi = (-wo_x, -wo_y, wo_z)``.
 
     ``f = reflectance · F(cos θ_o) δ(ω_i - ω_r) / |cos θ_i|`` (seed lecture 3,
@@ -79,7 +78,7 @@ class Mirror(BSDF):
     k: jnp.ndarray | None
     fresnel: str = eqx.field(static=True, default="none")
 
-    has_delta = True
+    EVAL_DTYPE_OF = "reflectance"
 
     def __init__(self, reflectance=1.0, *, eta=None, k=None, fresnel=None):
         self.reflectance = to_rgb(reflectance, "reflectance")
@@ -92,16 +91,6 @@ class Mirror(BSDF):
     @property
     def albedo(self):
         return self.reflectance
-
-    def eval(self, wo, wi):
-        wo, wi = prep_dirs(wo, wi)
-        shape = jnp.broadcast_shapes(wo.shape, wi.shape)
-        return jnp.zeros(shape, jnp.result_type(wo, wi, self.reflectance))
-
-    def pdf(self, wo, wi):
-        wo, wi = prep_dirs(wo, wi)
-        shape = jnp.broadcast_shapes(wo.shape, wi.shape)[:-1]
-        return jnp.zeros(shape, jnp.result_type(wo, wi))
 
     def sample(self, wo, u1, u2):
         wo, u1, u2, shape = sample_setup(wo, u1, u2)

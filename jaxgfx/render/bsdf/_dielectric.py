@@ -7,13 +7,12 @@ import jax.numpy as jnp
 
 from jaxgfx._math import safe_div
 from jaxgfx.render.bsdf._base import (
-    BSDF,
     BSDFSample,
+    DeltaBSDF,
     check_rgb,
     check_scalar,
     float_field,
     mask3,
-    prep_dirs,
     rgb_field,
     sample_setup,
 )
@@ -22,17 +21,17 @@ from jaxgfx.render.bsdf.fresnel import fresnel_dielectric
 __all__ = ["SmoothDielectric", "DeltaDielectric"]
 
 
-class DeltaDielectric(BSDF):
+class DeltaDielectric(DeltaBSDF):
     """What the delta dielectrics share (:class:`SmoothDielectric`, ``ThinDielectric``): the
     interior / exterior IOR ``eta`` (> 0), the specular reflectance and transmittance factors,
-    zero ``eval`` / ``pdf`` (delta lobes only) and a zero diffuse albedo; subclasses define
-    ``sample``."""
+    zero ``eval`` / ``pdf`` of :class:`~jaxgfx.render.bsdf._base.DeltaBSDF` and a zero diffuse
+    albedo; subclasses define ``sample``."""
 
     eta: jnp.ndarray = float_field(1.5046, "eta")
     specular_reflectance: jnp.ndarray = rgb_field(1.0, "specular_reflectance", kw_only=True)
     specular_transmittance: jnp.ndarray = rgb_field(1.0, "specular_transmittance", kw_only=True)
 
-    has_delta = True
+    EVAL_DTYPE_OF = "eta"
     is_transmissive = True
 
     def __check_init__(self):
@@ -43,15 +42,6 @@ class DeltaDielectric(BSDF):
     @property
     def albedo(self):
         return jnp.zeros_like(self.specular_reflectance)
-
-    def eval(self, wo, wi):
-        wo, wi = prep_dirs(wo, wi)
-        shape = jnp.broadcast_shapes(wo.shape, wi.shape)
-        return jnp.zeros(shape, jnp.result_type(wo, wi, self.eta))
-
-    def pdf(self, wo, wi):
-        wo, wi = prep_dirs(wo, wi)
-        return jnp.zeros(jnp.broadcast_shapes(wo.shape, wi.shape)[:-1], jnp.result_type(wo, wi))
 
 
 class SmoothDielectric(DeltaDielectric):

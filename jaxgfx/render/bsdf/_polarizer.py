@@ -9,12 +9,11 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from jaxgfx.render.bsdf._base import (
-    BSDF,
     BSDFSample,
+    DeltaBSDF,
     check_rgb,
     check_scalar,
     float_field,
-    prep_dirs,
     rgb_field,
     sample_setup,
 )
@@ -22,7 +21,7 @@ from jaxgfx.render.bsdf._base import (
 __all__ = ["PassThrough", "Polarizer", "CircularPolarizer", "Retarder"]
 
 
-class PassThrough(BSDF):
+class PassThrough(DeltaBSDF):
     """A null-like surface that scales the light crossing it: ``eval = pdf = 0`` and ``sample``
     always continues the ray straight on (``wi = -wo``, ``pdf`` 1, delta, ``eta`` 1) with the
     weight ``FACTOR · transmittance``; a bounce, and opaque to shadow rays, as the ``null``
@@ -31,7 +30,7 @@ class PassThrough(BSDF):
 
     transmittance: jnp.ndarray = rgb_field(1.0, "transmittance")
 
-    has_delta: ClassVar[bool] = True
+    EVAL_DTYPE_OF: ClassVar[str] = "transmittance"
     FACTOR: ClassVar[float] = 1.0
 
     def __check_init__(self):
@@ -40,16 +39,6 @@ class PassThrough(BSDF):
     @property
     def albedo(self):
         return jnp.zeros_like(self.transmittance)
-
-    def eval(self, wo, wi):
-        wo, wi = prep_dirs(wo, wi)
-        shape = jnp.broadcast_shapes(wo.shape, wi.shape)
-        return jnp.zeros(shape, jnp.result_type(wo, wi, self.transmittance))
-
-    def pdf(self, wo, wi):
-        wo, wi = prep_dirs(wo, wi)
-        shape = jnp.broadcast_shapes(wo.shape, wi.shape)[:-1]
-        return jnp.zeros(shape, jnp.result_type(wo, wi))
 
     def sample(self, wo, u1, u2):
         wo, u1, u2, shape = sample_setup(wo, u1, u2)
