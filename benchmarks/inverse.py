@@ -77,6 +77,29 @@ def time_to_first(alpha_hist, seconds_cum, truth, rel=0.02):
     return float(seconds_cum[hit[0]]) if hit.size else None
 
 
+def tail_start(cfg: dict, steps: int) -> int | None:
+    """The step from which the config's ``optimizer.average`` averages the iterates (None:
+    off): ``jaxgfx.pipelines.fit.OptimizerConfig.average_from``."""
+    m = int(round(float(cfg["optimizer"].get("average", 0.0)) * steps))
+    return None if m == 0 else steps - m
+
+
+def estimates(alpha_hist, k0, lo, hi):
+    """The fit's estimate of alpha after each step: the iterate, and from step ``k0 + 1`` on
+    the running mean of the iterates ``k0 + 1 .. k`` in the optimiser's variable ``u``
+    (``alpha = lo + (hi - lo) sigmoid(u)``), as ``jaxgfx.optim.fit(average_from=k0)`` reports
+    it when stopped at ``k`` (``k0`` None: the iterates)."""
+    a = np.asarray(alpha_hist, np.float64)
+    if k0 is None:
+        return a
+    t = np.clip((a - lo) / (hi - lo), 1e-12, 1 - 1e-12)
+    u = np.log(t) - np.log1p(-t)
+    run = np.cumsum(u[k0 + 1 :]) / np.arange(1, a.size - k0)
+    out = a.copy()
+    out[k0 + 1 :] = lo + (hi - lo) / (1 + np.exp(-run))
+    return out
+
+
 def run_jaxgfx(cfg: dict) -> dict:
     t0 = time.perf_counter()
     out = run_fit(FitJob.load(cfg, None, base_dir=CONFIG_DIR))
@@ -85,6 +108,9 @@ def run_jaxgfx(cfg: dict) -> dict:
     alpha = np.asarray(out["history"][ALPHA], np.float64)  # (steps + 1,)
     albedo = np.asarray(out["history"][ALBEDO], np.float64)
     secs = np.concatenate([[0.0], np.cumsum(out["seconds_history"])])
+    lo, hi = cfg["params"][ALPHA]["min"], cfg["params"][ALPHA]["max"]
+    est = estimates(alpha, tail_start(cfg, len(alpha) - 1), lo, hi)
+    result = float(out["params"][ALPHA])
     return {
         "seconds_per_step": out["seconds_per_step"],
         "compile_seconds": out["compile_seconds"],
@@ -92,10 +118,14 @@ def run_jaxgfx(cfg: dict) -> dict:
         "wall_seconds": wall,
         "time_to_2pct_alpha": time_to_within(alpha, secs, truth_a),
         "time_to_first_2pct_alpha": time_to_first(alpha, secs, truth_a),
+        "time_to_2pct_result": time_to_within(est, secs, truth_a, window=1),
         "final_alpha": float(alpha[-10:].mean()),
         "alpha_error": float(abs(alpha[-10:].mean() - truth_a)),
+        "result_alpha": result,
+        "result_alpha_error": abs(result - truth_a),
+        "average": out.get("average"),
         "albedo_error": float(np.max(np.abs(albedo[-10:].mean(0) - out["truth"][ALBEDO]))),
-        "curve": {"seconds": secs.tolist(), "alpha": alpha.tolist()},
+        "curve": {"seconds": secs.tolist(), "alpha": alpha.tolist(), "estimate": est.tolist()},
     }
 
 
@@ -121,7 +151,10 @@ def run_jaxgfx_lm(coarse: int, fine: int, seed: int = 0) -> dict:
     }
 
 
-def run_mitsuba(cfg: dict, steps: int, spp: int, lr: float) -> dict:
+def run_mitsuba(cfg: dict, steps: int, spp: int, lr: float, seed: int = 0) -> dict:
+    """Mitsuba 3's own loop (module doc); ``seed``: the fit's seeds are ``seed * steps + k``
+    (0: ``k``, the seeds of the earlier runs); the target's seed is 12345 whatever ``seed``."""
+    t_start = time.perf_counter()
     if os.path.exists(LLVM19):
         os.environ.setdefault("DRJIT_LIBLLVM_PATH", LLVM19)
     from jaxgfx.render.scene.mitsuba import import_mitsuba, to_mitsuba_dict
@@ -178,7 +211,7 @@ def run_mitsuba(cfg: dict, steps: int, spp: int, lr: float) -> dict:
         t = time.perf_counter()
         if lr_final is not None:  # the same exponential decay as jaxgfx's config
             opt.set_learning_rate(lr * (lr_final / lr) ** (it / max(steps - 1, 1)))
-        img = mi.render(scene, params, spp=spp, seed=it)
+        img = mi.render(scene, params, spp=spp, seed=seed * steps + it)
         loss = dr.mean(dr.square(img - ref), axis=None)
         dr.backward(loss)
         opt.step()
@@ -191,18 +224,41 @@ def run_mitsuba(cfg: dict, steps: int, spp: int, lr: float) -> dict:
     alpha = np.asarray(alphas)
     albedo = np.asarray(albedos)
     cum = np.concatenate([[0.0], np.cumsum(secs)])
+    # the same Polyak-Ruppert tail as jaxgfx's optimizer.average (in u; off: the last iterate)
+    est = estimates(alpha, tail_start(cfg, steps), lo_a, hi_a)
     return {
         "variant": variant,
+        "seed": seed,
         "seconds_per_step": float(np.median(secs[1:])),
         "first_step_seconds": float(secs[0]),
         "target_seconds": target_seconds,
+        "wall_seconds": time.perf_counter() - t_start,  # import, load, target and loop
         "time_to_2pct_alpha": time_to_within(alpha, cum, truth[ALPHA]),
         "time_to_first_2pct_alpha": time_to_first(alpha, cum, truth[ALPHA]),
+        "time_to_2pct_result": time_to_within(est, cum, truth[ALPHA], window=1),
         "final_alpha": float(alpha[-10:].mean()),
         "alpha_error": float(abs(alpha[-10:].mean() - truth[ALPHA])),
+        "result_alpha": float(est[-1]),
+        "result_alpha_error": float(abs(est[-1] - truth[ALPHA])),
         "albedo_error": float(np.max(np.abs(albedo[-10:].mean(0) - np.asarray(truth[ALBEDO])))),
-        "curve": {"seconds": cum.tolist(), "alpha": alpha.tolist()},
+        "curve": {"seconds": cum.tolist(), "alpha": alpha.tolist(), "estimate": est.tolist()},
         "target": ref_np,
+    }
+
+
+def spread(runs, truth) -> dict:
+    """Several fits of one system: each seed's result, the mean, its standard error, and how
+    many results are within 2 % of ``truth`` / settle there (``time_to_2pct_alpha``)."""
+    r = np.asarray([x["result_alpha"] for x in runs], np.float64)
+    return {
+        "seeds": [x["seed"] for x in runs],
+        "result_alpha": r.tolist(),
+        "mean": float(r.mean()),
+        "se": float(r.std(ddof=1) / np.sqrt(r.size)) if r.size > 1 else None,
+        "sd": float(r.std(ddof=1)) if r.size > 1 else None,
+        "within_2pct": int(np.sum(np.abs(r - truth) <= 0.02 * truth)),
+        "settled_2pct": sum(x["time_to_2pct_alpha"] is not None for x in runs),
+        "time_to_2pct_alpha": [x["time_to_2pct_alpha"] for x in runs],
     }
 
 
@@ -256,7 +312,10 @@ def main(argv=None) -> int:
     p.add_argument("--plot", default=None, help="directory for inverse_speed.png")
     p.add_argument("--no-mitsuba", action="store_true")
     p.add_argument("--lm-polish", default="128:4096", help="COARSE:FINE spp ('' to skip)")
+    p.add_argument("--mitsuba-seeds", default="",
+                   help="more Mitsuba fits with these seeds (e.g. 1,2,3): their spread")
     a = p.parse_args(argv)
+    t_run = time.perf_counter()
     enable_compilation_cache()
     cfg = copy.deepcopy(read_yaml(CONFIG))
     if a.steps is None:
@@ -301,8 +360,14 @@ def main(argv=None) -> int:
             res["target_relative_rmse_jaxgfx_vs_mitsuba"] = float(
                 np.sqrt(np.mean((ours - tgt) ** 2)) / np.sqrt(np.mean(tgt**2))
             )
+            seeds = [int(x) for x in a.mitsuba_seeds.split(",") if x]
+            if seeds:
+                _log(f"mitsuba seeds {seeds} ...")
+                runs = [m] + [run_mitsuba(cfg, a.steps, spp, lr, seed=sd) for sd in seeds]
+                res["mitsuba_seeds"] = spread(runs, cfg["target"]["synthetic"][ALPHA])
         except Exception as e:  # noqa: BLE001 - report why the peer could not run
             res["mitsuba"] = {"error": f"{type(e).__name__}: {e}"}
+    res["wall_seconds"] = time.perf_counter() - t_run  # the whole benchmark run
     if a.plot:
         os.makedirs(a.plot, exist_ok=True)
         plot(os.path.join(a.plot, "inverse_speed.png"), res, cfg["target"]["synthetic"][ALPHA])
