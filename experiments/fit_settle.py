@@ -30,8 +30,8 @@ alpha, truth 0.15, start 0.5, and the clay's albedo; 32x32, direct light). Two m
 fractions that ``optimizer.average`` would use (identical to the option's result up to
 float32 rounding: the same mean in the same variable).
 
-Prints JSON (``--out`` also writes it; each key's alpha history is in it). Seconds are not the point here (the machine may be
-shared); the step counts and values are.
+Prints JSON (``--out`` also writes it; each key's alpha history is in it). Seconds are not
+the point here (the machine may be shared); the step counts and values are.
 """
 
 from __future__ import annotations
