@@ -1,7 +1,7 @@
 """Why the example fit does not settle within 2 % of the true roughness: bias or noise?
 
     python -m experiments.fit_settle [--sections optimum,fits] [--keys 0-7]
-        [--targets 256:7,4096:7] [--variants base,avg] [--out FILE]
+        [--targets 256:7,16384:7] [--variants base,avg] [--post-average 0.5] [--out FILE]
 
 The problem is the shipped example (configs/inverse_material.yaml: the metal sphere's GGX
 alpha, truth 0.15, start 0.5, and the clay's albedo; 32x32, direct light). Two measurements:
@@ -255,7 +255,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--sections", default="optimum,fits")
     p.add_argument("--keys", default="0-7", help="fit keys: 0-7 or 0,3,5")
-    p.add_argument("--targets", default="256:7,4096:7", help="SPP:SEED of the fits' targets")
+    p.add_argument("--targets", default="256:7,16384:7", help="SPP:SEED of the fits' targets")
     p.add_argument("--optimum-targets", default="256:7,256:8,256:9,256:10,256:11,4096:7,16384:7")
     p.add_argument("--optimum-spp", type=int, default=8192)
     p.add_argument("--variants", default="base,avg")
