@@ -248,6 +248,9 @@ def fit(
     if isinstance(optimizer, str) and optimizer in LEAST_SQUARES_SOLVERS:
         if key is not None:
             raise ValueError("key: least-squares solvers need a deterministic residual function")
+        if average_from is not None:
+            raise ValueError("average_from: a least-squares solver returns its solution, not "
+                             "iterates to average")
         return fit_least_squares(
             loss, params, solver=optimizer, bounds=bounds, args=args, max_steps=steps
         )

@@ -83,6 +83,8 @@ def test_average_from_is_validated():
         fit(lambda p: p["x"] ** 2, {"x": 1.0}, steps=10, average_from=10, progress=False)
     with pytest.raises(ValueError, match=r"average_from: expected an integer >= 0"):
         fit(lambda p: p["x"] ** 2, {"x": 1.0}, steps=10, average_from=-1, progress=False)
+    with pytest.raises(ValueError, match=r"average_from: a least-squares solver returns its"):
+        fit(lambda p: p["x"], {"x": 1.0}, optimizer="lm", steps=10, average_from=5)
 
 
 def test_optimizer_average_config():
