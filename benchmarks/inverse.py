@@ -8,8 +8,8 @@ of the metal sphere (alpha 0.15, start 0.5) and the clay sphere's albedo ((0.7, 
 start 0.5 grey) in configs/scenes/inverse.yaml at 32x32, direct lighting (max_depth 2), 8 spp
 per step, Adam with the learning rate decaying from 0.05 to 0.005 over the config's steps
 (``--steps`` overrides), each system fitting a target rendered by itself at the config's
-``target.spp`` (16384 since 2026-12-06: a 256-spp target's own noise moved alpha's optimum
-by -2.2 %, ``experiments.fit_settle``).
+``target.spp`` (256; its own noise puts alpha's optimum ~2 % low: ``experiments.fit_settle``,
+docs/inverse.md section 4).
 
 * jaxgfx: :func:`jaxgfx.pipelines.fit.run_fit` (jitted step; bounded parameters through a
   sigmoid; primal and adjoint from two independent 4-spp images).
@@ -33,9 +33,8 @@ its standard error and how many seeds end / settle within 2 % — one seed's err
 chance (docs/inverse.md section 4). ``jaxgfx_lm``: jaxgfx's route
 to 2 % on a fixed key (``jaxgfx.testing.problems.lm_polish``: Levenberg-Marquardt at 128 spp, then 3
 Gauss-Newton steps at 4096 spp from its solution, key 0; ``time_to_2pct_alpha`` = compile +
-solve seconds of both stages when the result is within 2 %); its target is
-``jaxgfx.testing.problems``' 256-spp one (the example's before 2026-12-06). Mitsuba 3 has no
-least-squares solver, so this row has no peer. Also the relative RMSE between the two
+solve seconds of both stages when the result is within 2 %); Mitsuba 3 has no least-squares
+solver, so this row has no peer. Also the relative RMSE between the two
 targets (conventions check). Prints JSON; ``--plot DIR`` writes ``inverse_speed.png``
 (alpha error vs seconds, both systems). The machine may be shared: compare the two systems
 within one run.

@@ -61,7 +61,7 @@ def inverse_example(scene_desc: dict, *, size: int = 32):
         return s.replace("materials.clay.reflectance", p["albedo"])
 
     truth = {"alpha": jnp.float32(TRUE_ALPHA), "albedo": jnp.asarray(TRUE_ALBEDO, jnp.float32)}
-    # the example's target until 2026-12-06 (seed 7, 256 spp; the config now renders 16384 spp)
+    # the example's target: seed 7, 256 spp (configs/inverse_material.yaml)
     target = render(with_params(truth), jax.random.key(7), spp=256, integrator="direct")
     return with_params, target
 
