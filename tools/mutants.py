@@ -329,6 +329,25 @@ MUTANTS = [
         "why": "a default changed (10 steps)",
     },
     {
+        "name": "optim.fit.average_off_by_one",
+        "file": "jaxgfx/optim/_loop.py",
+        "old": "if average_from is not None and i >= average_from:",
+        "new": "if average_from is not None and i >= average_from - 1:",
+        "tests": ["tests/optim/test_average.py::test_average_of_a_known_sequence"],
+        "why": "the averaging window one iterate too early (history[k0] included)",
+    },
+    {
+        "name": "optim.fit.average_dropped",
+        "file": "jaxgfx/optim/_loop.py",
+        "old": "    if n_avg:\n        u = jax.tree.map(lambda s: s / n_avg, u_sum)",
+        "new": "    if n_avg < 0:\n        u = jax.tree.map(lambda s: s / n_avg, u_sum)",
+        "tests": [
+            "tests/optim/test_average.py::"
+            "test_averaging_a_noisy_quadratic_matches_the_stationary_variance"
+        ],
+        "why": "the average counted but the last iterate returned",
+    },
+    {
         "name": "defaults.render.integrator_direct",
         "file": "jaxgfx/render/render.py",
         "old": 'integrator: str | Integrator = "path",',

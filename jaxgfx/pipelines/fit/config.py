@@ -446,9 +446,18 @@ class OptimizerConfig:
     lr_final: float | None = None  # exponential decay from lr to lr_final over the steps
     # compile the step with jaxgfx.optim.FAST_COMPILE_OPTIONS (docs/performance.md)
     fast_compile: bool = False
+    # Polyak-Ruppert averaging: the fit's result is the mean of the iterates of the last
+    # `average` fraction of the steps (jaxgfx.optim.fit's average_from); 0: the last iterate
+    average: float = 0.0
 
     def __post_init__(self):
         check_choice(self.name, "optimizer.name", FIT_OPTIMIZERS)
+        f = self.average
+        if isinstance(f, bool) or not isinstance(f, (int, float)) or not 0 <= f <= 1:
+            raise ValueError(
+                "optimizer.average: expected the fraction of the steps, at the end, whose "
+                f"iterates are averaged into the result (0 <= average <= 1; 0: off), got {f!r}"
+            )
         if not isinstance(self.fast_compile, bool):
             raise ValueError(
                 f"optimizer.fast_compile: expected true/false, got {self.fast_compile!r}"
@@ -463,6 +472,12 @@ class OptimizerConfig:
         _positive_int(self.steps, "optimizer.steps")
         if self.tol is not None and not self.tol >= 0:
             raise ValueError(f"optimizer.tol: expected a number >= 0, got {self.tol}")
+
+    def average_from(self) -> int | None:
+        """:func:`jaxgfx.optim.fit`'s ``average_from``: the last ``round(average · steps)``
+        iterates are averaged (None: off, or a fraction that rounds to no iterate)."""
+        m = int(round(self.average * self.steps))
+        return None if m == 0 else self.steps - m
 
     def compiler_options(self):
         """XLA options for the fit step: :data:`jaxgfx.optim.FAST_COMPILE_OPTIONS` or None."""

@@ -761,6 +761,7 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
         progress=cfg.progress,
         tol=o.tol,
         compiler_options=o.compiler_options(),
+        average_from=o.average_from(),
     )
     if k_curve is not None:
         params["camera"]["curve"] = params["camera"]["curve"] * k_curve
@@ -771,6 +772,9 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
     _check_fitted(prep, scene_after, cfg)
     out = _result(given, prep, res, target_seconds, scene_after)
     out["adjoint"] = adjoint
+    if o.average:  # optimizer.average: the result is a mean of iterates (fit's average_from)
+        out["average"] = {"fraction": o.average, "from_step": o.average_from(),
+                          "iterates": res.n_averaged}
     renders = None
     if prep.views is not None:  # each view's loss before and after (one render per view)
         spp = max(cfg.render.spp, 64)
