@@ -1,0 +1,215 @@
+"""The cold ``jaxgfx fit`` timeline: where a fresh process's seconds go, phase by phase.
+
+    python -m benchmarks.fit_cold [--config configs/inverse_material.yaml]
+                                  [--variants default,fast_compile] [--repeats 2] [--out FILE]
+
+Each run is a **fresh Python process** with JAX's persistent compilation cache off
+(``JAXGFX_CACHE_DIR=off``: a cold start) that runs ``jaxgfx fit CONFIG --out TMP --quiet``
+through :func:`jaxgfx.cli.main`, with timers around the phases (wall and process CPU seconds
+from the process start): ``imports`` (``jaxgfx.cli``, ``jaxgfx.pipelines.fit``,
+``jaxgfx.render``, ``jaxgfx.optim``, jax), ``load`` (config + scene, ``prepare_fit``),
+``target`` (the synthetic target render), ``fit`` (the step's compile and the steps:
+``compile_seconds`` and the steps' sum from ``result.json``), ``report`` (the preview renders)
+and ``write``; ``other`` is the rest up to the process's end. JAX's own compile events
+(``jax.monitoring``: trace, lower to StableHLO, XLA compile) are summed per phase and listed
+per compiled function (wall seconds; they may overlap when programs compile in a thread).
+Variants: ``default`` (the config as given), ``fast_compile``
+(``optimizer.fast_compile: true``), ``sequential`` (``JAXGFX_FIT_OVERLAP=0``: the step
+compiled after the target, not beside it) and ``separate_programs``
+(``JAXGFX_FIT_SHARED_RENDER=0``: the target at its own spp in one call, as before), joinable
+with ``+``. Repeats are interleaved (A B A B) so that a change of the machine's load falls on
+both. Prints one JSON document; ``machine.load_before`` / ``load_after`` are the 1-minute load
+averages (the other jobs on the shared machine).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+PHASES = ("imports", "cli", "load", "pre_target", "target", "fit", "report", "write", "other")
+
+
+def _child(config: str, variant: str) -> dict:
+    t_start = time.perf_counter()
+    c_start = time.process_time()
+    marks = []  # (phase, wall s, cpu s) at each phase's end
+
+    def mark(name):
+        marks.append((name, time.perf_counter() - t_start, time.process_time() - c_start))
+
+    import jax  # noqa: F401  (counted in imports)
+    from jax import monitoring
+
+    events = []  # (event, fun_name, start, end) in perf_counter seconds from t_start
+    names = {"/jax/core/compile/jaxpr_trace_duration": "trace",
+             "/jax/core/compile/jaxpr_to_mlir_module_duration": "lower",
+             "/jax/core/compile/backend_compile_duration": "xla"}
+
+    def on_span(event, start, end, **kw):
+        if event in names:
+            events.append((names[event], str(kw.get("fun_name", "?")), start, end))
+
+    monitoring.register_event_time_span_listener(on_span)
+    import jaxgfx.cli as cli
+    import jaxgfx.optim  # noqa: F401
+    import jaxgfx.pipelines.fit as fitpkg
+    import jaxgfx.render  # noqa: F401
+    from jaxgfx.pipelines.fit import job, targets
+
+    mark("imports")
+    # the phases are wrapped where run_fit calls them
+    orig_prepare, orig_target = job.prepare_fit, job._target
+    orig_previews, orig_write = job._previews, job.write_outputs
+    clock0 = time.time() - (time.perf_counter() - t_start)  # perf_counter 0 on time.time
+
+    def wrap(fn, before, after):
+        def inner(*a, **k):
+            mark(before)
+            out = fn(*a, **k)
+            mark(after)
+            return out
+        return inner
+
+    job.prepare_fit = wrap(orig_prepare, "cli", "load")
+    job._target = wrap(orig_target, "pre_target", "target")
+    job._previews = wrap(orig_previews, "fit", "report")
+    job.write_outputs = wrap(orig_write, "report:post", "write")
+    del targets, fitpkg
+    out_dir = tempfile.mkdtemp(prefix="fit_cold_")
+    args = ["fit", config, "--out", os.path.join(out_dir, "out"), "--quiet"]
+    rc = cli.main(args)
+    mark("other")
+    with open(os.path.join(out_dir, "out", "result.json")) as f:
+        result = json.load(f)
+    # phases from the marks: each phase is the time since the previous mark
+    phases, prev_w, prev_c = {}, 0.0, 0.0
+    bounds = []
+    for name, w, c in marks:
+        key = name.split(":")[0]
+        phases.setdefault(key, {"wall_s": 0.0, "cpu_s": 0.0})
+        phases[key]["wall_s"] += w - prev_w
+        phases[key]["cpu_s"] += c - prev_c
+        bounds.append((key, prev_w, w))
+        prev_w, prev_c = w, c
+
+    def phase_of(t):
+        for key, a, b in bounds:
+            if a <= t < b:
+                return key
+        return "other"
+
+    per_phase, per_fun = {}, {}
+    for kind, fun, s, e in events:
+        s0, e0 = s - clock0, e - clock0
+        ph = per_phase.setdefault(phase_of(s0), {"trace": 0.0, "lower": 0.0, "xla": 0.0})
+        ph[kind] += e0 - s0
+        f = per_fun.setdefault(fun, {"trace": 0.0, "lower": 0.0, "xla": 0.0, "n_xla": 0})
+        f[kind] += e0 - s0
+        f["n_xla"] += kind == "xla"
+    top = sorted(per_fun.items(), key=lambda kv: -(kv[1]["xla"] + kv[1]["trace"]))[:8]
+    return {
+        "variant": variant,
+        "rc": rc,
+        "wall_s": marks[-1][1],
+        "cpu_s": marks[-1][2],
+        "phases": phases,
+        "compile_events_per_phase": per_phase,
+        "compile_events_top": dict(top),
+        "n_xla_compiles": sum(1 for e in events if e[0] == "xla"),
+        "step_compile_s": result["compile_seconds"],
+        "steps_s": result["seconds"],
+        "target_s": result["target_seconds"],
+        "params": result["params"],
+    }
+
+
+def _variant_env(variant: str, config: str) -> tuple[dict, str]:
+    env = dict(os.environ, JAXGFX_CACHE_DIR="off", JAX_PLATFORMS="cpu")
+    env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
+    for part in variant.split("+"):
+        if part == "default":
+            continue
+        if part == "fast_compile":
+            import yaml
+
+            from jaxgfx.config import read_yaml
+
+            data = read_yaml(config)
+            data["optimizer"] = {**data.get("optimizer", {}), "fast_compile": True}
+            base = os.path.dirname(os.path.abspath(config))
+            fd, path = tempfile.mkstemp(suffix=".yaml", dir=base, prefix=".fit_cold_")
+            with os.fdopen(fd, "w") as f:
+                yaml.safe_dump(data, f)
+            config = path
+        elif part == "sequential":
+            env["JAXGFX_FIT_OVERLAP"] = "0"
+        elif part == "separate_programs":
+            env["JAXGFX_FIT_SHARED_RENDER"] = "0"
+        else:
+            raise SystemExit(f"--variants: unknown variant part {part!r}")
+    return env, config
+
+
+def _load1() -> float:
+    return os.getloadavg()[0]
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--config", default=os.path.join(ROOT, "configs", "inverse_material.yaml"))
+    p.add_argument("--variants", default="default")
+    p.add_argument("--repeats", type=int, default=1)
+    p.add_argument("--out", default=None)
+    p.add_argument("--child", default=None, help=argparse.SUPPRESS)
+    a = p.parse_args(argv)
+    if a.child is not None:
+        print("FIT_COLD_JSON " + json.dumps(_child(a.config, a.child)))
+        return 0
+    runs = []
+    machine = {"cpus": os.cpu_count(), "load_before": _load1()}
+    for r in range(a.repeats):
+        for v in a.variants.split(","):
+            env, cfg = _variant_env(v, a.config)
+            try:
+                t0 = time.perf_counter()
+                proc = subprocess.run(
+                    [sys.executable, "-m", "benchmarks.fit_cold", "--config", cfg, "--child", v],
+                    cwd=ROOT, env=env, capture_output=True, text=True,
+                )
+                outer = time.perf_counter() - t0
+            finally:
+                if cfg != a.config:
+                    os.remove(cfg)
+            line = [x for x in proc.stdout.splitlines() if x.startswith("FIT_COLD_JSON ")]
+            if not line:
+                sys.stderr.write(proc.stdout[-2000:] + proc.stderr[-4000:])
+                raise SystemExit(f"variant {v}: the child failed (rc {proc.returncode})")
+            run = json.loads(line[0].split(" ", 1)[1])
+            run.update(repeat=r, process_wall_s=outer, load_after=_load1())
+            runs.append(run)
+            ph = run["phases"]
+            sys.stderr.write(
+                f"{v} #{r}: {outer:.1f} s wall (process), {run['cpu_s']:.1f} s CPU; "
+                + ", ".join(f"{k} {ph[k]['wall_s']:.1f}/{ph[k]['cpu_s']:.1f}"
+                            for k in PHASES if k in ph)
+                + f"; step compile {run['step_compile_s']:.1f} s; load {run['load_after']:.1f}\n"
+            )
+    machine["load_after"] = _load1()
+    doc = {"machine": machine, "config": os.path.relpath(a.config, ROOT), "runs": runs}
+    text = json.dumps(doc, indent=1)
+    if a.out:
+        with open(a.out, "w") as f:
+            f.write(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
