@@ -17,8 +17,10 @@ Variants: ``default`` (the config as given), ``fast_compile``
 (``optimizer.fast_compile: true``), ``sequential`` (``JAXGFX_FIT_OVERLAP=0``: the step
 compiled after the target, not beside it) and ``separate_programs``
 (``JAXGFX_FIT_SHARED_RENDER=0``: the target at its own spp in one call, as before), joinable
-with ``+``. Repeats are interleaved (A B A B) so that a change of the machine's load falls on
-both. Prints one JSON document; ``machine.load_before`` / ``load_after`` are the 1-minute load
+with ``+``. ``--set section.key=value`` changes the config (e.g. ``--set
+render.integrator=path --set optimizer.steps=100``). Repeats are interleaved (A B A B) so
+that a change of the machine's load falls on both. Prints one JSON document;
+``machine.load_before`` / ``load_after`` and each run's ``load_after`` are the 1-minute load
 averages (the other jobs on the shared machine).
 """
 
@@ -113,7 +115,7 @@ def _child(config: str, variant: str) -> dict:
         f = per_fun.setdefault(fun, {"trace": 0.0, "lower": 0.0, "xla": 0.0, "n_xla": 0})
         f[kind] += e0 - s0
         f["n_xla"] += kind == "xla"
-    top = sorted(per_fun.items(), key=lambda kv: -(kv[1]["xla"] + kv[1]["trace"]))[:8]
+    top = sorted(per_fun.items(), key=lambda kv: -(kv[1]["xla"] + kv[1]["trace"]))[:40]
     return {
         "variant": variant,
         "rc": rc,
@@ -125,35 +127,46 @@ def _child(config: str, variant: str) -> dict:
         "n_xla_compiles": sum(1 for e in events if e[0] == "xla"),
         "step_compile_s": result["compile_seconds"],
         "steps_s": result["seconds"],
+        "step_median_s": result["seconds_per_step"],
+        "n_steps": result["n_steps"],
         "target_s": result["target_seconds"],
         "params": result["params"],
     }
 
 
-def _variant_env(variant: str, config: str) -> tuple[dict, str]:
+def _variant_env(variant: str, config: str, sets=()) -> tuple[dict, str]:
+    """The child's environment and config file (a temporary copy next to ``config`` when the
+    variant or ``--set`` changes it)."""
+    import yaml
+
+    from jaxgfx.config import read_yaml
+
     env = dict(os.environ, JAXGFX_CACHE_DIR="off", JAX_PLATFORMS="cpu")
     env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
+    data = read_yaml(config)
+    changed = False
+    for item in sets:  # section.key=value (YAML value)
+        name, value = item.split("=", 1)
+        section, key = name.split(".", 1)
+        data[section] = {**(data.get(section) or {}), key: yaml.safe_load(value)}
+        changed = True
     for part in variant.split("+"):
         if part == "default":
             continue
         if part == "fast_compile":
-            import yaml
-
-            from jaxgfx.config import read_yaml
-
-            data = read_yaml(config)
             data["optimizer"] = {**data.get("optimizer", {}), "fast_compile": True}
-            base = os.path.dirname(os.path.abspath(config))
-            fd, path = tempfile.mkstemp(suffix=".yaml", dir=base, prefix=".fit_cold_")
-            with os.fdopen(fd, "w") as f:
-                yaml.safe_dump(data, f)
-            config = path
+            changed = True
         elif part == "sequential":
             env["JAXGFX_FIT_OVERLAP"] = "0"
         elif part == "separate_programs":
             env["JAXGFX_FIT_SHARED_RENDER"] = "0"
         else:
             raise SystemExit(f"--variants: unknown variant part {part!r}")
+    if changed:
+        base = os.path.dirname(os.path.abspath(config))
+        fd, config = tempfile.mkstemp(suffix=".yaml", dir=base, prefix=".fit_cold_")
+        with os.fdopen(fd, "w") as f:
+            yaml.safe_dump(data, f)
     return env, config
 
 
@@ -166,6 +179,8 @@ def main(argv=None):
     p.add_argument("--config", default=os.path.join(ROOT, "configs", "inverse_material.yaml"))
     p.add_argument("--variants", default="default")
     p.add_argument("--repeats", type=int, default=1)
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="override a config entry, e.g. --set render.integrator=path")
     p.add_argument("--out", default=None)
     p.add_argument("--child", default=None, help=argparse.SUPPRESS)
     a = p.parse_args(argv)
@@ -176,7 +191,7 @@ def main(argv=None):
     machine = {"cpus": os.cpu_count(), "load_before": _load1()}
     for r in range(a.repeats):
         for v in a.variants.split(","):
-            env, cfg = _variant_env(v, a.config)
+            env, cfg = _variant_env(v, a.config, a.set)
             try:
                 t0 = time.perf_counter()
                 proc = subprocess.run(
@@ -202,7 +217,8 @@ def main(argv=None):
                 + f"; step compile {run['step_compile_s']:.1f} s; load {run['load_after']:.1f}\n"
             )
     machine["load_after"] = _load1()
-    doc = {"machine": machine, "config": os.path.relpath(a.config, ROOT), "runs": runs}
+    doc = {"machine": machine, "config": os.path.relpath(a.config, ROOT), "set": a.set,
+           "runs": runs}
     text = json.dumps(doc, indent=1)
     if a.out:
         with open(a.out, "w") as f:
