@@ -18,8 +18,10 @@ Variants: ``default`` (the config as given), ``fast_compile``
 compiled after the target, not beside it) and ``separate_programs``
 (``JAXGFX_FIT_SHARED_RENDER=0``: the target at its own spp in one call, as before), joinable
 with ``+``. ``--set section.key=value`` changes the config (e.g. ``--set
-render.integrator=path --set optimizer.steps=100``). Repeats are interleaved (A B A B) so
-that a change of the machine's load falls on both. Prints one JSON document;
+render.integrator=path --set optimizer.steps=100``). ``--warm-steps N``: instead, the
+config's step compiled twice in one process (defaults, ``FAST_COMPILE_OPTIONS``) and called
+N times each, alternating, medians of process CPU and wall per call. Repeats are interleaved
+(A B A B) so that a change of the machine's load falls on both. Prints one JSON document;
 ``machine.load_before`` / ``load_after`` and each run's ``load_after`` are the 1-minute load
 averages (the other jobs on the shared machine).
 """
@@ -33,6 +35,8 @@ import subprocess
 import sys
 import tempfile
 import time
+
+import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PHASES = ("imports", "cli", "load", "pre_target", "target", "fit", "report", "write", "other")
@@ -134,6 +138,58 @@ def _child(config: str, variant: str) -> dict:
     }
 
 
+def _warm_child(config: str, n: int) -> dict:
+    """The fit step of ``config`` compiled twice in this process (XLA's defaults and
+    ``FAST_COMPILE_OPTIONS``) and called ``n`` times each, alternating A B B A ...: each
+    call's process CPU and wall seconds (the medians compare the two programs' warm steps on a
+    loaded machine)."""
+    import dataclasses
+
+    import jax
+
+    from jaxgfx.optim import FAST_COMPILE_OPTIONS, compile_step
+    from jaxgfx.optim._loop import _setup
+    from jaxgfx.pipelines.fit import FitJob, job, prepare_fit
+
+    fj = FitJob.load(config, None)
+    cfg, prep = fj.config, prepare_fit(fj.config, base_dir=fj.base_dir)
+    adjoint = job.choose_adjoint(cfg, prep)["adjoint"]
+    cfg = dataclasses.replace(cfg, render=dataclasses.replace(cfg.render, adjoint=adjoint))
+    _, k_fit, k_show = jax.random.split(jax.random.key(cfg.seed), 3)
+    target, _ = job._target(cfg, prep)
+    inp = job._fit_inputs(cfg, prep, target, k_show)
+    o = cfg.optimizer
+    out = {"config": os.path.relpath(config, ROOT), "adjoint": adjoint, "programs": {}}
+    steps = {}
+    for name, opts in (("default", None), ("fast_compile", dict(FAST_COMPILE_OPTIONS))):
+        c0 = time.process_time()
+        steps[name] = compile_step(inp.loss, inp.params, optimizer=o.name, key=k_fit,
+                                   args=inp.args, bounds=inp.bounds, compiler_options=opts)
+        out["programs"][name] = {"compile_cpu_s": time.process_time() - c0,
+                                 "compile_wall_s": steps[name].compile_seconds,
+                                 "cpu_s": [], "wall_s": []}
+    st = _setup(inp.loss, inp.params, o.name, o.lr, k_fit, inp.bounds, None)
+    call = (st.u0, st.opt_state, st.step_key, np.int32(0), inp.args)
+    for name in steps:  # one warm-up call each
+        jax.block_until_ready(steps[name].compiled(*call))
+    order = list(steps)
+    for i in range(n):
+        for name in order if i % 2 == 0 else order[::-1]:
+            c0, t0 = time.process_time(), time.perf_counter()
+            jax.block_until_ready(steps[name].compiled(*call))
+            rec = out["programs"][name]
+            rec["wall_s"].append(time.perf_counter() - t0)
+            rec["cpu_s"].append(time.process_time() - c0)
+    for rec in out["programs"].values():
+        rec["median_cpu_s"] = float(np.median(rec["cpu_s"]))
+        rec["median_wall_s"] = float(np.median(rec["wall_s"]))
+        del rec["cpu_s"], rec["wall_s"]
+    d, f = out["programs"]["default"], out["programs"]["fast_compile"]
+    out["fast_over_default_cpu"] = f["median_cpu_s"] / d["median_cpu_s"]
+    out["fast_over_default_wall"] = f["median_wall_s"] / d["median_wall_s"]
+    return out
+
+
 def _variant_env(variant: str, config: str, sets=()) -> tuple[dict, str]:
     """The child's environment and config file (a temporary copy next to ``config`` when the
     variant or ``--set`` changes it)."""
@@ -182,10 +238,38 @@ def main(argv=None):
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override a config entry, e.g. --set render.integrator=path")
     p.add_argument("--out", default=None)
+    p.add_argument("--warm-steps", type=int, default=0, metavar="N",
+                   help="instead: the warm step, default vs fast_compile, N calls each")
     p.add_argument("--child", default=None, help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.child is not None:
-        print("FIT_COLD_JSON " + json.dumps(_child(a.config, a.child)))
+        if a.child == "warm":
+            doc = _warm_child(a.config, a.warm_steps)
+        else:
+            doc = _child(a.config, a.child)
+        print("FIT_COLD_JSON " + json.dumps(doc))
+        return 0
+    if a.warm_steps:
+        env, cfg = _variant_env("default", a.config, a.set)
+        try:
+            proc = subprocess.run(
+                [sys.executable, "-m", "benchmarks.fit_cold", "--config", cfg, "--child",
+                 "warm", "--warm-steps", str(a.warm_steps)],
+                cwd=ROOT, env=env, capture_output=True, text=True)
+        finally:
+            if cfg != a.config:
+                os.remove(cfg)
+        line = [x for x in proc.stdout.splitlines() if x.startswith("FIT_COLD_JSON ")]
+        if not line:
+            sys.stderr.write(proc.stdout[-2000:] + proc.stderr[-4000:])
+            raise SystemExit(f"warm steps: the child failed (rc {proc.returncode})")
+        doc = {"load_before": _load1(), **json.loads(line[0].split(" ", 1)[1]),
+               "set": a.set, "load_after": _load1()}
+        doc["config"] = os.path.relpath(a.config, ROOT)
+        print(json.dumps(doc, indent=1))
+        if a.out:
+            with open(a.out, "w") as f:
+                json.dump(doc, f, indent=1)
         return 0
     runs = []
     machine = {"cpus": os.cpu_count(), "load_before": _load1()}
