@@ -142,12 +142,13 @@ def _warm_child(config: str, n: int) -> dict:
     """The fit step of ``config`` compiled twice in this process (XLA's defaults and
     ``FAST_COMPILE_OPTIONS``) and called ``n`` times each, alternating A B B A ...: each
     call's process CPU and wall seconds (the medians compare the two programs' warm steps on a
-    loaded machine)."""
+    loaded machine); then the config's fit run with each program (``optimizer.steps``, same
+    target and keys): the largest difference of the fitted values."""
     import dataclasses
 
     import jax
 
-    from jaxgfx.optim import FAST_COMPILE_OPTIONS, compile_step
+    from jaxgfx.optim import FAST_COMPILE_OPTIONS, compile_step, fit
     from jaxgfx.optim._loop import _setup
     from jaxgfx.pipelines.fit import FitJob, job, prepare_fit
 
@@ -184,6 +185,23 @@ def _warm_child(config: str, n: int) -> dict:
         rec["median_cpu_s"] = float(np.median(rec["cpu_s"]))
         rec["median_wall_s"] = float(np.median(rec["wall_s"]))
         del rec["cpu_s"], rec["wall_s"]
+    # the config's whole fit with each program: the fitted values and losses compared
+    fits = {}
+    for name, step in steps.items():
+        res = fit(inp.loss, inp.params, optimizer=o.name, learning_rate=o.schedule(),
+                  steps=o.steps, key=k_fit, args=inp.args, bounds=inp.bounds, progress=False,
+                  tol=o.tol, step=step, compiler_options=None if name == "default"
+                  else dict(FAST_COMPILE_OPTIONS))
+        fits[name] = res
+        out["programs"][name]["fit_median_step_s"] = float(np.median(res.seconds))
+    a, b = (jax.tree.leaves(fits[n].params) for n in ("default", "fast_compile"))
+    out["fit_steps"] = o.steps
+    out["fit_max_abs_diff"] = max(float(np.max(np.abs(np.asarray(x, np.float64) - y)))
+                                  for x, y in zip(a, b, strict=True))
+    out["fit_max_rel_diff"] = max(
+        float(np.max(np.abs(np.asarray(x, np.float64) - y) / np.maximum(np.abs(y), 1e-6)))
+        for x, y in zip(a, b, strict=True))
+    out["fit_loss_last"] = {n: float(r.loss[-1]) for n, r in fits.items()}
     d, f = out["programs"]["default"], out["programs"]["fast_compile"]
     out["fast_over_default_cpu"] = f["median_cpu_s"] / d["median_cpu_s"]
     out["fast_over_default_wall"] = f["median_wall_s"] / d["median_wall_s"]
