@@ -140,7 +140,7 @@ def test_cli_result_json_fields_and_the_overlapped_step(tmp_path, fake_render, m
 @pytest.mark.slow
 def test_shared_target_render_matches_one_call_real_renderer():
     # slow: two compiles of the direct-light render of configs/scenes/inverse.yaml (8x8):
-    # ~16 s CPU on 2 cores
+    # ~15 s CPU (61 s wall at load 9.5, 2 cores)
     """The real renderer: the 256-spp target as 4 x 64 spp (the report's program) against one
     256-spp call, per 2x2 block, z from the four sub-renders' spread (a conservative bound:
     one call's stratified samples vary less)."""
@@ -167,4 +167,6 @@ def test_shared_target_render_matches_one_call_real_renderer():
     var = 2 * b.var(0, ddof=1) / 4 + (1e-4 * blocks(old)) ** 2
     z = np.abs(blocks(shared) - blocks(old)) / np.sqrt(var + 1e-12)
     assert z.max() < 6, z.max()
-    assert abs(blocks(shared).mean() / blocks(old).mean() - 1) < 0.03
+    ratio = blocks(shared).mean() / blocks(old).mean()
+    assert abs(ratio - 1) < 0.03, ratio
+    assert abs(1.1 * ratio - 1) > 0.03  # power: a 10 % bias would fail
