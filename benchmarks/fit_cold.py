@@ -14,8 +14,7 @@ and ``write``; ``other`` is the rest up to the process's end. JAX's own compile 
 (``jax.monitoring``: trace, lower to StableHLO, XLA compile) are summed per phase and listed
 per compiled function (wall seconds; they may overlap when programs compile in a thread).
 Variants: ``default`` (the config as given), ``fast_compile``
-(``optimizer.fast_compile: true``), ``sequential`` (``JAXGFX_FIT_OVERLAP=0``: the step
-compiled after the target, not beside it) and ``separate_programs``
+(``optimizer.fast_compile: true``) and ``separate_programs``
 (``JAXGFX_FIT_SHARED_RENDER=0``: the target at its own spp in one call, as before), joinable
 with ``+``. ``--set section.key=value`` changes the config (e.g. ``--set
 render.integrator=path --set optimizer.steps=100``). ``--warm-steps N``: instead, the
@@ -230,8 +229,6 @@ def _variant_env(variant: str, config: str, sets=()) -> tuple[dict, str]:
         if part == "fast_compile":
             data["optimizer"] = {**data.get("optimizer", {}), "fast_compile": True}
             changed = True
-        elif part == "sequential":
-            env["JAXGFX_FIT_OVERLAP"] = "0"
         elif part == "separate_programs":
             env["JAXGFX_FIT_SHARED_RENDER"] = "0"
         else:

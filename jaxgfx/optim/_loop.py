@@ -321,11 +321,12 @@ def compile_step(
     compiler_options: dict | None = None,
 ) -> CompiledStep:
     """Compile :func:`fit`'s step ahead of the fit (same arguments as :func:`fit`; the
-    learning rate does not enter the program); pass the result as ``fit(..., step=...)``.
-    ``args`` may hold ``jax.ShapeDtypeStruct`` leaves in place of arrays not made yet (a
-    target still rendering): the step is compiled for their shapes and dtypes. Thread-safe
-    (tracing holds the GIL; XLA's compile does not), so a caller can compile the step in a
-    ``concurrent.futures`` thread while it renders."""
+    learning rate does not enter the program); pass the result as ``fit(..., step=...)``, e.g.
+    to compile one loss under several ``compiler_options`` and time their steps
+    (``benchmarks/fit_cold.py --warm-steps``). ``args`` may hold ``jax.ShapeDtypeStruct``
+    leaves in place of arrays not made yet: the step is compiled for their shapes and dtypes.
+    (Compiling it in a thread while the fit's target renders did not shorten a cold
+    ``jaxgfx fit``: XLA's CPU compile holds the GIL, docs/performance.md.)"""
     if isinstance(optimizer, str) and optimizer in LEAST_SQUARES_SOLVERS:
         raise ValueError("optimizer: compile_step is for the first-order optimisers of fit")
     if not callable(loss):
@@ -376,10 +377,10 @@ def fit(
     (relative change over ``patience`` steps; a loss that stays exactly 0 also stops).
     ``compiler_options``: XLA options for compiling the step (``jax.stages.Lowered.compile``;
     e.g. :data:`FAST_COMPILE_OPTIONS`); names XLA does not know raise its error.
-    ``step``: the step compiled beforehand by :func:`compile_step` (e.g. in a thread while the
-    target renders) with the same ``loss``, ``optimizer``, ``optimizer_options``, ``key``
-    (``None`` or not), ``bounds``, ``compiler_options`` and parameters and ``args`` of the same
-    shapes and dtypes (else ``ValueError``); ``compile_seconds`` is then its compile time.
+    ``step``: the step compiled beforehand by :func:`compile_step` with the same ``loss``,
+    ``optimizer``, ``optimizer_options``, ``key`` (``None`` or not), ``bounds``,
+    ``compiler_options`` and parameters and ``args`` of the same shapes and dtypes (else
+    ``ValueError``); ``compile_seconds`` is then its compile time.
     ``callback(step, params, loss)`` runs on the host after each step; returning ``True`` stops
     the loop. ``progress`` shows a tqdm bar.
 

@@ -1,6 +1,6 @@
 """The cold fit's compile path (jaxgfx/pipelines/fit/job.py): the synthetic target rendered
-by the report's program (mean of renders at the report's spp), the step compiled while the
-target renders (``jaxgfx.optim.compile_step``), and ``result.json`` unchanged in its fields.
+by the report's program (mean of renders at the report's spp) and ``result.json`` unchanged
+in its fields.
 
 The renderer is replaced here by a cheap stand-in with a closed-form estimator (the mean of
 ``spp`` uniform numbers per pixel and channel: expectation 1/2, variance 1/(12 spp)), so these
@@ -98,7 +98,6 @@ def _toy_loss(p, key, args):
 
 def _run_cli(tmp_path, name, monkeypatch):
     from jaxgfx.cli import main
-
     from jaxgfx.pipelines.fit import report
 
     monkeypatch.setattr(job, "cached_loss", lambda *a, **k: _toy_loss)
@@ -118,23 +117,19 @@ def _run_cli(tmp_path, name, monkeypatch):
         return json.load(f)
 
 
-def test_cli_result_json_fields_and_the_overlapped_step(tmp_path, fake_render, monkeypatch):
-    """``jaxgfx fit`` with the step compiled beside the target render writes the fields it
-    wrote before, and fits exactly what the sequential route fits (same target, same step)."""
-    from jaxgfx import optim
-
-    compiled = []
-    real = optim.compile_step
-    monkeypatch.setattr(optim, "compile_step", lambda *a, **k: compiled.append(1) or real(*a, **k))
-    res = _run_cli(tmp_path, "overlap", monkeypatch)
+def test_cli_result_json_fields_and_one_render_program(tmp_path, fake_render, monkeypatch):
+    """``jaxgfx fit`` writes the fields it wrote before; the 256-spp target (four calls) and
+    the two previews are renders of one spp, so one compiled forward program."""
+    res = _run_cli(tmp_path, "out", monkeypatch)
     assert set(res) == RESULT_FIELDS
-    assert compiled == [1] and res["compile_seconds"] > 0 and res["n_steps"] == 3
-    assert set(fake_render) == {64}  # target (4 calls) and previews: one program
-    monkeypatch.setenv("JAXGFX_FIT_OVERLAP", "0")
-    seq = _run_cli(tmp_path, "sequential", monkeypatch)
-    assert compiled == [1]  # not used on this route
-    assert seq["loss"] == res["loss"] and seq["params"] == res["params"]
-    assert seq["loss"][-1] < seq["loss"][0]
+    assert fake_render == [64] * 6  # target: 4 x 64 spp; previews before / after: 64 spp
+    assert res["compile_seconds"] > 0 and res["n_steps"] == 3
+    assert res["loss"][-1] < res["loss"][0]
+    # the old route renders the target in one 256-spp call: two programs
+    monkeypatch.setenv("JAXGFX_FIT_SHARED_RENDER", "0")
+    fake_render.clear()
+    _run_cli(tmp_path, "old", monkeypatch)
+    assert fake_render == [256, 64, 64]
 
 
 @pytest.mark.slow

@@ -737,25 +737,10 @@ class _FitInputs(typing.NamedTuple):
     loss: object
 
 
-def _target_aval(prep: Prepared):
-    """The shape and dtype (``jax.ShapeDtypeStruct``) of a synthetic linear target (the
-    scene's ``(H, W, 3)`` render, ``(photos, H, W, 3)`` over views), for compiling the step
-    while the target renders; None where the step's inputs need the target's values (a camera
-    fit: LDR photos, ``exposure.auto``, a bracket start), where the target is a file (nothing
-    to wait for), or with ``JAXGFX_FIT_OVERLAP=0``."""
-    import jax
-
-    if prep.targets is not None or prep.ldr or not _flag("JAXGFX_FIT_OVERLAP"):
-        return None
-    h, w = prep.scene.height, prep.scene.width
-    shape = (h, w, 3) if prep.views is None else (len(prep.view_of), h, w, 3)
-    return jax.ShapeDtypeStruct(shape, np.dtype(prep.scene.dtype))
-
-
 def _fit_inputs(cfg: FitConfig, prep: Prepared, target: Target, k_show) -> _FitInputs:
-    """The fit's parameters, bounds, ``args`` and loss for ``target`` (its ``pixels`` may be a
-    ``jax.ShapeDtypeStruct``: the step is then compiled for its shape)."""
-    import jax
+    """The fit's parameters, bounds, ``args`` (scene, target, camera arguments) and loss for
+    ``target``: what :func:`jaxgfx.optim.fit` gets (``benchmarks/fit_cold.py`` compiles the
+    step from them)."""
     import jax.numpy as jnp
 
     params, bounds, cam_args = _initial(cfg, prep, target)
@@ -787,16 +772,13 @@ def _fit_inputs(cfg: FitConfig, prep: Prepared, target: Target, k_show) -> _FitI
     masked = target.mask is not None
     loss = cached_loss(cfg, prep.paths, prep.ldr, target.grey, masked, priors, scaled,
                        views=prep.views is not None)
-    pixels = target.pixels
-    if not isinstance(pixels, jax.ShapeDtypeStruct):
-        pixels = jnp.asarray(pixels)
+    pixels = jnp.asarray(target.pixels)
     target_arg = (pixels, jnp.asarray(target.mask)) if masked else pixels
     return _FitInputs(params, bounds, (prep.scene, target_arg, cam_args), k_curve, scaled, loss)
 
 
 def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
     import jax
-    import jax.numpy as jnp
 
     from jaxgfx.optim import fit
 
@@ -809,45 +791,26 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
         cfg = dataclasses.replace(cfg, render=render_cfg)
 
     o = cfg.optimizer
-    fit_kw = dict(optimizer=o.name, key=k_fit, compiler_options=o.compiler_options())
     t0 = time.perf_counter()
-    aval = _target_aval(prep)
-    if aval is None:  # the step needs the target's values (a camera fit) or it is at hand
-        target, _ = _target(cfg, prep)
-        target_seconds = time.perf_counter() - t0
-        inputs = _fit_inputs(cfg, prep, target, k_show)
-        step = None
-    else:  # compile the step for the target's shape while the target renders
-        from concurrent.futures import ThreadPoolExecutor
-
-        from jaxgfx.optim import compile_step
-
-        inputs = _fit_inputs(cfg, prep, Target(aval), k_show)
-        with ThreadPoolExecutor(1, thread_name_prefix="jaxgfx-fit-compile") as pool:
-            pending = pool.submit(compile_step, inputs.loss, inputs.params, args=inputs.args,
-                                  bounds=inputs.bounds, **fit_kw)
-            target, _ = _target(cfg, prep)
-            target_seconds = time.perf_counter() - t0
-            step = pending.result()
-        pixels = np.asarray(target.pixels)
-        if target.mask is not None or target.grey or (pixels.shape, pixels.dtype) != (
-                aval.shape, aval.dtype):  # not the target compiled for: compile in fit
-            inputs, step = _fit_inputs(cfg, prep, target, k_show), None
-        else:
-            inputs = inputs._replace(args=(prep.scene, jnp.asarray(pixels), inputs.args[2]))
+    # (compiling the step in a thread while the target renders did not shorten the cold run:
+    # XLA's compile holds the GIL; docs/performance.md, "The cold jaxgfx fit")
+    target, _ = _target(cfg, prep)
+    target_seconds = time.perf_counter() - t0
+    inputs = _fit_inputs(cfg, prep, target, k_show)
     params, bounds, cam_args = inputs.params, inputs.bounds, inputs.args[2]
     k_curve, scaled = inputs.k_curve, inputs.scaled
     res = fit(
         inputs.loss,
         params,
+        optimizer=o.name,
         learning_rate=o.schedule(),
         steps=o.steps,
+        key=k_fit,
         args=inputs.args,
         bounds=bounds,
         progress=cfg.progress,
         tol=o.tol,
-        step=step,
-        **fit_kw,
+        compiler_options=o.compiler_options(),
     )
     if k_curve is not None:
         params["camera"]["curve"] = params["camera"]["curve"] * k_curve
