@@ -19,7 +19,9 @@ Variants: ``default`` (the config as given), ``fast_compile``
 with ``+``. ``--set section.key=value`` changes the config (e.g. ``--set
 render.integrator=path --set optimizer.steps=100``). ``--warm-steps N``: instead, the
 config's step compiled twice in one process (defaults, ``FAST_COMPILE_OPTIONS``) and called
-N times each, alternating, medians of process CPU and wall per call. Repeats are interleaved
+N times each, alternating, medians of process CPU and wall per call. ``--gil``: whether
+XLA's compile lets another Python thread run (a Python loop beside a compile; two compiles
+in two threads against one after the other). Repeats are interleaved
 (A B A B) so that a change of the machine's load falls on both. Prints one JSON document;
 ``machine.load_before`` / ``load_after`` and each run's ``load_after`` are the 1-minute load
 averages (the other jobs on the shared machine).
@@ -207,6 +209,69 @@ def _warm_child(config: str, n: int) -> dict:
     return out
 
 
+def _gil_probe() -> dict:
+    """Does XLA's CPU compile let another Python thread run? (1) a pure-Python loop in this
+    thread while another thread compiles the fit's 8x8 direct-light render (64 spp): its rate
+    against the loop alone; (2) two such compiles (16 and 64 spp) in two threads against one
+    after the other (wall and process CPU)."""
+    import threading
+
+    import jax
+
+    from jaxgfx.config import load_config
+    from jaxgfx.pipelines.fit import FitConfig, prepare_fit
+    from jaxgfx.render.estimator import resolve_integrator
+    from jaxgfx.render.render import _render
+
+    cfg = load_config(FitConfig, {
+        "scene": os.path.join(ROOT, "configs", "scenes", "inverse.yaml"),
+        "target": {"synthetic": {"materials.metal.alpha": 0.15}},
+        "params": {"materials.metal.alpha": {"init": 0.5, "min": 0.01, "max": 1.0}},
+        "render": {"spp": 4, "width": 8, "height": 8}})
+    scene = prepare_fit(cfg).scene
+    integ = resolve_integrator("direct", max_depth=2, rr_depth=None, strategy=None,
+                               sampling=None, caller="gil_probe")
+
+    def lowered(spp):
+        return _render.lower(scene, jax.random.key(0), spp, integ)
+
+    def loop_rate(seconds):
+        n, t = 0, time.perf_counter()
+        while time.perf_counter() - t < seconds:
+            n += 1
+        return n / seconds
+
+    out = {"load_before": _load1()}
+    alone = loop_rate(2.0)
+    low = lowered(64)
+    th = threading.Thread(target=low.compile)
+    c0, t0 = time.process_time(), time.perf_counter()
+    th.start()
+    n = 0
+    while th.is_alive():
+        n += 1
+    wall = time.perf_counter() - t0
+    out["loop"] = {"rate_during_compile_over_alone": n / wall / alone,
+                   "rate_alone_after_over_before": loop_rate(2.0) / alone,
+                   "compile_wall_s": wall, "process_cpu_s": time.process_time() - c0}
+    for mode in ("one_after_the_other", "two_threads", "one_after_the_other", "two_threads"):
+        lows = [lowered(spp) for spp in (16, 64)]
+        c0, t0 = time.process_time(), time.perf_counter()
+        if mode == "two_threads":
+            ths = [threading.Thread(target=x.compile) for x in lows]
+            for t in ths:
+                t.start()
+            for t in ths:
+                t.join()
+        else:
+            for x in lows:
+                x.compile()
+        out.setdefault(mode, []).append({"wall_s": time.perf_counter() - t0,
+                                         "cpu_s": time.process_time() - c0,
+                                         "load": _load1()})
+    return out
+
+
 def _variant_env(variant: str, config: str, sets=()) -> tuple[dict, str]:
     """The child's environment and config file (a temporary copy next to ``config`` when the
     variant or ``--set`` changes it)."""
@@ -255,8 +320,14 @@ def main(argv=None):
     p.add_argument("--out", default=None)
     p.add_argument("--warm-steps", type=int, default=0, metavar="N",
                    help="instead: the warm step, default vs fast_compile, N calls each")
+    p.add_argument("--gil", action="store_true",
+                   help="instead: whether XLA's compile lets another Python thread run")
     p.add_argument("--child", default=None, help=argparse.SUPPRESS)
     a = p.parse_args(argv)
+    if a.gil:  # in this process (the compilation cache off)
+        os.environ["JAXGFX_CACHE_DIR"] = "off"
+        print(json.dumps(_gil_probe(), indent=1))
+        return 0
     if a.child is not None:
         if a.child == "warm":
             doc = _warm_child(a.config, a.warm_steps)
