@@ -45,7 +45,9 @@ FAST_COMPILE_OPTIONS: dict[str, bool | int] = {
 ``optimizer.fast_compile: true``): measured on the ``configs/inverse_material.yaml`` step
 (``python -m benchmarks.render_compile``, docs/performance.md "Compile time, second pass"):
 1.6-2.2x less XLA compile time (process CPU), the same step time, images equal within
-float32 rounding."""
+float32 rounding. Not the default: on the textured and mesh fits (``configs/multiview*.yaml``)
+the fitted values move by more than float32 rounding (docs/performance.md, "The cold
+jaxgfx fit, phase by phase")."""
 
 OPTIMIZERS: dict[str, Callable[..., optax.GradientTransformation]] = {
     "adam": optax.adam,
