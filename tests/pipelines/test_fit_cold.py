@@ -135,7 +135,7 @@ def test_cli_result_json_fields_and_one_render_program(tmp_path, fake_render, mo
 @pytest.mark.slow
 def test_shared_target_render_matches_one_call_real_renderer():
     # slow: two compiles of the direct-light render of configs/scenes/inverse.yaml (8x8):
-    # ~15 s CPU (61 s wall at load 9.5, 2 cores)
+    # ~15 s CPU (14 s wall with a core to itself, 61 s at load 9.5)
     """The real renderer: the 256-spp target as 4 x 64 spp (the report's program) against one
     256-spp call, per 2x2 block, z from the four sub-renders' spread (a conservative bound:
     one call's stratified samples vary less)."""
