@@ -208,8 +208,6 @@ class _Setup(NamedTuple):
     schedule: Any
     lr_dtype: Any
     static: dict
-    optimizer: Any
-    opts: tuple
 
 
 def _setup(loss, params, optimizer, learning_rate, key, bounds, optimizer_options):
@@ -225,7 +223,7 @@ def _setup(loss, params, optimizer, learning_rate, key, bounds, optimizer_option
             ) from None
         tx = _named_optimizer(optimizer, opts)
     elif isinstance(optimizer, optax.GradientTransformation):
-        tx, opts = optimizer, ()
+        tx = optimizer
     else:
         raise TypeError(
             f"optimizer: expected a name in {sorted(OPTIMIZERS)} or an optax "
@@ -255,7 +253,7 @@ def _setup(loss, params, optimizer, learning_rate, key, bounds, optimizer_option
         schedule = None
     step_key = jax.random.key(0) if key is None else key
     static = dict(loss=loss, tx=tx, spec=spec, use_key=key is not None)
-    return _Setup(params, u0, opt_state, step_key, schedule, lr_dtype, static, optimizer, opts)
+    return _Setup(params, u0, opt_state, step_key, schedule, lr_dtype, static)
 
 
 def _types(tree):
