@@ -590,4 +590,27 @@ MUTANTS = [
         ],
         "why": "issue 22's bounds are inclusive (<= 2x): a ratio at the bound is met",
     },
+    # ------------------------------------------------------------------ pipelines: fit
+    {
+        "name": "pipelines.fit.shared_target_one_key",
+        "file": "jaxgfx/pipelines/fit/job.py",
+        "old": "imgs = [np.asarray(one(jax.random.fold_in(key, i), k)) for i in range(n)]",
+        "new": "imgs = [np.asarray(one(key, k)) for i in range(n)]",
+        "tests": [
+            "tests/pipelines/test_fit_cold.py::"
+            "test_target_render_is_four_renders_of_the_report_program"
+        ],
+        "why": "the target's n renders with one key: a k-spp image, n x the variance",
+    },
+    {
+        "name": "pipelines.fit.shared_target_sum_not_mean",
+        "file": "jaxgfx/pipelines/fit/job.py",
+        "old": "return (np.sum(imgs, axis=0, dtype=np.float64) / n).astype(imgs[0].dtype)",
+        "new": "return np.sum(imgs, axis=0, dtype=np.float64).astype(imgs[0].dtype)",
+        "tests": [
+            "tests/pipelines/test_fit_cold.py::"
+            "test_target_render_is_four_renders_of_the_report_program"
+        ],
+        "why": "the n renders summed, not averaged (a target n times too bright)",
+    },
 ]

@@ -11,8 +11,10 @@ from ._estimators import decorrelated_residuals as decorrelated_residuals
 from ._loop import FAST_COMPILE_OPTIONS as FAST_COMPILE_OPTIONS
 from ._loop import LEAST_SQUARES_SOLVERS as LEAST_SQUARES_SOLVERS
 from ._loop import OPTIMIZERS as OPTIMIZERS
+from ._loop import CompiledStep as CompiledStep
 from ._loop import FitResult as FitResult
 from ._loop import LeastSquaresSolution as LeastSquaresSolution
+from ._loop import compile_step as compile_step
 from ._loop import fit as fit
 from ._loop import fit_least_squares as fit_least_squares
 from ._loop import least_squares_solve as least_squares_solve
@@ -30,6 +32,8 @@ from ._transforms import to_unconstrained as to_unconstrained
 __all__ = [
     "fit",
     "fit_least_squares",
+    "compile_step",
+    "CompiledStep",
     "decorrelated",
     "decorrelated_loss",
     "decorrelated_residuals",

@@ -32,6 +32,8 @@ __all__ = [
     "OPTIMIZERS",
     "LEAST_SQUARES_SOLVERS",
     "FAST_COMPILE_OPTIONS",
+    "compile_step",
+    "CompiledStep",
 ]
 
 FAST_COMPILE_OPTIONS: dict[str, bool | int] = {
@@ -43,7 +45,9 @@ FAST_COMPILE_OPTIONS: dict[str, bool | int] = {
 ``optimizer.fast_compile: true``): measured on the ``configs/inverse_material.yaml`` step
 (``python -m benchmarks.render_compile``, docs/performance.md "Compile time, second pass"):
 1.6-2.2x less XLA compile time (process CPU), the same step time, images equal within
-float32 rounding."""
+float32 rounding. Not the default: on the textured and mesh fits (``configs/multiview*.yaml``)
+the fitted values move by more than float32 rounding (docs/performance.md, "The cold
+jaxgfx fit, phase by phase")."""
 
 OPTIMIZERS: dict[str, Callable[..., optax.GradientTransformation]] = {
     "adam": optax.adam,
@@ -185,6 +189,156 @@ def _step(u, state, k, i, a, *, loss, tx, spec, use_key):
     return u_new, state, val, jnp.isfinite(gsq), _unconstrained_to_params(u_new, spec)
 
 
+
+@dataclasses.dataclass(frozen=True)
+class CompiledStep:
+    """A compiled step of :func:`fit` (from :func:`compile_step`): the XLA executable, what
+    it was compiled for (the loss, optimiser, bounds and key use, the compiler options, the
+    shapes and dtypes of the parameters, optimiser state and ``args``) and ``compile_seconds``
+    (trace + lower + XLA compile, wall)."""
+
+    compiled: Any
+    static: tuple
+    in_types: Any
+    compile_seconds: float
+
+
+class _Setup(NamedTuple):
+    params: Any
+    u0: Any
+    opt_state: Any
+    step_key: Any
+    schedule: Any
+    lr_dtype: Any
+    static: dict
+
+
+def _setup(loss, params, optimizer, learning_rate, key, bounds, optimizer_options):
+    """The checked inputs of the step: unconstrained start, optimiser state, static args."""
+    if isinstance(optimizer, str):
+        check_choice(optimizer, "optimizer", (*OPTIMIZERS, *LEAST_SQUARES_SOLVERS))
+        opts = tuple(sorted((optimizer_options or {}).items()))
+        try:
+            hash(opts)
+        except TypeError:
+            raise TypeError(
+                "optimizer_options: expected hashable values (numbers, strings)"
+            ) from None
+        tx = _named_optimizer(optimizer, opts)
+    elif isinstance(optimizer, optax.GradientTransformation):
+        tx = optimizer
+    else:
+        raise TypeError(
+            f"optimizer: expected a name in {sorted(OPTIMIZERS)} or an optax "
+            f"GradientTransformation, got {type(optimizer).__name__}"
+        )
+    params = _as_param_tree(params)
+    check_bounds(params, bounds)
+    if key is not None and not isinstance(key, jax.Array):
+        raise TypeError(f"key: expected a JAX PRNG key, got {type(key).__name__}")
+
+    spec = _bound_spec(params, bounds)
+    u0 = to_unconstrained(params, bounds)
+    opt_state = tx.init(u0)
+    lr_dtype = None
+    if isinstance(optimizer, str):
+        # the learning rate lives in the optimiser state (optax.inject_hyperparams), so fits that
+        # differ only in it share one compiled step
+        lr0 = opt_state.hyperparams["learning_rate"]
+        lr_dtype = lr0.dtype
+        schedule = learning_rate if callable(learning_rate) else None
+        opt_state.hyperparams["learning_rate"] = jnp.asarray(
+            schedule(0) if schedule else learning_rate, lr_dtype
+        )
+    elif callable(learning_rate):
+        raise TypeError("learning_rate: a schedule needs a named optimizer (optax: build it in)")
+    else:
+        schedule = None
+    step_key = jax.random.key(0) if key is None else key
+    static = dict(loss=loss, tx=tx, spec=spec, use_key=key is not None)
+    return _Setup(params, u0, opt_state, step_key, schedule, lr_dtype, static)
+
+
+def _types(tree):
+    """Shapes, dtypes and weak types of a pytree's leaves (arrays or ShapeDtypeStructs)."""
+
+    def one(x):
+        a = x if isinstance(x, jax.ShapeDtypeStruct) else jax.typeof(x)
+        return (tuple(a.shape), str(a.dtype), bool(getattr(a, "weak_type", False)))
+
+    leaves, treedef = jax.tree_util.tree_flatten(tree)
+    return treedef, tuple(one(x) for x in leaves)
+
+
+def _signature(setup, compiler_options):
+    st = setup.static
+    return (st["loss"], st["tx"], st["spec"], st["use_key"],
+            tuple(sorted((compiler_options or {}).items())))
+
+
+def _compile(setup, args, compiler_options) -> CompiledStep:
+    static = setup.static
+    inputs = (setup.u0, setup.opt_state, setup.step_key, np.int32(0), args)
+    t0 = time.perf_counter()
+    try:
+        lowered = _step.lower(*inputs, **static)
+    except TypeError as e:  # a loss that does not return a scalar fails value_and_grad
+        out_shape = jax.eval_shape(functools.partial(_value, **static), setup.u0,
+                                   setup.step_key, args)
+        if getattr(out_shape, "shape", None) != ():
+            raise ValueError(f"loss: expected a scalar, got {out_shape}") from None
+        raise TypeError(f"loss: could not be traced with these params ({e})") from e
+    val = lowered.out_info[2]
+    if val.shape != ():
+        raise ValueError(f"loss: expected a scalar, got {val}")
+    compiled = lowered.compile(compiler_options=compiler_options or None)
+    return CompiledStep(compiled, _signature(setup, compiler_options), _types(inputs),
+                        time.perf_counter() - t0)
+
+
+def _check_step(step, setup, args, compiler_options):
+    if not isinstance(step, CompiledStep):
+        raise TypeError(f"step: expected a CompiledStep (compile_step), got {type(step).__name__}")
+    names = ("loss", "optimizer / optimizer_options", "bounds", "key (None or not)",
+             "compiler_options")
+    for name, a, b in zip(names, step.static, _signature(setup, compiler_options), strict=True):
+        if a is not b and a != b:
+            raise ValueError(f"step: compiled for another {name} than this fit's")
+    got = _types((setup.u0, setup.opt_state, setup.step_key, np.int32(0), args))
+    if got != step.in_types:
+        raise ValueError(
+            "step: compiled for parameters / args of other shapes or dtypes than this fit's "
+            f"({step.in_types[1]} against {got[1]})"
+        )
+
+
+def compile_step(
+    loss: Callable,
+    params,
+    *,
+    optimizer="adam",
+    key=None,
+    args=None,
+    bounds=None,
+    optimizer_options: dict | None = None,
+    compiler_options: dict | None = None,
+) -> CompiledStep:
+    """Compile :func:`fit`'s step ahead of the fit (same arguments as :func:`fit`; the
+    learning rate does not enter the program); pass the result as ``fit(..., step=...)``, e.g.
+    to compile one loss under several ``compiler_options`` and time their steps
+    (``benchmarks/fit_cold.py --warm-steps``). ``args`` may hold ``jax.ShapeDtypeStruct``
+    leaves in place of arrays not made yet: the step is compiled for their shapes and dtypes.
+    (Compiling it in a thread while the fit's target renders did not shorten a cold
+    ``jaxgfx fit``: XLA's CPU compile holds the GIL, docs/performance.md.)"""
+    if isinstance(optimizer, str) and optimizer in LEAST_SQUARES_SOLVERS:
+        raise ValueError("optimizer: compile_step is for the first-order optimisers of fit")
+    if not callable(loss):
+        raise TypeError(f"loss: expected a callable, got {type(loss).__name__}")
+    _check_compiler_options(compiler_options)
+    setup = _setup(loss, params, optimizer, 1e-2, key, bounds, optimizer_options)
+    return _compile(setup, args, compiler_options)
+
+
 def fit(
     loss: Callable,
     params,
@@ -203,6 +357,7 @@ def fit(
     optimizer_options: dict | None = None,
     compiler_options: dict | None = None,
     average_from: int | None = None,
+    step: CompiledStep | None = None,
 ) -> FitResult:
     """Minimise a scalar ``loss`` over ``params`` with a jitted first-order step.
 
@@ -226,6 +381,10 @@ def fit(
     (relative change over ``patience`` steps; a loss that stays exactly 0 also stops).
     ``compiler_options``: XLA options for compiling the step (``jax.stages.Lowered.compile``;
     e.g. :data:`FAST_COMPILE_OPTIONS`); names XLA does not know raise its error.
+    ``step``: the step compiled beforehand by :func:`compile_step` with the same ``loss``,
+    ``optimizer``, ``optimizer_options``, ``key`` (``None`` or not), ``bounds``,
+    ``compiler_options`` and parameters and ``args`` of the same shapes and dtypes (else
+    ``ValueError``); ``compile_seconds`` is then its compile time.
     ``callback(step, params, loss)`` runs on the host after each step; returning ``True`` stops
     the loop. ``progress`` shows a tqdm bar.
     ``average_from``: Polyak–Ruppert iterate averaging (Polyak & Juditsky 1992; Ruppert 1988):
@@ -260,23 +419,7 @@ def fit(
     _check_nonneg_int(patience, "patience")
     if tol is not None and not (isinstance(tol, (int, float)) and tol >= 0):
         raise ValueError(f"tol: expected a non-negative number or None, got {tol!r}")
-    if isinstance(optimizer, str):
-        check_choice(optimizer, "optimizer", (*OPTIMIZERS, *LEAST_SQUARES_SOLVERS))
-        opts = tuple(sorted((optimizer_options or {}).items()))
-        try:
-            hash(opts)
-        except TypeError:
-            raise TypeError(
-                "optimizer_options: expected hashable values (numbers, strings)"
-            ) from None
-        tx = _named_optimizer(optimizer, opts)
-    elif isinstance(optimizer, optax.GradientTransformation):
-        tx = optimizer
-    else:
-        raise TypeError(
-            f"optimizer: expected a name in {sorted(OPTIMIZERS)} or an optax "
-            f"GradientTransformation, got {type(optimizer).__name__}"
-        )
+    setup = _setup(loss, params, optimizer, learning_rate, key, bounds, optimizer_options)
     _check_compiler_options(compiler_options)
     if average_from is not None:
         _check_nonneg_int(average_from, "average_from", minimum=0)
@@ -285,41 +428,13 @@ def fit(
                 f"average_from: expected a step in 0..{steps - 1} (steps = {steps}), got "
                 f"{average_from}"
             )
-    params = _as_param_tree(params)
-    check_bounds(params, bounds)
-    if key is not None and not isinstance(key, jax.Array):
-        raise TypeError(f"key: expected a JAX PRNG key, got {type(key).__name__}")
-
-    spec = _bound_spec(params, bounds)
-    u0 = to_unconstrained(params, bounds)
-    opt_state = tx.init(u0)
-    if isinstance(optimizer, str):
-        # the learning rate lives in the optimiser state (optax.inject_hyperparams), so fits that
-        # differ only in it share one compiled step
-        lr0 = opt_state.hyperparams["learning_rate"]
-        lr_dtype = lr0.dtype
-        schedule = learning_rate if callable(learning_rate) else None
-        opt_state.hyperparams["learning_rate"] = jnp.asarray(
-            schedule(0) if schedule else learning_rate, lr_dtype
-        )
-    elif callable(learning_rate):
-        raise TypeError("learning_rate: a schedule needs a named optimizer (optax: build it in)")
+    u0, opt_state, step_key = setup.u0, setup.opt_state, setup.step_key
+    schedule, lr_dtype, params = setup.schedule, setup.lr_dtype, setup.params
+    if step is None:
+        step = _compile(setup, args, compiler_options)
     else:
-        schedule = None
-    step_key = jax.random.key(0) if key is None else key
-    static = dict(loss=loss, tx=tx, spec=spec, use_key=key is not None)
-
-    out_shape = jax.eval_shape(functools.partial(_value, **static), u0, step_key, args)
-    if getattr(out_shape, "shape", None) != ():
-        raise ValueError(f"loss: expected a scalar, got {out_shape}")
-    t0 = time.perf_counter()
-    try:
-        compiled = _step.lower(u0, opt_state, step_key, np.int32(0), args, **static).compile(
-            compiler_options=compiler_options or None
-        )
-    except TypeError as e:
-        raise TypeError(f"loss: could not be traced with these params ({e})") from e
-    compile_seconds = time.perf_counter() - t0
+        _check_step(step, setup, args, compiler_options)
+    compiled, compile_seconds = step.compiled, step.compile_seconds
 
     from tqdm.auto import tqdm
 

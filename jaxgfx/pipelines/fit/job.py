@@ -6,6 +6,7 @@ import contextlib
 import dataclasses
 import os
 import time
+import typing
 
 import numpy as np
 
@@ -116,12 +117,40 @@ def choose_adjoint(cfg: FitConfig, prep: Prepared) -> dict:
 
 
 
+def show_spp(cfg: FitConfig) -> int:
+    """The spp of the report's renders (previews, each view's loss): ``max(render.spp, 64)``;
+    also the spp of the one forward program that renders a synthetic target (:func:`_render`)."""
+    return max(cfg.render.spp, 64)
+
+
+def _flag(name: str) -> bool:
+    """An on-by-default switch of the cold-start work (``NAME=0`` turns it off: the old route,
+    for ``benchmarks/fit_cold.py``'s A/B runs)."""
+    return os.environ.get(name, "1") != "0"
+
+
 def _render(cfg: FitConfig, scene, key, spp):
+    """``scene`` rendered at ``spp``. When ``spp`` is a multiple ``n k`` of the report's
+    ``k = show_spp(cfg)`` (the 256-spp synthetic target: 4 × 64), the mean of ``n`` renders of
+    ``k`` spp with the keys ``fold_in(key, i)``, ``i < n``: the same estimator at ``spp``
+    samples per pixel (other random numbers than one ``spp`` call, equal within Monte Carlo
+    error), made by the program the report's renders use, so a cold fit compiles one forward
+    render instead of one per spp (``JAXGFX_FIT_SHARED_RENDER=0``: one call at ``spp``)."""
+    import jax
+
     from jaxgfx.render import render
 
     r = cfg.render
-    img = render(scene, key, spp=spp, integrator=r.integrator_spec, max_depth=r.max_depth)
-    return np.asarray(img)
+
+    def one(k, n):
+        return render(scene, k, spp=n, integrator=r.integrator_spec, max_depth=r.max_depth)
+
+    k = show_spp(cfg)
+    if spp > k and spp % k == 0 and _flag("JAXGFX_FIT_SHARED_RENDER"):
+        n = spp // k
+        imgs = [np.asarray(one(jax.random.fold_in(key, i), k)) for i in range(n)]
+        return (np.sum(imgs, axis=0, dtype=np.float64) / n).astype(imgs[0].dtype)
+    return np.asarray(one(key, spp))
 
 
 def _render_views(cfg: FitConfig, prep: Prepared, scene, key, spp) -> np.ndarray:
@@ -699,23 +728,20 @@ def view_losses(cfg: FitConfig, prep: Prepared, target: Target, renders, cam_p, 
     return np.bincount(view_of[: terms.size], weights=terms, minlength=prep.n_views)
 
 
-def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
-    import jax
+class _FitInputs(typing.NamedTuple):
+    params: dict
+    bounds: dict
+    args: tuple  # (scene, target pixels or (pixels, mask), camera args)
+    k_curve: float | None
+    scaled: tuple
+    loss: object
+
+
+def _fit_inputs(cfg: FitConfig, prep: Prepared, target: Target, k_show) -> _FitInputs:
+    """The fit's parameters, bounds, ``args`` (scene, target, camera arguments) and loss for
+    ``target``: what :func:`jaxgfx.optim.fit` gets (``benchmarks/fit_cold.py`` compiles the
+    step from them)."""
     import jax.numpy as jnp
-
-    from jaxgfx.optim import fit
-
-    key = jax.random.key(cfg.seed)
-    _k_target, k_fit, k_show = jax.random.split(key, 3)
-    given = cfg
-    adjoint = choose_adjoint(cfg, prep)
-    if cfg.render.adjoint != adjoint["adjoint"]:  # "auto", resolved
-        render_cfg = dataclasses.replace(cfg.render, adjoint=adjoint["adjoint"])
-        cfg = dataclasses.replace(cfg, render=render_cfg)
-
-    t0 = time.perf_counter()
-    target, _ = _target(cfg, prep)
-    target_seconds = time.perf_counter() - t0
 
     params, bounds, cam_args = _initial(cfg, prep, target)
     if prep.ldr and cfg.camera.exposure.auto:
@@ -748,15 +774,39 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
                        views=prep.views is not None)
     pixels = jnp.asarray(target.pixels)
     target_arg = (pixels, jnp.asarray(target.mask)) if masked else pixels
+    return _FitInputs(params, bounds, (prep.scene, target_arg, cam_args), k_curve, scaled, loss)
+
+
+def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
+    import jax
+
+    from jaxgfx.optim import fit
+
+    key = jax.random.key(cfg.seed)
+    _k_target, k_fit, k_show = jax.random.split(key, 3)
+    given = cfg
+    adjoint = choose_adjoint(cfg, prep)
+    if cfg.render.adjoint != adjoint["adjoint"]:  # "auto", resolved
+        render_cfg = dataclasses.replace(cfg.render, adjoint=adjoint["adjoint"])
+        cfg = dataclasses.replace(cfg, render=render_cfg)
+
     o = cfg.optimizer
+    t0 = time.perf_counter()
+    # (compiling the step in a thread while the target renders did not shorten the cold run:
+    # XLA's compile holds the GIL; docs/performance.md, "The cold jaxgfx fit")
+    target, _ = _target(cfg, prep)
+    target_seconds = time.perf_counter() - t0
+    inputs = _fit_inputs(cfg, prep, target, k_show)
+    params, bounds, cam_args = inputs.params, inputs.bounds, inputs.args[2]
+    k_curve, scaled = inputs.k_curve, inputs.scaled
     res = fit(
-        loss,
+        inputs.loss,
         params,
         optimizer=o.name,
         learning_rate=o.schedule(),
         steps=o.steps,
         key=k_fit,
-        args=(prep.scene, target_arg, cam_args),
+        args=inputs.args,
         bounds=bounds,
         progress=cfg.progress,
         tol=o.tol,
