@@ -6,6 +6,7 @@ The graph is read from the source (``ast``), function-level imports included, so
 hidden behind a lazy import counts too."""
 
 import ast
+import functools
 import os
 import subprocess
 import sys
@@ -36,6 +37,9 @@ ALLOWED = {
 }
 
 
+# parsed once per file and graph built once per run: four tests walk the library's modules and
+# the leaves' test re-reads it per leaf (the file's CPU time was mostly repeated parsing)
+@functools.cache
 def _parse(path):
     with open(path, encoding="utf-8") as f:
         return ast.parse(f.read(), path)
@@ -75,6 +79,7 @@ def _imports(name, path, known):
     return {m for m in out if m in known and m != name}
 
 
+@functools.cache
 def _graph(top="jaxgfx"):
     mods = _modules(top)
     return {m: _imports(m, p, mods) for m, p in mods.items()}
@@ -144,6 +149,18 @@ def test_the_layer_table_covers_every_subpackage():
     assert layers == set(ALLOWED)
 
 
+@functools.cache
+def _absolute_imports(path):
+    """Every module name an ``import`` or absolute ``from ... import`` of the file names."""
+    names = []
+    for n in ast.walk(_parse(path)):
+        if isinstance(n, ast.Import):
+            names += [a.name for a in n.names]
+        elif isinstance(n, ast.ImportFrom) and not n.level and n.module:
+            names.append(n.module)
+    return tuple(names)
+
+
 @pytest.mark.parametrize("leaf", ["experiments", "benchmarks", "tests"])
 def test_leaves_import_only_the_library(leaf):
     """experiments/, benchmarks/ and tests/ import jaxgfx and their own helpers, never each
@@ -152,16 +169,10 @@ def test_leaves_import_only_the_library(leaf):
     bad = []
     for top in [leaf, "jaxgfx"]:
         mods = _modules(top)
+        forbidden = others if top == leaf else {"experiments", "benchmarks", "tests"}
         for name, path in mods.items():
-            tree = _parse(path)
-            for n in ast.walk(tree):
-                names = []
-                if isinstance(n, ast.Import):
-                    names = [a.name for a in n.names]
-                elif isinstance(n, ast.ImportFrom) and not n.level and n.module:
-                    names = [n.module]
-                forbidden = others if top == leaf else {"experiments", "benchmarks", "tests"}
-                bad += [f"{name} -> {x}" for x in names if x.split(".")[0] in forbidden]
+            bad += [f"{name} -> {x}" for x in _absolute_imports(path)
+                    if x.split(".")[0] in forbidden]  # fmt: skip
     assert bad == []
 
 

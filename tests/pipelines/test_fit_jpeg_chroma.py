@@ -146,13 +146,18 @@ def test_the_codec_sees_the_white_balanced_values(x64):
     """16-bit photos whose chroma was subsampled after a per-channel gain (exposure × white
     balance): at the true image the chroma-aware loss is the quantisation's only."""
     resp = hdr.CameraResponse.analytic("srgb", anchor="unit")
-    table = level_table(resp, 16)
     _, lin = _photos(95, "4:2:0")
     lin = 0.3 + 0.4 * lin  # no channel leaves (0, 1) when the chroma is averaged
     gain = jnp.asarray([1.4, 1.0, 0.6])
-    v = chroma_subsampled(jnp.asarray(lin) * gain, 1.0, (2, 2))
+
+    @jax.jit  # one program: op by op, these made ~60 small compiles
+    def photo(lin):
+        v = chroma_subsampled(lin * gain, 1.0, (2, 2))
+        codes = jnp.round(jnp.clip(resp.from_linear_normalized(v), 0, 1) * 65535.0)
+        return level_table(resp, 16), v, codes
+
+    table, v, codes = photo(jnp.asarray(lin))
     assert 0 < float(v.min()) and float(v.max()) < 1
-    codes = jnp.round(jnp.clip(resp.from_linear_normalized(v), 0, 1) * 65535.0)
 
     def f(block):
         return float(

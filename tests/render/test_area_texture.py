@@ -81,7 +81,7 @@ def test_light_sample_uv_is_the_uv_a_ray_hitting_that_point_gets(kind):
     scene = _scene([{"type": "area", "radiance": TWO, "shape": shapes[kind]}])
     u = jax.random.uniform(jax.random.key(3), (256, 2), minval=0.02, maxval=0.98)
     p, n, _, uv = jax.jit(lambda u: sample_area(scene.emitter_shapes[0], u, with_uv=True))(u)
-    hit = C.intersect(scene, p + 0.3 * n, -n)
+    hit = jax.jit(C.intersect)(scene, p + 0.3 * n, -n)  # eager: 1.8 s of op-by-op compiles
     assert bool(jnp.all(hit.valid)) and bool(jnp.all(hit.shape_id == 0))
     np.testing.assert_allclose(hit.p, p, atol=2e-5)
     du = np.array(hit.uv[:, :2] - uv)

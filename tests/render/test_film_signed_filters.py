@@ -163,8 +163,10 @@ def test_render_weights_each_sample_by_its_sign(per_step):
     f = jax.jit(lambda s, k: render_partial(s, k, resolve_integrator("path", max_depth=1),
                                             spp=spp, rays_per_step=per_step) / spp)  # fmt: skip
     img = np.asarray(f(scene, key))
-    px, w = pixel_samples(jax.random.split(key)[0], 8, 4, spp, scene.rfilter,
-                          dtype=scene.dtype, with_weights=True)  # fmt: skip
+    # under jit: eagerly, its op-by-op compiles cost more than the render's (measured)
+    samples = jax.jit(lambda k: pixel_samples(k, 8, 4, spp, scene.rfilter, dtype=scene.dtype,
+                                              with_weights=True))  # fmt: skip
+    px, w = samples(jax.random.split(key)[0])
     ref = (np.asarray(w) * (np.asarray(px[..., 0]) < 4.0)).mean(-1)
     np.testing.assert_allclose(img, np.broadcast_to(ref[..., None], img.shape), atol=1e-5)
     assert img.min() < -0.05 and img.max() > 1.05  # the sign is applied
