@@ -53,6 +53,7 @@ import numpy as np
 from benchmarks._report import emit, machine
 from jaxgfx.config import read_yaml
 from jaxgfx.pipelines.fit import FitJob, enable_compilation_cache, run_fit
+from jaxgfx.testing import problems
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "configs", "inverse_material.yaml")
@@ -69,14 +70,8 @@ def _log(*a):
 def time_to_within(alpha_hist, seconds_cum, truth, rel=0.02, window=5):
     """Seconds after which the running mean of ``window`` iterates of alpha stays within
     ``rel`` of the truth until the last step (None when it does not settle there)."""
-    a = np.asarray(alpha_hist, np.float64)
-    ok = [abs(a[k - window : k].mean() - truth) <= rel * truth for k in range(window, len(a) + 1)]
-    if not ok or not ok[-1]:
-        return None
-    first = len(ok) - 1
-    while first > 0 and ok[first - 1]:
-        first -= 1
-    return float(seconds_cum[first + window - 1])
+    k = problems.settle_step(alpha_hist, truth, rel=rel, window=window)
+    return None if k is None else float(seconds_cum[k])
 
 
 def time_to_first(alpha_hist, seconds_cum, truth, rel=0.02):

@@ -50,6 +50,7 @@ import time
 import numpy as np
 
 from experiments._common import emit_json, log
+from jaxgfx.testing import problems
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "configs", "inverse_material.yaml")
@@ -75,14 +76,7 @@ VARIANTS = {
 def settle_step(alpha, truth=TRUE_ALPHA, rel=0.02, window=5):
     """The first step from which the mean of the last ``window`` iterates stays within ``rel``
     of ``truth`` until the end (None: it does not); benchmarks.inverse's criterion."""
-    a = np.asarray(alpha, np.float64)
-    ok = [abs(a[k - window : k].mean() - truth) <= rel * truth for k in range(window, len(a) + 1)]
-    if not ok or not ok[-1]:
-        return None
-    first = len(ok) - 1
-    while first > 0 and ok[first - 1]:
-        first -= 1
-    return first + window - 1
+    return problems.settle_step(alpha, truth, rel=rel, window=window)
 
 
 def _base_config() -> dict:
@@ -115,10 +109,10 @@ def render_target(cfg: dict, spp: int, seed: int) -> np.ndarray:
     return np.asarray(img, np.float32)
 
 
-def optimum(cfg: dict, targets: dict, spp: int, grid) -> dict:
-    """The alpha that minimises each target's expected loss (module doc)."""
+def _alpha_image(cfg: dict, spp: int):
+    """The config's scene at its true values but alpha, rendered at ``spp``: a jitted
+    ``img(alpha, key)``."""
     import jax
-    import jax.numpy as jnp
 
     from jaxgfx.pipelines.fit import build_scene
     from jaxgfx.render import render
@@ -131,6 +125,16 @@ def optimum(cfg: dict, targets: dict, spp: int, grid) -> dict:
     def img(a, key):
         s = build_scene(prep.scene, list(truth), {**truth, ALPHA: a})
         return render(s, key, spp=spp, integrator=r["integrator"], max_depth=r["max_depth"])
+
+    return img
+
+
+def optimum(cfg: dict, targets: dict, spp: int, grid) -> dict:
+    """The alpha that minimises each target's expected loss (module doc)."""
+    import jax
+    import jax.numpy as jnp
+
+    img = _alpha_image(cfg, spp)
 
     k1, k2 = jax.random.key(101), jax.random.key(202)
     t0 = time.perf_counter()
@@ -160,17 +164,7 @@ def target_pairs(cfg: dict, targets: dict, pairs, spp: int = 8192) -> dict:
     import jax
     import jax.numpy as jnp
 
-    from jaxgfx.pipelines.fit import build_scene
-    from jaxgfx.render import render
-
-    prep = _prep(cfg)
-    truth = dict(prep.truth)
-    r = cfg["render"]
-
-    @jax.jit
-    def img(a, key):
-        s = build_scene(prep.scene, list(truth), {**truth, ALPHA: a})
-        return render(s, key, spp=spp, integrator=r["integrator"], max_depth=r["max_depth"])
+    img = _alpha_image(cfg, spp)
 
     k = jax.random.key(55)
     d = (np.asarray(img(jnp.float32(0.16), k), np.float64)

@@ -20,6 +20,7 @@ from jaxgfx.render import Spheres, load_scene, render
 __all__ = [
     "TRUE_ALPHA",
     "TRUE_ALBEDO",
+    "settle_step",
     "inverse_example",
     "lm_start",
     "lm_solve",
@@ -39,6 +40,20 @@ TRUE_ALPHA = 0.15
 """The example fit's true GGX roughness of the metal sphere."""
 TRUE_ALBEDO = (0.7, 0.3, 0.15)
 """The example fit's true albedo of the clay sphere."""
+
+
+def settle_step(values, truth, *, rel: float = 0.02, window: int = 5) -> int | None:
+    """The index of the first iterate from which the mean of the last ``window`` values stays
+    within ``rel`` of ``truth`` up to the last one, or ``None`` when it does not end there (the
+    settling criterion of ``benchmarks.inverse`` and ``experiments.fit_settle``)."""
+    a = np.asarray(values, np.float64)
+    ok = [abs(a[k - window : k].mean() - truth) <= rel * truth for k in range(window, len(a) + 1)]
+    if not ok or not ok[-1]:
+        return None
+    first = len(ok) - 1
+    while first > 0 and ok[first - 1]:
+        first -= 1
+    return first + window - 1
 
 
 def inverse_example(scene_desc: dict, *, size: int = 32):
