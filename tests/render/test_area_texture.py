@@ -255,6 +255,9 @@ def _nee_loss(x, key, scene, n=512):
     return jnp.mean(jnp.sum(li * w[:, None] * jnp.asarray(WEIGHTS, x.dtype), -1))
 
 
+# slow: ~3.5 s of the default run (2026-12-06, quiet: float64 value-and-gradient compile); the
+# textured light's gradient stays in the default run (the checkerboard colour FD test)
+@pytest.mark.slow
 def test_irradiance_gradient_wrt_texels_matches_finite_differences(x64):
     """d E_estimate / d texels in float64, light sampling with fixed numbers. A mesh light is
     sampled by area (the points do not depend on the texels): reverse mode = central

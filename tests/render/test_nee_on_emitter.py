@@ -196,6 +196,9 @@ def _radiance_and_grads(radiance, refl, edge_v, scene, o, d, u):
     return jax.value_and_grad(mean, (0, 1, 2), has_aux=True)(radiance, refl, edge_v)
 
 
+# slow: ~3.6 s of the default run (2026-12-06, quiet: a depth-3 path program); NEE on the light
+# stays in the default run (test_sample_light_from_a_point_on_the_light_has_no_density)
+@pytest.mark.slow
 def test_rays_onto_light_see_exactly_its_radiance():
     """float32, path of depth 3: rays from below onto the light see its radiance, and nothing
     else: light sampling from the light's own surface adds 0, and the bounce off its black

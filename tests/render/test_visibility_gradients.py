@@ -110,6 +110,9 @@ def test_plain_ad_misses_the_silhouette_term():
     assert abs(float(g) - want_r) > 0.5 * abs(want_r)
 
 
+# slow: ~6 s of the default run (2026-12-06, quiet: the two forward programs only it compiles);
+# the value-and-gradient program's values stay checked by the default tests below
+@pytest.mark.slow
 def test_values_are_unchanged(primary):
     """The boundary term changes derivatives only: forward images are bit-identical, and the
     value of the value-and-gradient program equals the forward image's mean."""
