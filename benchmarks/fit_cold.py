@@ -311,6 +311,29 @@ def _load1() -> float:
     return os.getloadavg()[0]
 
 
+def _run_child(a, variant: str, child_args: list, what: str):
+    """Run ``--child CHILD_ARGS`` in a fresh process with ``variant``'s environment and config
+    (``_variant_env``; a temporary config is removed afterwards): its ``FIT_COLD_JSON`` document
+    and the process's wall seconds. ``SystemExit`` naming ``what`` when the child fails."""
+    env, cfg = _variant_env(variant, a.config, a.set)
+    try:
+        t0 = time.perf_counter()
+        proc = subprocess.run(
+            [sys.executable, "-m", "benchmarks.fit_cold", "--config", cfg, "--child",
+             *child_args],
+            cwd=ROOT, env=env, capture_output=True, text=True,
+        )
+        outer = time.perf_counter() - t0
+    finally:
+        if cfg != a.config:
+            os.remove(cfg)
+    line = [x for x in proc.stdout.splitlines() if x.startswith("FIT_COLD_JSON ")]
+    if not line:
+        sys.stderr.write(proc.stdout[-2000:] + proc.stderr[-4000:])
+        raise SystemExit(f"{what}: the child failed (rc {proc.returncode})")
+    return json.loads(line[0].split(" ", 1)[1]), outer
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--config", default=os.path.join(ROOT, "configs", "inverse_material.yaml"))
@@ -337,21 +360,9 @@ def main(argv=None):
         print("FIT_COLD_JSON " + json.dumps(doc))
         return 0
     if a.warm_steps:
-        env, cfg = _variant_env("default", a.config, a.set)
-        try:
-            proc = subprocess.run(
-                [sys.executable, "-m", "benchmarks.fit_cold", "--config", cfg, "--child",
-                 "warm", "--warm-steps", str(a.warm_steps)],
-                cwd=ROOT, env=env, capture_output=True, text=True)
-        finally:
-            if cfg != a.config:
-                os.remove(cfg)
-        line = [x for x in proc.stdout.splitlines() if x.startswith("FIT_COLD_JSON ")]
-        if not line:
-            sys.stderr.write(proc.stdout[-2000:] + proc.stderr[-4000:])
-            raise SystemExit(f"warm steps: the child failed (rc {proc.returncode})")
-        doc = {"load_before": _load1(), **json.loads(line[0].split(" ", 1)[1]),
-               "set": a.set, "load_after": _load1()}
+        child, _ = _run_child(a, "default", ["warm", "--warm-steps", str(a.warm_steps)],
+                              "warm steps")
+        doc = {"load_before": _load1(), **child, "set": a.set, "load_after": _load1()}
         doc["config"] = os.path.relpath(a.config, ROOT)
         print(json.dumps(doc, indent=1))
         if a.out:
@@ -362,22 +373,7 @@ def main(argv=None):
     machine = {"cpus": os.cpu_count(), "load_before": _load1()}
     for r in range(a.repeats):
         for v in a.variants.split(","):
-            env, cfg = _variant_env(v, a.config, a.set)
-            try:
-                t0 = time.perf_counter()
-                proc = subprocess.run(
-                    [sys.executable, "-m", "benchmarks.fit_cold", "--config", cfg, "--child", v],
-                    cwd=ROOT, env=env, capture_output=True, text=True,
-                )
-                outer = time.perf_counter() - t0
-            finally:
-                if cfg != a.config:
-                    os.remove(cfg)
-            line = [x for x in proc.stdout.splitlines() if x.startswith("FIT_COLD_JSON ")]
-            if not line:
-                sys.stderr.write(proc.stdout[-2000:] + proc.stderr[-4000:])
-                raise SystemExit(f"variant {v}: the child failed (rc {proc.returncode})")
-            run = json.loads(line[0].split(" ", 1)[1])
+            run, outer = _run_child(a, v, [v], f"variant {v}")
             run.update(repeat=r, process_wall_s=outer, load_after=_load1())
             runs.append(run)
             ph = run["phases"]

@@ -677,14 +677,14 @@ def _previews(cfg: FitConfig, prep: Prepared, target: Target, params, res, key, 
     8 bits (the middle photo of each view's bracket). ``renders``: the ``(V, H, W, 3)``
     renders ``{"before", "after"}`` when already made."""
     cam = cfg.camera
-    show_spp = max(cfg.render.spp, 64)
+    spp = show_spp(cfg)
     shown = _shown_photos(prep)
     renders = renders or {}
 
     def show(scene_params, cam_params, imgs):
         if imgs is None:
             scene = build_scene(prep.scene, prep.paths, scene_params)
-            imgs = _render_views(cfg, prep, scene, key, show_spp)
+            imgs = _render_views(cfg, prep, scene, key, spp)
         if cam is None:
             return imgs
         return np.stack([
@@ -827,7 +827,7 @@ def _fit_and_write(cfg: FitConfig, prep: Prepared, out_dir: str | None) -> dict:
                           "iterates": res.n_averaged}
     renders = None
     if prep.views is not None:  # each view's loss before and after (one render per view)
-        spp = max(cfg.render.spp, 64)
+        spp = show_spp(cfg)
         renders = {
             "before": _render_views(cfg, prep, build_scene(prep.scene, prep.paths, prep.init),
                                     k_show, spp),
