@@ -547,18 +547,6 @@ def section_gradient(mi, *, quick: bool):
 # 4. time to alpha within 2 %
 
 
-def _inverse_cfg(inverse, steps: int | None):
-    """The config dict ``benchmarks.inverse.main`` fits (the shipped config, ``steps``
-    overriding, no progress bar)."""
-    from jaxgfx.config import read_yaml
-
-    cfg = copy.deepcopy(read_yaml(inverse.CONFIG))
-    if steps is not None:
-        cfg["optimizer"] = {**cfg["optimizer"], "steps": int(steps)}
-    cfg["progress"] = False
-    return cfg
-
-
 def _child_inverse(system: str, t0: float, steps: int | None) -> dict:
     """In a fresh process: ``benchmarks.inverse.run_jaxgfx`` or ``run_mitsuba`` on the example
     fit; seconds from ``t0`` (the parent's ``time.time()`` just before starting this process)
@@ -575,7 +563,7 @@ def _child_inverse(system: str, t0: float, steps: int | None) -> dict:
         cache = enable_compilation_cache()  # as the CLI and benchmarks.inverse do
     else:
         cache = None
-    cfg = _inverse_cfg(I, steps)
+    cfg = I.problem_config(steps)
     n = int(cfg["optimizer"]["steps"])
     t_start = time.time() - t0
     t = time.perf_counter()

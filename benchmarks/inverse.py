@@ -52,7 +52,7 @@ import numpy as np
 
 from benchmarks._report import emit, machine
 from jaxgfx.config import read_yaml
-from jaxgfx.pipelines.fit import FitJob, enable_compilation_cache, run_fit
+from jaxgfx.pipelines.fit import FitJob, OptimizerConfig, enable_compilation_cache, run_fit
 from jaxgfx.testing import problems
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -83,9 +83,9 @@ def time_to_first(alpha_hist, seconds_cum, truth, rel=0.02):
 
 def tail_start(cfg: dict, steps: int) -> int | None:
     """The step from which the config's ``optimizer.average`` averages the iterates (None:
-    off): ``jaxgfx.pipelines.fit.OptimizerConfig.average_from``."""
-    m = int(round(float(cfg["optimizer"].get("average", 0.0)) * steps))
-    return None if m == 0 else steps - m
+    off), as the fit computes it (``OptimizerConfig.average_from``)."""
+    average = float(cfg["optimizer"].get("average", 0.0))
+    return OptimizerConfig(steps=steps, average=average).average_from()
 
 
 def estimates(alpha_hist, k0, lo, hi):
@@ -102,6 +102,16 @@ def estimates(alpha_hist, k0, lo, hi):
     out = a.copy()
     out[k0 + 1 :] = lo + (hi - lo) / (1 + np.exp(-run))
     return out
+
+
+def problem_config(steps: int | None = None) -> dict:
+    """The config dict this benchmark fits: the shipped ``configs/inverse_material.yaml``,
+    ``steps`` overriding its step count, no progress bar."""
+    cfg = copy.deepcopy(read_yaml(CONFIG))
+    if steps is not None:
+        cfg["optimizer"] = {**cfg["optimizer"], "steps": int(steps)}
+    cfg["progress"] = False
+    return cfg
 
 
 def run_jaxgfx(cfg: dict) -> dict:
@@ -325,11 +335,8 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     t_run = time.perf_counter()
     enable_compilation_cache()
-    cfg = copy.deepcopy(read_yaml(CONFIG))
-    if a.steps is None:
-        a.steps = int(cfg["optimizer"]["steps"])
-    cfg["optimizer"] = {**cfg["optimizer"], "steps": a.steps}
-    cfg["progress"] = False
+    cfg = problem_config(a.steps)
+    a.steps = int(cfg["optimizer"]["steps"])
     spp, lr = int(cfg["render"]["spp"]), float(cfg["optimizer"]["lr"])
     res: dict = {
         "benchmark": "inverse",
