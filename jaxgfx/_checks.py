@@ -24,6 +24,7 @@ __all__ = [
     "check_odd_int",
     "check_positive_int",
     "is_concrete",
+    "host_float_array",
 ]
 
 
@@ -32,14 +33,43 @@ def is_concrete(x) -> bool:
     return not isinstance(x, jax.core.Tracer)
 
 
-def as_float_array(x, name: str, *, dtype=None):
-    """Convert ``x`` to a floating JAX array; integers become float32 (values unchanged)."""
-    if isinstance(x, (str, bytes)) or x is None:
-        raise TypeError(f"{name}: expected an array of numbers, got {type(x).__name__}")
+def host_float_array(x, name: str, dtype=None):
+    """``x`` as a floating NumPy array when it is host data (a list, tuple or NumPy array);
+    ``None`` for a JAX array, a tracer or a Python number (whose JAX array is weakly typed,
+    which NumPy cannot express). Errors as :func:`as_float_array`."""
+    if isinstance(x, (jax.Array, jax.core.Tracer, int, float, complex)):
+        return None
+    if isinstance(x, (list, tuple)) and any(
+        isinstance(leaf, (jax.Array, jax.core.Tracer)) for leaf in jax.tree_util.tree_leaves(x)
+    ):
+        return None  # a list of JAX arrays or tracers: stacked by JAX (traced values stay)
     try:
-        arr = jnp.asarray(x)
+        arr = np.asarray(x)
     except (TypeError, ValueError) as e:
         raise TypeError(f"{name}: expected an array of numbers ({e})") from None
+    if arr.dtype == np.bool_:
+        raise TypeError(f"{name}: expected a numeric array, got a boolean array")
+    if arr.dtype.kind not in "iufc":
+        raise TypeError(f"{name}: expected an array of numbers, got dtype {arr.dtype}")
+    if dtype is not None:
+        return arr.astype(dtype)
+    if arr.dtype.kind not in "f":
+        arr = arr.astype(np.float32)
+    return arr
+
+
+def as_float_array(x, name: str, *, dtype=None):
+    """Convert ``x`` to a floating JAX array; integers become float32 (values unchanged).
+
+    Host data (lists, tuples, NumPy arrays) is converted with NumPy before it becomes a JAX
+    array, so a scene or model built from a description compiles nothing here (JAX compiles
+    each eager operation once per shape: a dtype conversion per parameter otherwise)."""
+    if isinstance(x, (str, bytes)) or x is None:
+        raise TypeError(f"{name}: expected an array of numbers, got {type(x).__name__}")
+    host = host_float_array(x, name, dtype)
+    if host is not None:  # device_put: jnp.asarray of a NumPy array compiles a copy per shape
+        return jax.device_put(host)
+    arr = jnp.asarray(x)
     if arr.dtype == jnp.bool_:
         raise TypeError(f"{name}: expected a numeric array, got a boolean array")
     if dtype is not None:

@@ -7,9 +7,17 @@ import math
 from typing import ClassVar, NamedTuple
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 
-from jaxgfx._checks import as_float_array, check_finite, check_nonnegative, check_positive
+from jaxgfx._checks import (
+    as_float_array,
+    check_finite,
+    check_nonnegative,
+    check_positive,
+    host_float_array,
+)
 
 __all__ = [
     "BSDF",
@@ -112,6 +120,12 @@ def to_rgb(x, name):
     """Parameter as an RGB array ``(..., 3)`` (conversion only; a scalar or a last axis of 1 is
     broadcast to 3 channels). ``TypeError`` / ``ValueError`` naming ``name`` for non-numbers or
     other shapes; values are checked by :func:`check_rgb`."""
+    host = host_float_array(x, name) if not isinstance(x, (str, bytes)) and x is not None else None
+    if host is not None:  # broadcast on the host: nothing to compile
+        if host.ndim == 0 or (host.ndim and host.shape[-1] == 1):
+            host = np.broadcast_to(host, host.shape[:-1] + (3,) if host.ndim else (3,))
+        if host.ndim and host.shape[-1] == 3:
+            return jax.device_put(np.ascontiguousarray(host))
     arr = as_float_array(x, name)
     if arr.ndim == 0:
         arr = jnp.broadcast_to(arr, (3,))

@@ -9,6 +9,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgfx._math import safe_div, safe_sqrt, sum_last
 
@@ -56,13 +57,26 @@ def frame_from_normal(n) -> Frame:
         n = n.astype(jnp.float32)
     if n.shape[-1:] != (3,):
         raise ValueError(f"n: expected shape (..., 3), got {n.shape}")
+    s, t = _basis(n, jnp)
+    return Frame(s=s, t=t, n=n)
+
+
+def _basis(n, xp):
+    """The ``(s, t)`` of :func:`frame_from_normal` with array module ``xp`` (jnp, or np for
+    a scene description's constants: nothing to compile)."""
     x, y, z = n[..., 0], n[..., 1], n[..., 2]
-    sign = jnp.where(z >= 0, 1.0, -1.0).astype(n.dtype)
+    sign = xp.where(z >= 0, 1.0, -1.0).astype(n.dtype)
     a = -1.0 / (sign + z)
     b = x * y * a
-    s = jnp.stack([1.0 + sign * x * x * a, sign * b, -sign * x], axis=-1)
-    t = jnp.stack([b, sign + y * y * a, -y], axis=-1)
-    return Frame(s=s, t=t, n=n)
+    s = xp.stack([1.0 + sign * x * x * a, sign * b, -sign * x], axis=-1)
+    t = xp.stack([b, sign + y * y * a, -y], axis=-1)
+    return s, t
+
+
+def host_basis(n):
+    """:func:`frame_from_normal`'s ``(s, t)`` of a NumPy normal ``n`` (..., 3), in NumPy."""
+    n = np.asarray(n)
+    return _basis(n, np)
 
 
 def to_local(frame: Frame, v):
@@ -73,7 +87,6 @@ def to_local(frame: Frame, v):
 def to_world(frame: Frame, v):
     """Local vector ``v`` (..., 3) expressed in world coordinates."""
     return v[..., 0:1] * frame.s + v[..., 1:2] * frame.t + v[..., 2:3] * frame.n
-
 
 
 def rotation_to_local(to_world, d):
@@ -90,6 +103,7 @@ def rotation_to_world(to_world, d):
     if to_world is None:
         return d
     return d @ jax.lax.stop_gradient(to_world).astype(d.dtype).T
+
 
 def cos_theta(w):
     """``cos θ`` of a local direction: ``w[..., 2]``."""

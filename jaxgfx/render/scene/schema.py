@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -26,7 +27,7 @@ from jaxgfx.render.camera import (
     ThinLensCamera,
 )
 from jaxgfx.render.geometry import Rectangles, SDFShape, Spheres, TriangleMesh, sdf_from_dict
-from jaxgfx.render.geometry.frame import frame_from_normal
+from jaxgfx.render.geometry.frame import host_basis
 
 __all__ = [
     "SHAPE_TYPES",
@@ -224,22 +225,29 @@ def _build_camera(d, where, base_dir=None):
 
 
 def rectangle_from_desc(d, where):
+    # NumPy throughout: the description's constants need no compiled program
     if "edge_u" in d or "edge_v" in d:  # a parallelogram given by its full edge vectors
         eu, ev = vec(d.get("edge_u"), f"{where}.edge_u"), vec(d.get("edge_v"), f"{where}.edge_v")
-        if not float(jnp.linalg.norm(jnp.cross(eu, ev))) > 0:
+        if not float(np.linalg.norm(np.cross(np.asarray(eu), np.asarray(ev)))) > 0:
             raise ValueError(f"{where}.edge_v: edge_u and edge_v must span a parallelogram")
-        return Rectangles(vec(d["center"], f"{where}.center")[None], eu[None], ev[None])
-    n = vec(d["normal"], f"{where}.normal")
-    nn = float(jnp.linalg.norm(n))
+        return Rectangles(*(_row(v) for v in (vec(d["center"], f"{where}.center"), eu, ev)))
+    n = np.asarray(vec(d["normal"], f"{where}.normal"))
+    nn = float(np.linalg.norm(n))
     if nn == 0:
         raise ValueError(f"{where}.normal: expected a non-zero vector")
-    size = check_finite(as_float_array(d.get("size", [2.0, 2.0]), f"{where}.size"), f"{where}.size")
-    if size.shape != (2,) or bool(jnp.any(size <= 0)):
-        raise ValueError(f"{where}.size: expected two positive numbers")
-    fr = frame_from_normal(n / nn)
-    return Rectangles(
-        vec(d["center"], f"{where}.center")[None], (fr.s * size[0])[None], (fr.t * size[1])[None]
+    size = np.asarray(
+        check_finite(as_float_array(d.get("size", [2.0, 2.0]), f"{where}.size"), f"{where}.size")
     )
+    if size.shape != (2,) or bool(np.any(size <= 0)):
+        raise ValueError(f"{where}.size: expected two positive numbers")
+    s, t = host_basis((n / np.asarray(nn, n.dtype)).astype(n.dtype))
+    center = vec(d["center"], f"{where}.center")
+    return Rectangles(_row(center), _row(s * size[0]), _row(t * size[1]))
+
+
+def _row(a):
+    """``a[None]`` as a JAX array, shaped on the host (no compiled reshape)."""
+    return jax.device_put(np.asarray(a)[None])  # (jnp.asarray would compile a copy)
 
 
 MESH_SOURCES = ("file", "vertices + faces", "generator")
