@@ -25,12 +25,13 @@ demo: $(STAMP)
 # the default and slow suites compile with XLA:CPU's legacy emitters (28 % less CPU, values within
 # float32 rounding; docs/testing.md); mutate and test-mitsuba keep XLA's defaults
 TEST_XLA_FLAGS := --xla_cpu_use_fusion_emitters=false
+TEST_PYTEST = XLA_FLAGS="$(XLA_FLAGS) $(TEST_XLA_FLAGS)" $(PY) -m pytest
 
 test: $(STAMP)
-	XLA_FLAGS="$(XLA_FLAGS) $(TEST_XLA_FLAGS)" $(PY) -m pytest -q -n 2 --dist loadfile --durations=15
+	$(TEST_PYTEST) -q -n 2 --dist loadfile --durations=15
 
 test-slow: $(STAMP)
-	XLA_FLAGS="$(XLA_FLAGS) $(TEST_XLA_FLAGS)" $(PY) -m pytest -q -n 2 --dist loadfile --durations=25 -m 'slow and not mitsuba'
+	$(TEST_PYTEST) -q -n 2 --dist loadfile --durations=25 -m 'slow and not mitsuba'
 
 # Mitsuba 3 comparison renders (scalar_rgb variant: needs only the PyPI wheel)
 test-mitsuba: $(STAMP)

@@ -37,6 +37,8 @@ def host_float_array(x, name: str, dtype=None):
     """``x`` as a floating NumPy array when it is host data (a list, tuple or NumPy array);
     ``None`` for a JAX array, a tracer or a Python number (whose JAX array is weakly typed,
     which NumPy cannot express). Errors as :func:`as_float_array`."""
+    if isinstance(x, (str, bytes)) or x is None:
+        raise TypeError(f"{name}: expected an array of numbers, got {type(x).__name__}")
     if isinstance(x, (jax.Array, jax.core.Tracer, int, float, complex)):
         return None
     if isinstance(x, (list, tuple)) and any(
@@ -64,8 +66,6 @@ def as_float_array(x, name: str, *, dtype=None):
     Host data (lists, tuples, NumPy arrays) is converted with NumPy before it becomes a JAX
     array, so a scene or model built from a description compiles nothing here (JAX compiles
     each eager operation once per shape: a dtype conversion per parameter otherwise)."""
-    if isinstance(x, (str, bytes)) or x is None:
-        raise TypeError(f"{name}: expected an array of numbers, got {type(x).__name__}")
     host = host_float_array(x, name, dtype)
     if host is not None:  # device_put: jnp.asarray of a NumPy array compiles a copy per shape
         return jax.device_put(host)

@@ -120,20 +120,15 @@ def to_rgb(x, name):
     """Parameter as an RGB array ``(..., 3)`` (conversion only; a scalar or a last axis of 1 is
     broadcast to 3 channels). ``TypeError`` / ``ValueError`` naming ``name`` for non-numbers or
     other shapes; values are checked by :func:`check_rgb`."""
-    host = host_float_array(x, name) if not isinstance(x, (str, bytes)) and x is not None else None
-    if host is not None:  # broadcast on the host: nothing to compile
-        if host.ndim == 0 or (host.ndim and host.shape[-1] == 1):
-            host = np.broadcast_to(host, host.shape[:-1] + (3,) if host.ndim else (3,))
-        if host.ndim and host.shape[-1] == 3:
-            return jax.device_put(np.ascontiguousarray(host))
-    arr = as_float_array(x, name)
+    host = host_float_array(x, name)  # host data is broadcast by NumPy: nothing to compile
+    arr, xp = (host, np) if host is not None else (as_float_array(x, name), jnp)
     if arr.ndim == 0:
-        arr = jnp.broadcast_to(arr, (3,))
+        arr = xp.broadcast_to(arr, (3,))
     elif arr.shape[-1] not in (1, 3):
         raise ValueError(f"{name}: expected a scalar or an RGB array (..., 3), got {arr.shape}")
     elif arr.shape[-1] == 1:
-        arr = jnp.broadcast_to(arr, arr.shape[:-1] + (3,))
-    return arr
+        arr = xp.broadcast_to(arr, arr.shape[:-1] + (3,))
+    return jax.device_put(np.ascontiguousarray(arr)) if host is not None else arr
 
 
 def rgb_param(x, name, *, nonnegative=True):

@@ -240,7 +240,7 @@ def rectangle_from_desc(d, where):
     )
     if size.shape != (2,) or bool(np.any(size <= 0)):
         raise ValueError(f"{where}.size: expected two positive numbers")
-    s, t = host_basis((n / np.asarray(nn, n.dtype)).astype(n.dtype))
+    s, t = host_basis(n / nn)  # float32 / float stays float32
     center = vec(d["center"], f"{where}.center")
     return Rectangles(_row(center), _row(s * size[0]), _row(t * size[1]))
 
